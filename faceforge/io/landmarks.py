@@ -1,0 +1,379 @@
+"""MPEG-4 FDP landmark files: reading, snapping to the skin, validation.
+
+A landmark file maps MPEG-4 Facial Definition Point ids (``"3.7"``) to a vertex id
+of the skin mesh and/or a 3D position. Three formats are read:
+
+* YAML (``.yaml``/``.yml``), as the sample heads' ``*.fdp.yaml``::
+
+      landmarks:
+        "2.1": {vertex: 1575, position: [0.0, 6.32, 1.37]}
+        "3.5": {vertex: null, position: [0.30, 7.34, 1.34]}
+
+  (a top-level mapping without the ``landmarks:`` key is accepted too);
+* JSON (``.json``) with the same structure;
+* CSV (``.csv``) with a header ``fdp,vertex,x,y,z`` (empty vertex or xyz allowed).
+
+:func:`load_landmarks` reads, snaps every point onto the skin surface (a given vertex
+id wins when its vertex agrees with the given position) and validates: duplicated
+and unknown FDP ids, required FDPs missing, vertex ids out of range, positions far
+from the mesh, coincident landmarks, left and right swapped and a head facing the
+wrong way. Every failure is a :class:`~faceforge.exceptions.LandmarkError` naming the
+file and the FDPs.
+
+Conventions (docs/ARCHITECTURE.md): +Y up, the face looks along +Z, the subject's
+left is +X. Thresholds are fractions of the mesh's bounding-box diagonal.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from faceforge.exceptions import LandmarkError
+
+#: number of feature points per MPEG-4 FDP group (ISO/IEC 14496-2 Annex C): 84 in all
+FDP_GROUP_SIZES = {2: 14, 3: 14, 4: 6, 5: 4, 6: 4, 7: 1, 8: 10, 9: 15, 10: 10, 11: 6}
+#: every valid FDP id, in standard order
+ALL_FDPS = tuple(f"{g}.{i}" for g, n in FDP_GROUP_SIZES.items() for i in range(1, n + 1))
+
+#: (subject-left FDP, subject-right FDP) mirror pairs of the standard
+LEFT_RIGHT_PAIRS = (
+    ("2.4", "2.5"), ("2.6", "2.7"), ("2.8", "2.9"), ("2.11", "2.12"), ("2.13", "2.14"),
+    ("3.1", "3.2"), ("3.3", "3.4"), ("3.5", "3.6"), ("3.7", "3.12"), ("3.11", "3.8"),
+    ("3.9", "3.10"), ("3.13", "3.14"), ("4.1", "4.2"), ("4.3", "4.4"), ("4.5", "4.6"),
+    ("5.1", "5.2"), ("5.3", "5.4"), ("6.3", "6.4"), ("8.3", "8.4"), ("8.5", "8.6"),
+    ("8.7", "8.8"), ("8.10", "8.9"), ("9.1", "9.2"), ("9.5", "9.4"), ("9.7", "9.6"),
+    ("9.13", "9.14"), ("10.1", "10.2"), ("10.3", "10.4"), ("10.5", "10.6"),
+    ("10.7", "10.8"), ("10.9", "10.10"), ("11.3", "11.2"),
+)
+
+#: FDPs every skin must provide. The fit needs the face's frame and extent: the eye
+#: corners (width, ES0 fallback, left/right check), the brows (forehead), the nose
+#: tip and base (facing check, mid-face), the mouth corners and the chin. Ears,
+#: hairline and jaw angles are optional, so an open face mask (MediaPipe) still fits.
+REQUIRED_FDPS = ("2.1", "3.7", "3.8", "3.11", "3.12", "4.3", "4.4", "8.3", "8.4", "9.3", "9.15")
+
+#: inner-lip FDPs that legitimately coincide on a closed mouth
+_MAY_COINCIDE = {frozenset(p) for p in (("2.2", "2.3"), ("2.6", "2.8"), ("2.7", "2.9"))}
+
+#: a given vertex and a given position disagree beyond this fraction of the diagonal
+VERTEX_POSITION_TOLERANCE = 0.005
+#: a position farther than this fraction of the diagonal from the surface is an error
+MAX_SNAP_DISTANCE = 0.05
+#: two different FDPs closer than this fraction of the diagonal coincide
+COINCIDENT_DISTANCE = 1e-4
+
+
+@dataclass(frozen=True)
+class RawLandmarks:
+    """Landmarks as read from a file, before meeting the mesh.
+
+    ids : tuple of n FDP ids (str, e.g. ``"3.7"``), file order
+    vertex : (n,) int64, vertex id or -1 where none was given
+    position : (n, 3) float64, given position or NaN where none was given (mesh units)
+    """
+
+    path: str
+    ids: tuple
+    vertex: np.ndarray
+    position: np.ndarray
+
+
+@dataclass(frozen=True)
+class Landmarks:
+    """Validated landmarks lying on the skin surface.
+
+    ids : tuple of n FDP ids
+    positions : (n, 3) float64, points on the skin surface (mesh units)
+    face_ids : (n,) int64, skin triangle holding each point
+    bary : (n, 3) float64, barycentric coordinates in that triangle
+    vertex : (n,) int64, the vertex used or -1 (position snapped to the surface)
+    snap_distance : (n,) float64, distance moved by snapping (mesh units)
+    """
+
+    path: str
+    ids: tuple
+    positions: np.ndarray
+    face_ids: np.ndarray
+    bary: np.ndarray
+    vertex: np.ndarray
+    snap_distance: np.ndarray
+
+    def as_dict(self) -> dict:
+        """``{fdp: (3,) float64}``."""
+        return {k: self.positions[i].copy() for i, k in enumerate(self.ids)}
+
+    def index(self, fdp: str) -> int:
+        return self.ids.index(fdp)
+
+
+def default_landmark_path(mesh_path: str | Path) -> Path:
+    """``<mesh stem>.fdp.yaml`` next to the mesh."""
+    mesh_path = Path(mesh_path)
+    return mesh_path.with_name(mesh_path.stem + ".fdp.yaml")
+
+
+# ----------------------------------------------------------------------------- reading
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that refuses duplicated mapping keys (PyYAML keeps the last)."""
+
+
+def _construct_unique_mapping(loader, node, deep=False):
+    seen = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=deep)
+        if key in seen:
+            raise LandmarkError(
+                f"FDP {key} given twice (lines {seen[key] + 1} and {key_node.start_mark.line + 1})",
+                loader.name, key_node.start_mark.line + 1)
+        seen[key] = key_node.start_mark.line
+    return loader.construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
+                                 _construct_unique_mapping)
+
+
+def _normalise_id(key, path) -> str:
+    text = str(key).strip()
+    if isinstance(key, float):  # YAML reads an unquoted 2.10 as 2.1: refuse the ambiguity
+        raise LandmarkError(f"FDP id {key!r} must be quoted (\"{text}\"): an unquoted 2.10 reads as 2.1", path)
+    return text
+
+
+def _entries_from_mapping(data, path) -> list:
+    if isinstance(data, dict) and "landmarks" in data:
+        data = data["landmarks"]
+    if not isinstance(data, dict):
+        raise LandmarkError("expected a mapping of FDP id -> {vertex, position}", path)
+    entries = []
+    for key, value in data.items():
+        fdp = _normalise_id(key, path)
+        if isinstance(value, dict):
+            vertex, position = value.get("vertex"), value.get("position")
+        elif isinstance(value, (list, tuple)) and len(value) == 3:
+            vertex, position = None, value
+        elif isinstance(value, int) and not isinstance(value, bool):
+            vertex, position = value, None
+        else:
+            raise LandmarkError(f"FDP {fdp}: expected {{vertex: id, position: [x, y, z]}}, got {value!r}", path)
+        entries.append((fdp, vertex, position))
+    return entries
+
+
+def _read_csv(path: Path) -> list:
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = [r for r in csv.reader(line for line in fh if not line.lstrip().startswith("#"))]
+    rows = [r for r in rows if any(c.strip() for c in r)]
+    if not rows:
+        raise LandmarkError("empty landmark file", path)
+    header = [c.strip().lower() for c in rows[0]]
+    if header[:1] != ["fdp"] or not {"vertex", "x", "y", "z"} <= set(header):
+        raise LandmarkError(f"CSV header must be fdp,vertex,x,y,z, got {','.join(header)}", path, 1)
+    col = {name: header.index(name) for name in ("fdp", "vertex", "x", "y", "z")}
+    entries = []
+    for line, row in enumerate(rows[1:], start=2):
+        row = row + [""] * (len(header) - len(row))
+        cell = {name: row[i].strip() for name, i in col.items()}
+        try:
+            vertex = int(cell["vertex"]) if cell["vertex"] not in ("", "null", "none") else None
+            xyz = [cell[c] for c in "xyz"]
+            position = None if all(c == "" for c in xyz) else [float(c) for c in xyz]
+        except ValueError as exc:
+            raise LandmarkError(f"FDP {cell['fdp']}: {exc}", path, line) from None
+        entries.append((cell["fdp"], vertex, position))
+    return entries
+
+
+def read_landmarks(path: str | Path) -> RawLandmarks:
+    """Read a YAML, JSON or CSV landmark file (format chosen by the suffix).
+
+    Checks the file on its own: syntax, duplicated and unknown FDP ids, the types of
+    vertex ids and positions. Raises :class:`LandmarkError`.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise LandmarkError("landmark file not found", path)
+    suffix = path.suffix.lower()
+    try:
+        if suffix in (".yaml", ".yml"):
+            with open(path, encoding="utf-8") as fh:
+                loader = _UniqueKeyLoader(fh)
+                loader.name = str(path)
+                try:
+                    data = loader.get_single_data()
+                finally:
+                    loader.dispose()
+            entries = _entries_from_mapping(data, path)
+        elif suffix == ".json":
+            def pairs_hook(pairs):
+                keys = [k for k, _ in pairs]
+                dup = sorted({k for k in keys if keys.count(k) > 1})
+                if dup:
+                    raise LandmarkError(f"FDP {', '.join(dup)} given twice", path)
+                return dict(pairs)
+            with open(path, encoding="utf-8") as fh:
+                data = json.load(fh, object_pairs_hook=pairs_hook)
+            entries = _entries_from_mapping(data, path)
+        elif suffix == ".csv":
+            entries = _read_csv(path)
+        else:
+            raise LandmarkError(f"unknown landmark format {suffix!r} (use .yaml, .json or .csv)", path)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise LandmarkError(f"invalid YAML: {getattr(exc, 'problem', exc)}", path,
+                            None if mark is None else mark.line + 1) from None
+    except json.JSONDecodeError as exc:
+        raise LandmarkError(f"invalid JSON: {exc.msg}", path, exc.lineno) from None
+    except UnicodeDecodeError:
+        raise LandmarkError("not a text file", path) from None
+    return _to_raw(entries, path)
+
+
+def _to_raw(entries: list, path) -> RawLandmarks:
+    if not entries:
+        raise LandmarkError("no landmarks in file", path)
+    ids = [e[0] for e in entries]
+    dup = sorted({k for k in ids if ids.count(k) > 1}, key=ids.index)
+    if dup:
+        raise LandmarkError(f"FDP {', '.join(dup)} given twice", path)
+    unknown = [k for k in ids if k not in ALL_FDPS]
+    if unknown:
+        raise LandmarkError(f"unknown FDP id {', '.join(unknown)} (MPEG-4 ids run 2.1 ... 11.6)", path)
+    vertex = np.full(len(ids), -1, dtype=np.int64)
+    position = np.full((len(ids), 3), np.nan)
+    for i, (fdp, v, p) in enumerate(entries):
+        if v is None and p is None:
+            raise LandmarkError(f"FDP {fdp}: neither vertex nor position given", path)
+        if v is not None:
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
+                raise LandmarkError(f"FDP {fdp}: vertex must be an integer id, got {v!r}", path)
+            if v < 0:
+                raise LandmarkError(f"FDP {fdp}: vertex id {v} is negative", path)
+            vertex[i] = v
+        if p is not None:
+            try:
+                arr = np.asarray(p, dtype=np.float64)
+            except (TypeError, ValueError):
+                arr = np.empty(0)
+            if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+                raise LandmarkError(f"FDP {fdp}: position must be 3 finite numbers, got {p!r}", path)
+            position[i] = arr
+    return RawLandmarks(str(path), tuple(ids), vertex, position)
+
+
+# ----------------------------------------------------------------------------- meeting the mesh
+
+
+def _closest_points(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray):
+    """Closest surface points: ``(points (k,3), distance (k,), face_ids (k,))``."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+    closest, distance, face_ids = trimesh.proximity.closest_point(mesh, points)
+    return np.asarray(closest, dtype=np.float64), np.asarray(distance), np.asarray(face_ids, dtype=np.int64)
+
+
+def _barycentric(points, vertices, faces, face_ids) -> np.ndarray:
+    """Barycentric coordinates (k, 3) of points in triangles ``faces[face_ids]``."""
+    tri = vertices[faces[face_ids]]
+    e0, e1, d = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], points - tri[:, 0]
+    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
+    d20, d21 = (d * e0).sum(1), (d * e1).sum(1)
+    den = d00 * d11 - d01 * d01
+    den = np.where(np.abs(den) > 0, den, 1.0)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    return np.stack([1.0 - v - w, v, w], axis=1)
+
+
+def snap_landmarks(raw: RawLandmarks, vertices: np.ndarray, faces: np.ndarray) -> Landmarks:
+    """Put every landmark on the surface of ``(vertices (n,3) float, faces (m,3) int)``.
+
+    A given vertex id wins when its vertex lies within ``VERTEX_POSITION_TOLERANCE`` of the
+    diagonal of the given position (or no position is given); a position alone is moved to
+    the closest surface point. Raises :class:`LandmarkError` for vertex ids out of range, a
+    vertex that disagrees with its position, and points farther than ``MAX_SNAP_DISTANCE``
+    of the diagonal from the surface.
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    path, ids = raw.path, raw.ids
+    diag = float(np.linalg.norm(vertices.max(0) - vertices.min(0)))
+    bad = [f"{ids[i]} ({raw.vertex[i]})" for i in np.flatnonzero(raw.vertex >= len(vertices))]
+    if bad:
+        raise LandmarkError(f"vertex id out of range (mesh has {len(vertices)} vertices) for FDP {', '.join(bad)}", path)
+    has_v = raw.vertex >= 0
+    has_p = ~np.isnan(raw.position[:, 0])
+    both = has_v & has_p
+    gap = np.linalg.norm(vertices[raw.vertex[both]] - raw.position[both], axis=1)
+    off = gap > VERTEX_POSITION_TOLERANCE * diag
+    if np.any(off):
+        names = [f"{ids[i]} (vertex {raw.vertex[i]} is {g:.3g} units from the given position)"
+                 for i, g in zip(np.flatnonzero(both)[off], gap[off])]
+        raise LandmarkError("vertex and position disagree for FDP " + "; ".join(names), path)
+    target = np.where(has_v[:, None], vertices[np.maximum(raw.vertex, 0)], raw.position)
+    closest, distance, face_ids = _closest_points(target, vertices, faces)
+    far = distance > MAX_SNAP_DISTANCE * diag
+    if np.any(far):
+        names = [f"{ids[i]} ({distance[i] / diag:.1%})" for i in np.flatnonzero(far)]
+        raise LandmarkError(f"FDP {', '.join(names)} lie far from the mesh (fraction of the diagonal; "
+                            f"limit {MAX_SNAP_DISTANCE:.0%}): wrong mesh or wrong units?", path)
+    positions = np.where(has_v[:, None], target, closest)
+    bary = _barycentric(positions, vertices, faces, face_ids)
+    return Landmarks(path, ids, positions, face_ids, bary, raw.vertex.copy(),
+                     np.where(has_v, 0.0, distance))
+
+
+def check_landmarks(lm: Landmarks, vertices: np.ndarray, required=REQUIRED_FDPS) -> None:
+    """Validate landmarks against each other and the mesh frame; raise :class:`LandmarkError`.
+
+    Checks, in order: required FDPs present; no two different FDPs at one point (inner-lip
+    pairs of a closed mouth excepted); subject-left FDPs at larger x than their right mirror
+    (subject's left = +X); the nose tip 9.3 in front (+Z) of the eyes and ears.
+    """
+    path, ids = lm.path, lm.ids
+    missing = [f for f in required if f not in ids]
+    if missing:
+        raise LandmarkError(f"required FDP {', '.join(missing)} missing (required: {', '.join(required)})", path)
+    diag = float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    p = lm.positions
+    dist = np.linalg.norm(p[:, None] - p[None], axis=2)
+    ii, jj = np.nonzero(np.triu(dist < COINCIDENT_DISTANCE * diag, k=1))
+    pairs = [(ids[i], ids[j]) for i, j in zip(ii, jj) if frozenset((ids[i], ids[j])) not in _MAY_COINCIDE]
+    if pairs:
+        raise LandmarkError("FDP at the same point: " + ", ".join(f"{a}={b}" for a, b in pairs), path)
+    pos = lm.as_dict()
+    present = [(l, r) for l, r in LEFT_RIGHT_PAIRS if l in pos and r in pos]
+    swapped = [(l, r) for l, r in present if pos[l][0] < pos[r][0] - COINCIDENT_DISTANCE * diag]
+    if swapped and len(swapped) * 2 >= len(present):
+        raise LandmarkError("left and right swapped: subject-left FDP "
+                            + ", ".join(f"{l} (x={pos[l][0]:.4g}) vs {r} (x={pos[r][0]:.4g})" for l, r in swapped)
+                            + " should have the larger x (subject's left = +X); mirror the landmarks or the mesh", path)
+    if swapped:
+        raise LandmarkError("left/right labels inconsistent for FDP "
+                            + ", ".join(f"{l}/{r}" for l, r in swapped)
+                            + " (the left one should have the larger x)", path)
+    back = [f for f in ("3.7", "3.12", "3.11", "3.8", "10.9", "10.10") if f in pos]
+    behind = np.mean([pos[f][2] for f in back])
+    if pos["9.3"][2] <= behind:
+        raise LandmarkError(f"head faces the wrong way: nose tip 9.3 (z={pos['9.3'][2]:.4g}) is not in front of "
+                            f"the eyes/ears (mean z={behind:.4g}); the face must look along +Z with +Y up", path)
+    up = pos["3.7"][1] + pos["3.12"][1] - 2 * pos["2.1"][1]
+    if up <= 0:
+        raise LandmarkError("head upside down: the eyes (3.7, 3.12) are not above the chin 2.1 along +Y", path)
+
+
+def load_landmarks(path: str | Path, vertices: np.ndarray, faces: np.ndarray,
+                   required=REQUIRED_FDPS) -> Landmarks:
+    """Read, snap and validate a landmark file for the mesh ``(vertices, faces)``."""
+    lm = snap_landmarks(read_landmarks(path), vertices, faces)
+    check_landmarks(lm, vertices, required)
+    return lm
