@@ -1,0 +1,313 @@
+"""The lip line: find it from the FDPs and cut it so the lips can part (§8).
+
+Input heads join their lips in three ways, detected from the topology alone:
+
+``"open"``
+    The inner upper and inner lower lip contours are different vertex paths and
+    no triangle joins them between the corners (ICT: a mouth boundary behind
+    touching lips; MakeHuman: a slit folding into a closed mouth cavity). Nothing
+    is changed.
+``"bridged"``
+    The contours are different paths but triangles span the gap between them
+    (MediaPipe). Those triangles are deleted; the vertex array is unchanged.
+``"shared_ring"``
+    The upper and lower lips share one edge ring (a lower-lip FDP lies on the
+    upper contour). The ring's interior vertices (corners excluded) are
+    duplicated: the copies are appended after the user's vertices and the
+    triangles on the lower-lip side are rewired to them, which opens a slit
+    whose two borders run along the lip line.
+
+The contours are the shortest edge paths (Dijkstra, edge length) through the
+inner-lip FDPs ``2.4 -> 2.6 -> 2.2 -> 2.7 -> 2.5`` (upper) and
+``2.4 -> 2.8 -> 2.3 -> 2.9 -> 2.5`` (lower); the lower path avoids the upper
+one's interior vertices so that the two are disjoint unless they share FDPs.
+
+Mapping back: the working mesh's first ``n_user`` vertices are the user's, in
+the user's order; appended vertex ``n_user + i`` is a copy of user vertex
+``MouthCut.source[i]``. :meth:`MouthCut.to_user` keeps the first ``n_user``
+rows (the upper-lip copy of each cut vertex).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+
+__all__ = ["MouthCut", "LIP_FDPS", "lip_contours", "cut_mouth", "lip_side"]
+
+#: FDPs of the inner lip contour, corner to corner
+UPPER_FDPS = ("2.4", "2.6", "2.2", "2.7", "2.5")
+LOWER_FDPS = ("2.4", "2.8", "2.3", "2.9", "2.5")
+LIP_FDPS = tuple(sorted(set(UPPER_FDPS + LOWER_FDPS)))
+
+
+@dataclass(frozen=True)
+class MouthCut:
+    """The working skin mesh after the lip cut.
+
+    Attributes
+    ----------
+    case : str
+        ``"open"``, ``"bridged"``, ``"shared_ring"`` or ``"no_landmarks"``.
+    vertices : (n_user + c, 3) float64
+        User vertices, then the ``c`` duplicated lip vertices.
+    faces : (m', 3) int64
+        Working triangles (bridging triangles removed, lower-lip side rewired).
+    n_user : int
+        Number of user vertices.
+    source : (c,) int64
+        User vertex that appended vertex ``n_user + i`` duplicates.
+    removed_faces : (r,) int64
+        Indices into the input ``faces`` of the deleted bridging triangles.
+    upper : (u,) int64
+        Upper inner-lip contour, corner to corner (working vertex ids).
+    lower : (l,) int64
+        Lower inner-lip contour, corner to corner (after the cut: the copies).
+    """
+
+    case: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    n_user: int
+    source: np.ndarray
+    removed_faces: np.ndarray
+    upper: np.ndarray
+    lower: np.ndarray
+
+    def to_user(self, positions) -> np.ndarray:
+        """Positions of the user's vertices ``(n_user, 3)`` from working ones ``(n, 3)``."""
+        return np.asarray(positions)[: self.n_user]
+
+    def report(self) -> dict:
+        """A JSON-ready summary for the bind report."""
+        what = {
+            "open": "lips already separate: nothing changed",
+            "bridged": f"deleted {len(self.removed_faces)} triangles bridging the lips",
+            "shared_ring": f"cut the shared lip ring: duplicated {len(self.source)} vertices "
+                           "(appended after the user's; the lower lip uses the copies)",
+            "no_landmarks": "inner-lip FDPs 2.2-2.5 missing: mouth not examined",
+        }[self.case]
+        return {
+            "case": self.case,
+            "action": what,
+            "n_user_vertices": int(self.n_user),
+            "duplicated_vertices": int(len(self.source)),
+            "removed_triangles": int(len(self.removed_faces)),
+            "upper_contour_vertices": int(len(self.upper)),
+            "lower_contour_vertices": int(len(self.lower)),
+        }
+
+
+def _graph(vertices: np.ndarray, faces: np.ndarray):
+    from scipy.sparse import coo_matrix
+
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    w = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+    w = np.maximum(w, 1e-300)  # zero-length edges must still be edges
+    n = len(vertices)
+    g = coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
+    return g.tocsr()
+
+
+def _path(graph, a: int, b: int, banned=()) -> list[int]:
+    """Shortest edge path a -> b avoiding ``banned`` vertices; [] if none."""
+    from scipy.sparse.csgraph import dijkstra
+
+    if a == b:
+        return [a]
+    g = graph
+    banned = [x for x in banned if x not in (a, b)]
+    if banned:
+        g = graph.tolil(copy=True)
+        for x in banned:
+            g.rows[x] = []
+            g.data[x] = []
+        g = g.tocsr()
+        keep = np.ones(g.shape[0], bool)
+        keep[banned] = False
+        g = g.multiply(keep[None, :]).tocsr()
+    dist, pred = dijkstra(g, indices=a, return_predecessors=True)
+    if not np.isfinite(dist[b]):
+        return []
+    out = [b]
+    while out[-1] != a:
+        out.append(int(pred[out[-1]]))
+    return out[::-1]
+
+
+def _chain(graph, ids: list[int], banned=()) -> list[int]:
+    out = [ids[0]]
+    for a, b in zip(ids[:-1], ids[1:]):
+        p = _path(graph, a, b, banned)
+        if not p:
+            return []
+        out += p[1:]
+    return out
+
+
+def lip_contours(vertices, faces, lip_vertices: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Upper and lower inner-lip contours as vertex paths from corner 2.4 to 2.5.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (m, 3) int
+    lip_vertices : dict
+        FDP id -> vertex id; needs 2.2-2.5, uses 2.6-2.9 where present.
+
+    Returns
+    -------
+    upper, lower : (u,) int64, (l,) int64
+        Both start at 2.4 and end at 2.5. The lower path avoids the upper
+        path's interior unless a lower FDP lies on it (shared ring).
+    """
+    v = np.asarray(vertices, FLOAT)
+    f = np.asarray(faces, INT)
+    g = _graph(v, f)
+    up = [int(lip_vertices[k]) for k in UPPER_FDPS if k in lip_vertices]
+    lo = [int(lip_vertices[k]) for k in LOWER_FDPS if k in lip_vertices]
+    upper = _chain(g, up)
+    if not upper:
+        raise ValueError("no edge path joins the upper inner-lip FDPs")
+    inner = set(upper[1:-1])
+    if any(x in inner for x in lo[1:-1]):
+        lower = _chain(g, lo)
+    else:
+        lower = _chain(g, lo, banned=sorted(inner)) or _chain(g, lo)
+    if not lower:
+        raise ValueError("no edge path joins the lower inner-lip FDPs")
+    return np.asarray(upper, INT), np.asarray(lower, INT)
+
+
+def _fans(center: int, star: np.ndarray, faces: np.ndarray, cut_edges: set) -> list[list[int]]:
+    """Split the faces ``star`` around ``center`` into fans across non-cut edges."""
+    parent = {int(t): int(t) for t in star}
+
+    def find(x):
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    by_edge: dict[int, list[int]] = {}
+    for t in star:
+        for w in faces[t]:
+            if w != center and (min(w, center), max(w, center)) not in cut_edges:
+                by_edge.setdefault(int(w), []).append(int(t))
+    for ts in by_edge.values():
+        for t in ts[1:]:
+            parent[find(t)] = find(ts[0])
+    groups: dict[int, list[int]] = {}
+    for t in star:
+        groups.setdefault(find(int(t)), []).append(int(t))
+    return list(groups.values())
+
+
+def cut_mouth(vertices, faces, lip_vertices: dict, up=(0.0, 1.0, 0.0)) -> MouthCut:
+    """Detect how the lips are joined and cut them apart (see the module text).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (m, 3) int
+    lip_vertices : dict
+        FDP id -> vertex id for the inner-lip FDPs (2.2-2.9); without 2.2-2.5
+        the mouth is left alone (case ``"no_landmarks"``).
+    up : (3,) float
+        Upward direction of the face (+Y by convention), used to tell the
+        lower-lip side of a shared ring.
+
+    Returns
+    -------
+    MouthCut
+    """
+    v = np.asarray(vertices, FLOAT)
+    f = np.asarray(faces, INT)
+    n = len(v)
+    none = np.zeros(0, INT)
+    if not all(k in lip_vertices for k in ("2.2", "2.3", "2.4", "2.5")):
+        return MouthCut("no_landmarks", v.copy(), f.copy(), n, none, none, none, none)
+    upper, lower = lip_contours(v, f, lip_vertices)
+    ui, li = set(upper[1:-1].tolist()), set(lower[1:-1].tolist())
+    if ui & li:
+        return _cut_ring(v, f, upper, np.asarray(up, FLOAT))
+    in_u = np.isin(f, list(ui)).any(axis=1) if ui else np.zeros(len(f), bool)
+    in_l = np.isin(f, list(li)).any(axis=1) if li else np.zeros(len(f), bool)
+    bridge = in_u & in_l
+    if not bridge.any():
+        return MouthCut("open", v.copy(), f.copy(), n, none, none, upper, lower)
+    return MouthCut("bridged", v.copy(), f[~bridge], n, none,
+                    np.flatnonzero(bridge).astype(INT), upper, lower)
+
+
+def _cut_ring(v: np.ndarray, f: np.ndarray, ring: np.ndarray, up: np.ndarray) -> MouthCut:
+    """Duplicate the interior of ``ring``; lower-side fans use the copies."""
+    n = len(v)
+    up = up / np.linalg.norm(up)
+    cut_edges = {(min(a, b), max(a, b)) for a, b in zip(ring[:-1].tolist(), ring[1:].tolist())}
+    # star of every vertex: sort face slots by vertex
+    slots = np.argsort(f.ravel(), kind="stable")
+    starts = np.searchsorted(f.ravel()[slots], np.arange(n + 1))
+    new_f = f.copy()
+    source, lower = [], [int(ring[0])]
+    centroid = v[f].mean(axis=1)
+    for r in ring[1:-1].tolist():
+        star = np.unique(slots[starts[r]:starts[r + 1]] // 3)
+        fans = _fans(r, star, f, cut_edges)
+        side = [float(np.mean((centroid[fan] - v[r]) @ up)) for fan in fans]
+        low = [fan for fan, s in zip(fans, side) if s < 0]
+        if len(fans) < 2 or not low or len(low) == len(fans):
+            lower.append(r)
+            continue
+        copy = n + len(source)
+        source.append(r)
+        lower.append(copy)
+        for fan in low:
+            rows = np.asarray(fan)
+            new_f[rows] = np.where(f[rows] == r, copy, new_f[rows])
+    lower.append(int(ring[-1]))
+    src = np.asarray(source, INT)
+    verts = np.concatenate([v, v[src]]) if len(src) else v.copy()
+    return MouthCut("shared_ring", verts, new_f, n, src, np.zeros(0, INT), ring.astype(INT),
+                    np.asarray(lower, INT))
+
+
+def lip_side(cut: MouthCut, up=(0.0, 1.0, 0.0), radius: float | None = None) -> np.ndarray:
+    """Which lip each working vertex belongs to: +1 upper, -1 lower, 0 neither.
+
+    The lip line is the chain of midpoints between each contour vertex and the
+    nearest vertex of the other contour. A vertex within ``radius`` of it is
+    upper when it lies above its nearest lip-line point along ``up``, lower
+    otherwise; the contours' own interior vertices are upper / lower by
+    definition and the two corners are 0. ``radius`` defaults to the mouth
+    width (corner to corner).
+
+    Returns
+    -------
+    (n,) int8 over ``cut.vertices``
+    """
+    p = cut.vertices
+    out = np.zeros(len(p), np.int8)
+    if len(cut.upper) < 2 or len(cut.lower) < 2:
+        return out
+    from scipy.spatial import cKDTree
+
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    pu, pl = p[cut.upper], p[cut.lower]
+    line = np.concatenate([0.5 * (pu + pl[cKDTree(pl).query(pu)[1]]),
+                           0.5 * (pl + pu[cKDTree(pu).query(pl)[1]])])
+    width = np.linalg.norm(pu[0] - pu[-1])
+    r = width if radius is None else float(radius)
+    dist, idx = cKDTree(line).query(p)
+    near = dist <= r
+    above = p @ u >= line[np.minimum(idx, len(line) - 1)] @ u
+    out[near & above] = 1
+    out[near & ~above] = -1
+    out[cut.upper[1:-1]] = 1
+    out[cut.lower[1:-1]] = -1
+    out[[cut.upper[0], cut.upper[-1]]] = 0
+    return out

@@ -1,0 +1,222 @@
+"""The skin as a network of PBD constraints (§8).
+
+The skin is the user's triangulated mesh. Pure functions on ``faces`` give the
+constraint index arrays of §8:
+
+* a stretch (distance) constraint on every edge,
+* for each pair of triangles sharing an interior edge, a stretch constraint
+  between the two opposite vertices (penalises bending and twisting),
+* a dihedral bending constraint on the same pair,
+* an area constraint per triangle,
+* one volume constraint over all triangles (the PBD engine closes an open
+  surface virtually).
+
+:func:`add_skin` feeds them, plus the anchors found by
+:mod:`faceforge.anatomy.binding`, into a :class:`faceforge.pbd.ModelBuilder`.
+Each anchor is a particle ``q`` held by a position constraint whose target is
+a surface point on a muscle or a bone (recomputed every frame from the
+deformed layer, :meth:`SkinLayer.anchor_targets`) and a stretch constraint
+``k_anchor`` between the skin vertex and ``q``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+
+__all__ = [
+    "SkinTopology",
+    "SkinStiffness",
+    "SkinLayer",
+    "skin_topology",
+    "add_skin",
+]
+
+
+@dataclass(frozen=True)
+class SkinTopology:
+    """Constraint index arrays of a skin mesh (all ``int64``).
+
+    Attributes
+    ----------
+    edges : (e, 2)
+        Every undirected edge once, ``edges[:, 0] < edges[:, 1]``, sorted.
+    cross_pairs : (p, 2)
+        For every interior manifold edge, the two vertices opposite to it
+        (one per adjacent triangle).
+    bending_quads : (p, 4)
+        ``(e0, e1, o0, o1)``: the shared edge then the opposite vertices, in
+        the order the PBD engine's ``add_bending`` expects; row ``i`` is the
+        same pair as ``cross_pairs[i]``.
+    triangles : (m, 3)
+        The faces, for area and volume constraints.
+    boundary_edges : (b, 2)
+        Edges used by one triangle only (open borders).
+    nonmanifold_edges : (k, 2)
+        Edges used by more than two triangles; they get an edge stretch
+        constraint but no cross-stretch or bending (the pair is ambiguous).
+    """
+
+    edges: np.ndarray
+    cross_pairs: np.ndarray
+    bending_quads: np.ndarray
+    triangles: np.ndarray
+    boundary_edges: np.ndarray
+    nonmanifold_edges: np.ndarray
+
+
+def skin_topology(faces) -> SkinTopology:
+    """Build the §8 constraint topology of a triangle mesh.
+
+    Parameters
+    ----------
+    faces : (m, 3) int
+        Triangles; vertex ids index any vertex array.
+
+    Returns
+    -------
+    SkinTopology
+        Deterministic (sorted by edge) index arrays. For a manifold mesh
+        ``3 m = 2 * len(cross_pairs) + len(boundary_edges)``.
+    """
+    f = np.asarray(faces, dtype=INT)
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"faces must have shape (m, 3), got {f.shape}")
+    m = len(f)
+    # half-edge k of face t goes f[t, k] -> f[t, k+1]; its opposite vertex is f[t, k+2]
+    a = f.reshape(-1)
+    b = np.roll(f, -1, axis=1).reshape(-1)
+    opp = np.roll(f, -2, axis=1).reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((np.repeat(np.arange(m), 3), hi, lo))
+    lo, hi, opp = lo[order], hi[order], opp[order]
+    if len(lo) == 0:
+        empty2 = np.zeros((0, 2), INT)
+        return SkinTopology(empty2, empty2, np.zeros((0, 4), INT), f, empty2, empty2)
+    new = np.r_[True, (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])]
+    start = np.flatnonzero(new)
+    count = np.diff(np.r_[start, len(lo)])
+    edges = np.stack([lo[start], hi[start]], axis=1)
+    two = start[count == 2]
+    cross = np.stack([opp[two], opp[two + 1]], axis=1)
+    quads = np.concatenate([edges[count == 2], cross], axis=1)
+    return SkinTopology(
+        edges=edges,
+        cross_pairs=cross,
+        bending_quads=quads,
+        triangles=f,
+        boundary_edges=edges[count == 1],
+        nonmanifold_edges=edges[count > 2],
+    )
+
+
+@dataclass(frozen=True)
+class SkinStiffness:
+    """PBD stiffness ``k`` in [0, 1] of each skin constraint kind (§8)."""
+
+    stretching: float = 0.15
+    bending: float = 0.95
+    area: float = 0.95
+    anchor: float = 0.2
+    volume: float = 1.0
+    #: position constraint holding each anchor particle q on its surface point
+    #: (the paper binds q "through a position constraint" without a value)
+    position: float = 1.0
+
+    @classmethod
+    def from_config(cls, config) -> "SkinStiffness":
+        """Read ``skin.stiffness.*`` from a validated config (``config.get(dotted)``)."""
+        kw = {}
+        for key in ("stretching", "bending", "area", "anchor", "volume"):
+            kw[key] = float(config.get(f"skin.stiffness.{key}"))
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class SkinLayer:
+    """Where the skin lives in the PBD model (indices, all ``int64``).
+
+    Attributes
+    ----------
+    first : int
+        Particle index of skin vertex 0; skin vertex ``i`` is particle ``first + i``.
+    n_vertices : int
+        Number of skin particles (the working mesh, after the mouth cut).
+    anchor_vertices : (k,)
+        Skin vertex of each anchor.
+    anchor_particles : (k,)
+        Particle index of each anchor particle ``q``.
+    anchor_slots : (k,)
+        Slots of the q position constraints in ``Control.position_targets``.
+    """
+
+    first: int
+    n_vertices: int
+    anchor_vertices: np.ndarray
+    anchor_particles: np.ndarray
+    anchor_slots: np.ndarray
+
+    def skin_positions(self, state_positions) -> np.ndarray:
+        """The skin's rows ``(n_vertices, 3)`` of a PBD positions array."""
+        return np.asarray(state_positions)[self.first : self.first + self.n_vertices]
+
+
+def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices=None,
+             anchor_points=None, inv_mass: float = 1.0) -> SkinLayer:
+    """Add the skin particles, §8 constraints and anchors to a PBD builder.
+
+    Constraints are added in the order: anchors (q position, then p-q stretch),
+    edge stretch, cross stretch, bending, area, volume; the builder projects them
+    in that order after the deeper layers added before.
+
+    Parameters
+    ----------
+    builder : faceforge.pbd.ModelBuilder
+    vertices : (n, 3) float
+        Rest positions of the skin (the working mesh).
+    faces : (m, 3) int
+    stiffness : SkinStiffness
+    anchor_vertices : (k,) int, optional
+        Skin vertices bound to a muscle or bone.
+    anchor_points : (k, 3) float, optional
+        Rest position of each anchor's surface point (the ray hit).
+    inv_mass : float
+        Inverse mass of every skin and anchor particle.
+
+    Returns
+    -------
+    SkinLayer
+    """
+    v = np.asarray(vertices, dtype=FLOAT)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (n, 3), got {v.shape}")
+    topo = skin_topology(faces)
+    if topo.triangles.size and topo.triangles.max() >= len(v):
+        raise ValueError(f"faces index vertices outside [0, {len(v)})")
+    av = np.zeros(0, INT) if anchor_vertices is None else np.asarray(anchor_vertices, INT).reshape(-1)
+    ap = np.zeros((0, 3)) if anchor_points is None else np.asarray(anchor_points, FLOAT).reshape(-1, 3)
+    if len(av) != len(ap):
+        raise ValueError(f"anchor_vertices {av.shape} and anchor_points {ap.shape} differ in length")
+
+    first = builder.add_particles(v, np.full(len(v), inv_mass, FLOAT))
+    if len(av):
+        q_first = builder.add_particles(ap, np.full(len(ap), inv_mass, FLOAT))
+        q = q_first + np.arange(len(ap), dtype=INT)
+        slots = np.asarray(builder.add_position(q, stiffness.position), INT)
+        builder.add_distance(np.stack([first + av, q], axis=1), stiffness.anchor)
+    else:
+        q = np.zeros(0, INT)
+        slots = np.zeros(0, INT)
+    if len(topo.edges):
+        builder.add_distance(first + topo.edges, stiffness.stretching)
+    if len(topo.cross_pairs):
+        builder.add_distance(first + topo.cross_pairs, stiffness.stretching)
+        builder.add_bending(first + topo.bending_quads, stiffness.bending)
+    if len(topo.triangles):
+        builder.add_area(first + topo.triangles, stiffness.area)
+        builder.add_volume(first + topo.triangles, stiffness.volume)
+    return SkinLayer(first=int(first), n_vertices=len(v), anchor_vertices=av,
+                     anchor_particles=q, anchor_slots=slots)
