@@ -1,0 +1,166 @@
+"""Action lines (§5.1.1) and their regular sampling (§5.1.2 Eq. 3, §5.2.1 Eq. 4).
+
+An action line is an ordered list of surface points on a triangulated layer
+(the skull, a deeper muscle, or several of them concatenated into one mesh with
+:func:`faceforge.geometry.triangles.concatenate_meshes`). It has no positions
+of its own: :meth:`ActionLine.positions` and :meth:`ActionLine.normals`
+evaluate the surface points on the layer's *current* vertices, so the line
+follows the layer (Fig. 2).
+
+Sampling (Eq. 3). An open line of arc length ``L`` sampled with ``n`` samples
+uses ``step = L / (n - 1)`` so that the first and last samples are the line's
+end points (the corners of the muscle contour); a closed line uses
+``step = L / n`` (the sample after the last would be the first again). The
+paper's Eq. 3 divides by N; we read N as the number of *intervals*, which is
+what makes the contour corners shared by the latitudinal and longitudinal
+lines. Eq. 4 scales the step, ``step' = step (1 - c)``: sample ``k`` sits at
+arc length ``k step'`` from the line's first point (the origin), so for
+``c > 0`` every sample slides toward the origin along the line itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.constants import FLOAT
+from faceforge.geometry.surface_points import SurfacePoints, project_to_surface
+from faceforge.geometry.triangles import check_mesh, vertex_normals
+
+__all__ = ["ActionLine", "sample_polyline", "mean_edge_length"]
+
+
+def mean_edge_length(vertices, faces) -> float:
+    """Mean length of the (directed, so each interior edge twice) triangle edges."""
+    v, f = check_mesh(vertices, faces)
+    e = v[f[:, [1, 2, 0]]] - v[f]
+    return float(np.linalg.norm(e, axis=2).mean())
+
+
+def sample_polyline(points, normals, n: int, closed: bool = False, step_scale: float = 1.0):
+    """Samples at a regular arc-length step along a polyline (Eq. 3, Eq. 4).
+
+    Parameters
+    ----------
+    points, normals : (p, 3) float
+        Polyline vertices and their unit normals (p >= 2; for ``closed`` the
+        segment from the last point back to the first is included).
+    n : int
+        Number of samples (>= 2 open, >= 3 closed).
+    step_scale : float
+        ``1 - c`` of Eq. 4; 1 samples the whole line, 0 puts every sample on
+        the first point.
+
+    Returns
+    -------
+    positions (n, 3), normals (n, 3), arc (n,) float64
+        ``arc`` is each sample's arc length from the first point. Positions are
+        the linear interpolation of the two end points of the segment holding
+        the sample, the normal the same combination of their normals,
+        normalized (§5.1.2).
+    """
+    p = np.asarray(points, dtype=FLOAT)
+    nn = np.asarray(normals, dtype=FLOAT)
+    if closed:
+        p = np.vstack([p, p[:1]])
+        nn = np.vstack([nn, nn[:1]])
+    if len(p) < 2:
+        raise ValueError("an action line needs at least two surface points")
+    if n < (3 if closed else 2):
+        raise ValueError(f"cannot sample {'a closed' if closed else 'an open'} line with {n} samples")
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    length = cum[-1]
+    step = length / (n if closed else n - 1)
+    arc = np.arange(n) * step * float(step_scale)
+    arc = np.clip(arc, 0.0, length)
+    k = np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(seg) - 1)
+    t = np.divide(arc - cum[k], seg[k], out=np.zeros_like(arc), where=seg[k] > 0)
+    t = np.clip(t, 0.0, 1.0)[:, None]
+    pos = (1.0 - t) * p[k] + t * p[k + 1]
+    nrm = (1.0 - t) * nn[k] + t * nn[k + 1]
+    length_n = np.linalg.norm(nrm, axis=1, keepdims=True)
+    nrm = np.divide(nrm, length_n, out=np.zeros_like(nrm), where=length_n > 0)
+    return pos, nrm, arc
+
+
+@dataclass(frozen=True)
+class ActionLine:
+    """Ordered surface points on one (possibly concatenated) layer mesh.
+
+    Attributes
+    ----------
+    points : SurfacePoints
+        The line's vertices in order, first = origin end.
+    closed : bool
+        True for the sphincter's loops (the last point connects to the first).
+    """
+
+    points: SurfacePoints
+    closed: bool = False
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @classmethod
+    def from_points(cls, points, vertices, faces, closed: bool = False, spacing: float | None = None):
+        """Build a line through the 3D ``points (p, 3)`` that hugs the surface.
+
+        Every straight segment between consecutive given points is subdivided
+        so that no piece is longer than ``spacing`` (default: the layer's mean
+        edge length, i.e. about one surface point per triangle crossed); all
+        points are then projected onto the layer (closest point). Consecutive
+        points that project onto the same spot are merged. The given points
+        themselves are kept (projected), so the line's ends are the projections
+        of the first and last given points.
+        """
+        v, f = check_mesh(vertices, faces)
+        p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+        if len(p) < 2:
+            raise ValueError(f"an action line needs at least two points, got {len(p)}")
+        if spacing is None:
+            spacing = mean_edge_length(v, f)
+        ends = np.vstack([p, p[:1]]) if closed else p
+        dense = [ends[0]]
+        for a, b in zip(ends[:-1], ends[1:]):
+            pieces = max(1, int(np.ceil(np.linalg.norm(b - a) / spacing)))
+            t = np.arange(1, pieces + 1)[:, None] / pieces
+            dense.extend(a + t * (b - a))
+        dense = np.asarray(dense)
+        if closed:
+            dense = dense[:-1]
+        sp = project_to_surface(dense, v, f)
+        pos = sp.positions(v, f)
+        keep = np.r_[True, np.linalg.norm(np.diff(pos, axis=0), axis=1) > 1e-12 * max(spacing, 1e-300)]
+        if closed and keep.sum() > 1 and np.linalg.norm(pos[-1] - pos[0]) <= 1e-12 * spacing:
+            keep[-1] = False
+        return cls(sp.take(np.flatnonzero(keep)), closed)
+
+    def positions(self, vertices, faces) -> np.ndarray:
+        """Current positions of the line's surface points, ``(p, 3)``."""
+        return self.points.positions(vertices, faces)
+
+    def normals(self, vertices, faces, vnormals=None) -> np.ndarray:
+        """Current unit normals of the line's surface points, ``(p, 3)``."""
+        return self.points.normals(vertices, faces, vnormals)
+
+    def length(self, vertices, faces) -> float:
+        """Current arc length (including the closing segment of a closed line)."""
+        p = self.positions(vertices, faces)
+        if self.closed:
+            p = np.vstack([p, p[:1]])
+        return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
+
+    def sample(self, vertices, faces, n: int, step_scale: float = 1.0, vnormals=None):
+        """``n`` samples at a regular step (Eq. 3) scaled by ``step_scale = 1 - c`` (Eq. 4).
+
+        Returns ``positions (n, 3), normals (n, 3)`` on the current layer
+        ``(vertices, faces)``; see :func:`sample_polyline`.
+        """
+        v, f = check_mesh(vertices, faces)
+        vn = vertex_normals(v, f) if vnormals is None else vnormals
+        pos, nrm, _ = sample_polyline(
+            self.positions(v, f), self.normals(v, f, vn), n, self.closed, step_scale
+        )
+        return pos, nrm

@@ -1,0 +1,117 @@
+"""Surface points (§5.1.1, Fig. 2): a triangle id plus barycentric coordinates.
+
+A surface point carries no position of its own: its position and normal are
+recomputed from the current vertices of its triangle, so it follows any
+deformation or rigid motion of the mesh it lies on.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+from faceforge.geometry.triangles import (
+    barycentric,
+    check_mesh,
+    points_from_barycentric,
+    vertex_normals,
+)
+
+__all__ = ["SurfacePoints", "project_to_surface", "closest_points"]
+
+
+@dataclass(frozen=True)
+class SurfacePoints:
+    """``n`` points on a triangle mesh.
+
+    Attributes
+    ----------
+    face_ids : (n,) int64
+        Triangle of each point.
+    bary : (n, 3) float64
+        Homogeneous barycentric coordinates w.r.t. ``faces[face_ids]`` (sum 1).
+    """
+
+    face_ids: np.ndarray
+    bary: np.ndarray
+
+    def __post_init__(self):
+        ids = np.asarray(self.face_ids, dtype=INT).reshape(-1)
+        w = np.asarray(self.bary, dtype=FLOAT).reshape(-1, 3)
+        if len(ids) != len(w):
+            raise ValueError(f"face_ids {ids.shape} and bary {w.shape} differ in length")
+        object.__setattr__(self, "face_ids", ids)
+        object.__setattr__(self, "bary", w)
+
+    def __len__(self) -> int:
+        return len(self.face_ids)
+
+    def take(self, index) -> "SurfacePoints":
+        """The subset (or reordering) ``index`` of these points."""
+        return SurfacePoints(self.face_ids[index], self.bary[index])
+
+    @staticmethod
+    def concatenate(parts) -> "SurfacePoints":
+        """Join several :class:`SurfacePoints` on the same mesh, in order."""
+        parts = list(parts)
+        if not parts:
+            return SurfacePoints(np.zeros(0, INT), np.zeros((0, 3), FLOAT))
+        return SurfacePoints(
+            np.concatenate([p.face_ids for p in parts]), np.concatenate([p.bary for p in parts])
+        )
+
+    def positions(self, vertices, faces) -> np.ndarray:
+        """Current positions ``(n, 3) float64``: barycentric blend of the triangle's vertices."""
+        return points_from_barycentric(vertices, faces, self.face_ids, self.bary)
+
+    def normals(self, vertices, faces, vnormals=None) -> np.ndarray:
+        """Current unit normals ``(n, 3) float64``.
+
+        The barycentric blend of the vertex normals (area-weighted, see
+        :func:`~faceforge.geometry.triangles.vertex_normals`), normalized, as
+        §5.1.1 prescribes. Pass ``vnormals (V, 3)`` to reuse normals already
+        computed for this frame.
+        """
+        v, f = check_mesh(vertices, faces)
+        vn = vertex_normals(v, f) if vnormals is None else np.asarray(vnormals, dtype=FLOAT)
+        n = np.einsum("ij,ijk->ik", self.bary, vn[f[self.face_ids]])
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def closest_points(points, vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closest point of the mesh to each query point.
+
+    Uses ``trimesh.proximity.closest_point`` (an r-tree of triangle boxes plus
+    the exact point-triangle distance). Returns ``(closest (k, 3), distance (k,),
+    face_ids (k,))``.
+    """
+    import trimesh
+
+    v, f = check_mesh(vertices, faces)
+    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+    if len(f) == 0:
+        raise ValueError("cannot project onto a mesh without faces")
+    if len(p) == 0:
+        return np.zeros((0, 3)), np.zeros(0), np.zeros(0, INT)
+    mesh = trimesh.Trimesh(v, f, process=False, validate=False)
+    closest, dist, tri = trimesh.proximity.closest_point(mesh, p)
+    return np.asarray(closest, FLOAT), np.asarray(dist, FLOAT), np.asarray(tri, INT)
+
+
+def project_to_surface(points, vertices, faces) -> SurfacePoints:
+    """Surface points at the closest point of the mesh to each of ``points (k, 3)``.
+
+    The barycentric coordinates of the closest point are clipped to the
+    triangle (tiny negative values from round-off) and renormalized, so the
+    result lies exactly on the surface.
+    """
+    v, f = check_mesh(vertices, faces)
+    closest, _, tri = closest_points(points, v, f)
+    w = barycentric(closest, v, f, tri)
+    w = np.clip(w, 0.0, None)
+    s = w.sum(axis=1, keepdims=True)
+    w = np.divide(w, s, out=np.full_like(w, 1.0 / 3.0), where=s > 0)
+    return SurfacePoints(tri, w)

@@ -1,0 +1,138 @@
+"""Per-triangle and per-vertex quantities of a triangle mesh.
+
+Every function takes the mesh as ``(vertices (n, 3) float64, faces (m, 3) int64)``
+and returns new arrays; nothing is cached. Lengths are in the mesh's units.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+
+__all__ = [
+    "check_mesh",
+    "face_normals",
+    "face_areas",
+    "vertex_normals",
+    "barycentric",
+    "points_from_barycentric",
+    "concatenate_meshes",
+]
+
+
+def check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """Validate and convert a mesh.
+
+    Returns ``vertices (n, 3) float64`` and ``faces (m, 3) int64``; raises
+    ``ValueError`` naming the offending shape or index.
+    """
+    v = np.asarray(vertices, dtype=FLOAT)
+    f = np.asarray(faces, dtype=INT)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (n, 3), got {v.shape}")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"faces must have shape (m, 3), got {f.shape}")
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError(f"faces index vertices outside [0, {len(v)}): range [{f.min()}, {f.max()}]")
+    return v, f
+
+
+def _cross(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Unnormalized face normals ``(e1 x e2)``, length = twice the area. (m, 3)."""
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    return np.cross(b - a, c - a)
+
+
+def face_normals(vertices, faces) -> np.ndarray:
+    """Unit normals of the faces, right-hand rule over ``(f0, f1, f2)``.
+
+    Returns ``(m, 3) float64``; degenerate (zero-area) faces get a zero vector.
+    """
+    v, f = check_mesh(vertices, faces)
+    n = _cross(v, f)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def face_areas(vertices, faces) -> np.ndarray:
+    """Areas of the faces, ``(m,) float64`` in squared mesh units."""
+    v, f = check_mesh(vertices, faces)
+    return 0.5 * np.linalg.norm(_cross(v, f), axis=1)
+
+
+def vertex_normals(vertices, faces) -> np.ndarray:
+    """Area-weighted average of the face normals of each vertex's star.
+
+    Summing the unnormalized cross products weights every face by twice its area.
+    Returns ``(n, 3) float64`` unit vectors; vertices referenced by no face (or
+    whose star has zero area) get a zero vector.
+    """
+    v, f = check_mesh(vertices, faces)
+    cross = _cross(v, f)
+    acc = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(acc, f[:, k], cross)
+    length = np.linalg.norm(acc, axis=1, keepdims=True)
+    return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
+
+
+def barycentric(points, vertices, faces, face_ids) -> np.ndarray:
+    """Barycentric coordinates of ``points (k, 3)`` w.r.t. the triangles ``face_ids (k,)``.
+
+    The point is first projected orthogonally onto the triangle's plane, so a
+    point off the plane gets the coordinates of its foot. Returns ``(k, 3)
+    float64`` summing to 1; degenerate triangles give ``(1, 0, 0)``.
+    """
+    v, f = check_mesh(vertices, faces)
+    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+    ids = np.asarray(face_ids, dtype=INT).reshape(-1)
+    if len(ids) != len(p):
+        raise ValueError(f"points {p.shape} and face_ids {ids.shape} differ in length")
+    tri = v[f[ids]]
+    a = tri[:, 0]
+    e0 = tri[:, 1] - a
+    e1 = tri[:, 2] - a
+    d = p - a
+    d00 = np.einsum("ij,ij->i", e0, e0)
+    d01 = np.einsum("ij,ij->i", e0, e1)
+    d11 = np.einsum("ij,ij->i", e1, e1)
+    d20 = np.einsum("ij,ij->i", d, e0)
+    d21 = np.einsum("ij,ij->i", d, e1)
+    den = d00 * d11 - d01 * d01
+    ok = den > 1e-300
+    safe = np.where(ok, den, 1.0)
+    b1 = np.where(ok, (d11 * d20 - d01 * d21) / safe, 0.0)
+    b2 = np.where(ok, (d00 * d21 - d01 * d20) / safe, 0.0)
+    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+
+
+def points_from_barycentric(vertices, faces, face_ids, bary) -> np.ndarray:
+    """Inverse of :func:`barycentric`: ``sum_k bary[:, k] * v[f[face_ids, k]]``, (k, 3)."""
+    v, f = check_mesh(vertices, faces)
+    ids = np.asarray(face_ids, dtype=INT).reshape(-1)
+    w = np.asarray(bary, dtype=FLOAT).reshape(-1, 3)
+    return np.einsum("ij,ijk->ik", w, v[f[ids]])
+
+
+def concatenate_meshes(meshes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stack several meshes into one, faces re-indexed.
+
+    Parameters
+    ----------
+    meshes : sequence of (vertices (n_i, 3), faces (m_i, 3))
+
+    Returns
+    -------
+    vertices (sum n_i, 3) float64, faces (sum m_i, 3) int64, vertex_offsets (len + 1,) int64
+        Mesh ``i`` owns vertices ``offsets[i]:offsets[i + 1]``; its faces keep their order.
+    """
+    vs, fs, offsets = [], [], [0]
+    for v, f in meshes:
+        v, f = check_mesh(v, f)
+        fs.append(f + offsets[-1])
+        vs.append(v)
+        offsets.append(offsets[-1] + len(v))
+    if not vs:
+        return np.zeros((0, 3), FLOAT), np.zeros((0, 3), INT), np.zeros(1, INT)
+    return np.concatenate(vs), np.concatenate(fs), np.asarray(offsets, INT)
