@@ -1,0 +1,120 @@
+"""The compiled time step: predict, project in builder order, update velocities.
+
+One numba function runs a whole ``Solver.step`` (all substeps and iterations) so
+that no Python code runs per particle or per constraint. Blocks are dispatched by
+kind; inside a block the per-kind sweep calls the pure constraint function.
+"""
+
+from __future__ import annotations
+
+import numba
+
+from faceforge.constants import NUMBA_OPTIONS
+from faceforge.pbd.constraints.area import _project_area
+from faceforge.pbd.constraints.attachment import _project_attachment
+from faceforge.pbd.constraints.bending import _project_bending
+from faceforge.pbd.constraints.distance import _project_distance
+from faceforge.pbd.constraints.position import _project_position
+from faceforge.pbd.constraints.volume import _project_volume
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _project(x, w, blocks, iterations,
+             d_idx, d_rest, d_k, d_c, d_lam,
+             b_idx, b_rest, b_k, b_c, b_lam,
+             a_idx, a_rest, a_k, a_c, a_lam,
+             v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
+             p_idx, p_target, p_k, p_c, p_lam,
+             t_idx, t_tri, t_bary, t_k, t_c, t_lam):
+    """``iterations`` Gauss-Seidel sweeps over ``blocks (nb, 3)`` rows (kind, start, stop)."""
+    for _ in range(iterations):
+        for b in range(blocks.shape[0]):
+            kind = blocks[b, 0]
+            start = blocks[b, 1]
+            stop = blocks[b, 2]
+            if kind == 0:
+                _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, start, stop)
+            elif kind == 1:
+                _project_bending(x, w, b_idx, b_rest, b_k, b_c, b_lam, start, stop)
+            elif kind == 2:
+                _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, start, stop)
+            elif kind == 3:
+                _project_volume(x, w, v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref,
+                                v_rest, v_k, v_c, v_lam, v_g, start, stop)
+            elif kind == 4:
+                _project_position(x, w, p_idx, p_target, p_k, p_c, p_lam, start, stop)
+            else:
+                _project_attachment(x, w, t_idx, t_tri, t_bary, t_k, t_c, t_lam, start, stop)
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _predict(x, v, prev, w, damp, h, gravity):
+    """Store ``prev = x``; damp and integrate dynamic particles: ``x += h v``."""
+    for i in range(x.shape[0]):
+        px = x[i, 0]
+        py = x[i, 1]
+        pz = x[i, 2]
+        prev[i, 0] = px
+        prev[i, 1] = py
+        prev[i, 2] = pz
+        if w[i] > 0.0:
+            vx = v[i, 0] * damp
+            vy = v[i, 1] * damp - h * gravity
+            vz = v[i, 2] * damp
+            x[i, 0] = px + h * vx
+            x[i, 1] = py + h * vy
+            x[i, 2] = pz + h * vz
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _velocities(x, v, prev, inv_h):
+    for i in range(x.shape[0]):
+        v[i, 0] = (x[i, 0] - prev[i, 0]) * inv_h
+        v[i, 1] = (x[i, 1] - prev[i, 1]) * inv_h
+        v[i, 2] = (x[i, 2] - prev[i, 2]) * inv_h
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
+          substeps, iterations, blocks, lams,
+          d_idx, d_rest, d_k, d_c,
+          b_idx, b_rest, b_k, b_c,
+          a_idx, a_rest, a_k, a_c,
+          v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
+          p_idx, p_target, p_k, p_c,
+          t_idx, t_tri, t_bary, t_k, t_c):
+    """A whole step of ``substeps`` substeps of length ``h``; ``x_out``/``v_out`` may alias the inputs.
+
+    ``lams`` is one flat scratch array holding the multipliers of all kinds in the
+    order distance, bending, area, volume, position, attachment.
+    """
+    n = x_in.shape[0]
+    for q in range(kin.shape[0]):
+        for d in range(3):
+            kin_start[q, d] = x_in[kin[q], d]
+    for i in range(n):
+        for d in range(3):
+            x_out[i, d] = x_in[i, d]
+            v_out[i, d] = v_in[i, d]
+    o1 = d_idx.shape[0]
+    o2 = o1 + b_idx.shape[0]
+    o3 = o2 + a_idx.shape[0]
+    o4 = o3 + v_rest.shape[0]
+    o5 = o4 + p_idx.shape[0]
+    for s in range(substeps):
+        _predict(x_out, v_out, prev, w, damp, h, gravity)
+        alpha = (s + 1.0) / substeps
+        for q in range(kin.shape[0]):
+            i = kin[q]
+            for d in range(3):
+                x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
+        lams[:] = 0.0
+        _project(x_out, w, blocks, iterations,
+                 d_idx, d_rest, d_k, d_c, lams[:o1],
+                 b_idx, b_rest, b_k, b_c, lams[o1:o2],
+                 a_idx, a_rest, a_k, a_c, lams[o2:o3],
+                 v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
+                 lams[o3:o4], v_g,
+                 p_idx, p_target, p_k, p_c, lams[o4:o5],
+                 t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
+        _velocities(x_out, v_out, prev, 1.0 / h)

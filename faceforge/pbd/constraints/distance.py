@@ -1,0 +1,72 @@
+"""Distance (stretch) constraint between two particles.
+
+``C(p0, p1) = |p0 - p1| - l0`` (Müller et al. 2007, section 3.3 and Eq. 10/11);
+``grad_p0 C = n``, ``grad_p1 C = -n`` with ``n = (p0 - p1) / |p0 - p1|``. Internal:
+the two corrections are weighted by inverse mass and conserve linear momentum.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from faceforge.constants import NUMBA_OPTIONS
+from faceforge.pbd.constraints._common import DEGENERATE, _multiplier
+
+
+def init_distance(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Rest lengths ``(m,) float64`` of the pairs ``indices (m, 2) int`` in ``positions (n, 3)``."""
+    p = np.asarray(positions, dtype=np.float64)
+    i = np.asarray(indices, dtype=np.int64).reshape(-1, 2)
+    return np.linalg.norm(p[i[:, 0]] - p[i[:, 1]], axis=1)
+
+
+def residual_distance(positions, indices, rest_length) -> np.ndarray:
+    """``C`` per constraint, ``(m,) float64`` in length units (0 when satisfied)."""
+    return init_distance(positions, indices) - np.asarray(rest_length, dtype=np.float64)
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _solve_distance(x, w, i0, i1, rest, k, c, lam):
+    """Project one distance constraint in place on ``x (n, 3)``; return the multiplier increment."""
+    w0 = w[i0]
+    w1 = w[i1]
+    denom = w0 + w1
+    if denom == 0.0:
+        return 0.0
+    dx = x[i0, 0] - x[i1, 0]
+    dy = x[i0, 1] - x[i1, 1]
+    dz = x[i0, 2] - x[i1, 2]
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 <= DEGENERATE * rest * rest or d2 == 0.0:
+        return 0.0  # coincident particles: no direction to push along
+    d = math.sqrt(d2)
+    s = _multiplier(d - rest, denom, k, c, lam) / d
+    x[i0, 0] += s * w0 * dx
+    x[i0, 1] += s * w0 * dy
+    x[i0, 2] += s * w0 * dz
+    x[i1, 0] -= s * w1 * dx
+    x[i1, 1] -= s * w1 * dy
+    x[i1, 2] -= s * w1 * dz
+    return s * d
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _project_distance(x, w, idx, rest, k, c, lam, start, stop):
+    """Gauss-Seidel sweep over constraints ``start:stop`` in order."""
+    for j in range(start, stop):
+        lam[j] += _solve_distance(x, w, idx[j, 0], idx[j, 1], rest[j], k[j], c[j], lam[j])
+
+
+def solve_distance(positions, inv_mass, indices, rest_length, stiffness) -> np.ndarray:
+    """One PBD Gauss-Seidel sweep over all distance constraints; returns new ``(n, 3)`` positions."""
+    x = np.array(positions, dtype=np.float64, order="C")
+    idx = np.ascontiguousarray(indices, dtype=np.int64).reshape(-1, 2)
+    m = len(idx)
+    k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
+    _project_distance(x, np.ascontiguousarray(inv_mass, dtype=np.float64), idx,
+                      np.ascontiguousarray(rest_length, dtype=np.float64), k,
+                      np.zeros(m), np.zeros(m), 0, m)
+    return x

@@ -1,0 +1,185 @@
+"""Volume of a triangulated surface (one constraint per body).
+
+``V = 1/6 sum_f (p_a - r) . ((p_b - r) x (p_c - r))`` summed over the body's oriented
+triangles ``(a, b, c)`` and ``C = V - V0`` (Müller et al. 2007, section 4.4 / paper §8).
+
+The reference point ``r`` is the centroid of the *reference particles*: the boundary
+vertices of the surface (vertices on an edge used by one triangle only), or every
+vertex when the surface is closed. For a closed surface V does not depend on r. An
+open surface is closed virtually by the fan of triangles from r to its boundary
+edges: those triangles contain r and add nothing to the sum, so V is the volume of
+that closed surface. Because r moves with the boundary, V is invariant under
+translation and rotation of the body, and the chain-rule term ``dV/dr`` (spread
+evenly over the reference particles) makes the gradient sum to zero, so the
+projection conserves linear momentum.
+
+Per body the solver stores a CSR block: the body's particles (global ids), its
+triangles in local ids and its reference particles in local ids.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from faceforge.constants import NUMBA_OPTIONS
+from faceforge.pbd.constraints._common import _multiplier
+
+
+def boundary_vertices(triangles: np.ndarray) -> np.ndarray:
+    """Sorted vertex ids ``(b,) int64`` on edges used by exactly one of ``triangles (f, 3)``."""
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    edges = np.sort(np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]]), axis=1)
+    uniq, counts = np.unique(edges, axis=0, return_counts=True)
+    return np.unique(uniq[counts == 1])
+
+
+def reference_vertices(triangles: np.ndarray) -> np.ndarray:
+    """The vertices whose centroid is the reference point: boundary, or all if closed."""
+    b = boundary_vertices(triangles)
+    return b if len(b) else np.unique(np.asarray(triangles, dtype=np.int64))
+
+
+def signed_volume(positions: np.ndarray, triangles: np.ndarray) -> float:
+    """Volume (cubed length units) enclosed by ``triangles`` closed virtually (see module doc)."""
+    p = np.asarray(positions, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    r = p[reference_vertices(t)].mean(axis=0)
+    a, b, c = p[t[:, 0]] - r, p[t[:, 1]] - r, p[t[:, 2]] - r
+    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
+
+
+def init_volume(positions: np.ndarray, triangles: np.ndarray) -> float:
+    """Rest volume of one body (cubed length units)."""
+    return signed_volume(positions, triangles)
+
+
+def residual_volume(positions, triangles, rest_volume) -> float:
+    """``C`` of one body, in cubed length units."""
+    return signed_volume(positions, triangles) - float(rest_volume)
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g):
+    """Project one volume constraint in place on ``x (n, 3)``.
+
+    particles : (p,) int global ids of the body; tris : (f, 3) int local ids;
+    ref : (r,) int local ids of the reference particles; g : (>= p, 3) float scratch.
+    Returns the multiplier increment.
+    """
+    npart = particles.shape[0]
+    nref = ref.shape[0]
+    if npart == 0 or nref == 0:
+        return 0.0
+    rx = 0.0
+    ry = 0.0
+    rz = 0.0
+    for q in range(nref):
+        i = particles[ref[q]]
+        rx += x[i, 0]
+        ry += x[i, 1]
+        rz += x[i, 2]
+    rx /= nref
+    ry /= nref
+    rz /= nref
+    for q in range(npart):
+        g[q, 0] = 0.0
+        g[q, 1] = 0.0
+        g[q, 2] = 0.0
+    vol = 0.0
+    for f in range(tris.shape[0]):
+        la = tris[f, 0]
+        lb = tris[f, 1]
+        lc = tris[f, 2]
+        ia = particles[la]
+        ib = particles[lb]
+        ic = particles[lc]
+        ax = x[ia, 0] - rx
+        ay = x[ia, 1] - ry
+        az = x[ia, 2] - rz
+        bx = x[ib, 0] - rx
+        by = x[ib, 1] - ry
+        bz = x[ib, 2] - rz
+        cx = x[ic, 0] - rx
+        cy = x[ic, 1] - ry
+        cz = x[ic, 2] - rz
+        # b x c, c x a, a x b
+        px = by * cz - bz * cy
+        py = bz * cx - bx * cz
+        pz = bx * cy - by * cx
+        vol += ax * px + ay * py + az * pz
+        g[la, 0] += px
+        g[la, 1] += py
+        g[la, 2] += pz
+        g[lb, 0] += cy * az - cz * ay
+        g[lb, 1] += cz * ax - cx * az
+        g[lb, 2] += cx * ay - cy * ax
+        g[lc, 0] += ay * bz - az * by
+        g[lc, 1] += az * bx - ax * bz
+        g[lc, 2] += ax * by - ay * bx
+    # dV/dr = -sum of the gradients, shared by the reference particles
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    for q in range(npart):
+        sx += g[q, 0]
+        sy += g[q, 1]
+        sz += g[q, 2]
+    sx /= nref
+    sy /= nref
+    sz /= nref
+    for q in range(nref):
+        g[ref[q], 0] -= sx
+        g[ref[q], 1] -= sy
+        g[ref[q], 2] -= sz
+    denom = 0.0
+    for q in range(npart):
+        denom += w[particles[q]] * (g[q, 0] * g[q, 0] + g[q, 1] * g[q, 1] + g[q, 2] * g[q, 2])
+    denom /= 36.0
+    if denom <= 0.0:
+        return 0.0
+    s = _multiplier(vol / 6.0 - rest, denom, k, c, lam)
+    f6 = s / 6.0
+    for q in range(npart):
+        i = particles[q]
+        f = f6 * w[i]
+        x[i, 0] += f * g[q, 0]
+        x[i, 1] += f * g[q, 1]
+        x[i, 2] += f * g[q, 2]
+    return s
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _project_volume(x, w, pstart, particles, tstart, tris, rstart, ref, rest, k, c, lam,
+                    g, start, stop):
+    """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``tstart``, ``rstart``)."""
+    for j in range(start, stop):
+        lam[j] += _solve_volume(x, w, particles[pstart[j]:pstart[j + 1]],
+                                tris[tstart[j]:tstart[j + 1]], ref[rstart[j]:rstart[j + 1]],
+                                rest[j], k[j], c[j], lam[j], g)
+
+
+def localize(triangles: np.ndarray):
+    """Split one body's ``triangles (f, 3)`` (global ids) into solver data.
+
+    Returns ``(particles (p,) int64 global ids, local_triangles (f, 3) int64,
+    reference (r,) int64 local ids)``.
+    """
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    particles, inverse = np.unique(t, return_inverse=True)
+    local = inverse.reshape(-1, 3).astype(np.int64)
+    ref = np.searchsorted(particles, reference_vertices(t)).astype(np.int64)
+    return particles, local, ref
+
+
+def solve_volume(positions, inv_mass, triangles, rest_volume, stiffness) -> np.ndarray:
+    """One PBD projection of one body's volume constraint; returns new ``(n, 3)`` positions."""
+    x = np.array(positions, dtype=np.float64, order="C")
+    particles, local, ref = localize(triangles)
+    one = np.ones(1, dtype=np.float64)
+    _project_volume(x, np.ascontiguousarray(inv_mass, dtype=np.float64),
+                    np.array([0, len(particles)]), particles, np.array([0, len(local)]), local,
+                    np.array([0, len(ref)]), ref, np.array([float(rest_volume)]),
+                    one * float(stiffness), one * 0.0, one * 0.0,
+                    np.zeros((len(particles), 3)), 0, 1)
+    return x

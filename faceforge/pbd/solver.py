@@ -1,0 +1,96 @@
+"""Solver: Müller et al. 2007 position-based dynamics over a frozen Model.
+
+``step(state_in, state_out, control, dt)``: for each of ``substeps`` substeps of
+length ``h = dt / substeps``: damp velocities (``damping`` per step, spread evenly
+over the substeps), predict ``p = x + h v`` for dynamic particles, move kinematic
+particles linearly toward ``control.kinematic_positions`` (reached at the last
+substep), project all constraints ``iterations`` times in builder order
+(sequential Gauss-Seidel), set ``v = (p - x) / h``. Deterministic: sequential, no
+fastmath, no allocation inside the compiled step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from faceforge.pbd._kernels import _step
+from faceforge.pbd.model import Control, Model, State
+from faceforge.pbd.settings import SolverSettings
+
+
+def effective_stiffness(k: np.ndarray, settings: SolverSettings) -> tuple[np.ndarray, np.ndarray]:
+    """Per-projection ``(k_eff, c)`` for the stiffness mode (see :mod:`faceforge.pbd.settings`).
+
+    k : (m,) float in [0, 1]. Returns two (m,) float64 arrays: the PBD scale and the
+    XPBD compliance ratio (0 in the PBD modes).
+    """
+    k = np.asarray(k, dtype=np.float64)
+    mode = settings.stiffness_mode
+    if mode == "paper":
+        return k.copy(), np.zeros_like(k)
+    if mode == "iteration_independent":
+        return 1.0 - (1.0 - k) ** (1.0 / settings.iterations), np.zeros_like(k)
+    on = k > 0
+    c = np.zeros_like(k)
+    c[on] = (1.0 - k[on]) / k[on]
+    return on.astype(np.float64), c
+
+
+class Solver:
+    """Steps a :class:`Model`; holds only derived per-mode arrays and scratch buffers."""
+
+    def __init__(self, model: Model, settings: SolverSettings | None = None):
+        self.model = model
+        self.settings = settings or SolverSettings()
+        m, s = model, self.settings
+        self._w = np.ascontiguousarray(m.inv_mass, dtype=np.float64)
+        self._kin = np.ascontiguousarray(m.kinematic_indices)
+        self._kin_start = np.zeros((len(self._kin), 3))
+        self._prev = np.zeros((m.particle_count, 3))
+        self._k = {}
+        for kind in ("distance", "bending", "area", "volume", "position", "attachment"):
+            self._k[kind] = effective_stiffness(getattr(m, f"{kind}_stiffness"), s)
+        self._lams = np.zeros(m.constraint_count)
+        counts = np.diff(m.volume_particle_start)
+        self._vol_g = np.zeros((int(counts.max()) if len(counts) else 1, 3))
+        self._damp = (1.0 - s.damping) ** (1.0 / s.substeps)
+
+    def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
+        """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
+
+        Arrays of ``state_out`` are written in place; they must be C-contiguous float64
+        ``(n, 3)`` like ``state_in``'s.
+        """
+        m = self.model
+        n = m.particle_count
+        for name, a in (("state_in.positions", state_in.positions),
+                        ("state_in.velocities", state_in.velocities),
+                        ("state_out.positions", state_out.positions),
+                        ("state_out.velocities", state_out.velocities)):
+            if a.shape != (n, 3) or a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"{name} must be a C-contiguous float64 array of shape "
+                                 f"({n}, 3), got {a.shape} {a.dtype}")
+        targets = np.ascontiguousarray(control.position_targets, dtype=np.float64)
+        kin = np.ascontiguousarray(control.kinematic_positions, dtype=np.float64)
+        if targets.shape != (m.position_count, 3):
+            raise ValueError(f"control.position_targets must have shape ({m.position_count}, 3), "
+                             f"got {targets.shape}")
+        if kin.shape != (len(self._kin), 3):
+            raise ValueError(f"control.kinematic_positions must have shape ({len(self._kin)}, 3), "
+                             f"got {kin.shape}")
+        if not dt > 0:
+            raise ValueError(f"dt must be > 0, got {dt!r}")
+        s = self.settings
+        k = self._k
+        _step(state_in.positions, state_in.velocities, state_out.positions, state_out.velocities,
+              self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
+              self._damp, dt / s.substeps, s.substeps, s.iterations, m.blocks, self._lams,
+              m.distance_indices, m.distance_rest_length, *k["distance"],
+              m.bending_indices, m.bending_rest_angle, *k["bending"],
+              m.area_indices, m.area_rest_area, *k["area"],
+              m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
+              m.volume_local_triangles, m.volume_reference_start, m.volume_reference,
+              m.volume_rest_volume, *k["volume"], self._vol_g,
+              m.position_indices, targets, *k["position"],
+              m.attachment_indices, m.attachment_triangles, m.attachment_bary,
+              *k["attachment"])
