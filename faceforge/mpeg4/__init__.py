@@ -1,0 +1,59 @@
+"""MPEG-4 Face Animation: FAP/FDP tables, FAPU, the .fap reader/writer, expressions.
+
+Imports nothing of faceforge but ``constants``/``exceptions``. Public API::
+
+    from faceforge.mpeg4 import (FAP_TABLE, FDP_TABLE, FAPU_NAMES, LIP_PAIRS, fap_record,
+                                 FapTrack, read_fap, write_fap, parse_fap, format_fap, FapWarning,
+                                 Fapu, fapu_from_landmarks, fap_displacement,
+                                 EXPRESSIONS, expression_track, expression_weights)
+"""
+
+from .expressions import EXPRESSION_CODES, EXPRESSIONS, expression_track, expression_weights
+from .fap import FapTrack, FapWarning, format_fap, parse_fap, read_fap, write_fap
+from .fapu import Fapu, fap_displacement, fapu_from_landmarks
+from .tables import (
+    DIRECTION_VECTORS,
+    FAP_BY_NAME,
+    FAP_DIRECTIONS,
+    FAP_TABLE,
+    FAP_UNITS,
+    FAPU_FORMULAS,
+    FAPU_NAMES,
+    FDP_BY_ID,
+    FDP_TABLE,
+    LIP_PAIRS,
+    N_FAPS,
+    FapRecord,
+    FdpRecord,
+    fap_record,
+)
+
+__all__ = [
+    "DIRECTION_VECTORS",
+    "EXPRESSION_CODES",
+    "EXPRESSIONS",
+    "FAP_BY_NAME",
+    "FAP_DIRECTIONS",
+    "FAP_TABLE",
+    "FAP_UNITS",
+    "FAPU_FORMULAS",
+    "FAPU_NAMES",
+    "FDP_BY_ID",
+    "FDP_TABLE",
+    "LIP_PAIRS",
+    "N_FAPS",
+    "FapRecord",
+    "FapTrack",
+    "FapWarning",
+    "Fapu",
+    "FdpRecord",
+    "expression_track",
+    "expression_weights",
+    "fap_displacement",
+    "fap_record",
+    "fapu_from_landmarks",
+    "format_fap",
+    "parse_fap",
+    "read_fap",
+    "write_fap",
+]
