@@ -1,0 +1,257 @@
+"""Ray-cast binding of the skin to the muscles and the skull (§8).
+
+For each skin vertex ``p`` a ray is cast along its normal (the area-weighted
+average of the normals of its star of faces), outward first: after the fit,
+parts of some muscles may lie outside the skin and the skin binds to them
+first. Without a hit, a second ray is cast inward. Along each ray the muscles
+are tested from the most superficial to the deepest (the first muscle in that
+order that the ray meets wins, wherever along the ray it lies); inward, when no
+muscle is met, the skull (cranium and mandible, nearest hit) is tested. Hits
+farther than ``max_distance`` are ignored.
+
+On a hit the binding records a surface point (triangle + barycentric
+coordinates) on the hit body. The skin layer (:func:`faceforge.anatomy.skin.add_skin`)
+turns each into a particle ``q`` held on that surface point by a position
+constraint and a stretch constraint ``k_anchor`` between ``p`` and ``q``;
+:meth:`Binding.targets` recomputes the surface points on the deformed bodies
+every frame.
+
+Lips: skin of the upper lip may bind only to the cranium (upper structures),
+skin of the lower lip only to the mandible (``lip_sides`` from
+:func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
+
+Ray casting uses :class:`faceforge.geometry.rays.RayCaster` (trimesh, Embree
+where installed); all bodies of one pass are merged into one mesh so every pass
+is a single batched query.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+from faceforge.geometry.rays import RayCaster
+from faceforge.geometry.triangles import barycentric, check_mesh, vertex_normals
+
+__all__ = ["Body", "Binding", "bind_skin", "MUSCLE", "CRANIUM", "MANDIBLE", "UNBOUND"]
+
+#: kinds of body (and the per-vertex status codes of :attr:`Binding.status`)
+UNBOUND, MUSCLE, CRANIUM, MANDIBLE = 0, 1, 2, 3
+_KIND_CODES = {"muscle": MUSCLE, "cranium": CRANIUM, "mandible": MANDIBLE}
+KIND_NAMES = {UNBOUND: "none", MUSCLE: "muscle", CRANIUM: "cranium", MANDIBLE: "mandible"}
+
+
+@dataclass(frozen=True)
+class Body:
+    """A surface the skin can bind to.
+
+    Attributes
+    ----------
+    name : str
+        Muscle name, ``"cranium"`` or ``"mandible"``.
+    kind : str
+        ``"muscle"``, ``"cranium"`` or ``"mandible"``.
+    vertices : (n, 3) float64
+        Rest positions (after the fit), skin units.
+    faces : (m, 3) int64
+    """
+
+    name: str
+    kind: str
+    vertices: np.ndarray = field(repr=False)
+    faces: np.ndarray = field(repr=False)
+
+    def __post_init__(self):
+        if self.kind not in _KIND_CODES:
+            raise ValueError(f"body kind must be one of {sorted(_KIND_CODES)}, got {self.kind!r}")
+        v, f = check_mesh(self.vertices, self.faces)
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", f)
+
+
+@dataclass(frozen=True)
+class Binding:
+    """The anchors of the skin (one per bound skin vertex).
+
+    Attributes
+    ----------
+    body_names : tuple of str
+        The bodies, in the order given to :func:`bind_skin`.
+    status : (n,) int8
+        Per skin vertex: ``UNBOUND`` 0, ``MUSCLE`` 1, ``CRANIUM`` 2, ``MANDIBLE`` 3.
+    vertex_ids : (k,) int64
+        Bound skin vertices, increasing.
+    body : (k,) int64
+        Index into ``body_names`` of each anchor's body.
+    face_ids : (k,) int64
+        Hit triangle, in that body's faces.
+    bary : (k, 3) float64
+        Barycentric coordinates of the hit on that triangle.
+    points : (k, 3) float64
+        Rest position of the hit (skin units).
+    distance : (k,) float64
+        Distance from the skin vertex to the hit.
+    outward : (k,) bool
+        True when found by the outward ray.
+    normals : (n, 3) float64
+        The skin normals used for the rays.
+    """
+
+    body_names: tuple
+    status: np.ndarray
+    vertex_ids: np.ndarray
+    body: np.ndarray
+    face_ids: np.ndarray
+    bary: np.ndarray
+    points: np.ndarray
+    distance: np.ndarray
+    outward: np.ndarray
+    normals: np.ndarray
+
+    def targets(self, body_vertices) -> np.ndarray:
+        """Anchor surface points ``(k, 3)`` on the current (deformed) bodies.
+
+        ``body_vertices`` is a sequence with, for each body in ``body_names``
+        order, its current vertex positions ``(n_b, 3)``; faces are the rest
+        faces given to :func:`bind_skin` (stored per body in ``faces``).
+        """
+        out = np.empty((len(self.vertex_ids), 3), FLOAT)
+        for b, verts in enumerate(body_vertices):
+            sel = self.body == b
+            if sel.any():
+                tri = np.asarray(verts, FLOAT)[self.body_faces[b][self.face_ids[sel]]]
+                out[sel] = np.einsum("ij,ijk->ik", self.bary[sel], tri)
+        return out
+
+    body_faces: tuple = field(default=(), repr=False)
+
+    def as_arrays(self) -> dict:
+        """Flat arrays for an npz stage file (no pickle)."""
+        return {
+            "status": self.status, "vertex_ids": self.vertex_ids, "body": self.body,
+            "face_ids": self.face_ids, "bary": self.bary, "points": self.points,
+            "distance": self.distance, "outward": self.outward, "normals": self.normals,
+            "body_names": np.asarray(self.body_names, dtype=str),
+        }
+
+
+def _merge(bodies: list[Body], ids: list[int]):
+    verts, faces, owner, off = [], [], [], 0
+    for i in ids:
+        b = bodies[i]
+        verts.append(b.vertices)
+        faces.append(b.faces + off)
+        owner.append(np.full(len(b.faces), i, INT))
+        off += len(b.vertices)
+    return np.concatenate(verts), np.concatenate(faces), np.concatenate(owner)
+
+
+def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed):
+    """Best hit per ray among ``bodies[ids]``: smallest ``rank`` then distance.
+
+    ``allowed (k, n_bodies) bool`` filters bodies per ray. Returns
+    ``(body (k,), local_face (k,), points (k, 3), dist (k,))``, body -1 on a miss.
+    """
+    k = len(origins)
+    body = np.full(k, -1, INT)
+    face = np.full(k, -1, INT)
+    pts = np.full((k, 3), np.nan)
+    dist = np.full(k, np.inf)
+    if k == 0 or not ids:
+        return body, face, pts, dist
+    v, f, owner = _merge(bodies, ids)
+    first_face = {}
+    start = 0
+    for i in ids:
+        first_face[i] = start
+        start += len(bodies[i].faces)
+    ray, tri, loc, t = RayCaster(v, f).all_hits(origins, dirs)
+    b = owner[tri]
+    keep = (t >= 0) & (t <= max_distance) & allowed[ray, b]
+    ray, tri, loc, t, b = ray[keep], tri[keep], loc[keep], t[keep], b[keep]
+    if len(ray) == 0:
+        return body, face, pts, dist
+    order = np.lexsort((t, rank[b], ray))
+    ray, tri, loc, t, b = ray[order], tri[order], loc[order], t[order], b[order]
+    first = np.r_[True, ray[1:] != ray[:-1]]
+    r = ray[first]
+    body[r] = b[first]
+    offsets = np.array([first_face[i] for i in b[first]], INT)
+    face[r] = tri[first] - offsets
+    pts[r] = loc[first]
+    dist[r] = t[first]
+    return body, face, pts, dist
+
+
+def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
+              normals=None) -> Binding:
+    """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Skin rest positions (the working mesh, after the mouth cut).
+    faces : (m, 3) int
+    bodies : sequence of Body
+        Muscles ordered from the most superficial to the deepest, and the
+        skull parts (kind ``"cranium"`` / ``"mandible"``) in any position.
+    max_distance : float
+        Longest ray, in skin units (``bind.max_ray_distance`` x head diagonal).
+    lip_sides : (n,) int, optional
+        +1 upper lip (binds to the cranium only), -1 lower lip (mandible only),
+        0 elsewhere; see :func:`faceforge.anatomy.mouth.lip_side`.
+    normals : (n, 3) float, optional
+        Outward unit normals; default the area-weighted star average.
+
+    Returns
+    -------
+    Binding
+    """
+    v, f = check_mesh(vertices, faces)
+    bodies = list(bodies)
+    n, nb = len(v), len(bodies)
+    nrm = vertex_normals(v, f) if normals is None else np.asarray(normals, FLOAT)
+    if nrm.shape != v.shape:
+        raise ValueError(f"normals {nrm.shape} must match vertices {v.shape}")
+    sides = np.zeros(n, INT) if lip_sides is None else np.asarray(lip_sides, INT).reshape(-1)
+    if len(sides) != n:
+        raise ValueError(f"lip_sides {sides.shape} must have one entry per vertex ({n})")
+    kinds = np.array([_KIND_CODES[b.kind] for b in bodies], INT)
+    muscles = [i for i in range(nb) if kinds[i] == MUSCLE]
+    skull = [i for i in range(nb) if kinds[i] != MUSCLE]
+    rank = np.zeros(nb, INT)
+    rank[muscles] = np.arange(len(muscles))  # superficial first; skull parts all rank 0
+
+    allowed = np.ones((n, max(nb, 1)), bool)
+    allowed[np.ix_(sides > 0, kinds == MANDIBLE)] = False
+    allowed[np.ix_(sides < 0, kinds == CRANIUM)] = False
+
+    body = np.full(n, -1, INT)
+    face = np.full(n, -1, INT)
+    pts = np.full((n, 3), np.nan)
+    dist = np.full(n, np.inf)
+    outward = np.zeros(n, bool)
+    has_dir = np.linalg.norm(nrm, axis=1) > 0
+    passes = ((muscles, +1.0), (muscles, -1.0), (skull, -1.0))
+    for p, (ids, sign) in enumerate(passes):
+        todo = np.flatnonzero((body < 0) & has_dir)
+        res = _cast(bodies, ids, rank, v[todo], sign * nrm[todo], max_distance, allowed[todo])
+        hit = res[0] >= 0
+        t = todo[hit]
+        body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
+        outward[t] = sign > 0
+
+    ids = np.flatnonzero(body >= 0).astype(INT)
+    bary = np.zeros((len(ids), 3), FLOAT)
+    for b in np.unique(body[ids]):
+        sel = body[ids] == b
+        bary[sel] = barycentric(pts[ids[sel]], bodies[b].vertices, bodies[b].faces, face[ids[sel]])
+    status = np.zeros(n, np.int8)
+    status[ids] = kinds[body[ids]]
+    return Binding(
+        body_names=tuple(b.name for b in bodies), status=status, vertex_ids=ids,
+        body=body[ids], face_ids=face[ids], bary=bary, points=pts[ids], distance=dist[ids],
+        outward=outward[ids], normals=nrm, body_faces=tuple(b.faces for b in bodies),
+    )

@@ -1,0 +1,89 @@
+"""The lip cut on small synthetic faces: shared ring, bridged, open."""
+
+import numpy as np
+
+from faceforge.anatomy.mouth import cut_mouth, lip_side
+from faceforge.anatomy.skin import skin_topology
+from tests.bind.synthetic import mouth_grid
+
+
+def _boundary(faces):
+    return {tuple(e) for e in skin_topology(faces).boundary_edges.tolist()}
+
+
+def _lip_fdps_of(cut):
+    """FDP -> vertex of a cut mesh: upper FDPs on the upper contour, lower on the lower."""
+    u, lo = cut.upper, cut.lower
+    k = len(u) // 2
+    return {"2.4": u[0], "2.5": u[-1], "2.2": u[k], "2.3": lo[k],
+            "2.6": u[k // 2], "2.8": lo[k // 2], "2.7": u[(k + len(u)) // 2],
+            "2.9": lo[(k + len(u)) // 2]}
+
+
+def test_shared_ring_is_cut_and_user_vertices_keep_their_order():
+    v, f, lips = mouth_grid(8)
+    cut = cut_mouth(v, f, lips)
+    assert cut.case == "shared_ring"
+    n = len(v)
+    assert cut.n_user == n
+    np.testing.assert_array_equal(cut.vertices[:n], v)  # order and positions preserved
+    np.testing.assert_array_equal(cut.vertices[n:], v[cut.source])  # copies coincide
+    # the ring interior (corners excluded) is duplicated: 8-grid, corners at columns 1 and 7
+    assert len(cut.source) == 5
+    assert len(cut.faces) == len(f)
+    # the cut creates a boundary along the lip line: both sides of every ring edge
+    new_boundary = _boundary(cut.faces) - _boundary(f)
+    ring = list(zip(cut.upper[:-1], cut.upper[1:]))
+    low = list(zip(cut.lower[:-1], cut.lower[1:]))
+    expected = {tuple(sorted(map(int, e))) for e in ring + low}
+    assert new_boundary == expected
+    # every rewired face lies below the lip line
+    rewired = np.flatnonzero((cut.faces != f).any(axis=1))
+    assert len(rewired) and np.all(v[f[rewired]].mean(axis=1)[:, 1] < 0.5)
+    assert cut.to_user(cut.vertices).shape == v.shape
+
+
+def test_cutting_twice_finds_the_mouth_open():
+    v, f, lips = mouth_grid(8)
+    cut = cut_mouth(v, f, lips)
+    again = cut_mouth(cut.vertices, cut.faces, _lip_fdps_of(cut))
+    assert again.case == "open"
+    np.testing.assert_array_equal(again.faces, cut.faces)
+
+
+def test_bridging_triangles_are_deleted_and_nothing_else():
+    v, f, lips = mouth_grid(8)
+    cut = cut_mouth(v, f, lips)
+    verts = cut.vertices.copy()
+    verts[cut.upper[1:-1], 1] += 0.02  # part the lips geometrically
+    bridge = []
+    for (a, b), (c, d) in zip(zip(cut.upper[:-1], cut.upper[1:]), zip(cut.lower[:-1], cut.lower[1:])):
+        if a != c:
+            bridge.append([a, c, b] if b == d else [a, c, d])
+        if b != d:
+            bridge.append([a, d, b])
+    faces = np.concatenate([cut.faces, np.asarray(bridge)])
+    out = cut_mouth(verts, faces, _lip_fdps_of(cut))
+    assert out.case == "bridged"
+    np.testing.assert_array_equal(np.sort(out.removed_faces), np.arange(len(cut.faces), len(faces)))
+    np.testing.assert_array_equal(out.faces, cut.faces)
+    np.testing.assert_array_equal(out.vertices, verts)
+
+
+def test_missing_lip_landmarks_leave_the_mesh_alone():
+    v, f, lips = mouth_grid(6)
+    out = cut_mouth(v, f, {"2.2": lips["2.2"]})
+    assert out.case == "no_landmarks"
+    np.testing.assert_array_equal(out.faces, f)
+    assert out.report()["case"] == "no_landmarks"
+
+
+def test_lip_side_splits_upper_and_lower():
+    v, f, lips = mouth_grid(8)
+    cut = cut_mouth(v, f, lips)
+    side = lip_side(cut)
+    assert np.all(side[cut.upper[1:-1]] == 1)
+    assert np.all(side[cut.lower[1:-1]] == -1)
+    y = cut.vertices[:, 1]
+    assert np.all(side[(side != 0) & (y > 0.5 + 1e-9)] == 1)
+    assert np.all(side[(side != 0) & (y < 0.5 - 1e-9)] == -1)
