@@ -1,0 +1,250 @@
+"""The ``faceforge`` command line: one click group, stage commands discovered lazily.
+
+Built-in commands: ``status``, ``clean``, ``run``, ``config show|validate|reset``.
+Stage modules in ``faceforge/pipeline/stages/`` add theirs (fit, bind, animate,
+batch) with :func:`faceforge.pipeline.register_command`; see
+``faceforge/pipeline/__init__.py`` for the pattern.
+
+Importing this module imports click and the stage registry only, so
+``faceforge --help`` stays instant; numpy, numba and trimesh are imported inside
+the stages that use them. Every :class:`~faceforge.exceptions.FaceforgeError` is
+printed as ``faceforge: error: <file>: <cause>`` with exit status 2 (traceback
+with ``-v``).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from pathlib import Path
+
+import click
+
+from faceforge.exceptions import FaceforgeError
+from faceforge.pipeline import stage as registry
+
+_BUILTIN_ORDER = ("status", "run", "clean", "config")
+
+
+class App:
+    """The context object of every command (``click.pass_obj``).
+
+    Attributes
+    ----------
+    workspace : :class:`faceforge.pipeline.runner.Workspace` of ``--workdir``.
+    config : the merged, validated :class:`faceforge.io.config.Config`.
+    verbosity : ``-v`` count minus ``-q`` (-1 quiet, 0 normal, 1+ verbose).
+    """
+
+    def __init__(self, workdir: str, config_file: str | None, sets: tuple[str, ...],
+                 verbosity: int, progress: bool | None):
+        from faceforge.io.config import load_config, parse_sets, read_config_file
+        from faceforge.pipeline.runner import Workspace
+
+        self.workspace = Workspace(workdir)
+        self.verbosity = verbosity
+        self.progress = (sys.stderr.isatty() and verbosity >= 0) if progress is None else progress
+        # validate every layer before any work
+        self.config_file = config_file
+        self._file_layer = read_config_file(config_file) if config_file else None
+        self._set_layer = parse_sets(sets) if sets else None
+        self.config = load_config(config_file, sets, remembered=self.workspace.config_path)
+
+    def log(self, message: str) -> None:
+        """A progress line on stderr (hidden with ``-q``)."""
+        if self.verbosity >= 0:
+            click.echo(message, err=True)
+
+    def debug(self, message: str) -> None:
+        if self.verbosity >= 1:
+            click.echo(message, err=True)
+
+    def remember_overrides(self) -> None:
+        """Fold ``--config``/``--set`` into ``<workdir>/config.yaml`` so later commands reuse them."""
+        from faceforge.io.config import merge_trees, read_config_file
+        from faceforge.io.stagefiles import save_yaml
+
+        layers = [layer for layer in (self._file_layer, self._set_layer) if layer is not None]
+        if not layers:
+            return
+        path = self.workspace.config_path
+        tree = read_config_file(path).tree if path.exists() else {}
+        for layer in layers:
+            tree = merge_trees(tree, layer.tree)
+        save_yaml(path, tree, header="config overrides remembered for this workdir (from --config/--set);\n"
+                                     "edit, or forget them with `faceforge config reset`")
+        self.debug(f"remembered overrides in {path}")
+
+    def run_stage(self, name: str, params: dict | None = None, force: bool = False):
+        """Remember ``params`` and overrides, then bring stage ``name`` and its upstream up to date."""
+        from faceforge.pipeline import runner
+
+        stage = registry.get_stage(name)
+        inputs = {n.rstrip("?") for s in registry.stage_order([name]) for n in s.inputs}
+        self.workspace.root.mkdir(parents=True, exist_ok=True)
+        remembered = self.workspace.load_params()
+        for key, value in (params or {}).items():
+            if value is None:
+                continue
+            remembered[key] = os.path.abspath(value) if key in inputs else value
+        if params:
+            self.workspace.save_params(remembered)
+        self.remember_overrides()
+        return runner.run(self.workspace, self.config, remembered, [stage.name], force=force,
+                          log=self.log, progress=self.progress)
+
+
+class FaceforgeGroup(click.Group):
+    """Lists built-in commands plus those registered by stage modules; formats errors."""
+
+    def list_commands(self, ctx):
+        registry.discover()
+        extra = sorted(name for name in registry.COMMANDS if name not in self.commands)
+        return [n for n in _BUILTIN_ORDER if n in self.commands] + extra
+
+    def get_command(self, ctx, name):
+        if name in self.commands:
+            return self.commands[name]
+        registry.discover()
+        return registry.COMMANDS.get(name)
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except FaceforgeError as exc:
+            verbose = ctx.params.get("verbose", 0) > 0
+            if verbose:
+                traceback.print_exc()
+            click.echo(f"faceforge: error: {exc}", err=True)
+            ctx.exit(exc.exit_code)
+
+
+@click.group(cls=FaceforgeGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.option("--workdir", "-w", type=click.Path(file_okay=False), default=".", show_default=True,
+              help="Folder holding the current head's stages (one per head).")
+@click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
+              help="YAML file merged over the defaults (remembered by stage commands).")
+@click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override one config value (YAML scalar); repeatable.")
+@click.option("-v", "--verbose", count=True, help="More output; tracebacks on errors.")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors.")
+@click.option("--progress/--no-progress", default=None,
+              help="Progress bars on stderr [default: only on a terminal, not with -q].")
+@click.version_option(package_name="faceforge", prog_name="faceforge")
+@click.pass_context
+def cli(ctx, workdir, config_file, sets, verbose, quiet, progress):
+    """faceforge: fit a skull and muscles into a head mesh, bind the skin and
+    animate it with MPEG-4 FAPs (Fratarcangeli 2012, position-based dynamics).
+
+    \b
+    faceforge --workdir work fit head.obj --landmarks head.fdp.yaml
+    faceforge --workdir work bind
+    faceforge --workdir work animate --fap joy.fap -o work/joy.pc2
+    """
+    ctx.obj = App(workdir, config_file, tuple(sets), verbose - (1 if quiet else 0), progress)
+
+
+@cli.command()
+@click.pass_obj
+def status(app: App):
+    """List the stages and why each is or is not up to date."""
+    from faceforge.pipeline.runner import plan
+
+    statuses = plan(app.workspace, app.config, app.workspace.load_params())
+    if not statuses:
+        click.echo("no stages registered yet")
+        return
+    width = max(len(s.stage.name) for s in statuses)
+    for s in statuses:
+        state = "up to date" if s.up_to_date else "stale: " + "; ".join(s.reasons)
+        click.echo(f"{s.stage.name:<{width}}  {state}")
+        if app.verbosity >= 1 and s.key:
+            click.echo(f"{'':<{width}}  key {s.key[:16]}  {s.stage.description}")
+
+
+@cli.command("run")
+@click.argument("stage_name", metavar="STAGE")
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="Set a remembered input (a path for names listed in the stage's inputs).")
+@click.option("--force", is_flag=True, help="Rerun STAGE even if it is up to date.")
+@click.pass_obj
+def run_command(app: App, stage_name, params, force):
+    """Bring STAGE and everything upstream of it up to date."""
+    values = {}
+    for item in params:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise click.BadParameter(f"expected NAME=VALUE, got {item!r}", param_hint="--param")
+        values[name] = value
+    app.run_stage(stage_name, values, force=force)
+
+
+@cli.command()
+@click.argument("stages", nargs=-1)
+@click.option("--forget", is_flag=True, help="Also forget remembered inputs and config overrides.")
+@click.pass_obj
+def clean(app: App, stages, forget):
+    """Delete stage folders (all, or STAGES); user files are kept."""
+    from faceforge.pipeline.runner import clean as clean_stages
+
+    for name in stages:
+        registry.get_stage(name)
+    removed = clean_stages(app.workspace, list(stages) or None, log=app.log)
+    app.log(f"removed {', '.join(removed)}" if removed else "nothing to remove")
+    if forget:
+        for path in (app.workspace.params_path, app.workspace.config_path):
+            if path.exists():
+                path.unlink()
+                app.log(f"forgot {path.name}")
+
+
+@cli.group("config")
+def config_group():
+    """Show, validate or reset the configuration."""
+
+
+@config_group.command("show")
+@click.option("--origins/--no-origins", default=True, help="Mark values not from the defaults.")
+@click.pass_obj
+def config_show(app: App, origins):
+    """Print the merged, validated configuration as YAML."""
+    click.echo(app.config.to_yaml(annotate=origins), nl=False)
+
+
+@config_group.command("validate")
+@click.argument("file", type=click.Path(dir_okay=False))
+@click.pass_obj
+def config_validate(app: App, file):
+    """Check FILE against the schema (configs/default.yaml); print every problem."""
+    from faceforge.exceptions import ConfigError
+    from faceforge.io.config import read_config_file
+
+    try:
+        read_config_file(file)
+    except ConfigError as exc:
+        for err in getattr(exc, "all_errors", [exc])[:-1]:
+            click.echo(f"faceforge: error: {err}", err=True)
+        raise getattr(exc, "all_errors", [exc])[-1] from None
+    app.log(f"{file}: ok")
+
+
+@config_group.command("reset")
+@click.pass_obj
+def config_reset(app: App):
+    """Forget the overrides remembered in <workdir>/config.yaml."""
+    path: Path = app.workspace.config_path
+    if path.exists():
+        path.unlink()
+        app.log(f"removed {path}")
+    else:
+        app.log("no remembered overrides")
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Console-script entry point (``faceforge``); FACEFORGE_<OPTION> env vars set defaults."""
+    cli.main(args=argv, prog_name="faceforge", auto_envvar_prefix="FACEFORGE")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

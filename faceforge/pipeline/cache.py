@@ -1,0 +1,114 @@
+"""Cache keys of stages and the reasons a stage is stale (DVC-like).
+
+A stage's record holds exactly what its key hashes::
+
+    {"stage": "bind", "version": "1",
+     "config": {"skin.stiffness": {...}, "bind": {...}},      # values of its config keys
+     "inputs": {"mesh": {"path": "/abs/head.obj", "sha256": "..."}},
+     "upstream": {"fit": "<fit's key>"}}
+
+The key is the SHA-256 of the record's canonical JSON with input *paths* left out,
+so moving an unchanged file does not rerun anything. ``<workdir>/<name>/stage.json``
+stores the record, the key and the outputs; :func:`stale_reasons` compares it with
+the current record and says why in words ("`skin.stiffness.bending` changed").
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+from typing import Any, Mapping
+
+from faceforge.exceptions import StageError
+
+_CHUNK = 1 << 20
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 hex digest of a file's bytes, or of a folder (sorted relative names + contents)."""
+    path = Path(path)
+    digest = hashlib.sha256()
+    if path.is_dir():
+        for child in sorted(p for p in path.rglob("*") if p.is_file()):
+            digest.update(child.relative_to(path).as_posix().encode("utf-8") + b"\0")
+            digest.update(file_digest(child).encode("ascii"))
+        return digest.hexdigest()
+    try:
+        with open(path, "rb") as fh:
+            for chunk in iter(lambda: fh.read(_CHUNK), b""):
+                digest.update(chunk)
+    except FileNotFoundError:
+        raise StageError("input file not found", path) from None
+    except OSError as exc:
+        raise StageError(f"cannot read input: {exc.strerror}", path) from None
+    return digest.hexdigest()
+
+
+def canonical_json(value: Any) -> str:
+    """Deterministic JSON (sorted keys, no spaces) used for hashing."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
+def record_key(record: Mapping) -> str:
+    """The cache key of a record: SHA-256 of its canonical JSON without input paths."""
+    hashed = dict(record)
+    hashed["inputs"] = {name: (None if v is None else v["sha256"]) for name, v in record["inputs"].items()}
+    return hashlib.sha256(canonical_json(hashed).encode("utf-8")).hexdigest()
+
+
+def _leaf_diff(old: Any, new: Any, prefix: str) -> list[str]:
+    """Dotted keys whose values differ between two config subtrees."""
+    if isinstance(old, Mapping) and isinstance(new, Mapping):
+        out = []
+        for key in list(old) + [k for k in new if k not in old]:
+            if key not in old or key not in new:
+                out.append(f"{prefix}.{key}")
+            else:
+                out.extend(_leaf_diff(old[key], new[key], f"{prefix}.{key}"))
+        return out
+    return [] if old == new else [prefix]
+
+
+def stale_reasons(current: Mapping, previous: Mapping | None) -> list[str]:
+    """Why a stage whose record is ``current`` differs from its stored ``previous`` record.
+
+    Returns an empty list when the keys agree; otherwise short sentences naming the
+    changed config keys, inputs and upstream stages.
+    """
+    if previous is None:
+        return ["never run"]
+    if record_key(current) == previous.get("key"):
+        return []
+    reasons = []
+    if previous.get("version") != current["version"]:
+        reasons.append(f"code version {previous.get('version')} -> {current['version']}")
+    old_config = previous.get("config", {})
+    for key, value in current["config"].items():
+        if key not in old_config:
+            reasons.append(f"`{key}` newly read")
+        else:
+            reasons.extend(f"`{k}` changed" for k in _leaf_diff(old_config[key], value, key))
+    old_inputs = previous.get("inputs", {})
+    for name, entry in current["inputs"].items():
+        old = old_inputs.get(name)
+        old_sha = None if old is None else old.get("sha256")
+        new_sha = None if entry is None else entry["sha256"]
+        if old_sha != new_sha:
+            label = Path(entry["path"]).name if entry else name
+            reasons.append(f"input {label} changed" if old and entry else f"input {name} {'added' if entry else 'removed'}")
+    old_up = previous.get("upstream", {})
+    for dep, key in current["upstream"].items():
+        if old_up.get(dep) != key:
+            reasons.append(f"upstream {dep} changed")
+    return reasons or ["stage.json does not match (written by another faceforge version?)"]
+
+
+def read_stage_json(stage_dir: Path) -> dict | None:
+    """The stored record of a complete stage folder, or None when absent or unreadable."""
+    path = stage_dir / "stage.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) and "key" in data else None

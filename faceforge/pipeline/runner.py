@@ -1,0 +1,248 @@
+"""Run stages in a workdir: plan (which are stale and why), run atomically, status, clean.
+
+Workdir layout::
+
+    <workdir>/faceforge.yaml      remembered params (input paths) of the last runs
+    <workdir>/config.yaml         remembered config overrides (--config/--set of stage runs)
+    <workdir>/.faceforge.lock     fcntl lock serializing processes
+    <workdir>/<stage>/            one folder per complete stage, stage.json inside
+    <workdir>/.tmp-<stage>-*      a stage being written (removed on the next run if stale)
+
+A stage is written into ``.tmp-<stage>-<pid>-<token>/``, its ``stage.json`` last,
+and only then renamed to ``<stage>/`` (the previous folder is first moved aside).
+A run killed at any instant therefore leaves either the old complete folder,
+no folder, or a temp folder that the next run deletes: never a folder that
+looks complete but is not.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping
+
+from faceforge.exceptions import StageError
+from faceforge.pipeline.cache import file_digest, read_stage_json, record_key, stale_reasons
+from faceforge.pipeline.lock import WorkdirLock
+from faceforge.pipeline.stage import Stage, StageContext, stage_order
+
+PARAMS_FILE = "faceforge.yaml"
+CONFIG_FILE = "config.yaml"
+_TEMP_PREFIXES = (".tmp-", ".trash-")
+
+
+class Workspace:
+    """The files of one workdir (see the module docstring)."""
+
+    def __init__(self, workdir: str | Path):
+        self.root = Path(workdir).absolute()
+
+    @property
+    def params_path(self) -> Path:
+        return self.root / PARAMS_FILE
+
+    @property
+    def config_path(self) -> Path:
+        return self.root / CONFIG_FILE
+
+    def stage_dir(self, name: str) -> Path:
+        return self.root / name
+
+    def load_params(self) -> dict:
+        """Remembered params (``{}`` for a new workdir)."""
+        from faceforge.io.stagefiles import load_yaml
+
+        if not self.params_path.exists():
+            return {}
+        data = load_yaml(self.params_path) or {}
+        params = data.get("params") if isinstance(data, dict) else None
+        if not isinstance(params, dict):
+            raise StageError("expected a mapping with a 'params' key", self.params_path)
+        return params
+
+    def save_params(self, params: Mapping[str, Any]) -> None:
+        from faceforge.io.stagefiles import save_yaml
+
+        save_yaml(self.params_path, {"params": dict(params)},
+                  header="faceforge workdir: inputs remembered from the last runs (written by faceforge)")
+
+    def clean_temp(self) -> list[Path]:
+        """Delete leftovers of interrupted runs (call with the lock held)."""
+        removed = []
+        if self.root.is_dir():
+            for child in self.root.iterdir():
+                if child.is_dir() and child.name.startswith(_TEMP_PREFIXES):
+                    shutil.rmtree(child, ignore_errors=True)
+                    removed.append(child)
+        return removed
+
+    def lock(self, notify: Callable[[str], None] = lambda msg: None) -> WorkdirLock:
+        return WorkdirLock(self.root, notify)
+
+
+@dataclass
+class StageStatus:
+    """A stage's current record and key, and why it is stale (empty: up to date)."""
+
+    stage: Stage
+    record: dict | None
+    key: str | None
+    reasons: list[str] = field(default_factory=list)
+    ran: bool = False
+    seconds: float = 0.0
+
+    @property
+    def up_to_date(self) -> bool:
+        return not self.reasons
+
+
+def _resolve_input(name: str, config, params: Mapping) -> str | None:
+    name = name.rstrip("?")
+    if name in params:
+        value = params[name]
+    else:
+        value = config.get(name, None) if "." in name else None
+    return None if value in (None, "") else str(value)
+
+
+def current_record(stage: Stage, config, params: Mapping, upstream: Mapping[str, str]) -> tuple[dict, list[str]]:
+    """The record of ``stage`` for the present inputs, and the names of missing required inputs."""
+    missing, inputs = [], {}
+    for name in stage.inputs:
+        path = _resolve_input(name, config, params)
+        if path is None:
+            inputs[name.rstrip("?")] = None
+            if not name.endswith("?"):
+                missing.append(name)
+            continue
+        if not Path(path).exists():
+            inputs[name.rstrip("?")] = None
+            missing.append(f"{name.rstrip('?')} ({path} not found)")
+            continue
+        inputs[name.rstrip("?")] = {"path": path, "sha256": file_digest(path)}
+    record = {
+        "stage": stage.name,
+        "version": str(stage.version),
+        "config": {key: config.get(key) for key in stage.config_keys},
+        "inputs": inputs,
+        "upstream": {dep: upstream[dep] for dep in stage.deps},
+    }
+    return record, missing
+
+
+def plan(workspace: Workspace, config, params: Mapping,
+         targets: Iterable[str] | None = None) -> list[StageStatus]:
+    """Status of the stages needed for ``targets`` (all when None), upstream first."""
+    statuses: list[StageStatus] = []
+    keys: dict[str, str] = {}
+    for stage in stage_order(targets):
+        record, missing = current_record(stage, config, params, keys)
+        key = record_key(record)
+        keys[stage.name] = key
+        previous = read_stage_json(workspace.stage_dir(stage.name))
+        if missing:
+            reasons = [f"needs input {', '.join(missing)}"]
+        else:
+            reasons = stale_reasons(record, previous)
+            if not reasons:
+                absent = [o for o in stage.outputs if not (workspace.stage_dir(stage.name) / o).exists()]
+                if absent:
+                    reasons = [f"output missing: {', '.join(absent)}"]
+        statuses.append(StageStatus(stage, record, key, reasons))
+    return statuses
+
+
+def _commit(workspace: Workspace, tmp: Path, name: str) -> None:
+    """Rename the finished temp folder to ``<workdir>/<name>`` (old folder moved aside first)."""
+    final = workspace.stage_dir(name)
+    trash = None
+    if final.exists():
+        trash = workspace.root / f".trash-{name}-{os.getpid()}-{secrets.token_hex(4)}"
+        os.rename(final, trash)
+    os.rename(tmp, final)
+    if trash is not None:
+        shutil.rmtree(trash, ignore_errors=True)
+
+
+def run_stage(workspace: Workspace, status: StageStatus, config, params: Mapping,
+              log: Callable[[str], None] = lambda msg: None, progress: bool = False) -> None:
+    """Run one stale stage into a temp folder and rename it into place (lock must be held)."""
+    from faceforge import __version__
+    from faceforge.io.stagefiles import save_json
+
+    stage = status.stage
+    tmp = workspace.root / f".tmp-{stage.name}-{os.getpid()}-{secrets.token_hex(4)}"
+    tmp.mkdir(parents=True)
+    ctx = StageContext(name=stage.name, config=config, params=dict(params), out_dir=tmp,
+                       workdir=workspace.root, deps=stage.deps, progress_enabled=progress, logger=log)
+    start = time.perf_counter()
+    try:
+        stage.run(ctx)
+        absent = [o for o in stage.outputs if not (tmp / o).exists()]
+        if absent:
+            raise StageError(f"stage {stage.name} did not write {', '.join(absent)}")
+        status.seconds = time.perf_counter() - start
+        save_json(tmp / "stage.json", {**status.record, "key": status.key, "outputs": list(stage.outputs),
+                                        "faceforge_version": __version__,
+                                        "seconds": round(status.seconds, 3)})
+        _commit(workspace, tmp, stage.name)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    status.ran = True
+
+
+def run(workspace: Workspace, config, params: Mapping, targets: Iterable[str], force: bool = False,
+        log: Callable[[str], None] = lambda msg: None, progress: bool = False) -> list[StageStatus]:
+    """Bring ``targets`` and their upstream stages up to date; ``force`` reruns the targets.
+
+    Holds the workdir lock for the whole run, deletes temp folders of interrupted
+    runs, logs one line per stage ("fit: up to date", "bind: running (`bind.x`
+    changed)"). Raises :class:`StageError` when a required input is missing.
+    """
+    targets = list(targets)
+    workspace.root.mkdir(parents=True, exist_ok=True)
+    with workspace.lock(notify=log):
+        for leftover in workspace.clean_temp():
+            log(f"removed {leftover.name} left by an interrupted run")
+        statuses = plan(workspace, config, params, targets)
+        if force:
+            for status in statuses:
+                if status.stage.name in targets and not status.reasons:
+                    status.reasons = ["--force"]
+        for status in statuses:
+            name = status.stage.name
+            if status.reasons and status.reasons[0].startswith("needs input"):
+                raise StageError(f"stage {name} {status.reasons[0]}", workspace.root)
+            if not status.reasons:
+                log(f"{name}: up to date")
+                continue
+            log(f"{name}: running ({'; '.join(status.reasons)})")
+            run_stage(workspace, status, config, params, log=log, progress=progress)
+            log(f"{name}: done in {status.seconds:.1f} s")
+    return statuses
+
+
+def clean(workspace: Workspace, names: Iterable[str] | None = None,
+          log: Callable[[str], None] = lambda msg: None) -> list[str]:
+    """Delete stage folders (those holding a stage.json) and temp leftovers; keep user files."""
+    removed = []
+    if not workspace.root.is_dir():
+        return removed
+    with workspace.lock(notify=log):
+        workspace.clean_temp()
+        wanted = [s.name for s in stage_order()] if names is None else list(names)
+        for name in wanted:
+            folder = workspace.stage_dir(name)
+            if not folder.is_dir():
+                continue
+            if not (folder / "stage.json").exists():
+                log(f"kept {folder}: no stage.json, not a faceforge stage folder")
+                continue
+            shutil.rmtree(folder)
+            removed.append(name)
+    return removed
