@@ -1,0 +1,268 @@
+"""Calibrate the FAP mapping: make requested and achieved FAP displacements agree (§9).
+
+The paper claims the FAP -> contraction mapping is precise because the contraction ``c``
+sets the fibre length (§5.2). This module measures it. For every entry of the mapping it
+applies the entry's FAPs alone at a few *drives* on the bound head (through a
+``simulate`` callable that returns the settled skin), measures how far the FAP's FDP
+moved along the FAP's direction in FAPU, and inverts the sampled (monotone, usually
+nonlinear: fibres bunch, contractions clip, skin lags its anchors) drive -> displacement
+curve. The inverse becomes the entry's ``response`` knots (requested -> drive). A couple of
+secant refinements per requested value correct what linear interpolation misses, and a
+final pass measures what the calibrated mapping achieves: that is the report.
+
+Everything here works on arrays and callables; the pipeline stage supplies the head,
+the FAP table (direction, unit, FDP of each FAP) and the FAPU.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.anatomy.fap_mapping import N_FAPS, FapMapping, with_entry
+
+#: FAP groups the acceptance criterion is computed over (MPEG-4 FAP numbers)
+JAW_FAPS = (3, 14, 15)
+LIP_FAPS = (4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 16, 17, 18, 51, 52, 53, 54, 55, 56, 57, 58, 59, 60)
+CHEEK_FAPS = (39, 40, 41, 42)
+EYEBROW_FAPS = (31, 32, 33, 34, 35, 36, 37, 38)
+
+
+def fap_group(fap: int) -> str:
+    """'jaw' | 'lip' | 'cheek' | 'eyebrow' | 'other' for a FAP number."""
+    for name, faps in (("jaw", JAW_FAPS), ("lip", LIP_FAPS), ("cheek", CHEEK_FAPS),
+                       ("eyebrow", EYEBROW_FAPS)):
+        if fap in faps:
+            return name
+    return "other"
+
+
+@dataclass(frozen=True)
+class Probe:
+    """How to observe one FAP on the skin.
+
+    vertex : skin vertex index of the FAP's FDP
+    relative_to : vertex index whose displacement is subtracted, or -1
+    direction : (3,) float unit vector of the FAP's positive motion (project frame)
+    unit : float, skin length of one FAPU of this FAP (e.g. MNS0 / 1024)
+    """
+
+    fap: int
+    vertex: int
+    relative_to: int
+    direction: np.ndarray
+    unit: float
+
+
+def measure(rest: np.ndarray, moved: np.ndarray, probe: Probe) -> np.ndarray:
+    """Displacement in FAPU of ``probe``'s FDP along its direction.
+
+    rest : (n, 3) float skin positions at rest; moved : (k, n, 3) or (n, 3) float
+    Returns (k,) or scalar float (FAPU).
+    """
+    moved = np.asarray(moved, dtype=float)
+    d = moved[..., probe.vertex, :] - rest[probe.vertex]
+    if probe.relative_to >= 0:
+        d = d - (moved[..., probe.relative_to, :] - rest[probe.relative_to])
+    return (d @ np.asarray(probe.direction, dtype=float)) / probe.unit
+
+
+def invert_monotone(drives: np.ndarray, achieved: np.ndarray, requested: np.ndarray) -> np.ndarray:
+    """Drives that achieve ``requested`` on the sampled curve ``achieved(drives)``.
+
+    drives : (k,) float, all of one sign, sampled drives (FAPU)
+    achieved : (k,) float, displacement measured at each drive (FAPU)
+    requested : (r,) float, of the same sign as ``drives``' intended effect
+
+    The curve gets (0, 0) prepended and is made monotone (running max of |achieved|
+    along |drive|), then inverted by linear interpolation; beyond the last sample the
+    last secant slope extrapolates. Returns (r,) float drives; NaN where the curve never
+    moves the FDP in the requested sense (the FAP is unreachable with this mapping).
+    """
+    drives, achieved, requested = (np.asarray(a, dtype=float) for a in (drives, achieved, requested))
+    order = np.argsort(np.abs(drives))
+    d = np.concatenate([[0.0], drives[order]])
+    a = np.concatenate([[0.0], achieved[order]])
+    out = np.full(requested.shape, np.nan)
+    for sense in (1.0, -1.0):
+        sel = np.sign(requested) == sense
+        if not np.any(sel):
+            continue
+        gain = np.maximum.accumulate(np.maximum(sense * a, 0.0))   # |achieved| in this sense
+        if gain[-1] <= 0.0:
+            continue
+        # strictly increasing support for interpolation: keep the first sample of each plateau
+        keep = np.concatenate([[True], np.diff(gain) > 0.0])
+        g, dd = gain[keep], d[keep]
+        r = np.abs(requested[sel])
+        res = np.interp(r, g, dd)
+        if len(g) >= 2:
+            slope = (dd[-1] - dd[-2]) / (g[-1] - g[-2])
+            res = np.where(r > g[-1], dd[-1] + (r - g[-1]) * slope, res)
+        out[sel] = res
+    return out
+
+
+@dataclass
+class CalibrationRow:
+    fap: int
+    name: str
+    group: str
+    requested: float
+    achieved_before: float
+    achieved: float
+    drive: float
+
+    @property
+    def error(self) -> float:
+        """Relative error |achieved - requested| / |requested|."""
+        return abs(self.achieved - self.requested) / abs(self.requested)
+
+    def as_dict(self) -> dict:
+        return {"fap": self.fap, "name": self.name, "group": self.group,
+                "requested": self.requested, "achieved_uncalibrated": self.achieved_before,
+                "achieved": self.achieved, "drive": self.drive, "relative_error": self.error}
+
+
+def _frames(entry_faps, values: np.ndarray) -> np.ndarray:
+    f = np.zeros((len(values), N_FAPS))
+    for fap in entry_faps:
+        f[:, fap - 1] = values
+    return f
+
+
+def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: dict,
+                      requested: dict, refine: int = 2, sample_scale=(0.5, 1.0, 1.5),
+                      max_drive=20.0, progress=None):
+    """Fit every entry's response curve so requested and achieved FAPU agree.
+
+    Parameters
+    ----------
+    mapping : FapMapping, the starting mapping (its response curves are ignored)
+    simulate : callable (mapping, faps (k, 68) float) -> skin (k, n, 3) float, the settled
+        skin of k independent static poses
+    rest : (n, 3) float, skin at rest
+    probes : dict FAP number -> Probe; entries whose first FAP has no probe are skipped
+    requested : dict FAP number -> (r,) float requested values (FAPU, nonzero)
+    refine : secant refinements per requested value after the first inversion
+    sample_scale : drives sampled for the first curve, as fractions of max |requested|
+    max_drive : cap on |drive| / |requested|
+    progress : optional callable wrapping an iterable (e.g. tqdm)
+
+    Returns
+    -------
+    (calibrated FapMapping, list of CalibrationRow for every (FAP of the entry, requested))
+    """
+    rows = []
+    calibrated = mapping
+    indices = range(len(mapping.entries))
+    for idx in (progress(indices) if progress else indices):
+        entry = mapping.entries[idx]
+        lead = entry.faps[0]
+        if lead not in probes or lead not in requested:
+            continue
+        req = np.asarray(requested[lead], dtype=float)
+        req = req[req != 0.0]
+        if len(req) == 0:
+            continue
+        probe = probes[lead]
+        identity = with_entry(calibrated, idx, response=None)
+        # 1. sample the drive -> displacement curve (identity response: drive = value)
+        top = np.abs(req).max()
+        signs = np.unique(np.sign(req))
+        drives = np.concatenate([s * top * np.asarray(sample_scale, dtype=float) for s in signs])
+        sampled = measure(rest, simulate(identity, _frames(entry.faps, drives)), probe)
+        before = measure(rest, simulate(identity, _frames(entry.faps, req)), probe)
+        # 2. invert it, 3. refine each requested value by secant steps on its own samples
+        drive = invert_monotone(drives, sampled, req)
+        ok = np.isfinite(drive)
+        d_all, a_all = list(drives), list(sampled)
+        achieved = before.copy()
+        for _ in range(refine + 1):
+            if not np.any(ok):
+                break
+            trial = with_entry(calibrated, idx, response=None)
+            got = measure(rest, simulate(trial, _frames(entry.faps, drive[ok])), probe)
+            achieved[ok] = got
+            d_all += list(drive[ok])
+            a_all += list(got)
+            # secant on the two nearest samples around each requested value
+            drive[ok] = invert_monotone(np.asarray(d_all), np.asarray(a_all), req[ok])
+            ok = np.isfinite(drive)
+            # an FDP that barely moves would ask for absurd drives: cap them (contractions
+            # and jaw limits saturate long before, so the report shows the shortfall)
+            drive = np.clip(drive, -max_drive * np.abs(req), max_drive * np.abs(req))
+        knots = np.column_stack([req[ok], drive[ok]]) if np.any(ok) else None
+        if knots is not None:
+            knots = _monotone_knots(knots)
+        calibrated = with_entry(calibrated, idx, response=knots)
+        # 4. verify with the calibrated response, every FAP of the entry on its own probe
+        for fap in entry.faps:
+            if fap not in probes:
+                continue
+            final = measure(rest, simulate(calibrated, _frames(entry.faps, req)), probes[fap])
+            first = before if fap == lead else measure(
+                rest, simulate(identity, _frames(entry.faps, req)), probes[fap])
+            for j, r in enumerate(req):
+                rows.append(CalibrationRow(fap, entry.name, fap_group(fap), float(r), float(first[j]),
+                                           float(final[j]), float(drive[j]) if ok[j] else float("nan")))
+    return calibrated, rows
+
+
+def _monotone_knots(knots: np.ndarray) -> np.ndarray:
+    """Sort knots by requested value and force drives monotone (non-decreasing in value)."""
+    k = knots[np.argsort(knots[:, 0], kind="stable")].copy()
+    neg, pos = k[:, 0] < 0.0, k[:, 0] > 0.0
+    # on each side the drive keeps the sign it had and grows with |requested|
+    if np.any(pos):
+        s = np.sign(np.median(k[pos, 1])) or 1.0
+        k[pos, 1] = s * np.maximum.accumulate(np.maximum(s * k[pos, 1], 0.0))
+    if np.any(neg):
+        s = np.sign(np.median(k[neg, 1])) or -1.0
+        mag = np.maximum(s * k[neg, 1][::-1], 0.0)
+        k[neg, 1] = (s * np.maximum.accumulate(mag))[::-1]
+    return k
+
+
+def summarize(rows) -> dict:
+    """Median relative error per group and over lip + jaw + cheek + eyebrow FAPs."""
+    out = {}
+    for group in ("jaw", "lip", "cheek", "eyebrow"):
+        errs = [r.error for r in rows if r.group == group]
+        out[group] = {"count": len(errs), "median_relative_error": float(np.median(errs)) if errs else None}
+    errs = [r.error for r in rows if r.group in ("jaw", "lip", "cheek", "eyebrow")]
+    out["all"] = {"count": len(errs), "median_relative_error": float(np.median(errs)) if errs else None}
+    before = [abs(r.achieved_before - r.requested) / abs(r.requested) for r in rows
+              if r.group in ("jaw", "lip", "cheek", "eyebrow")]
+    out["all_uncalibrated"] = {"count": len(before),
+                               "median_relative_error": float(np.median(before)) if before else None}
+    return out
+
+
+def format_table(rows) -> str:
+    """A short fixed-width table: FAP, name, requested, achieved, relative error."""
+    lines = [f"{'FAP':>4} {'name':<22} {'requested':>10} {'uncalib.':>10} {'achieved':>10} {'error':>7}"]
+    for r in rows:
+        lines.append(f"{r.fap:>4} {r.name:<22} {r.requested:>10.1f} {r.achieved_before:>10.1f} "
+                     f"{r.achieved:>10.1f} {100 * r.error:>6.1f}%")
+    return "\n".join(lines)
+
+
+def measure_coupling(mapping: FapMapping, simulate, rest: np.ndarray, probes: dict,
+                     value: float, jaw_fap: int = 3) -> FapMapping:
+    """Set each ``coupling[jaw_fap]`` ratio to what open_jaw alone does to the entry's FDP.
+
+    Applies ``jaw_fap`` alone at ``value`` FAPU and, for every entry coupled to it, stores
+    (displacement of the entry's lead FDP in its FAPU) / value. Entries without a probe
+    keep their ratio. Units must agree (open_jaw and the lower-lip FAPs are both MNS).
+    """
+    frames = np.zeros((1, N_FAPS))
+    frames[0, jaw_fap - 1] = value
+    skin = simulate(mapping, frames)
+    out = mapping
+    for idx, e in enumerate(mapping.entries):
+        if jaw_fap in e.coupling and e.faps[0] in probes:
+            ratio = float(measure(rest, skin, probes[e.faps[0]])[0]) / value
+            out = with_entry(out, idx, coupling={**e.coupling, jaw_fap: ratio})
+    return out

@@ -1,0 +1,117 @@
+"""Calibration on a synthetic head whose response is known and nonlinear."""
+
+import numpy as np
+import pytest
+
+from faceforge.anatomy.calibrate import (Probe, calibrate_mapping, invert_monotone, measure,
+                                         measure_coupling, summarize)
+from faceforge.anatomy.fap_mapping import (N_FAPS, JawLevers, fap_controls, mapping_from_dict)
+
+FAPU = {k: v / 1024 for k, v in {"MNS": 0.2, "MW": 0.5, "ENS": 0.45, "ES": 0.6, "IRISD": 0.1}.items()}
+FAPU["AU"] = 1e-5
+LEVERS = JawLevers(1.0, 1.0)
+UP, LEFT, DOWN = np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0]), np.array([0.0, -1.0, 0.0])
+
+MAPPING = {
+    "jaw_limits": {"pitch": [-0.02, 0.45], "yaw": [-0.1, 0.1], "protrusion": [-0.04, 0.1]},
+    "entries": [
+        {"fap": 3, "name": "open_jaw", "fapu": "MNS", "jaw": {"dof": "pitch", "gain": 1.0}},
+        {"fap": [59, 12], "name": "raise_l_cornerlip", "fapu": "MNS",
+         "positive": {"zyg": 0.002}, "negative": {"dep": 0.004}},
+        {"fap": 31, "name": "raise_l_i_eyebrow", "fapu": "ENS", "positive": {"front": 0.001}},
+        {"fap": [52, 5], "name": "raise_b_midlip", "fapu": "MNS", "coupling": {3: -0.5},
+         "negative": {"dep": 0.001}},
+    ],
+}
+MUSCLES = ["zyg", "dep", "front"]
+
+
+def synthetic_head(mapping, faps):
+    """Five probe vertices moved by saturating (tanh) functions of the controls.
+
+    v0: lip corner, up by 0.05 tanh(3 zyg) - 0.03 tanh(2 dep); v1/v2: brow, up by 0.12
+    tanh(2 front) (v2 also carries some of it: a relative probe); v3: upper lip (fixed);
+    v4: lower lip, down by 0.8 x jaw arc + 0.04 dep (heads are ~2 units, MNS0 = 0.2).
+    """
+    c, jaw = fap_controls(mapping, faps, MUSCLES, FAPU, LEVERS)
+    k = len(faps)
+    skin = np.zeros((k, 5, 3))
+    skin[:, 0, 1] = 0.05 * np.tanh(3 * c[:, 0]) - 0.03 * np.tanh(2 * c[:, 1])
+    skin[:, 1, 1] = 0.12 * np.tanh(2 * c[:, 2])
+    skin[:, 2, 1] = 0.3 * skin[:, 1, 1]
+    skin[:, 4, 1] = -0.8 * np.sin(jaw[:, 0]) * LEVERS.pitch - 0.04 * c[:, 1]
+    return skin
+
+
+PROBES = {
+    59: Probe(59, 0, -1, UP, FAPU["MNS"]), 12: Probe(12, 0, -1, UP, FAPU["MNS"]),
+    31: Probe(31, 1, 2, UP, FAPU["ENS"]),
+    3: Probe(3, 4, 3, DOWN, FAPU["MNS"]),
+    52: Probe(52, 4, -1, UP, FAPU["MNS"]),
+}
+REQUESTED = {59: [-60.0, 60.0, 150.0], 31: [50.0, 150.0], 3: [100.0, 300.0], 52: [-100.0]}
+
+
+def twin_invert(drives, achieved, requested):
+    """Plain twin of invert_monotone for one sign: bisection on the interpolated curve."""
+    out = []
+    for r in requested:
+        s = np.sign(r)
+        d = np.concatenate([[0.0], drives[np.sign(drives) == np.sign(drives[0])]])
+        a = np.concatenate([[0.0], achieved[np.sign(drives) == np.sign(drives[0])]])
+        o = np.argsort(np.abs(d))
+        d, a = d[o], np.maximum.accumulate(np.maximum(s * a[o], 0))
+        lo, hi = 0.0, abs(d[-1])
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            if np.interp(mid, np.abs(d), a) < abs(r):
+                lo = mid
+            else:
+                hi = mid
+        out.append(np.sign(d[-1]) * hi)
+    return np.array(out)
+
+
+def test_invert_monotone_matches_bisection_twin():
+    drives = np.array([50.0, 100.0, 150.0, 200.0])
+    achieved = 80 * np.tanh(drives / 120)
+    req = np.array([10.0, 30.0, 55.0])
+    assert np.allclose(invert_monotone(drives, achieved, req), twin_invert(drives, achieved, req),
+                       atol=1e-6)
+
+
+def test_invert_monotone_wrong_sense_is_nan_and_plateaus_are_skipped():
+    drives = np.array([1.0, 2.0, 3.0])
+    assert np.isnan(invert_monotone(drives, -drives, np.array([1.0]))).all()
+    r = invert_monotone(drives, np.array([1.0, 1.0, 2.0]), np.array([1.0, 1.5]))
+    assert np.allclose(r, [1.0, 2.0])   # (2, 1) is on the plateau: (1, 1) -> (3, 2)
+
+
+def test_measure_relative_probe():
+    rest = np.zeros((3, 3))
+    moved = rest.copy()
+    moved[1, 1], moved[2, 1] = 0.5, 0.2
+    assert measure(rest, moved, Probe(1, 1, 2, UP, 0.1)) == pytest.approx(3.0)
+
+
+def test_calibration_makes_requested_equal_achieved():
+    m = mapping_from_dict(MAPPING)
+    rest = np.zeros((5, 3))
+    calibrated, rows = calibrate_mapping(m, synthetic_head, rest, PROBES, REQUESTED, refine=3)
+    s = summarize(rows)
+    assert s["all_uncalibrated"]["median_relative_error"] > 0.2      # the guess was off
+    assert s["all"]["median_relative_error"] < 0.01
+    assert max(r.error for r in rows) < 0.03
+    # both twins of the corner entry were reported, each on its own probe
+    assert {r.fap for r in rows} >= {59, 12, 31, 3, 52}
+    # requested values the mapping can never reach (saturating tanh) stay honest
+    m2, rows2 = calibrate_mapping(m, synthetic_head, rest, PROBES, {31: [2000.0]})
+    assert rows2[0].achieved < 2000.0 * 0.9
+
+
+def test_coupling_is_measured_from_open_jaw():
+    m = mapping_from_dict(MAPPING)
+    m2 = measure_coupling(m, synthetic_head, np.zeros((5, 3)), PROBES, value=200.0)
+    ratio = m2.entry_of(52).coupling[3]
+    expected = -0.8 * np.sin(np.arctan2(200 * FAPU["MNS"], 1.0)) / (200 * FAPU["MNS"])
+    assert ratio == pytest.approx(expected, rel=1e-9)
