@@ -137,7 +137,7 @@ def test_save_load_round_trip(mapping, tmp_path):
     (lambda d: d["entries"][3].update(fapu="FOO"), "fapu must be one of"),
     (lambda d: d["entries"][3]["positive"].update(orbicularis_oris=-1), "gain must be >= 0"),
     (lambda d: d["entries"].append(dict(d["entries"][0])), "appears in two entries"),
-    (lambda d: d["entries"][3].update(response=[[10, 5], [20, 1]]), "monotone"),
+    (lambda d: d["entries"][3].update(response=[[10, 5], [20, 1], [30, 8]]), "monotone"),
     (lambda d: d["jaw_limits"].update(pitch=[0.1, 0.4]), "lo <= 0 <= hi"),
     (lambda d: d["entries"][3].update(bogus=1), "unknown keys"),
 ])
