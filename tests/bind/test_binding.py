@@ -1,0 +1,97 @@
+"""Ray-cast binding (§8) on nested synthetic spheres."""
+
+import numpy as np
+import pytest
+
+from faceforge.anatomy.binding import CRANIUM, MANDIBLE, MUSCLE, UNBOUND, Body, bind_skin
+from tests.bind.synthetic import sphere
+
+
+def _cap(radius, zmin, subdivisions=3):
+    """The part of a sphere above z = zmin * radius (an open muscle sheet)."""
+    v, f = sphere(radius, subdivisions)
+    keep = (v[f][:, :, 2] > zmin * radius).all(axis=1)
+    return v, f[keep]
+
+
+@pytest.fixture(scope="module")
+def skin():
+    return sphere(1.0, 2)
+
+
+def test_inward_rays_bind_to_muscle_over_skull(skin):
+    v, f = skin
+    muscle = Body("m", "muscle", *_cap(0.9, 0.3))
+    skull = Body("cranium", "cranium", *sphere(0.8, 3))
+    b = bind_skin(v, f, [muscle, skull], max_distance=0.5)
+    assert np.all(b.status != UNBOUND)  # every ray meets the skull sphere at 0.2
+    over = v[:, 2] > 0.5  # well inside the cap's shadow
+    assert np.all(b.status[over] == MUSCLE)
+    assert np.all(b.status[v[:, 2] < 0.2] == CRANIUM)
+    np.testing.assert_allclose(b.distance[b.body == 0], 0.1, atol=0.01)
+    np.testing.assert_allclose(b.distance[b.body == 1], 0.2, atol=0.01)
+    assert not b.outward.any()
+    # hits lie on the body surfaces: |point| = that body's radius (up to facets)
+    r = np.linalg.norm(b.points, axis=1)
+    assert np.all(np.abs(r - np.where(b.body == 0, 0.9, 0.8)) < 0.01)
+
+
+def test_outward_muscle_wins_first(skin):
+    v, f = skin
+    outer = Body("outer", "muscle", *_cap(1.1, 0.6))
+    inner = Body("inner", "muscle", *_cap(0.9, 0.0))
+    b = bind_skin(v, f, [outer, inner], max_distance=0.5)
+    top = b.vertex_ids[v[b.vertex_ids, 2] > 0.75]
+    sel = np.isin(b.vertex_ids, top)
+    assert len(top) and np.all(b.body[sel] == 0) and np.all(b.outward[sel])
+
+
+def test_muscle_order_not_distance_decides(skin):
+    v, f = skin
+    near = Body("near", "muscle", *_cap(0.9, 0.3))
+    far = Body("far", "muscle", *_cap(0.7, 0.3))
+    # listed superficial first: "far" is declared the most superficial, so it wins
+    b = bind_skin(v, f, [far, near], max_distance=0.5)
+    top = v[b.vertex_ids, 2] > 0.6
+    assert np.all(b.body[top] == 0)
+    b2 = bind_skin(v, f, [near, far], max_distance=0.5)
+    assert np.all(b2.body[v[b2.vertex_ids, 2] > 0.6] == 0)
+    assert b2.body_names[0] == "near"
+
+
+def test_rays_beyond_max_distance_miss(skin):
+    v, f = skin
+    skull = Body("cranium", "cranium", *sphere(0.5, 2))
+    b = bind_skin(v, f, [skull], max_distance=0.3)
+    assert np.all(b.status == UNBOUND) and len(b.vertex_ids) == 0
+    b = bind_skin(v, f, [skull], max_distance=0.6)
+    assert np.all(b.status == CRANIUM)
+
+
+def test_lip_sides_pick_cranium_or_mandible(skin):
+    v, f = skin
+    cranium = Body("cranium", "cranium", *sphere(0.8, 3))
+    mandible = Body("mandible", "mandible", *sphere(0.9, 3))
+    sides = np.zeros(len(v), int)
+    sides[: len(v) // 2] = 1
+    sides[len(v) // 2:] = -1
+    b = bind_skin(v, f, [cranium, mandible], max_distance=0.5, lip_sides=sides)
+    assert np.all(b.status[sides > 0] == CRANIUM)
+    assert np.all(b.status[sides < 0] == MANDIBLE)
+    # without sides the nearer (mandible) wins everywhere
+    b = bind_skin(v, f, [cranium, mandible], max_distance=0.5)
+    assert np.all(b.status == MANDIBLE)
+
+
+def test_targets_round_trip_and_follow_rigid_motion(skin):
+    v, f = skin
+    muscle = Body("m", "muscle", *_cap(0.9, 0.3))
+    skull = Body("cranium", "cranium", *sphere(0.8, 3))
+    b = bind_skin(v, f, [muscle, skull], max_distance=0.5)
+    rest = b.targets([muscle.vertices, skull.vertices])
+    np.testing.assert_allclose(rest, b.points, atol=1e-12)
+    shift = np.array([0.1, -0.2, 0.3])
+    moved = b.targets([muscle.vertices + shift, skull.vertices])
+    d = moved - b.points
+    np.testing.assert_allclose(d[b.body == 0], np.broadcast_to(shift, d[b.body == 0].shape), atol=1e-12)
+    np.testing.assert_allclose(d[b.body == 1], 0.0, atol=1e-12)
