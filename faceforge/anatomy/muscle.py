@@ -1,0 +1,431 @@
+"""Volumetric muscles from action lines (§5.1.2, §5.2.1 linear, §5.2.2 sphincter).
+
+A :class:`Muscle` is pure data: its rest mesh (a morphed :mod:`.hexmesh`), the
+constraint network of Fig. 5 with the stiffness of §5.2.1 / §5.2.2, and the
+action lines (surface points on the layer it lies on) that produce the
+per-frame position targets of its bound bottom particles. Adding it to a
+``pbd.ModelBuilder`` is :meth:`Muscle.add_to_builder`; nothing here steps time.
+
+Stiffness keys (``muscle.linear.stiffness.*`` / ``muscle.sphincter.stiffness.*``
+of ``configs/default.yaml``; a missing key means 0 and "0 is not created"):
+
+=================  ==============================================================
+latitudinal_up/low  across the fibres, ``(i, j)-(i, j+1)``, top / bottom sheet
+longitudinal_up/low along the fibres, ``(i, j)-(i+1, j)``, top / bottom sheet
+shear_up/low        both diagonals of every grid cell, top / bottom sheet
+connection          bottom ``(i, j)`` to top ``(i, j)``
+bend                dihedral angle of every pair of faces sharing an edge
+volume              one volume constraint over the closed muscle surface
+position            bottom contour particles to their contour samples
+=================  ==============================================================
+
+Linear contraction (§5.2.1, Eq. 4): the fibre lines A0, A2 are sampled with
+``step' = step (1 - c)`` so their samples slide toward the origin (sample 0
+stays on the origin). The origin line A3 is sampled normally (the fixed site).
+The interior insertion samples (A1, ``0 < j < w-1``) have no fibre of their
+own: each is moved by the linear blend (in ``j``) of the displacements of the
+two insertion corners, so the whole insertion edge travels with the fibres.
+
+Sphincter contraction (§5.2.2). The paper's
+``delta = (o - s1) (1 - c) cos(pi/2 (1 - sqrt(y^2 b^2 + x^2 a^2) / (ab)))``
+moves every sample to the centre at c = 0, contradicting "c = 0 is rest". We
+read ``(1 - c)`` as the *remaining* fraction of the orifice and use
+``delta = c kappa (o - s1) cos(pi/2 (1 - r))``: c = 0 is the rest state and c = 1
+the maximal contraction, which moves each inner sample the fraction ``kappa``
+(``max_closure``, default :data:`SPHINCTER_MAX_CLOSURE` = 0.5) of the way to the
+centre, times the fall-off. kappa = 1 (a fully closed orifice) collapses the
+inner loop to a point; its wall triangles degenerate and the dihedral bending
+projection diverges, so the default stops half way (a puckered mouth). ``r`` is the ellipse
+radius of the outer sample ``s3 = o + x dir_a + y dir_b``, written correctly as
+``r = sqrt(x^2 / a^2 + y^2 / b^2) = sqrt(x^2 b^2 + y^2 a^2) / (ab)`` (the paper
+swaps a and b, which would give r != 1 on the ellipse itself), clipped so that
+``|1 - r| <= 1``. The ellipse is fitted by linear least squares
+(``q11 x^2 + 2 q12 x y + q22 y^2 = 1`` about the centre ``o`` = mean of all
+inner and outer samples) in the plane of best fit (PCA) of those samples,
+recomputed every frame from the current, uncontracted samples. The same delta
+moves the pair's inner and outer samples; the interior (``0 < j < w-1``)
+bottom particles are not bound, as in the linear muscle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from faceforge.anatomy.action_line import ActionLine
+from faceforge.anatomy.hexmesh import HexTopology, hex_topology, morph_hex
+from faceforge.constants import FLOAT, INT
+from faceforge.geometry.triangles import check_mesh, vertex_normals
+
+__all__ = [
+    "STIFFNESS_KEYS",
+    "Muscle",
+    "build_linear_muscle",
+    "build_sphincter_muscle",
+    "distance_network",
+    "bending_quads",
+    "fit_ellipse",
+    "sphincter_displacement",
+    "align_loops",
+    "SPHINCTER_MAX_CLOSURE",
+]
+
+STIFFNESS_KEYS = (
+    "latitudinal_up", "latitudinal_low", "longitudinal_up", "longitudinal_low",
+    "shear_up", "shear_low", "connection", "bend", "volume", "position",
+)
+
+
+def _check_stiffness(stiffness: dict) -> dict:
+    unknown = sorted(set(stiffness) - set(STIFFNESS_KEYS))
+    if unknown:
+        raise ValueError(f"unknown muscle stiffness key(s) {unknown}; valid: {', '.join(STIFFNESS_KEYS)}")
+    out = {k: float(stiffness.get(k, 0.0)) for k in STIFFNESS_KEYS}
+    bad = [k for k, v in out.items() if not 0.0 <= v <= 1.0]
+    if bad:
+        raise ValueError(f"muscle stiffness {bad} outside [0, 1]")
+    return out
+
+
+def distance_network(topo: HexTopology) -> dict[str, np.ndarray]:
+    """The distance constraints of Fig. 5, ``{kind: pairs (m, 2) int64}`` (muscle-local ids)."""
+    h, w = topo.h, topo.w
+    rows = h if topo.closed else h - 1
+    ii, jj = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    out = {}
+    for sheet, idx in (("up", topo.top), ("low", topo.bottom)):
+        i, j = ii[:, :-1].ravel(), jj[:, :-1].ravel()
+        out[f"latitudinal_{sheet}"] = np.stack([idx(i, j), idx(i, j + 1)], 1)
+        i, j = ii[:rows].ravel(), jj[:rows].ravel()
+        out[f"longitudinal_{sheet}"] = np.stack([idx(i, j), idx((i + 1) % h, j)], 1)
+        i, j = ii[:rows, :-1].ravel(), jj[:rows, :-1].ravel()
+        i1 = (i + 1) % h
+        out[f"shear_{sheet}"] = np.concatenate(
+            [np.stack([idx(i, j), idx(i1, j + 1)], 1), np.stack([idx(i1, j), idx(i, j + 1)], 1)]
+        )
+    out["connection"] = np.stack([topo.bottom(ii.ravel(), jj.ravel()), topo.top(ii.ravel(), jj.ravel())], 1)
+    return {k: v.astype(INT) for k, v in out.items()}
+
+
+def bending_quads(faces) -> np.ndarray:
+    """One ``(p0, p1, p2, p3)`` per interior edge of a manifold triangle mesh.
+
+    ``(p0, p1)`` is the shared edge, ``p2`` / ``p3`` the vertices opposite to it
+    in the two faces. Returns ``(e, 4) int64``; raises ``ValueError`` if an edge
+    has more than two faces.
+    """
+    f = np.asarray(faces, dtype=INT)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    opp = np.concatenate([f[:, 2], f[:, 0], f[:, 1]])
+    key = np.sort(e, axis=1)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, e, opp = key[order], e[order], opp[order]
+    same = np.all(key[1:] == key[:-1], axis=1)
+    if np.any(same[1:] & same[:-1]):
+        raise ValueError("bending_quads: an edge is shared by more than two faces")
+    k = np.flatnonzero(same)
+    return np.stack([e[k, 0], e[k, 1], opp[k], opp[k + 1]], 1).astype(INT)
+
+
+def fit_ellipse(points) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Least-squares ellipse of ``points (k, 3)`` in their plane of best fit.
+
+    Returns ``(o (3,), dir_a (3,), dir_b (3,), a, b)``: centre (the mean, as
+    §5.2.2 prescribes), unit semi-major / semi-minor directions and semi-axis
+    lengths (a >= b > 0). The conic ``q11 x^2 + 2 q12 xy + q22 y^2 = 1`` about
+    ``o`` is solved by linear least squares; if it is not positive definite
+    (nearly collinear points) the PCA standard deviations scaled by sqrt(2)
+    are used instead.
+    """
+    p = np.asarray(points, dtype=FLOAT)
+    o = p.mean(axis=0)
+    d = p - o
+    _, sv, vt = np.linalg.svd(d, full_matrices=False)
+    e1, e2 = vt[0], vt[1]
+    x, y = d @ e1, d @ e2
+    A = np.stack([x * x, 2 * x * y, y * y], 1)
+    q, *_ = np.linalg.lstsq(A, np.ones(len(p)), rcond=None)
+    Q = np.array([[q[0], q[1]], [q[1], q[2]]])
+    lam, vec = np.linalg.eigh(Q)
+    if lam[0] > 0:
+        a, b = 1.0 / np.sqrt(lam[0]), 1.0 / np.sqrt(lam[1])
+        ua, ub = vec[:, 0], vec[:, 1]
+    else:
+        n = max(len(p), 1)
+        a, b = sv[0] * np.sqrt(2.0 / n), max(sv[1] * np.sqrt(2.0 / n), 1e-300)
+        ua, ub = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    dir_a = ua[0] * e1 + ua[1] * e2
+    dir_b = ub[0] * e1 + ub[1] * e2
+    return o, dir_a, dir_b, float(a), float(b)
+
+
+#: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
+SPHINCTER_MAX_CLOSURE = 0.5
+
+
+def sphincter_displacement(inner, outer, c: float) -> np.ndarray:
+    """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
+
+    ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
+    multiplied by the maximal closure. ``delta = c (o - s1) cos(pi/2 (1 - r))``.
+    """
+    s1 = np.asarray(inner, dtype=FLOAT)
+    s3 = np.asarray(outer, dtype=FLOAT)
+    o, da, db, a, b = fit_ellipse(np.concatenate([s1, s3]))
+    x = (s3 - o) @ da
+    y = (s3 - o) @ db
+    r = np.sqrt(x * x * b * b + y * y * a * a) / (a * b)
+    fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
+    return float(c) * (o - s1) * fall[:, None]
+
+
+@dataclass
+class Muscle:
+    """One muscle: rest mesh, constraint network and the action lines that drive it.
+
+    Attributes
+    ----------
+    name, kind : str
+        ``kind`` is "linear" or "sphincter".
+    topology : HexTopology
+    rest_positions : (2 h w, 3) float64
+        The morphed, thickened template (particles in muscle-local order).
+    faces : (m, 3) int64
+        Closed, outward-oriented surface (muscle-local ids).
+    lines : dict[str, ActionLine]
+        Linear: "A0", "A1", "A2", "A3" (fibre a, insertion, fibre b, origin);
+        sphincter: "A1" (inner loop), "A3" (outer loop). Surface points refer to
+        the concatenated mesh of the bodies in ``lies_on``, in that order.
+    lies_on : tuple[str, ...]
+        Names of the bodies (skull parts or deeper muscles) the lines lie on.
+    stiffness : dict[str, float]
+        Keys :data:`STIFFNESS_KEYS`; kinds with 0 are not created.
+    layer : int
+    active : bool
+        Passive support tissue ignores its contraction.
+    """
+
+    name: str
+    kind: str
+    topology: HexTopology
+    rest_positions: np.ndarray
+    faces: np.ndarray
+    lines: dict
+    lies_on: tuple
+    stiffness: dict
+    layer: int = 0
+    active: bool = True
+    thickness: float = 0.0
+    max_closure: float = SPHINCTER_MAX_CLOSURE
+    constraints: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.stiffness = _check_stiffness(self.stiffness)
+        net = distance_network(self.topology)
+        self.constraints = {k: v for k, v in net.items() if self.stiffness[k] > 0}
+        if self.stiffness["bend"] > 0:
+            self.constraints["bend"] = bending_quads(self.faces)
+
+    @property
+    def n_particles(self) -> int:
+        return len(self.rest_positions)
+
+    @property
+    def bound(self) -> np.ndarray:
+        """Bottom contour particles driven by position constraints, ``(k,)`` (muscle-local)."""
+        return self.topology.contour
+
+    def constraint_count(self) -> int:
+        """Number of constraints :meth:`add_to_builder` creates."""
+        n = sum(len(v) for v in self.constraints.values())
+        n += int(self.stiffness["volume"] > 0)
+        n += len(self.bound) if self.stiffness["position"] > 0 else 0
+        return n
+
+    def fibre_lengths(self, positions) -> np.ndarray:
+        """Length of each bottom fibre polyline ``j = 0..w-1`` along ``i`` (w,) (linear muscles)."""
+        topo = self.topology
+        p = np.asarray(positions, FLOAT)[: topo.h * topo.w].reshape(topo.h, topo.w, 3)
+        return np.linalg.norm(np.diff(p, axis=0), axis=2).sum(axis=0)
+
+    def inverted_faces(self, positions) -> np.ndarray:
+        """Boolean mask over the bottom and top sheet faces that are folded over.
+
+        A bottom face is inverted when its outward normal points toward the top
+        sheet (positive dot with the mean bottom-to-top connection vector of its
+        three columns), a top face when its outward normal points toward the
+        bottom; zero-area faces count as inverted. ``(2 s,) bool`` for the ``s``
+        faces of each sheet.
+        """
+        p = np.asarray(positions, FLOAT)
+        hw = self.topology.h * self.topology.w
+        sheets = self.faces[: 2 * self._sheet_count]
+        a, b, c = p[sheets[:, 0]], p[sheets[:, 1]], p[sheets[:, 2]]
+        n = np.cross(b - a, c - a)
+        col = np.where(sheets >= hw, sheets - hw, sheets)
+        d = (p[col + hw] - p[col]).mean(axis=1)
+        sign = np.where(np.arange(len(sheets)) < self._sheet_count, -1.0, 1.0)
+        return (sign * np.einsum("ij,ij->i", n, d)) <= 0.0
+
+    @property
+    def _sheet_count(self) -> int:
+        rows = self.topology.h if self.topology.closed else self.topology.h - 1
+        return 2 * rows * (self.topology.w - 1)
+
+    def sample_targets(self, c: float, vertices, faces, vnormals=None) -> np.ndarray:
+        """Position targets of :attr:`bound`, ``(k, 3)``, for contraction ``c`` in [0, 1].
+
+        ``(vertices, faces)`` is the current concatenated mesh of :attr:`lies_on`.
+        Passive muscles (``active=False``) always use c = 0.
+        """
+        c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
+        v, f = check_mesh(vertices, faces)
+        vn = vertex_normals(v, f) if vnormals is None else vnormals
+        grid = self._grid_targets(c, v, f, vn)
+        g = self.topology.contour_grid()
+        return grid[g[:, 0], g[:, 1]]
+
+    def _grid_targets(self, c, v, f, vn) -> np.ndarray:
+        h, w = self.topology.h, self.topology.w
+        grid = np.full((h, w, 3), np.nan)
+        L = self.lines
+        if self.kind == "linear":
+            a0, _ = L["A0"].sample(v, f, h, 1.0 - c, vn)
+            a2, _ = L["A2"].sample(v, f, h, 1.0 - c, vn)
+            a3, _ = L["A3"].sample(v, f, w, 1.0, vn)
+            a1, _ = L["A1"].sample(v, f, w, 1.0, vn)
+            if c > 0:
+                r0, _ = L["A0"].sample(v, f, h, 1.0, vn)
+                r2, _ = L["A2"].sample(v, f, h, 1.0, vn)
+                t = np.linspace(0.0, 1.0, w)[:, None]
+                a1 = a1 + (1.0 - t) * (a0[-1] - r0[-1]) + t * (a2[-1] - r2[-1])
+            grid[0, :] = a3
+            grid[-1, :] = a1
+            grid[:, 0] = a0
+            grid[:, -1] = a2
+        else:
+            s1, _ = L["A1"].sample(v, f, h, 1.0, vn)
+            s3, _ = L["A3"].sample(v, f, h, 1.0, vn)
+            if c > 0:
+                d = sphincter_displacement(s1, s3, c * self.max_closure)
+                s1, s3 = s1 + d, s3 + d
+            grid[:, 0] = s1
+            grid[:, -1] = s3
+        return grid
+
+    def add_to_builder(self, builder, positions=None) -> tuple[int, np.ndarray]:
+        """Add particles and constraints to a ``pbd.ModelBuilder``.
+
+        Order: distance kinds (in :data:`STIFFNESS_KEYS` order), bending, volume,
+        position. Rest values come from :attr:`rest_positions` (or ``positions``).
+        Returns ``(first_particle, position_slots (k,))``; slots are empty when
+        ``position`` stiffness is 0.
+        """
+        p = self.rest_positions if positions is None else positions
+        first = builder.add_particles(p, 1.0)
+        k = self.stiffness
+        for kind in STIFFNESS_KEYS:
+            if kind in self.constraints and kind != "bend":
+                builder.add_distance(self.constraints[kind] + first, k[kind])
+        if "bend" in self.constraints:
+            builder.add_bending(self.constraints["bend"] + first, k["bend"])
+        if k["volume"] > 0:
+            builder.add_volume(self.faces + first, k["volume"])
+        slots = np.zeros(0, INT)
+        if k["position"] > 0:
+            slots = builder.add_position(self.bound + first, k["position"])
+        return first, slots
+
+
+def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw) -> Muscle:
+    v, f = check_mesh(vertices, faces)
+    proto = Muscle(name, kind, topo, np.zeros((topo.n_particles, 3)), topo.faces, lines,
+                   tuple(kw.pop("lies_on", ())), stiffness, **kw)
+    vn = vertex_normals(v, f)
+    samples = proto.sample_targets(0.0, v, f, vn)
+    g = topo.contour_grid()
+    normals = _grid_normals(proto, v, f, vn)[g[:, 0], g[:, 1]]
+    pos, mfaces = morph_hex(topo, samples, normals, thickness)
+    return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
+                  proto.layer, proto.active, float(thickness), proto.max_closure)
+
+
+def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:
+    h, w = m.topology.h, m.topology.w
+    grid = np.zeros((h, w, 3))
+    L = m.lines
+    if m.kind == "linear":
+        grid[0, :] = L["A3"].sample(v, f, w, 1.0, vn)[1]
+        grid[-1, :] = L["A1"].sample(v, f, w, 1.0, vn)[1]
+        grid[:, 0] = L["A0"].sample(v, f, h, 1.0, vn)[1]
+        grid[:, -1] = L["A2"].sample(v, f, h, 1.0, vn)[1]
+    else:
+        grid[:, 0] = L["A1"].sample(v, f, h, 1.0, vn)[1]
+        grid[:, -1] = L["A3"].sample(v, f, h, 1.0, vn)[1]
+    return grid
+
+
+def build_linear_muscle(name, origin, insertion, fibre_a, fibre_b, vertices, faces, h, w,
+                        thickness, stiffness, *, lies_on=(), layer=0, active=True) -> Muscle:
+    """A sheet muscle (§5.2.1) from its four action lines on the layer ``(vertices, faces)``.
+
+    Parameters
+    ----------
+    origin, insertion : ActionLine
+        A3 and A1, both running from the fibre_a side to the fibre_b side.
+    fibre_a, fibre_b : ActionLine
+        A0 (origin[0] -> insertion[0]) and A2 (origin[-1] -> insertion[-1]).
+    vertices, faces : the rest mesh the lines lie on (concatenation of ``lies_on``).
+    h, w : int
+        Samples along / across the fibres.
+    thickness : float
+        In mesh units.
+    stiffness : dict
+        ``muscle.linear.stiffness`` of the config.
+    """
+    topo = hex_topology(int(h), int(w), closed=False)
+    lines = {"A0": fibre_a, "A1": insertion, "A2": fibre_b, "A3": origin}
+    return _build(name, "linear", topo, lines, vertices, faces, thickness, stiffness,
+                  lies_on=lies_on, layer=layer, active=active)
+
+
+def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness, stiffness, *,
+                           lies_on=(), layer=0, active=True,
+                           max_closure=SPHINCTER_MAX_CLOSURE) -> Muscle:
+    """A sphincter (§5.2.2) from its closed inner (A1) and outer (A3) loops.
+
+    The loops must run in the same rotational sense and start at corresponding
+    points (the coincident latitudinal lines A0 = A2 join their first points);
+    :func:`faceforge.anatomy.muscle.align_loops` arranges that for raw points.
+    """
+    if not (inner.closed and outer.closed):
+        raise ValueError(f"sphincter {name}: inner and outer action lines must be closed loops")
+    topo = hex_topology(int(h), int(w), closed=True)
+    lines = {"A1": inner, "A3": outer}
+    if not 0.0 <= max_closure < 1.0:
+        raise ValueError(f"sphincter {name}: max_closure must lie in [0, 1), got {max_closure}")
+    return _build(name, "sphincter", topo, lines, vertices, faces, thickness, stiffness,
+                  lies_on=lies_on, layer=layer, active=active, max_closure=max_closure)
+
+
+def align_loops(inner, outer) -> tuple[np.ndarray, np.ndarray]:
+    """Reorder the closed point loop ``outer (q, 3)`` to match ``inner (p, 3)``.
+
+    Makes both loops turn the same way about their common mean (in the plane of
+    best fit) and rotates ``outer`` to start at its point nearest ``inner[0]``.
+    """
+    p = np.asarray(inner, FLOAT)
+    q = np.asarray(outer, FLOAT)
+    o = np.concatenate([p, q]).mean(axis=0)
+    _, _, vt = np.linalg.svd(np.concatenate([p, q]) - o, full_matrices=False)
+    n = vt[2]
+
+    def turn(loop):
+        d = loop - o
+        return np.sum(np.cross(d, np.roll(d, -1, axis=0)) @ n)
+
+    if np.sign(turn(p)) != np.sign(turn(q)):
+        q = q[::-1]
+    start = int(np.argmin(np.linalg.norm(q - p[0], axis=1)))
+    return p, np.roll(q, -start, axis=0)
