@@ -21,10 +21,12 @@ def test_weights_one_at_sources_zero_at_the_back():
     w, d, scale = influence_weights(v, f, front, back_vertex=back)
     assert np.all(w[front] == 1.0) and w[back] == 0.0
     assert np.all((w >= 0) & (w <= 1))
-    # the heat-method distance approximates the great-circle distance to the cap
+    # the heat-method distance approximates the great-circle distance to the
+    # sources within its smoothing error (~1.5 edge lengths on this coarse sphere)
     great = np.arccos(np.clip(v @ v[front].T, -1, 1)).min(axis=1)
-    far = v[:, 2] < 0.5
-    np.testing.assert_allclose(d[far], great[far], rtol=0.1, atol=0.05)
+    edge = np.linalg.norm(v[f[:, 0]] - v[f[:, 1]], axis=1).mean()
+    assert np.abs(d - great).max() < 1.5 * edge
+    assert np.corrcoef(d, great)[0, 1] > 0.99
     assert abs(scale - d[back]) < 1e-12
     # weights fall with distance
     order = np.argsort(d)
