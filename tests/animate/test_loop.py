@@ -1,0 +1,142 @@
+"""The simulation loop and the physical checks, on stand-in layers and a real PBD skin."""
+
+import numpy as np
+import pytest
+
+from faceforge.anatomy.animate import (Rig, Timings, check_animation, inverted_triangles, play,
+                                       points_inside, static_poses)
+
+
+def grid(n=6):
+    """A flat (n x n) sheet in the XY plane facing +Z, triangulated."""
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    v = np.column_stack([x.ravel(), y.ravel(), np.zeros(n * n)])
+    f = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a = i * n + j
+            f += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+    return v, np.array(f)
+
+
+def box():
+    import trimesh
+    m = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    return np.asarray(m.vertices), np.asarray(m.faces)
+
+
+def follower_rig(rest, order):
+    """Skull -> muscles -> skin stand-ins that log the call order and move rigidly."""
+
+    def skull(jaw):
+        order.append("skull")
+        return np.array([0.0, -jaw[0], jaw[2]])
+
+    def muscles(c, bones, dt):
+        order.append("muscles")
+        return bones + np.array([c.sum(), 0.0, 0.0])
+
+    def skin(bones, muscles, dt):
+        order.append("skin")
+        return rest + muscles
+
+    return Rig(skull=skull, muscles=muscles, skin=skin, rest=rest)
+
+
+def test_layers_run_deepest_first_and_rest_is_a_fixed_point():
+    rest, _ = grid()
+    order = []
+    rig = follower_rig(rest, order)
+    out = play(rig, np.zeros((4, 2)), np.zeros((4, 3)), fps=25)
+    assert order == ["skull", "muscles", "skin"] * 4
+    assert np.array_equal(out, np.broadcast_to(rest, out.shape))
+
+
+def test_influence_weights_the_displacement():
+    rest, _ = grid()
+    w = np.linspace(0, 1, len(rest))
+    rig = follower_rig(rest, [])
+    rig.influence = w
+    out = play(rig, np.full((1, 2), 0.25), np.zeros((1, 3)), fps=25)
+    assert np.allclose(out[0] - rest, w[:, None] * np.array([0.5, 0.0, 0.0]))
+
+
+def test_progress_timings_and_settle():
+    rest, _ = grid()
+    calls = []
+    rig = follower_rig(rest, [])
+
+    def progress(it, total, desc):
+        calls.append((total, desc))
+        return it
+
+    t = Timings()
+    play(rig, np.zeros((3, 1)), np.zeros((3, 3)), fps=30, progress=progress, timings=t, settle=2)
+    assert calls == [(3, "frames")] and t.frames == 9
+    ms = t.per_frame_ms()
+    assert ms["total"] == pytest.approx(ms["skull"] + ms["muscles"] + ms["skin"])
+
+
+def test_non_finite_frame_is_named():
+    rest, _ = grid()
+    rig = follower_rig(rest, [])
+    with pytest.raises(FloatingPointError, match="frame 1"):
+        play(rig, np.array([[0.0], [np.nan]]), np.zeros((2, 3)), fps=25)
+
+
+def test_real_pbd_skin_follows_its_anchor_and_settles():
+    """A PBD sheet whose border is position-driven follows a translation of its border."""
+    from faceforge.pbd import ModelBuilder, Solver, SolverSettings
+
+    rest, faces = grid(5)
+    b = ModelBuilder()
+    b.add_particles(rest, np.ones(len(rest)))
+    ring = np.array([i for i in range(25) if i % 5 in (0, 4) or i // 5 in (0, 4)])
+    b.add_position(ring, 1.0)
+    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    b.add_distance(edges, 0.5)
+    model = b.finalize()
+    solver = Solver(model, SolverSettings(iterations=10, substeps=1, damping=0.1))
+    state = {"s": model.state()}
+    control = model.control()
+
+    def reset():
+        state["s"] = model.state()
+
+    def skin(bones, muscles, dt):
+        control.position_targets[:] = rest[ring] + bones
+        solver.step(state["s"], state["s"], control, dt)
+        return state["s"].positions
+
+    rig = Rig(skull=lambda jaw: np.array([jaw[2], 0.0, 0.0]), muscles=lambda c, b, dt: None,
+              skin=skin, rest=rest, reset=reset)
+    # (the skull stand-in moves the border in-plane by jaw[2] along X: a flat membrane has
+    # no linear out-of-plane stiffness, in-plane it converges geometrically)
+    # rest is a fixed point
+    assert np.allclose(play(rig, np.zeros((5, 1)), np.zeros((5, 3)), fps=25), rest, atol=1e-12)
+    # a pure translation of both anchors is followed by the whole sheet once settled
+    poses = static_poses(rig, np.zeros((1, 1)), np.array([[0.0, 0.0, 0.1]]), fps=25, settle=100)
+    err = np.abs(poses[0] - (rest + [0.1, 0, 0])).max()
+    assert err < 1e-3, err
+
+
+def test_inverted_triangles_counts_flips():
+    rest, faces = grid(4)
+    flipped = rest * np.array([-1.0, 1.0, 1.0])        # mirrored: every triangle flips
+    counts = inverted_triangles(rest, np.stack([rest, flipped, rest + 1.0]), faces)
+    assert counts.tolist() == [0, len(faces), 0]
+
+
+def test_points_inside_box_and_check_animation():
+    bv, bf = box()
+    pts = np.array([[0.0, 0.0, 0.0], [0.2, 0.1, -0.3], [0.9, 0.0, 0.0], [0.0, 0.0, 0.51]])
+    assert points_inside(pts, bv, bf).tolist() == [True, True, False, False]
+
+    rest, faces = grid(4)
+    rest = 0.8 * rest + np.array([-0.4, -0.4, 0.8])      # a sheet in front of the box
+    frames = np.stack([rest, rest - [0, 0, 0.6], rest])  # frame 1 pushes it into the box
+    rep = check_animation(rest, frames, faces, skull=lambda i: [(bv, bf)])
+    assert rep.non_finite == 0 and rep.inverted_triangles == 0
+    assert rep.skin_inside_skull == len(rest) and rep.worst_frame == 1 and not rep.ok
+    ok = check_animation(rest, np.stack([rest, rest + [0, 0, 0.2]]), faces, skull=lambda i: [(bv, bf)])
+    assert ok.ok
