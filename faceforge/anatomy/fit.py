@@ -1,0 +1,427 @@
+"""Fit the template skull and muscle map into a skin mesh (§7, Fig. 8).
+
+Functions on arrays. The construction, in order:
+
+1. **Targets.** For each FDP present on both the skull template and the skin, the skin
+   landmark is moved inward along the skin normal by the published soft-tissue depth
+   beneath it (:mod:`faceforge.anatomy.fit_tissue`, scaled by ES0). FDPs without bone
+   beneath them (nose tip, inner lips, pupils, ears) are not skull targets.
+2. **Initial alignment.** A similarity transform (scale, rotation, translation; Umeyama
+   1991 least squares) takes the skull landmarks onto the targets, so heads in any unit
+   and a moderately rotated pose fit.
+3. **Hardy multiquadric RBF** (§4, :func:`faceforge.geometry.rbf.hardy_rbf`) from the
+   aligned skull landmarks to the targets; exact at the landmarks.
+4. **Enhancement landmarks** (red dots of Fig. 8). Candidate points are the outer-surface
+   vertices of the morphed skull in front of the ears (a vertex is *outer* when a ray
+   along its normal leaves the skull without hitting it again). Farthest-point sampling
+   picks ``enhancement_samples`` of them at least ``enhancement_spacing`` apart from
+   every existing source. From each, the line along the skull normal is intersected with
+   the skin; the nearest place where that line leaves the skin volume gives the local
+   thickness ``D`` (negative when the bone pokes through). Where ``D`` is below
+   ``enhancement_min_ratio`` times the expected depth ``t*`` (Shepard interpolation of the
+   landmark depths), the pair (skull point -> skin exit point - ``t*`` along the normal)
+   is added and the RBF is rebuilt; ``enhancement_rounds`` rounds. Points whose line
+   misses the skin (the back of an open head, beyond a face mask) are left alone: the
+   back of the skull need not fit (§7).
+5. **Muscles** (:mod:`faceforge.anatomy.fit_muscles`): the muscle map is morphed by the
+   same map, thickness rescaled by Eq. 5; skull landmarks covered by muscles are brought
+   onto the muscle surface by cylindrical projection and the fit is run again (the refit).
+
+The map is kept as a composition of callables (similarity then RBF then refit RBF) and
+is applied to every template point: cranium, mandible, landmarks, jaw axes (points by
+the map, directions by mapping two points), muscle-map points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from faceforge.anatomy import fit_tissue
+from faceforge.geometry.rbf import hardy_rbf
+from faceforge.geometry.rays import RayCaster
+from faceforge.geometry.triangles import vertex_normals
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Parameters of the fit (config section ``fit``)."""
+
+    tissue_depth: bool = True          # move skin targets inward by tissue depth
+    enhancement_rays: bool = True      # add ray-cast enhancement landmarks
+    refit: bool = True                 # cylindrical projection onto muscles and second fit
+    enhancement_rounds: int = 3
+    enhancement_samples: int = 48      # new pairs considered per round
+    enhancement_spacing: float = 0.035  # min distance between RBF sources, fraction of skin diagonal
+    enhancement_min_ratio: float = 0.7  # add a pair where thickness < ratio * expected depth
+    front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0
+    muscle_gap_mm: float = 1.5         # skin tissue kept above the muscle top at landmarks (mm)
+
+    @classmethod
+    def from_config(cls, cfg: dict | None) -> "FitSettings":
+        cfg = dict(cfg or {})
+        cfg.pop("rbf_kernel", None)
+        known = {k: v for k, v in cfg.items() if k in cls.__dataclass_fields__}
+        return cls(**known)
+
+
+@dataclass
+class SkinSurface:
+    """The skin with what the fit queries repeatedly.
+
+    vertices (n, 3) float64, faces (m, 3) int64 with outward winding, normals (n, 3) unit
+    area-weighted vertex normals, diagonal float (bounding-box diagonal, mesh units).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    diagonal: float
+    caster: RayCaster
+    boundary_vertices: np.ndarray
+
+    @classmethod
+    def build(cls, vertices, faces) -> "SkinSurface":
+        from faceforge.io.mesh_check import edge_face_counts
+
+        v = np.asarray(vertices, dtype=np.float64)
+        f = orient_outward(v, np.asarray(faces, dtype=np.int64))
+        edges, counts = edge_face_counts(f)
+        bnd = np.unique(edges[counts == 1])
+        return cls(v, f, vertex_normals(v, f), float(np.linalg.norm(np.ptp(v, axis=0))), RayCaster(v, f), bnd)
+
+    def normals_at(self, face_ids, bary) -> np.ndarray:
+        """Unit smooth normals (k, 3) at surface points given by face ids and barycentrics."""
+        n = np.einsum("ki,kij->kj", bary, self.normals[self.faces[face_ids]])
+        return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def orient_outward(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Faces (m, 3) wound so that normals point out of the face (+Z side of the head).
+
+    The face looks along +Z: the area-weighted mean normal of the front half (faces whose
+    centroid lies in front of the median z) must point along +Z; otherwise every face is
+    flipped. Assumes a consistently wound mesh.
+    """
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    cz = tri[:, :, 2].mean(axis=1)
+    front = cz >= np.median(cz)
+    return faces if cross[front, 2].sum() >= 0 else faces[:, ::-1].copy()
+
+
+# ----------------------------------------------------------------------------- alignment
+
+
+def similarity_transform(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares similarity (4, 4) with ``dst ~ s R src + t`` (Umeyama 1991).
+
+    src, dst : (n, 3) float, n >= 3 corresponding points. R is a proper rotation.
+    """
+    src = np.asarray(src, dtype=np.float64)
+    dst = np.asarray(dst, dtype=np.float64)
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 3:
+        raise ValueError(f"similarity_transform: src {src.shape} and dst {dst.shape} must be (n>=3, 3)")
+    mu_s, mu_d = src.mean(0), dst.mean(0)
+    xs, xd = src - mu_s, dst - mu_d
+    cov = xd.T @ xs / len(src)
+    u, sig, vt = np.linalg.svd(cov)
+    e = np.eye(3)
+    if np.linalg.det(u) * np.linalg.det(vt) < 0:
+        e[2, 2] = -1.0
+    rot = u @ e @ vt
+    var_s = (xs ** 2).sum() / len(src)
+    scale = float(np.trace(np.diag(sig) @ e) / var_s)
+    out = np.eye(4)
+    out[:3, :3] = scale * rot
+    out[:3, 3] = mu_d - scale * rot @ mu_s
+    return out
+
+
+def apply_affine(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a (4, 4) affine map to points (..., 3)."""
+    p = np.asarray(points, dtype=np.float64)
+    return p @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def map_directions(warp: Callable, points: np.ndarray, directions: np.ndarray, step: float) -> np.ndarray:
+    """Unit directions (k, 3) after ``warp``: map ``p`` and ``p + step d``, normalise."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    a, b = warp(p - 0.5 * step * d), warp(p + 0.5 * step * d)
+    out = b - a
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+@dataclass
+class Warp:
+    """The fitted map template -> head: similarity, then RBFs in order."""
+
+    similarity: np.ndarray
+    rbfs: list = field(default_factory=list)
+
+    def __call__(self, points) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64)
+        out = apply_affine(self.similarity, p.reshape(-1, 3))
+        for g in self.rbfs:
+            out = g(out)
+        return out.reshape(p.shape)
+
+
+# ----------------------------------------------------------------------------- queries
+
+
+def farthest_point_sample(points: np.ndarray, k: int, existing: np.ndarray, min_distance: float) -> np.ndarray:
+    """Indices (<= k,) of ``points`` (n, 3), greedily farthest from ``existing`` (e, 3) and each other,
+    all at least ``min_distance`` away. Deterministic."""
+    if len(points) == 0 or k <= 0:
+        return np.zeros(0, dtype=np.int64)
+    if len(existing):
+        from scipy.spatial import cKDTree
+
+        dist = cKDTree(existing).query(points)[0]
+    else:
+        dist = np.full(len(points), np.inf)
+    chosen = []
+    for _ in range(k):
+        i = int(np.argmax(dist))
+        if dist[i] < min_distance:
+            break
+        chosen.append(i)
+        dist = np.minimum(dist, np.linalg.norm(points - points[i], axis=1))
+    return np.asarray(chosen, dtype=np.int64)
+
+
+def outer_vertices(vertices: np.ndarray, faces: np.ndarray, caster: RayCaster | None = None) -> np.ndarray:
+    """Bool (n,): the ray from a vertex along its normal leaves the mesh without hitting it.
+
+    The start is nudged along the normal by 1e-4 of the diagonal to skip its own faces.
+    """
+    caster = caster or RayCaster(vertices, faces)
+    n = vertex_normals(vertices, faces)
+    eps = 1e-4 * float(np.linalg.norm(np.ptp(vertices, axis=0)))
+    face, _, _ = caster.first_hit(vertices + eps * n, n)
+    return face < 0
+
+
+def skin_exit_along(skin: SkinSurface, points: np.ndarray, directions: np.ndarray, reach: float):
+    """Signed thickness of the skin volume along lines through ``points`` (k, 3).
+
+    For each line ``p + s d`` (``d`` unit, ``|s| <= reach``) the crossings where the line
+    leaves the skin volume (the skin's outward normal agrees with ``d``) are found; the
+    one nearest to ``p`` gives ``s`` (positive: ``p`` lies inside, beneath the skin;
+    negative: ``p`` pokes out). Returns ``(s (k,) float, NaN where none; exit points (k, 3))``.
+    """
+    d = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+    ray, tri, loc, dist = skin.caster.all_hits(points - reach * d, d)
+    s = dist - reach
+    fn = np.cross(*(skin.vertices[skin.faces[tri]][:, i] - skin.vertices[skin.faces[tri]][:, 0] for i in (1, 2)))
+    leaving = np.einsum("ij,ij->i", fn, d[ray]) > 0
+    keep = leaving & (np.abs(s) <= reach)
+    ray, s, loc = ray[keep], s[keep], loc[keep]
+    out = np.full(len(points), np.nan)
+    pts = np.full((len(points), 3), np.nan)
+    if len(ray):
+        order = np.lexsort((np.abs(s), ray))
+        ray, s, loc = ray[order], s[order], loc[order]
+        first = np.r_[True, ray[1:] != ray[:-1]]
+        out[ray[first]] = s[first]
+        pts[ray[first]] = loc[first]
+    return out, pts
+
+
+def front_mask(points: np.ndarray, skin_landmarks: dict, offset_es0: float) -> np.ndarray:
+    """Bool (n,): in front (+Z) of the coronal plane ``offset_es0`` ES0 behind the outer eye corners."""
+    z0 = 0.5 * (skin_landmarks["3.7"][2] + skin_landmarks["3.12"][2])
+    return points[:, 2] > z0 - offset_es0 * fit_tissue.es0(skin_landmarks)
+
+
+# ----------------------------------------------------------------------------- the skull fit
+
+
+@dataclass
+class SkullTargets:
+    """Skull landmark -> skin target pairs of one fit.
+
+    fdps : tuple of n FDP ids; source (n, 3) template skull points; skin (n, 3) skin
+    landmarks; normal (n, 3) unit skin normals; depth (n,) tissue depth (head units);
+    target (n, 3) = skin - depth * normal.
+    """
+
+    fdps: tuple
+    source: np.ndarray
+    skin: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+
+    @property
+    def target(self) -> np.ndarray:
+        return self.skin - self.depth[:, None] * self.normal
+
+
+def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_points, skin_face_ids,
+                  skin_bary, scale_mm: float, use_depth: bool) -> SkullTargets:
+    """Pair the template skull landmarks with the skin landmarks they fit to.
+
+    Only FDPs on both sides with bone beneath (``fit_tissue.FDP_TISSUE_CODE``) are used,
+    with depth 0 when ``use_depth`` is false.
+    """
+    index = {f: i for i, f in enumerate(skin_ids)}
+    fdps = tuple(f for f in skull_landmarks if f in index and f in fit_tissue.FDP_TISSUE_CODE)
+    if len(fdps) < 6:
+        raise ValueError(f"only {len(fdps)} FDPs shared by skull template and skin ({', '.join(fdps)}); need >= 6")
+    rows = np.array([index[f] for f in fdps])
+    depth = fit_tissue.tissue_depths(fdps, scale_mm) if use_depth else np.zeros(len(fdps))
+    return SkullTargets(fdps, np.array([skull_landmarks[f] for f in fdps], dtype=np.float64),
+                        np.asarray(skin_points, dtype=np.float64)[rows],
+                        skin.normals_at(np.asarray(skin_face_ids)[rows], np.asarray(skin_bary)[rows]), depth)
+
+
+@dataclass
+class SkullFit:
+    """Result of :func:`fit_skull`.
+
+    warp : Warp template -> head; sources (s, 3) aligned template points of every RBF
+    centre; targets (s, 3); n_landmarks : the first n rows are FDP pairs, the rest are
+    enhancement landmarks; rounds : pairs added per enhancement round.
+    """
+
+    warp: Warp
+    sources: np.ndarray
+    targets: np.ndarray
+    n_landmarks: int
+    rounds: list
+
+
+def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.ndarray, skin: SkinSurface,
+              skin_landmarks: dict, settings: FitSettings) -> SkullFit:
+    """Steps 2-4 of the module docstring on the skull ``(vertices (n,3), faces (m,3))`` (template space)."""
+    sim = similarity_transform(pairs.source, pairs.target)
+    src = apply_affine(sim, pairs.source)
+    dst = pairs.target.copy()
+    warp = Warp(sim, [hardy_rbf(src, dst)])
+    rounds = []
+    if not settings.enhancement_rays:
+        return SkullFit(warp, src, dst, len(src), rounds)
+    aligned = apply_affine(sim, skull_vertices)
+    outer = outer_vertices(aligned, skull_faces)
+    depth_sites, site_depth = pairs.target, pairs.depth
+    spacing = settings.enhancement_spacing * skin.diagonal
+    for _ in range(settings.enhancement_rounds):
+        moved = warp.rbfs[0](aligned)
+        cand = np.flatnonzero(outer & front_mask(moved, skin_landmarks, settings.front_offset_es0))
+        pick = cand[farthest_point_sample(aligned[cand], settings.enhancement_samples, src, spacing)]
+        if len(pick) == 0:
+            break
+        normals = vertex_normals(moved, skull_faces)[pick]
+        expected = fit_tissue.depth_field(moved[pick], depth_sites, site_depth) if settings.tissue_depth \
+            else np.zeros(len(pick))
+        s, exit_pts = skin_exit_along(skin, moved[pick], normals, reach=0.1 * skin.diagonal)
+        bad = np.isfinite(s) & (s < settings.enhancement_min_ratio * expected + 1e-9 * skin.diagonal)
+        # a source whose twin target crosses existing ones would fold the map: keep moderate moves
+        if not np.any(bad):
+            rounds.append(0)
+            break
+        new_src = aligned[pick[bad]]
+        new_dst = exit_pts[bad] - expected[bad, None] * normals[bad]
+        src, dst = np.vstack([src, new_src]), np.vstack([dst, new_dst])
+        warp = Warp(sim, [hardy_rbf(src, dst)])
+        rounds.append(int(bad.sum()))
+    return SkullFit(warp, src, dst, len(pairs.fdps), rounds)
+
+
+# ----------------------------------------------------------------------------- the whole fit
+
+
+@dataclass
+class FitTemplate:
+    """Template inputs of :func:`fit_head`, all in template (skull) space.
+
+    cranium, mandible : (vertices (n, 3) float64, faces (m, 3) int64)
+    landmarks : {fdp: (3,) float64} points on the bone
+    jaw_axes : {name: (point (3,), direction (3,))} e.g. pitch, yaw, protrusion
+    muscle_points : {muscle name: (k, 3) float64} every point of the muscle map
+    """
+
+    cranium: tuple
+    mandible: tuple
+    landmarks: dict
+    jaw_axes: dict = field(default_factory=dict)
+    muscle_points: dict = field(default_factory=dict)
+
+
+@dataclass
+class FitResult:
+    """Everything :func:`fit_head` produced, in head space (mesh units)."""
+
+    cranium: np.ndarray                 # (n, 3) fitted cranium vertices (template faces)
+    mandible: np.ndarray                # (n, 3) fitted mandible vertices
+    landmarks: dict                     # {fdp: (3,)} fitted bone landmarks
+    fdps: tuple                         # FDPs used as skull targets
+    targets: np.ndarray                 # (n, 3) final bone-landmark targets (after the refit)
+    reached: np.ndarray                 # (n, 3) where those landmarks ended up
+    jaw_axes: dict                      # {name: (point (3,), unit direction (3,))}
+    muscle_points: dict                 # {name: (k, 3)} morphed muscle map
+    muscles: list                       # [(name, vertices, faces)] built on the fitted skull
+    warp: Warp
+    info: dict                          # counts for the report
+
+
+def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, skin_face_ids, skin_bary,
+             settings: FitSettings = FitSettings(), build_muscles: Callable | None = None) -> FitResult:
+    """Fit the skull and muscle map into the skin (steps 1-5 of the module docstring).
+
+    skin_ids (n,) FDP ids, skin_points (n, 3), skin_face_ids (n,), skin_bary (n, 3): the
+    validated skin landmarks (:class:`faceforge.io.landmarks.Landmarks`).
+    ``build_muscles(cranium (v, f), mandible (v, f), warp) -> [(name, vertices, faces)]``
+    builds the muscles on the fitted skull (Eq. 5 thickness); without it the muscle map
+    points are morphed only and there is no refit.
+    """
+    from faceforge.anatomy import fit_muscles
+
+    skin_lm = {f: np.asarray(p, dtype=np.float64) for f, p in zip(skin_ids, skin_points)}
+    scale_mm = fit_tissue.units_per_mm(skin_lm)
+    pairs = skull_targets(template.landmarks, skin, skin_ids, skin_points, skin_face_ids, skin_bary,
+                          scale_mm, settings.tissue_depth)
+    (cv, cf), (mv, mf) = template.cranium, template.mandible
+    skull_v = np.vstack([cv, mv])
+    skull_f = np.vstack([cf, mf + len(cv)])
+    sk = fit_skull(pairs, skull_v, skull_f, skin, skin_lm, settings)
+    warp = sk.warp
+    skull_fit = warp(skull_v)
+    muscles = []
+    targets = pairs.target
+    info = {"units_per_mm": scale_mm, "landmark_pairs": len(pairs.fdps), "enhancement_rounds": sk.rounds,
+            "enhancement_landmarks": int(len(sk.sources) - sk.n_landmarks), "covered_landmarks": [],
+            "refit": False}
+    if build_muscles is not None:
+        muscles = build_muscles((skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf), warp)
+        if settings.refit and muscles:
+            diag = float(np.linalg.norm(np.ptp(skull_fit, axis=0)))
+            gap = settings.muscle_gap_mm * scale_mm
+            max_lift = 0.05 * diag
+            rf = fit_muscles.refit_pairs(warp(pairs.source), pairs.skin, pairs.normal, pairs.depth,
+                                         fit_muscles.vertical_axis(skull_fit[:len(cv)]),
+                                         [(v, f) for _, v, f in muscles], gap, skin.diagonal, max_lift)
+            fixed = np.vstack([warp(pairs.source)[~rf.covered], sk.targets[sk.n_landmarks:]])
+            g2 = fit_muscles.refit_rbf(rf, fixed)
+            if g2 is not None:
+                warp = Warp(warp.similarity, warp.rbfs + [g2])
+                skull_fit = g2(skull_fit)
+                muscles = [(n, g2(v), f) for n, v, f in muscles]
+                targets = rf.skull_targets
+                info["refit"] = True
+                info["covered_landmarks"] = [f for f, c in zip(pairs.fdps, rf.covered) if c]
+    # axes: points by the map, directions by mapping two points 1 % of the skin diagonal apart
+    step = 0.01 * skin.diagonal / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
+    jaw = {}
+    for name, (point, direction) in template.jaw_axes.items():
+        point = np.asarray(point, dtype=np.float64)[None]
+        jaw[name] = (warp(point)[0], map_directions(warp, point, np.asarray(direction, dtype=np.float64)[None], step)[0])
+    fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
+    reached = np.array([fitted_lm[f] for f in pairs.fdps])
+    return FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
+                     {n: warp(p) for n, p in template.muscle_points.items()}, muscles, warp, info)

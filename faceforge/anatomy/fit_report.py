@@ -1,0 +1,78 @@
+"""Checks of a fit: how deep the skull and muscles lie beneath the skin.
+
+Inside test (:func:`depth_below_skin`). For a watertight skin the sign comes from
+ray parity (``trimesh.Trimesh.contains``). Heads are usually open (neck, eyes, mouth;
+a face mask is all open), so otherwise the sign is that of the offset from the
+closest skin point along the skin's smooth normal there (interpolated area-weighted
+vertex normals): positive beneath the skin. A point whose closest skin point lies on
+the skin's boundary (beyond the edge of a mask, through an eye hole) is *not covered*:
+no skin is above it, so it is neither inside nor outside and is left out of the
+fractions (the back of the skull need not fit, §7).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def depth_below_skin(points: np.ndarray, skin) -> tuple[np.ndarray, np.ndarray]:
+    """Signed depth (k,) float (positive beneath the skin, head units) and covered (k,) bool.
+
+    ``skin``: :class:`faceforge.anatomy.fit.SkinSurface`.
+    """
+    import trimesh
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0:
+        return np.zeros(0), np.zeros(0, bool)
+    mesh = trimesh.Trimesh(skin.vertices, skin.faces, process=False, validate=False)
+    closest, dist, tri = trimesh.proximity.closest_point(mesh, points)
+    from faceforge.geometry.triangles import barycentric
+
+    bary = barycentric(closest, skin.vertices, skin.faces, tri)
+    normal = skin.normals_at(tri, bary)
+    sign = np.sign(np.einsum("ij,ij->i", normal, closest - points))
+    sign[sign == 0] = 1.0
+    covered = np.ones(len(points), bool)
+    if len(skin.boundary_vertices):
+        on_bnd = np.isin(skin.faces[tri], skin.boundary_vertices)
+        near = (on_bnd * bary).sum(axis=1) > 0.999   # closest point on a boundary edge/vertex
+        covered = ~near
+    elif mesh.is_watertight:
+        sign = np.where(mesh.contains(points), 1.0, -1.0)
+    return sign * dist, covered
+
+
+def inside_stats(depth: np.ndarray, covered: np.ndarray, diagonal: float, tol: float = 0.0) -> dict:
+    """Summary of signed depths: fraction inside (depth > -tol), worst poke, min/median."""
+    d = depth[covered]
+    if len(d) == 0:
+        return {"count": 0, "inside_fraction": None, "max_outside": 0.0, "max_outside_rel": 0.0,
+                "min_depth": None, "median_depth": None}
+    poke = float(max(0.0, -d.min()))
+    return {
+        "count": int(len(d)),
+        "inside_fraction": float(np.mean(d > -tol)),
+        "max_outside": poke,
+        "max_outside_rel": poke / diagonal,
+        "min_depth": float(d.min()),
+        "median_depth": float(np.median(d)),
+    }
+
+
+def landmark_residuals(fdps, reached: np.ndarray, targets: np.ndarray, diagonal: float) -> dict:
+    """``{fdp: distance / diagonal}`` between reached (n, 3) and target (n, 3) points."""
+    r = np.linalg.norm(np.asarray(reached) - np.asarray(targets), axis=1) / diagonal
+    return {f: float(x) for f, x in zip(fdps, r)}
+
+
+def save_fit_png(path, skin_v, skin_f, layers: list, title: str = "fit") -> None:
+    """Front and side pictures: ``layers`` [(vertices, faces, rgb)] inside the translucent skin.
+
+    Uses :func:`faceforge.viz.render.render_meshes` (painter's algorithm, Agg).
+    """
+    from faceforge.viz.render import Layer, render_meshes
+
+    drawn = [Layer(v, f, color=c, label=name) for name, v, f, c in layers]
+    drawn.append(Layer(skin_v, skin_f, color=(0.95, 0.78, 0.68), alpha=0.25, label="skin"))
+    render_meshes(path, drawn, views=("front", "side"), title=title)
