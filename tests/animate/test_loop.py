@@ -140,3 +140,20 @@ def test_points_inside_box_and_check_animation():
     assert rep.skin_inside_skull == len(rest) and rep.worst_frame == 1 and not rep.ok
     ok = check_animation(rest, np.stack([rest, rest + [0, 0, 0.2]]), faces, skull=lambda i: [(bv, bf)])
     assert ok.ok
+
+
+def test_contact_sheet_writes_a_png_with_the_chosen_frames(tmp_path):
+    import matplotlib.image as mpimg
+
+    from faceforge.viz.contact_sheet import contact_sheet, pick_frames
+
+    assert pick_frames(100, 5) == [0, 25, 50, 74, 99]
+    assert pick_frames(10, spec="0,-1,3") == [0, 9, 3]
+    with pytest.raises(ValueError, match=r"\[12\]"):
+        pick_frames(10, spec="1,12")
+    rest, faces = grid(4)
+    frames = np.stack([rest + [0, 0.1 * k, 0] for k in range(4)])
+    png = contact_sheet(tmp_path / "s.png", frames, faces, [0, 3], fps=25, title="t")
+    img = mpimg.imread(png)
+    assert img.shape[1] > img.shape[0] > 50          # two panels side by side
+    assert img[..., :3].std() > 0.01                 # something was drawn

@@ -1,0 +1,81 @@
+"""A contact sheet: chosen frames of an animation side by side in one PNG (matplotlib Agg)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def pick_frames(n_frames: int, count: int = 6, spec: str | None = None) -> list[int]:
+    """Frame indices to show.
+
+    ``spec`` is a comma-separated list of frame numbers (``"0,10,25"``; negative counts from
+    the end); without it ``count`` frames evenly spaced from first to last. Out-of-range
+    numbers raise ValueError naming them.
+    """
+    if n_frames < 1:
+        raise ValueError("the animation has no frames")
+    if spec:
+        try:
+            idx = [int(tok) for tok in spec.split(",") if tok.strip()]
+        except ValueError:
+            raise ValueError(f"frame list must be integers separated by commas, got {spec!r}") from None
+        bad = [i for i in idx if not -n_frames <= i < n_frames]
+        if bad:
+            raise ValueError(f"frames {bad} are outside 0..{n_frames - 1}")
+        return [i % n_frames for i in idx]
+    count = max(1, min(count, n_frames))
+    return sorted(set(np.linspace(0, n_frames - 1, count).round().astype(int).tolist()))
+
+
+def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: float,
+                  view: str = "front", cols: int | None = None, title: str | None = None,
+                  panel: float = 2.6, dpi: int = 110) -> Path:
+    """Write a grid of shaded renders of ``frames[indices]``.
+
+    Parameters
+    ----------
+    out_png : path of the PNG to write
+    frames : (F, n, 3) float, vertex positions per frame (project frame: +Y up, face +Z)
+    faces : (m, 3) int
+    indices : frame indices to draw (each panel is titled with its frame and time)
+    fps : frames per second (for the time stamps)
+    view : "front" | "side" | "top" (see :mod:`faceforge.viz.render`)
+    cols : panels per row (default: up to 6)
+
+    All panels share one scale (the union of the drawn frames' extents), so motion between
+    panels is visible as motion.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from faceforge.viz.render import Layer, draw_layers, view_matrix
+
+    indices = list(indices)
+    frames = np.asarray(frames, dtype=float)
+    cols = cols or min(len(indices), 6)
+    rows = -(-len(indices) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(panel * cols, panel * 1.15 * rows), dpi=dpi,
+                             squeeze=False)
+    r = view_matrix(view)
+    proj = np.concatenate([frames[i] for i in indices]) @ r.T
+    lo, hi = proj[:, :2].min(axis=0), proj[:, :2].max(axis=0)
+    pad = 0.04 * (hi - lo).max()
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, i in zip(axes.ravel(), indices):
+        draw_layers(ax, [Layer(frames[i], faces)], view, labels=False)
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        ax.set_title(f"frame {i}  ({i / fps:.2f} s)", fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out_png)
+    plt.close(fig)
+    return out_png
