@@ -255,3 +255,212 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         body=body[ids], face_ids=face[ids], bary=bary, points=pts[ids], distance=dist[ids],
         outward=outward[ids], normals=nrm, body_faces=tuple(b.faces for b in bodies),
     )
+
+
+# -- regions and report --------------------------------------------------------------
+
+#: ear attachment FDPs (otobasion superius / inferius) and the whole ear group
+_EAR_FDPS = ("10.7", "10.8", "10.9", "10.10", "10.1", "10.2", "10.3", "10.4", "10.5", "10.6")
+#: hairline FDPs from subject-right to subject-left (11.2, 11.1, 11.3)
+_HAIRLINE_FDPS = ("11.2", "11.1", "11.3")
+
+
+def face_front_mask(vertices, landmarks: dict, margin: float = 0.1) -> tuple[np.ndarray, dict]:
+    """The face front: in front of the ears, below the hairline, above the chin.
+
+    * In front of the ears: ``z`` above the most anterior ear FDP (10.x), else
+      (no ear FDPs) above the landmarks' bounding box minus ``margin`` of its depth.
+    * Below the hairline: ``y`` below the hairline through 11.2, 11.1, 11.3
+      (piecewise linear in ``x``, constant beyond its ends), else below the
+      landmarks' bounding box plus ``margin`` of its height.
+    * Above the chin: ``y`` at or above FDP 2.1 (menton), else the box bottom.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    landmarks : dict
+        FDP id -> (3,) position (skin units, +Y up, face along +Z).
+
+    Returns
+    -------
+    mask : (n,) bool
+    rule : dict
+        Which rule each limit used and its value (JSON-ready).
+    """
+    v = np.asarray(vertices, FLOAT)
+    pts = {k: np.asarray(p, FLOAT) for k, p in landmarks.items()}
+    allp = np.array(list(pts.values())) if pts else v
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    size = hi - lo
+    rule = {}
+    ears = [pts[k][2] for k in _EAR_FDPS if k in pts]
+    if ears:
+        z0 = float(max(ears))
+        rule["ears"] = {"rule": "z > max z of the ear FDPs 10.x", "z": z0}
+    else:
+        z0 = float(lo[2] - margin * size[2])
+        rule["ears"] = {"rule": f"z > landmark box front minus {margin} of its depth (no 10.x)", "z": z0}
+    hair = [pts[k] for k in _HAIRLINE_FDPS if k in pts]
+    if hair:
+        h = np.array(sorted(hair, key=lambda p: p[0]))
+        y_top = np.interp(v[:, 0], h[:, 0], h[:, 1])
+        rule["hairline"] = {"rule": "y < hairline through 11.2, 11.1, 11.3 (linear in x)",
+                            "points": h.tolist()}
+    else:
+        y_top = np.full(len(v), hi[1] + margin * size[1])
+        rule["hairline"] = {"rule": f"y < landmark box top plus {margin} of its height (no 11.x)",
+                            "y": float(y_top[0]) if len(v) else None}
+    y0 = float(pts["2.1"][1]) if "2.1" in pts else float(lo[1])
+    rule["chin"] = {"rule": "y >= FDP 2.1" if "2.1" in pts else "y >= landmark box bottom", "y": y0}
+    mask = (v[:, 2] > z0) & (v[:, 1] < y_top) & (v[:, 1] >= y0)
+    return mask, rule
+
+
+def bind_report(binding: Binding, regions: dict, n_user: int | None = None) -> dict:
+    """Fractions of skin vertices bound to muscle / cranium / mandible / nothing.
+
+    Parameters
+    ----------
+    binding : Binding
+    regions : dict
+        Region name -> ``(n,) bool`` mask over the skin vertices.
+    n_user : int, optional
+        Count only the first ``n_user`` vertices (the user's).
+
+    Returns
+    -------
+    dict (JSON-ready): per region the vertex count and fractions; ``missed`` =
+    vertices whose outward and inward rays both found nothing.
+    """
+    status = binding.status if n_user is None else binding.status[:n_user]
+    out = {"vertices": int(len(status)), "regions": {}}
+    for name, mask in {"all": np.ones(len(status), bool), **regions}.items():
+        m = np.asarray(mask, bool)[: len(status)]
+        count = int(m.sum())
+        frac = {KIND_NAMES[c]: (float((status[m] == c).sum()) / count if count else 0.0)
+                for c in (MUSCLE, CRANIUM, MANDIBLE, UNBOUND)}
+        frac["bound"] = 1.0 - frac["none"]
+        out["regions"][name] = {"vertices": count, "fraction": frac,
+                                "unbound_vertices": int((status[m] == UNBOUND).sum())}
+    out["missed_rays"] = int((status == UNBOUND).sum())
+    out["outward_anchors"] = int(binding.outward.sum())
+    per_body = np.bincount(binding.body, minlength=len(binding.body_names))
+    out["anchors_per_body"] = {n: int(c) for n, c in zip(binding.body_names, per_body) if c}
+    return out
+
+
+# -- the whole §8 binding of one head ----------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BoundSkin:
+    """Everything :func:`bind_head` finds (the content of the bind stage).
+
+    Attributes
+    ----------
+    cut : faceforge.anatomy.mouth.MouthCut
+        The working skin mesh (``cut.vertices``, ``cut.faces``) and the mapping
+        back to the user's vertices.
+    binding : Binding
+        Anchors over the working vertices.
+    lip_sides : (n,) int8
+        +1 upper lip, -1 lower lip, 0 elsewhere (working vertices).
+    weights : (n,) float64
+        Influence map in [0, 1] (working vertices).
+    geodesic : (n,) float64
+        Geodesic distance from the anchored region.
+    scale : float
+        The influence normalisation (distance to the back of the head).
+    front : (n,) bool
+        The face-front region (in front of the ears, below the hairline).
+    report : dict
+        The bind report (JSON-ready).
+    """
+
+    cut: object
+    binding: Binding
+    lip_sides: np.ndarray
+    weights: np.ndarray
+    geodesic: np.ndarray
+    scale: float
+    front: np.ndarray
+    report: dict
+
+    def as_arrays(self) -> dict:
+        """Flat arrays for ``bind.npz`` (no pickle). Anchor arrays are prefixed ``anchor_``."""
+        c = self.cut
+        out = {
+            "n_user": np.int64(c.n_user), "vertices": c.vertices, "faces": c.faces,
+            "duplicate_source": c.source, "removed_faces": c.removed_faces,
+            "lip_upper": c.upper, "lip_lower": c.lower, "lip_sides": self.lip_sides,
+            "influence": self.weights, "geodesic": self.geodesic,
+            "influence_scale": np.float64(self.scale), "front": self.front,
+        }
+        for key, value in self.binding.as_arrays().items():
+            out[key if key in ("status", "normals", "body_names") else f"anchor_{key}"] = value
+        return out
+
+
+def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    return cKDTree(vertices).query(points)[1].astype(INT)
+
+
+def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
+              max_ray_fraction: float, up=(0.0, 1.0, 0.0)) -> BoundSkin:
+    """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        The user's skin (triangulated), skin units.
+    faces : (m, 3) int
+    landmarks : dict
+        FDP id -> (3,) position on the skin.
+    cranium, mandible : tuple (vertices (k, 3), faces (l, 3)) or None
+        The fitted skull parts (skin units).
+    muscles : sequence of tuple (name, layer, vertices, faces)
+        The fitted muscles' rest meshes; a higher layer is more superficial.
+    max_ray_fraction : float
+        ``bind.max_ray_distance``: longest ray as a fraction of the skin's
+        bounding-box diagonal.
+
+    Returns
+    -------
+    BoundSkin
+    """
+    from faceforge.anatomy.influence import influence_weights
+    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side
+
+    v, f = check_mesh(vertices, faces)
+    pts = {k: np.asarray(p, FLOAT) for k, p in landmarks.items()}
+    lips = [k for k in LIP_FDPS if k in pts]
+    lip_ids = dict(zip(lips, _nearest_vertex(v, np.array([pts[k] for k in lips])))) if lips else {}
+    cut = cut_mouth(v, f, lip_ids, up=up)
+    sides = lip_side(cut, up=up)
+
+    order = sorted(range(len(muscles)), key=lambda i: -int(muscles[i][1]))  # stable
+    bodies = [Body(str(muscles[i][0]), "muscle", muscles[i][2], muscles[i][3]) for i in order]
+    if cranium is not None:
+        bodies.append(Body("cranium", "cranium", *cranium))
+    if mandible is not None:
+        bodies.append(Body("mandible", "mandible", *mandible))
+    diagonal = float(np.linalg.norm(np.ptp(v, axis=0)))
+    binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides)
+
+    sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
+    back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None
+    weights, dist, scale = influence_weights(cut.vertices, cut.faces, sources, back_vertex=back)
+
+    front, rule = face_front_mask(cut.vertices, pts)
+    report = bind_report(binding, {"face_front": front, "back_and_neck": ~front})
+    report["region_rules"] = rule
+    report["max_ray_distance"] = max_ray_fraction * diagonal
+    report["mouth"] = cut.report()
+    report["influence"] = {
+        "sources": int(len(sources)), "normalisation": float(scale),
+        "normalised_by": "geodesic distance to FDP 11.6" if back is not None else "largest distance",
+        "mean_weight": float(weights.mean()) if len(weights) else 0.0,
+    }
+    return BoundSkin(cut, binding, sides, weights, dist, float(scale), front, report)

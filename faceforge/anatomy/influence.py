@@ -108,7 +108,7 @@ def save_influence_png(path, vertices, faces, weights, title: str = "influence m
         if hx == 2:
             polys = polys * np.array([-1.0, 1.0])  # side view: face to the left
         colours = cmap(w[f[order][vis]].mean(axis=1))
-        ax.add_collection(PolyCollection(polys, facecolors=colours, edgecolors="none"))
+        ax.add_collection(PolyCollection(polys, facecolors=colours, edgecolors="none", linewidths=0))
         ax.autoscale()
         ax.set_aspect("equal")
         ax.set_axis_off()

@@ -1,0 +1,109 @@
+"""The bind stage: skin constraints, anchors and influence map (paper §8).
+
+Reads the fit stage's folder, cuts the lips where they are joined
+(:mod:`faceforge.anatomy.mouth`), binds every skin vertex to a muscle or the
+skull by ray casting (:mod:`faceforge.anatomy.binding`) and computes the
+influence map (:mod:`faceforge.anatomy.influence`). Writes:
+
+``bind.npz``
+    :meth:`faceforge.anatomy.binding.BoundSkin.as_arrays`: the working skin
+    (``vertices``, ``faces``; the first ``n_user`` vertices are the user's, in
+    order, appended vertex ``n_user + i`` duplicates ``duplicate_source[i]``),
+    the anchors (``anchor_*``, ``status``, ``body_names``), ``lip_sides``,
+    ``influence``, ``geodesic``, ``front``. The skin constraint topology is a
+    pure function of ``faces`` (:func:`faceforge.anatomy.skin.skin_topology`), so it
+    is rebuilt by whoever assembles the model, not stored.
+``report.json``
+    fractions bound to muscle / cranium / mandible / nothing by region, rays
+    that missed, the mouth cut, the influence normalisation.
+``influence.png``
+    front and side views of the skin coloured by influence (Fig. 9).
+"""
+
+from __future__ import annotations
+
+import click
+
+from faceforge.pipeline import Stage, register_command, register_stage
+
+
+def load_fit(fit_dir):
+    """The fitted head from the fit stage's ``fit.npz``.
+
+    Expected arrays: ``skin_vertices (n, 3)``, ``skin_faces (m, 3)``,
+    ``cranium_vertices``/``cranium_faces``, ``mandible_vertices``/``mandible_faces``,
+    ``landmark_ids (L,) str``, ``landmark_positions (L, 3)``, and the muscles as
+    CSR blocks: ``muscle_names (k,) str``, ``muscle_layers (k,)``,
+    ``muscle_vertex_start (k+1,)``, ``muscle_vertices``, ``muscle_face_start (k+1,)``,
+    ``muscle_faces`` (ids local to each muscle).
+
+    Returns
+    -------
+    dict with ``vertices``, ``faces``, ``landmarks`` {fdp: (3,)}, ``cranium``,
+    ``mandible`` ((v, f) or None) and ``muscles`` [(name, layer, v, f)].
+    """
+    from faceforge.exceptions import StageError
+    from faceforge.io.stagefiles import load_npz
+
+    path = fit_dir / "fit.npz"
+    if not path.exists():
+        raise StageError("fit.npz missing: run `faceforge fit` first", path)
+    d = load_npz(path)
+    need = ("skin_vertices", "skin_faces", "landmark_ids", "landmark_positions")
+    missing = [k for k in need if k not in d]
+    if missing:
+        raise StageError(f"fit.npz lacks {', '.join(missing)}", path)
+
+    def part(name):
+        if f"{name}_vertices" in d and len(d[f"{name}_vertices"]):
+            return d[f"{name}_vertices"], d[f"{name}_faces"]
+        return None
+
+    muscles = []
+    if "muscle_names" in d:
+        vs, fs = d["muscle_vertex_start"], d["muscle_face_start"]
+        for i, name in enumerate(d["muscle_names"]):
+            muscles.append((str(name), int(d["muscle_layers"][i]),
+                            d["muscle_vertices"][vs[i]:vs[i + 1]], d["muscle_faces"][fs[i]:fs[i + 1]]))
+    landmarks = {str(k): p for k, p in zip(d["landmark_ids"], d["landmark_positions"])}
+    return {"vertices": d["skin_vertices"], "faces": d["skin_faces"], "landmarks": landmarks,
+            "cranium": part("cranium"), "mandible": part("mandible"), "muscles": muscles}
+
+
+def run(ctx):
+    """Bind the fitted head in ``ctx.input("fit")``; write bind.npz, report.json, influence.png."""
+    from faceforge.anatomy.binding import bind_head
+    from faceforge.anatomy.influence import save_influence_png
+    from faceforge.anatomy.skin import SkinStiffness
+    from faceforge.io.stagefiles import save_json, save_npz
+
+    head = load_fit(ctx.input("fit"))
+    SkinStiffness.from_config(ctx.config)  # validates the keys this stage hashes
+    ctx.log(f"binding {len(head['vertices'])} skin vertices to {len(head['muscles'])} muscles and the skull")
+    bound = bind_head(head["vertices"], head["faces"], head["landmarks"], head["cranium"],
+                      head["mandible"], head["muscles"],
+                      float(ctx.config.get("bind.max_ray_distance")))
+    front = bound.report["regions"]["face_front"]["fraction"]["bound"]
+    ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
+    save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())
+    save_json(ctx.out_dir / "report.json", bound.report)
+    save_influence_png(ctx.out_dir / "influence.png", bound.cut.vertices, bound.cut.faces,
+                       bound.weights, title="influence of the musculoskeletal structure (Fig. 9)")
+
+
+STAGE = register_stage(Stage(
+    name="bind", deps=("fit",), config_keys=("skin.stiffness", "bind"),
+    outputs=("bind.npz", "report.json", "influence.png"), version="1", run=run,
+    description="bind the skin to muscles and bone, influence map (§8)"))
+
+
+@click.command("bind", help="Bind the skin to the fitted muscles and skull (paper §8).")
+@click.option("--force", is_flag=True, help="Rerun even if up to date.")
+@click.pass_obj
+def command(app, force):
+    app.run_stage("bind", force=force)
+    report = app.workspace.stage_dir("bind") / "report.json"
+    app.log(f"bind report: {report}")
+
+
+register_command(command)
