@@ -107,7 +107,10 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
         for q in range(kin.shape[0]):
             i = kin[q]
             for d in range(3):
-                x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
+                if s == substeps - 1:  # exactly the control, no rounding
+                    x_out[i, d] = kin_target[q, d]
+                else:
+                    x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
         lams[:] = 0.0
         _project(x_out, w, blocks, iterations,
                  d_idx, d_rest, d_k, d_c, lams[:o1],

@@ -22,7 +22,7 @@ from faceforge.constants import NUMBA_OPTIONS
 DEGENERATE = 1e-24
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _multiplier(value, denom, k, c, lam):
     """Scaled multiplier ``s`` of one projection (float, units of C / |grad C|^2).
 

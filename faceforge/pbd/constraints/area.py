@@ -30,7 +30,7 @@ def residual_area(positions, triangles, rest_area) -> np.ndarray:
     return init_area(positions, triangles) - np.asarray(rest_area, dtype=np.float64)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _solve_area(x, w, i0, i1, i2, rest, k, c, lam):
     """Project one area constraint in place on ``x (n, 3)``; return the multiplier increment."""
     w0 = w[i0]

@@ -34,7 +34,7 @@ def residual_attachment(positions, particles, triangles, bary) -> np.ndarray:
     return np.linalg.norm(p - attachment_targets(positions, triangles, bary), axis=1)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _solve_attachment(x, w, i, t0, t1, t2, b0, b1, b2, k, c, lam):
     """Project one attachment in place (moves ``x[i]`` only); return the multiplier increment."""
     tx = b0 * x[t0, 0] + b1 * x[t1, 0] + b2 * x[t2, 0]

@@ -58,7 +58,7 @@ def residual_bending(positions, quads, rest_angle) -> np.ndarray:
     return _wrap(dihedral_angle(positions, quads) - np.asarray(rest_angle, dtype=np.float64))
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _solve_bending(x, w, i0, i1, i2, i3, rest, k, c, lam):
     """Project one dihedral constraint in place on ``x (n, 3)``; return the multiplier increment."""
     w0 = w[i0]

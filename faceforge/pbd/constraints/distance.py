@@ -28,7 +28,7 @@ def residual_distance(positions, indices, rest_length) -> np.ndarray:
     return init_distance(positions, indices) - np.asarray(rest_length, dtype=np.float64)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _solve_distance(x, w, i0, i1, rest, k, c, lam):
     """Project one distance constraint in place on ``x (n, 3)``; return the multiplier increment."""
     w0 = w[i0]

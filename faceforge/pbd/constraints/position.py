@@ -29,7 +29,7 @@ def residual_position(positions, particles, targets) -> np.ndarray:
     return np.linalg.norm(p - np.asarray(targets, dtype=np.float64), axis=1)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _pull(x, w, i, tx, ty, tz, k, c, lam):
     """Move particle ``i`` toward ``t`` (one-sided); return the multiplier increment."""
     wi = w[i]
@@ -49,7 +49,7 @@ def _pull(x, w, i, tx, ty, tz, k, c, lam):
     return s
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _solve_position(x, w, i, target, slot, k, c, lam):
     """Project one position constraint (target row ``slot`` of ``target (m, 3)``)."""
     return _pull(x, w, i, target[slot, 0], target[slot, 1], target[slot, 2], k, c, lam)

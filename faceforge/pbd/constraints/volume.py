@@ -59,7 +59,7 @@ def residual_volume(positions, triangles, rest_volume) -> float:
     return signed_volume(positions, triangles) - float(rest_volume)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(inline="always", **NUMBA_OPTIONS)
 def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g):
     """Project one volume constraint in place on ``x (n, 3)``.
 

@@ -1,0 +1,78 @@
+"""Tiny shared helpers for the benchmarks: time a callable, print a table, write JSON.
+
+Usage::
+
+    from _util import timeit, print_table, write_results
+    t = timeit(lambda: solver.step(s, s, c, dt), repeat=5, number=20)   # seconds per call
+    print_table(rows, ["name", "ms"])                                   # rows: list of dicts
+    write_results("pbd", {"rows": rows})          # -> benchmarks/results/pbd.json
+
+Benchmarks are scripts, not tests: run them with ``python benchmarks/bench_<name>.py``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def timeit(fn, repeat: int = 5, number: int = 1, warmup: int = 1) -> dict:
+    """Time ``fn()``: ``warmup`` untimed calls, then ``repeat`` rounds of ``number`` calls.
+
+    Returns seconds per call: ``{"best": float, "median": float, "mean": float, "runs": int}``
+    (best is the least noisy on a shared machine).
+    """
+    for _ in range(warmup):
+        fn()
+    per_call = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        per_call.append((time.perf_counter() - t0) / number)
+    per_call.sort()
+    return {"best": per_call[0], "median": per_call[len(per_call) // 2],
+            "mean": sum(per_call) / len(per_call), "runs": repeat * number}
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return str(v)
+
+
+def print_table(rows: list[dict], columns: list[str] | None = None, title: str | None = None) -> None:
+    """Print ``rows`` (dicts) as an aligned text table with the given ``columns``."""
+    if not rows:
+        return
+    columns = columns or list(rows[0])
+    cells = [[_fmt(r.get(c, "")) for c in columns] for r in rows]
+    widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(columns)]
+    if title:
+        print(title)
+    print("  ".join(c.ljust(w) for c, w in zip(columns, widths)))
+    print("  ".join("-" * w for w in widths))
+    for row in cells:
+        print("  ".join(v.ljust(w) for v, w in zip(row, widths)))
+    print()
+
+
+def machine() -> dict:
+    """A short description of where the numbers were measured."""
+    return {"platform": platform.platform(), "python": platform.python_version(),
+            "processor": platform.processor() or platform.machine(), "cpus": os.cpu_count()}
+
+
+def write_results(name: str, data: dict) -> Path:
+    """Write ``data`` plus machine info and a UTC timestamp to ``results/<name>.json``."""
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    out = RESULTS / f"{name}.json"
+    payload = {"benchmark": name, "when_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+               "machine": machine(), **data}
+    out.write_text(json.dumps(payload, indent=2, sort_keys=False) + "\n")
+    return out

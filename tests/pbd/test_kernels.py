@@ -1,0 +1,120 @@
+"""Every numba kernel against its plain-Python twin (tests/pbd/twins.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from faceforge.pbd.constraints import (
+    init_area, init_bending, init_distance, init_volume, solve_attachment, solve_position,
+    solve_volume)
+from faceforge.pbd.constraints.area import _project_area
+from faceforge.pbd.constraints.bending import _project_bending, dihedral_angle
+from faceforge.pbd.constraints.distance import _project_distance
+from faceforge.pbd.constraints.volume import reference_vertices
+from tests.pbd import twins
+from tests.pbd.meshes import adjacent_quads, edges, sphere
+
+
+@pytest.fixture(scope="module")
+def mesh():
+    v, f = sphere(1)
+    rng = np.random.default_rng(7)
+    rest = v.copy()
+    x = v + rng.normal(scale=0.08, size=v.shape)
+    w = rng.uniform(0.2, 2.0, size=len(v))
+    w[::9] = 0.0  # some kinematic particles
+    return rest, x, w, f
+
+
+@pytest.mark.parametrize("xpbd", [False, True])
+def test_distance_matches_twin(mesh, xpbd):
+    rest, x, w, f = mesh
+    e = edges(f)
+    r = init_distance(rest, e)
+    m = len(e)
+    rng = np.random.default_rng(1)
+    k = rng.uniform(0.1, 1.0, m)
+    c = rng.uniform(0.0, 3.0, m) if xpbd else np.zeros(m)
+    lam0 = rng.normal(size=m) * 0.01 if xpbd else np.zeros(m)
+    want, want_lam = twins.distance(x, w, e, r, k, c, lam0)
+    got, lam = x.copy(), lam0.copy()
+    _project_distance(got, w, e, r, k, c, lam, 0, m)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
+    np.testing.assert_allclose(lam, want_lam, rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.parametrize("xpbd", [False, True])
+def test_bending_matches_twin(mesh, xpbd):
+    rest, x, w, f = mesh
+    q = adjacent_quads(f)
+    r = init_bending(rest, q)
+    m = len(q)
+    rng = np.random.default_rng(2)
+    k = rng.uniform(0.1, 1.0, m)
+    c = rng.uniform(0.0, 3.0, m) if xpbd else np.zeros(m)
+    lam0 = rng.normal(size=m) * 0.01 if xpbd else np.zeros(m)
+    want, want_lam = twins.bending(x, w, q, r, k, c, lam0)
+    got, lam = x.copy(), lam0.copy()
+    _project_bending(got, w, q, r, k, c, lam, 0, m)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(lam, want_lam, rtol=1e-8, atol=1e-12)
+
+
+def test_bending_gradient_is_the_derivative_of_the_angle():
+    rng = np.random.default_rng(3)
+    h = 1e-6
+    for _ in range(20):
+        p = rng.normal(size=(4, 3))
+        q = np.array([[0, 1, 2, 3]])
+        grad = np.array(twins.bending_gradient(*p))
+        fd = np.zeros((4, 3))
+        for i in range(4):
+            for d in range(3):
+                pp, pm = p.copy(), p.copy()
+                pp[i, d] += h
+                pm[i, d] -= h
+                fd[i, d] = (dihedral_angle(pp, q)[0] - dihedral_angle(pm, q)[0]) / (2 * h)
+        np.testing.assert_allclose(grad, fd, atol=1e-6 * max(1.0, np.abs(fd).max()))
+
+
+@pytest.mark.parametrize("xpbd", [False, True])
+def test_area_matches_twin(mesh, xpbd):
+    rest, x, w, f = mesh
+    r = init_area(rest, f)
+    m = len(f)
+    rng = np.random.default_rng(4)
+    k = rng.uniform(0.1, 1.0, m)
+    c = rng.uniform(0.0, 3.0, m) if xpbd else np.zeros(m)
+    lam0 = rng.normal(size=m) * 0.01 if xpbd else np.zeros(m)
+    want, want_lam = twins.area(x, w, f, r, k, c, lam0)
+    got, lam = x.copy(), lam0.copy()
+    _project_area(got, w, f, r, k, c, lam, 0, m)
+    np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(lam, want_lam, rtol=1e-9, atol=1e-13)
+
+
+@pytest.mark.parametrize("open_surface", [False, True])
+def test_volume_matches_twin(mesh, open_surface):
+    rest, x, w, f = mesh
+    f = f[:-12] if open_surface else f
+    v0 = init_volume(rest, f) * 1.1
+    ref = reference_vertices(f)
+    assert (len(ref) < len(np.unique(f))) == open_surface
+    want = twins.volume(x, w, f, v0, 0.7, ref)
+    got = solve_volume(x, w, f, v0, 0.7)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
+
+
+def test_position_and_attachment_match_twins(mesh):
+    rest, x, w, f = mesh
+    rng = np.random.default_rng(5)
+    particles = np.array([1, 4, 9, 20])  # 9 is kinematic
+    targets = rng.normal(size=(4, 3))
+    k = np.array([0.2, 1.0, 0.5, 0.7])
+    np.testing.assert_allclose(solve_position(x, w, particles, targets, k),
+                               twins.position(x, w, particles, targets, k), rtol=1e-13)
+    tris = f[[3, 5, 30, 31]]
+    bary = rng.dirichlet(np.ones(3), size=4)
+    np.testing.assert_allclose(solve_attachment(x, w, particles, tris, bary, k),
+                               twins.attachment(x, w, particles, tris, bary, k), rtol=1e-13)

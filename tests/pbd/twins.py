@@ -1,0 +1,127 @@
+"""Plain-Python twins of the numba kernels: slow, obvious, one constraint at a time.
+
+Each twin recomputes C and its gradient with numpy vectors in a Python loop and
+applies the same PBD/XPBD update ``dp_i = s w_i grad_i C`` with
+``s = (-k C - c D lam) / (D (1 + c))``; the tests compare them with the kernels.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def _apply(x, w, ids, grads, value, k, c, lam):
+    denom = sum(w[i] * float(g @ g) for i, g in zip(ids, grads))
+    if denom <= 0.0:
+        return 0.0
+    s = (-k * value - c * denom * lam) / (denom * (1.0 + c))
+    for i, g in zip(ids, grads):
+        x[i] = x[i] + s * w[i] * g
+    return s
+
+
+def distance(x, w, pairs, rest, k, c=None, lam=None):
+    x = x.copy()
+    m = len(pairs)
+    c = np.zeros(m) if c is None else c
+    lam = np.zeros(m) if lam is None else lam.copy()
+    for j, (a, b) in enumerate(pairs):
+        d = x[a] - x[b]
+        n = float(np.linalg.norm(d))
+        if n == 0.0 or w[a] + w[b] == 0.0:
+            continue
+        lam[j] += _apply(x, w, (a, b), (d / n, -d / n), n - rest[j], k[j], c[j], lam[j])
+    return x, lam
+
+
+def _angle(p0, p1, p2, p3):
+    e = p1 - p0
+    na = np.cross(e, p2 - p0)
+    nb = np.cross(p0 - p1, p3 - p1)
+    return math.atan2(float(np.cross(na, nb) @ e) / float(np.linalg.norm(e)), float(na @ nb))
+
+
+def bending_gradient(p0, p1, p2, p3):
+    """Gradient of the signed dihedral angle (Bridson et al. 2003), four (3,) vectors."""
+    e = p1 - p0
+    el = float(np.linalg.norm(e))
+    na = np.cross(e, p2 - p0)
+    nb = np.cross(p0 - p1, p3 - p1)
+    a = na / float(na @ na)
+    b = nb / float(nb @ nb)
+    return (-float((p2 - p1) @ e) / el * a - float((p3 - p1) @ e) / el * b,
+            float((p2 - p0) @ e) / el * a + float((p3 - p0) @ e) / el * b,
+            -el * a, -el * b)
+
+
+def bending(x, w, quads, rest, k, c=None, lam=None):
+    x = x.copy()
+    m = len(quads)
+    c = np.zeros(m) if c is None else c
+    lam = np.zeros(m) if lam is None else lam.copy()
+    for j, q in enumerate(quads):
+        p = [x[i] for i in q]
+        e = p[1] - p[0]
+        na = np.cross(e, p[2] - p[0])
+        nb = np.cross(p[0] - p[1], p[3] - p[1])
+        ee = float(e @ e)
+        if ee == 0 or na @ na <= 1e-24 * ee * ee or nb @ nb <= 1e-24 * ee * ee:
+            continue
+        value = (_angle(*p) - rest[j] + math.pi) % (2 * math.pi) - math.pi
+        lam[j] += _apply(x, w, q, bending_gradient(*p), value, k[j], c[j], lam[j])
+    return x, lam
+
+
+def area(x, w, tris, rest, k, c=None, lam=None):
+    x = x.copy()
+    m = len(tris)
+    c = np.zeros(m) if c is None else c
+    lam = np.zeros(m) if lam is None else lam.copy()
+    for j, (a, b, d) in enumerate(tris):
+        n = np.cross(x[b] - x[a], x[d] - x[a])
+        nl = float(np.linalg.norm(n))
+        if nl == 0.0:
+            continue
+        u = n / nl
+        grads = (0.5 * np.cross(u, x[d] - x[b]), 0.5 * np.cross(u, x[a] - x[d]),
+                 0.5 * np.cross(u, x[b] - x[a]))
+        lam[j] += _apply(x, w, (a, b, d), grads, 0.5 * nl - rest[j], k[j], c[j], lam[j])
+    return x, lam
+
+
+def volume(x, w, tris, rest, k, ref):
+    """One body; ``ref``: global ids of the reference particles."""
+    x = x.copy()
+    r = x[ref].mean(axis=0)
+    grads = {}
+    vol = 0.0
+    for a, b, d in tris:
+        pa, pb, pd = x[a] - r, x[b] - r, x[d] - r
+        vol += float(pa @ np.cross(pb, pd)) / 6.0
+        for i, g in ((a, np.cross(pb, pd)), (b, np.cross(pd, pa)), (d, np.cross(pa, pb))):
+            grads[i] = grads.get(i, 0.0) + g / 6.0
+    total = sum(grads.values())
+    for i in ref:
+        grads[i] = grads[i] - total / len(ref)
+    ids = sorted(grads)
+    _apply(x, w, ids, [grads[i] for i in ids], vol - rest, k, 0.0, 0.0)
+    return x
+
+
+def position(x, w, particles, targets, k):
+    x = x.copy()
+    for j, i in enumerate(particles):
+        if w[i] > 0:
+            x[i] = x[i] + k[j] * (targets[j] - x[i])
+    return x
+
+
+def attachment(x, w, particles, tris, bary, k):
+    x = x.copy()
+    for j, i in enumerate(particles):
+        t = bary[j] @ x[tris[j]]
+        if w[i] > 0:
+            x[i] = x[i] + k[j] * (t - x[i])
+    return x
