@@ -85,6 +85,13 @@ def triangulate_polygons(polygons: list, path: str = "<mesh>") -> tuple[np.ndarr
 # readers: each returns (vertices, polygons list or faces array)
 
 
+def _one_line(text: str, limit: int = 160) -> str:
+    """First line of a library's error message, without control characters, shortened."""
+    line = (text.strip().splitlines() or [""])[0]
+    line = "".join(ch if ch.isprintable() else "?" for ch in line)
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
 def _read_text(path: Path) -> str:
     try:
         return path.read_text(encoding="utf-8", errors="replace")
@@ -143,12 +150,20 @@ def _read_off(path: Path):
 
 
 def _read_meshio(path: Path):
+    import contextlib
+    import io
+
     import meshio
 
+    chatter = io.StringIO()
     try:
-        mesh = meshio.read(path)
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+            mesh = meshio.read(path)
+    except SystemExit:  # meshio's PLY reader calls sys.exit on malformed headers
+        detail = _one_line(chatter.getvalue()) or "malformed file"
+        raise MeshError(f"cannot read {path.suffix[1:].upper()}: {detail}", path) from None
     except Exception as exc:  # meshio raises many types for bad files
-        raise MeshError(f"cannot read {path.suffix[1:].upper()}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", path) from None
+        raise MeshError(f"cannot read {path.suffix[1:].upper()}: {_one_line(str(exc)) or type(exc).__name__}", path) from None
     polygons = []
     for block in mesh.cells:
         if block.type in ("triangle", "quad", "polygon") or block.type.startswith("polygon"):
@@ -160,12 +175,13 @@ def _read_trimesh(path: Path, merge: bool):
     import trimesh
 
     try:
-        mesh = trimesh.load(path, force="mesh", process=False)
+        with np.errstate(all="ignore"):  # NaN/inf input is reported by check_arrays instead
+            mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for bad files
-        raise MeshError(f"cannot read {path.suffix[1:].upper()}: {str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", path) from None
+        raise MeshError(f"cannot read {path.suffix[1:].upper()}: {_one_line(str(exc)) or type(exc).__name__}", path) from None
     if not isinstance(mesh, trimesh.Trimesh):
         raise MeshError("no triangle mesh found in the file", path)
-    if merge and len(mesh.faces):
+    if merge and len(mesh.faces) and np.isfinite(mesh.vertices).all():
         mesh.merge_vertices()
     return np.asarray(mesh.vertices, dtype=np.float64).reshape(-1, 3), np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)
 
@@ -241,8 +257,26 @@ def _write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
     _atomic_write_bytes(path, ("\n".join(lines) + "\n").encode("ascii"))
 
 
+def _write_off(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    from faceforge.io.stagefiles import _atomic_write_bytes
+
+    lines = ["OFF", f"{len(vertices)} {len(faces)} 0"]
+    lines += [f"{x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
+    lines += [f"3 {a} {b} {c}" for a, b, c in faces.tolist()]
+    _atomic_write_bytes(path, ("\n".join(lines) + "\n").encode("ascii"))
+
+
+def _write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
+    import meshio
+
+    tmp = path.with_name(f".{path.name}.tmp.ply")
+    meshio.write_points_cells(tmp, vertices, [("triangle", faces)], file_format="ply", binary=True)
+    tmp.replace(path)
+
+
 def save_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray) -> Path:
-    """Write a triangle mesh (OBJ exactly, with full float precision; PLY/OFF/STL/GLB via trimesh).
+    """Write a triangle mesh: OBJ, OFF and PLY (binary float64) round-trip exactly;
+    STL and GLB (via trimesh) store float32.
 
     Parameters
     ----------
@@ -258,7 +292,11 @@ def save_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray) -> Path
     path.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".obj":
         _write_obj(path, vertices, faces)
-    elif suffix in (".ply", ".off", ".stl", ".glb"):
+    elif suffix == ".off":
+        _write_off(path, vertices, faces)
+    elif suffix == ".ply":
+        _write_ply(path, vertices, faces)
+    elif suffix in (".stl", ".glb"):
         import trimesh
 
         from faceforge.io.stagefiles import _atomic_write_bytes
