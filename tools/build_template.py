@@ -1,0 +1,586 @@
+"""Build ``templates/skull/`` (cranium, mandible, FDP landmarks, jaw axes) from the shared assets.
+
+Reproducible: ``python tools/build_template.py [--assets /work/shared/assets] [--out templates/skull]``
+rewrites ``cranium.obj``, ``mandible.obj``, ``landmarks.yaml`` and ``jaw.yaml`` byte for byte
+(no randomness). Only numpy, scipy, trimesh and PyYAML are used (all runtime dependencies);
+the build does not need any extra package.
+
+Steps
+-----
+1. **Skull.** The YahooJAPAN skull (``anatomy/skull-yahoojapan/skull_low_resolution.obj``,
+   CC BY 3.0; 5,154 vertices, one closed surface, Y up, face +Z, mandible fused to the
+   cranium with the teeth in occlusion) is welded, its midsagittal plane (found by
+   mirror-ICP) moved to x = 0, and the shape symmetrised by averaging each vertex with
+   the mirror image of its mirrored closest surface point.
+2. **Mandible.** The fused skull is split with a minimum cut on the dual graph of the
+   mesh (faces = nodes, shared edges = arcs of capacity = edge length) between the chin
+   (source) and the vault (sink). Arcs may only be cut inside two search regions around
+   the known fusions: the dental arch (teeth in occlusion) and the rami (condylar necks,
+   coronoid processes under the zygomatic arches). The minimum cut is the shortest set of
+   closed curves separating the jaw from the cranium: it runs around the thinnest necks,
+   i.e. through the occlusal contact and the condylar necks. Each cut loop is closed on
+   both sides by an ear-clipped cap in the loop's best-fit plane, so both bones are closed
+   and consistently oriented (outward normals).
+3. **Placement.** A similarity transform (uniform scale, rotation about x, translation in
+   y and z; x stays the midsagittal plane) puts the skull into the ICT-FaceKit head
+   (``heads/ict/``, cm): eight bony points found on the midline profile and the lateral
+   extremes of the skull are matched, in the least-squares sense, to the corresponding
+   skin points moved inward along the skin normal by the soft-tissue depth of
+   ``tissue-depth/`` (Rhine 1983). The template therefore lives in the ICT head's frame:
+   **centimetres, life size**, +Y up, face +Z, subject's left +X, midsagittal plane x = 0.
+4. **Landmarks.** For each chosen FDP of the ICT head a ray is cast from the skin point
+   inward (against the smoothed skin normal) and the first hit on the prescribed bone is
+   the landmark (closest bone point when the ray misses or exits through an opening,
+   e.g. the orbit). Right-side landmarks are the exact mirror images of the left ones
+   (the skull is symmetric). Upper-lip FDPs are put on the maxilla (cranium), lower-lip
+   FDPs on the mandible, so mandible landmarks move with the jaw.
+5. **Jaw.** Pitch axis through the centres of the two condylar cut loops (left-right);
+   yaw axis vertical through their midpoint; protrusion direction = the forward direction
+   of the occlusal plane (best-fit plane of the dental cut) in the midsagittal plane.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.csgraph as csgraph
+import trimesh
+import yaml
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: FDP -> (bone, soft-tissue depth used in the placement fit or None)
+LANDMARK_BONES = {
+    # chin and jaw corners (mandible)
+    "2.1": "mandible", "2.10": "mandible", "2.13": "mandible", "2.14": "mandible",
+    # inner lip: upper lip on the maxilla, lower lip on the mandible, corners on the maxilla
+    "2.2": "cranium", "2.6": "cranium", "2.7": "cranium", "2.4": "cranium", "2.5": "cranium",
+    "2.3": "mandible", "2.8": "mandible", "2.9": "mandible",
+    # outer lip
+    "8.1": "cranium", "8.5": "cranium", "8.6": "cranium", "8.9": "cranium", "8.10": "cranium",
+    "8.3": "cranium", "8.4": "cranium",
+    "8.2": "mandible", "8.7": "mandible", "8.8": "mandible",
+    # eye corners on the orbit rims
+    "3.7": "cranium", "3.8": "cranium", "3.11": "cranium", "3.12": "cranium",
+    # brows on the brow ridge
+    "4.1": "cranium", "4.2": "cranium", "4.3": "cranium", "4.4": "cranium", "4.5": "cranium", "4.6": "cranium",
+    # cheeks on the maxilla / zygomatic bone
+    "5.1": "cranium", "5.2": "cranium", "5.3": "cranium", "5.4": "cranium",
+    # nose: alae and base on the rim of the nasal aperture / anterior nasal spine
+    "9.1": "cranium", "9.2": "cranium", "9.4": "cranium", "9.5": "cranium", "9.15": "cranium",
+    # ears: root of the zygomatic arch in front of the auditory meatus
+    "10.9": "cranium", "10.10": "cranium",
+    # hairline, top and back of the skull on the frontal / parietal / occipital bone
+    "11.1": "cranium", "11.2": "cranium", "11.3": "cranium", "11.4": "cranium", "11.6": "cranium",
+}
+
+#: FDPs whose ray is cast straight back (-Z) instead of against the skin normal: the
+#: skin normal at the lips and the nose base points up or down along the lip surface
+STRAIGHT_BACK = {"2.2", "2.3", "2.4", "2.5", "2.6", "2.7", "2.8", "2.9",
+                 "8.1", "8.2", "8.3", "8.4", "8.5", "8.6", "8.7", "8.8", "8.9", "8.10",
+                 "9.1", "9.2", "9.4", "9.5", "9.15"}
+
+
+# ----------------------------------------------------------------------------- loading
+def load_welded(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Read an OBJ and weld coincident vertices: (v (n,3) float64, f (m,3) int64)."""
+    m = trimesh.load(path, force="mesh")
+    m = trimesh.Trimesh(m.vertices, m.faces, process=True)
+    return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)
+
+
+def mirror_plane_offset(v: np.ndarray, iterations: int = 30) -> float:
+    """x of the midsagittal plane: rigid ICP of the x-mirrored points onto the points.
+
+    The plane halfway between each point and its ICP-aligned mirror image is averaged.
+    """
+    tree = cKDTree(v)
+    cur = v * [-1.0, 1.0, 1.0]
+    for _ in range(iterations):
+        _, idx = tree.query(cur)
+        p, q = cur, v[idx]
+        pc, qc = p.mean(0), q.mean(0)
+        u, _, vt = np.linalg.svd((p - pc).T @ (q - qc))
+        d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+        cur = (p - pc) @ (vt.T @ d @ u.T).T + qc
+    return float(((v + cur) / 2.0)[:, 0].mean())
+
+
+def symmetrise(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Average each vertex with the mirror of the closest surface point to its mirror image."""
+    mesh = trimesh.Trimesh(v, f, process=False)
+    mirrored = v * [-1.0, 1.0, 1.0]
+    closest, _, _ = trimesh.proximity.closest_point(mesh, mirrored)
+    return (v + closest * [-1.0, 1.0, 1.0]) / 2.0
+
+
+# ------------------------------------------------------------------------- mandible cut
+def jaw_min_cut(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Boolean (m,) mask of the mandible's faces: minimum edge-length cut chin | vault.
+
+    Search regions (source skull units, x-centred YahooJAPAN frame, skull height 13.9):
+    the dental arch (|x| < 2.8, 1 < z, 2.6 < y < 5.2) and the rami (|x| > 2.4,
+    -2.5 < z < 3.4, 4.4 < y < 6.6). Arcs outside them cannot be cut.
+    """
+    c = v[f].mean(axis=1)
+    ax = np.abs(c[:, 0])
+    teeth = (ax < 2.8) & (c[:, 2] > 1.0) & (c[:, 1] > 2.6) & (c[:, 1] < 5.2)
+    rami = (ax > 2.4) & (c[:, 2] > -2.5) & (c[:, 2] < 3.4) & (c[:, 1] > 4.4) & (c[:, 1] < 6.6)
+    region = teeth | rami
+    mesh = trimesh.Trimesh(v, f, process=False)
+    adj, edges = mesh.face_adjacency, mesh.face_adjacency_edges
+    length = np.linalg.norm(v[edges[:, 0]] - v[edges[:, 1]], axis=1)
+    cuttable = region[adj[:, 0]] & region[adj[:, 1]]
+    # steer the cut: in the dental arch towards the occlusal line seen on the full-resolution
+    # skull (incisal edges at y = 3.4, sloping down 0.15 per unit backwards); in the rami
+    # upwards, to where the condyles and coronoid processes meet the temporal bone
+    mid = v[edges].mean(axis=1)
+    y_occ = 3.4 - 0.15 * (5.6 - mid[:, 2])
+    w_teeth = 1.0 + ((mid[:, 1] - y_occ) / 0.2) ** 2
+    w_rami = 1.0 + (np.maximum(5.7 - mid[:, 1], 0.0) / 0.3) ** 2
+    weight = np.where(np.abs(mid[:, 0]) < 2.6, w_teeth, w_rami)
+    big = 10**7
+    cap = np.where(cuttable, np.minimum(np.round(length * weight * 1000), big - 1).astype(np.int64) + 1, big)
+    n = len(f)
+    src, snk = n, n + 1
+    chin = np.flatnonzero(c[:, 1] < 1.0)
+    vault = np.flatnonzero(c[:, 1] > 8.0)
+    rows = np.r_[adj[:, 0], adj[:, 1], np.full(len(chin), src), vault]
+    cols = np.r_[adj[:, 1], adj[:, 0], chin, np.full(len(vault), snk)]
+    caps = np.r_[cap, cap, np.full(len(chin) + len(vault), 10 * big)].astype(np.int32)
+    graph = sp.csr_matrix((caps, (rows, cols)), shape=(n + 2, n + 2))
+    flow = csgraph.maximum_flow(graph, src, snk).flow
+    residual = (graph - flow).tocsr()
+    residual.data[residual.data < 0] = 0
+    residual.eliminate_zeros()
+    reach = csgraph.breadth_first_order(residual, src, directed=True, return_predecessors=False)
+    mask = np.zeros(n + 2, dtype=bool)
+    mask[reach] = True
+    return mask[:n]
+
+
+def boundary_loops(f: np.ndarray) -> list[np.ndarray]:
+    """Boundary loops of a manifold mesh, each ordered along its faces' half-edges."""
+    half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    keys = {tuple(e) for e in half.tolist()}
+    nxt = {a: b for a, b in half.tolist() if (b, a) not in keys}
+    loops, seen = [], set()
+    for start in sorted(nxt):
+        if start in seen:
+            continue
+        loop, cur = [], start
+        while cur not in seen:
+            seen.add(cur)
+            loop.append(cur)
+            cur = nxt[cur]
+        loops.append(np.array(loop, dtype=np.int64))
+    return loops
+
+
+def _ear_clip(p2: np.ndarray) -> list[tuple[int, int, int]]:
+    """Triangulate a simple polygon (k,2) given counter-clockwise; indices into p2."""
+    idx = list(range(len(p2)))
+    tris = []
+
+    def cross(a, b, c):
+        return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0])
+
+    guard = 0
+    while len(idx) > 3 and guard < 10000:
+        guard += 1
+        best, best_q = None, -np.inf
+        for k in range(len(idx)):
+            i0, i1, i2 = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
+            a, b, c = p2[i0], p2[i1], p2[i2]
+            if cross(a, b, c) <= 1e-12:
+                continue
+            inside = False
+            for j in idx:
+                if j in (i0, i1, i2):
+                    continue
+                q = p2[j]
+                if cross(a, b, q) >= 0 and cross(b, c, q) >= 0 and cross(c, a, q) >= 0:
+                    inside = True
+                    break
+            if inside:
+                continue
+            # prefer well-shaped ears: the smallest angle of the triangle
+            e = [np.linalg.norm(b - a), np.linalg.norm(c - b), np.linalg.norm(a - c)]
+            quality = cross(a, b, c) / max(max(e) ** 2, 1e-30)
+            if quality > best_q:
+                best, best_q = k, quality
+        if best is None:  # numerically degenerate remainder: fan it
+            break
+        k = best
+        tris.append((idx[k - 1], idx[k], idx[(k + 1) % len(idx)]))
+        idx.pop(k)
+    for k in range(1, len(idx) - 1):
+        tris.append((idx[0], idx[k], idx[k + 1]))
+    return tris
+
+
+def cap_loop(v: np.ndarray, loop: np.ndarray) -> np.ndarray:
+    """Faces (k,3) closing ``loop`` (ordered along the mesh's half-edges), planar-projected.
+
+    The cap runs each boundary edge in the opposite direction to the existing face, so the
+    closed mesh stays consistently oriented.
+    """
+    p = v[loop]
+    centre = p.mean(0)
+    _, _, vt = np.linalg.svd(p - centre)
+    e1, e2 = vt[0], vt[1]
+    p2 = np.c_[(p - centre) @ e1, (p - centre) @ e2]
+    rev = loop[::-1]
+    p2r = p2[::-1]
+    area = 0.5 * np.sum(p2r[:, 0] * np.roll(p2r[:, 1], -1) - np.roll(p2r[:, 0], -1) * p2r[:, 1])
+    if area < 0:  # make the reversed loop counter-clockwise in (e1, e2) by flipping e2
+        p2r = p2r * [1.0, -1.0]
+    # triangles follow the reversed loop's index order, so their boundary edges run
+    # opposite to the existing faces whatever the 2D frame's handedness
+    tris = np.array(_ear_clip(p2r), dtype=np.int64)
+    return rev[tris]
+
+
+def split_skull(v: np.ndarray, f: np.ndarray):
+    """Cut the fused skull; return (cranium (v,f), mandible (v,f), cut loops {name: (k,3)})."""
+    jaw = jaw_min_cut(v, f)
+    parts, loops = {}, {}
+    for name, faces in (("cranium", f[~jaw]), ("mandible", f[jaw])):
+        used = np.unique(faces)
+        remap = -np.ones(len(v), dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        pv, pf = v[used], remap[faces]
+        caps = []
+        for loop in boundary_loops(pf):
+            caps.append(cap_loop(pv, loop))
+            if name == "mandible":
+                loops[f"loop{len(loops)}"] = pv[loop]
+        pf = np.concatenate([pf] + caps)
+        mesh = trimesh.Trimesh(pv, pf, process=False)
+        if mesh.volume < 0:
+            mesh.invert()
+        parts[name] = (np.asarray(mesh.vertices), np.asarray(mesh.faces, dtype=np.int64))
+    return parts["cranium"], parts["mandible"], loops
+
+
+# ----------------------------------------------------------------------------- placement
+def _rot_x(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def apply_similarity(params, points: np.ndarray) -> np.ndarray:
+    """p' = s R_x(a) p + (0, ty, tz) for params (s, a, ty, tz)."""
+    s, a, ty, tz = params
+    return s * points @ _rot_x(a).T + np.array([0.0, ty, tz])
+
+
+def _midline(v: np.ndarray, half_width: float) -> np.ndarray:
+    return v[np.abs(v[:, 0]) < half_width]
+
+
+def skull_points(v: np.ndarray) -> dict[str, np.ndarray]:
+    """Bony reference points on the x-centred source skull (source units), by extremes."""
+    mid = _midline(v, 0.3)
+    pts = {}
+    pts["vertex"] = mid[np.argmax(mid[:, 1])]
+    back = mid[mid[:, 1] > 6.0]
+    pts["opisthocranion"] = back[np.argmin(back[:, 2])]
+    brow = mid[(mid[:, 1] > 7.5) & (mid[:, 1] < 10.0)]
+    pts["glabella"] = brow[np.argmax(brow[:, 2])]
+    chin = mid[mid[:, 1] < 2.0]
+    pts["pogonion"] = chin[np.argmax(chin[:, 2])]
+    pts["menton"] = mid[np.argmin(mid[:, 1])]
+    top = v[v[:, 1] > 8.0]
+    pts["euryon"] = top[np.argmax(top[:, 0])]
+    arch = v[(v[:, 1] > 5.0) & (v[:, 1] < 7.0) & (v[:, 2] > -1.0)]
+    pts["zygion"] = arch[np.argmax(arch[:, 0])]
+    incisal = mid[(mid[:, 1] > 3.2) & (mid[:, 1] < 3.6)]
+    pts["stomion"] = incisal[np.argmax(incisal[:, 2])]
+    return pts
+
+
+def skin_points(head_v: np.ndarray, fdp: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The skin points over the bony points of :func:`skull_points` on the ICT head (cm)."""
+    mid = _midline(head_v, 0.2)
+    pts = {"vertex": fdp["11.4"], "opisthocranion": fdp["11.6"], "pogonion": fdp["2.10"],
+           "menton": fdp["2.1"]}
+    brow = mid[(mid[:, 1] > 4.5) & (mid[:, 1] < 8.0)]
+    pts["glabella"] = brow[np.argmax(brow[:, 2])]
+    top = head_v[(head_v[:, 1] > 6.0) & (head_v[:, 1] < 12.0)]
+    pts["euryon"] = top[np.argmax(top[:, 0])]
+    face = head_v[(head_v[:, 1] > 1.5) & (head_v[:, 1] < 3.5) & (head_v[:, 2] > 1.5) & (head_v[:, 2] < 5.0)]
+    pts["zygion"] = face[np.argmax(face[:, 0])]
+    pts["stomion"] = (fdp["2.2"] + fdp["2.3"]) / 2.0
+    return pts
+
+
+#: soft-tissue depth (cm) over each bony point: Rhine 1983 via Taylor 2001 where listed
+#: (glabella 4.5 mm, pogonion 13, menton 8, zygion 7); scalp at vertex, euryon and
+#: opisthocranion 6 mm (not in the table; typical scalp thickness)
+TISSUE_DEPTH = {"vertex": 0.6, "opisthocranion": 0.6, "glabella": 0.45, "pogonion": 1.3,
+                "menton": 0.8, "euryon": 0.6, "zygion": 0.7, "stomion": 1.2}
+# stomion (lips' contact line) over the upper incisal edge: lip thickness ~ 1.2 cm
+# (between prosthion 11 mm and infradentale 12.25 mm of the table)
+
+
+def fit_into_head(v: np.ndarray, head_v: np.ndarray, head_n: np.ndarray,
+                  fdp: dict[str, np.ndarray]) -> np.ndarray:
+    """Similarity params (s, a, ty, tz) mapping the source skull into the ICT head."""
+    sk = skull_points(v)
+    sn = skin_points(head_v, fdp)
+    tree = cKDTree(head_v)
+    names = sorted(TISSUE_DEPTH)
+    src = np.array([sk[k] for k in names])
+    dst = []
+    for k in names:
+        n = head_n[tree.query(sn[k])[1]]
+        dst.append(sn[k] - TISSUE_DEPTH[k] * n)
+    dst = np.array(dst)
+
+    def residual(x):
+        return (apply_similarity(x, src) - dst).ravel()
+
+    x0 = np.array([1.55, 0.0, 0.0, 0.0])
+    x0[2:] = (dst.mean(0) - x0[0] * src.mean(0))[1:]
+    return least_squares(residual, x0).x
+
+
+# ----------------------------------------------------------------------------- landmarks
+def _smoothed_normals(mesh: trimesh.Trimesh, rounds: int = 3) -> np.ndarray:
+    """Vertex normals averaged over the 1-ring ``rounds`` times (less noise at the lips)."""
+    n = np.asarray(mesh.vertex_normals, dtype=float)
+    nbrs = mesh.vertex_neighbors
+    for _ in range(rounds):
+        n = np.array([n[[i] + list(nb)].sum(0) for i, nb in enumerate(nbrs)])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return n
+
+
+def place_landmark(skin_point: np.ndarray, direction: np.ndarray, bone: trimesh.Trimesh,
+                   max_depth: float) -> tuple[np.ndarray, str]:
+    """First hit of the ray skin_point + t*direction on ``bone`` (t <= max_depth), else closest.
+
+    The ray starts 1 cm outside the skin so that a skin point lying (slightly) inside the
+    bone still finds the bone's outer surface. Returns (point (3,), "ray" | "closest").
+    """
+    origin = skin_point - 1.0 * direction
+    locs, _, _ = bone.ray.intersects_location(origin[None], direction[None], multiple_hits=True)
+    if len(locs):
+        t = (locs - origin) @ direction
+        ok = (t >= 0) & (t <= max_depth + 1.0)
+        if ok.any():
+            return locs[ok][np.argmin(t[ok])], "ray"
+    closest, _, _ = trimesh.proximity.closest_point(bone, skin_point[None])
+    return closest[0], "closest"
+
+
+def mirror_partners(fdp: dict[str, np.ndarray], keys) -> dict[str, str]:
+    """{left FDP: right FDP} by position: the right point is the left one mirrored in x.
+
+    (MPEG-4 numbering does not pair consecutively everywhere: 3.7 <-> 3.12, 3.8 <-> 3.11.)
+    """
+    keys = [k for k in keys if k in fdp]
+    pairs = {}
+    for k in keys:
+        if fdp[k][0] <= 1e-3:
+            continue
+        m = fdp[k] * [-1.0, 1.0, 1.0]
+        other = min((j for j in keys if fdp[j][0] < -1e-3), key=lambda j: np.linalg.norm(fdp[j] - m))
+        pairs[k] = other
+    return pairs
+
+
+#: vertical nudge (cm) of inner-lip FDPs once the lip line is moved onto the occlusal line:
+#: the inner upper lip rests on the upper incisor crowns, the inner lower lip on the lower ones
+INNER_LIP_NUDGE = {"2.2": 0.3, "2.6": 0.3, "2.7": 0.3, "2.3": -0.3, "2.8": -0.3, "2.9": -0.3}
+
+
+def place_landmarks(cranium, mandible, head: trimesh.Trimesh, fdp: dict[str, np.ndarray],
+                    occlusal_y: float, max_depth: float = 3.0):
+    """Bone landmarks {fdp: (position (3,), bone, method, skin distance)} for :data:`LANDMARK_BONES`.
+
+    Lips and nose base (:data:`STRAIGHT_BACK`) are cast straight back (-Z). The lip FDPs are
+    first moved vertically by ``occlusal_y - stomion_y`` (closed lips rest on the incisal
+    edges; a similarity placement leaves the template's mouth off the skin's by up to ~1 cm),
+    inner-lip ones nudged onto the crowns (:data:`INNER_LIP_NUDGE`). Midline points are cast in
+    the x = 0 plane; right-side points are the mirror images of the left ones (left = +x).
+    """
+    bones = {"cranium": trimesh.Trimesh(*cranium, process=False),
+             "mandible": trimesh.Trimesh(*mandible, process=False)}
+    normals = _smoothed_normals(head)
+    tree = cKDTree(np.asarray(head.vertices))
+    stomion_y = (fdp["2.2"][1] + fdp["2.3"][1]) / 2.0
+    partners = mirror_partners(fdp, LANDMARK_BONES)
+    out = {}
+    for key in sorted(LANDMARK_BONES, key=lambda k: tuple(int(p) for p in k.split("."))):
+        p = fdp[key].copy()
+        if p[0] < -1e-3:
+            continue  # right side: mirrored below
+        if key in STRAIGHT_BACK:
+            d = np.array([0.0, 0.0, -1.0])
+            if key.split(".")[0] in ("2", "8"):
+                p[1] += occlusal_y - stomion_y + INNER_LIP_NUDGE.get(key, 0.0)
+        else:
+            d = -normals[tree.query(p)[1]]
+        midline = abs(p[0]) <= 1e-3
+        if midline:
+            p[0], d[0] = 0.0, 0.0
+        d = d / np.linalg.norm(d)
+        bone = LANDMARK_BONES[key]
+        pos, how = place_landmark(p, d, bones[bone], max_depth)
+        if midline:  # keep a midline point on the midsagittal section of its bone
+            pos = trimesh.proximity.closest_point(bones[bone], (pos * [0.0, 1.0, 1.0])[None])[0][0]
+        out[key] = (pos, bone, how, float(np.linalg.norm(pos - fdp[key])))
+        if key in partners:
+            other = partners[key]
+            mpos = trimesh.proximity.closest_point(bones[bone], (pos * [-1.0, 1.0, 1.0])[None])[0][0]
+            out[other] = (mpos, bone, how, float(np.linalg.norm(mpos - fdp[other])))
+    return out
+
+
+# ------------------------------------------------------------------------------------ jaw
+def jaw_axes(cut_loops: dict[str, np.ndarray], mandible_v: np.ndarray) -> dict:
+    """Pitch, yaw and protrusion axes from the mandible's cut loops (template frame).
+
+    The two condylar loops are the most posterior loop on each side; the dental loop is
+    the one crossing the midline.
+    """
+    loops = list(cut_loops.values())
+    dental = max(loops, key=len)
+    left = [l for l in loops if l.mean(0)[0] > 1.0]
+    right = [l for l in loops if l.mean(0)[0] < -1.0]
+    cl = min(left, key=lambda l: l.mean(0)[2]).mean(0)
+    cr = min(right, key=lambda l: l.mean(0)[2]).mean(0)
+    # symmetric condyles: average the mirrored pair
+    c = (cl + cr * [-1.0, 1.0, 1.0]) / 2.0
+    cl, cr = c, c * [-1.0, 1.0, 1.0]
+    centre = (cl + cr) / 2.0
+    pitch_dir = (cl - cr) / np.linalg.norm(cl - cr)
+    # occlusal plane normal from the dental cut; forward = its tangent in the x = 0 plane
+    p = dental - dental.mean(0)
+    normal = np.linalg.svd(p)[2][2]
+    if normal[1] < 0:
+        normal = -normal
+    fwd = np.cross(pitch_dir, normal)
+    fwd /= np.linalg.norm(fwd)
+    if fwd[2] < 0:
+        fwd = -fwd
+    yaw_dir = np.cross(fwd, pitch_dir)
+    yaw_dir /= np.linalg.norm(yaw_dir)
+    return {"condyle_left": cl, "condyle_right": cr, "centre": centre, "pitch_dir": pitch_dir,
+            "yaw_dir": yaw_dir, "protrusion_dir": fwd, "occlusal_normal": normal}
+
+
+# ---------------------------------------------------------------------------------- write
+def write_obj(path: Path, v: np.ndarray, f: np.ndarray, header: str) -> None:
+    """Plain OBJ, 6 decimals, 1-based faces: deterministic bytes."""
+    lines = [f"# {line}" for line in header.splitlines()]
+    lines += [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in v]
+    lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _r(p, nd: int = 5) -> list[float]:
+    return [round(float(x), nd) + 0.0 for x in p]
+
+
+def write_landmarks(path: Path, marks: dict, fdp_table: dict[str, str]) -> None:
+    lines = [
+        "# MPEG-4 FDP landmarks on the template skull (templates/skull/cranium.obj, mandible.obj).",
+        "# Built by tools/build_template.py: each point is the first bone hit of a ray cast inward from the",
+        "# FDP on the ICT-FaceKit head skin (against the smoothed skin normal; straight back (-Z) for the lips",
+        "# and the nose base), on the bone named here; 'closest' marks the few points where the ray found",
+        "# no bone within 3 cm (orbit, nasal aperture) and the closest bone point was taken instead.",
+        "# Right-side points are mirror images (x -> -x) of the left ones. skin_depth = distance to the skin",
+        "# FDP in cm (compare tissue-depth/: pogonion 1.3, glabella 0.45, supraorbital 0.85, ...).",
+        "# Units: cm, +Y up, face +Z, subject's left +X, midsagittal plane x = 0.",
+        "units: cm",
+        f"count: {len(marks)}",
+        "landmarks:",
+    ]
+    order = sorted(marks, key=lambda k: tuple(int(p) for p in k.split(".")))
+    for k in order:
+        pos, bone, how, depth = marks[k]
+        lines.append(f'  "{k}": {{position: {_r(pos)}, bone: {bone}}}  '
+                     f"# {fdp_table.get(k, '')} | {how}, skin_depth {depth:.2f}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def write_jaw(path: Path, axes: dict) -> None:
+    text = f"""# Jaw axes of the template skull (section 6.1): exactly three DOFs, a rigid transform of the mandible.
+# Built by tools/build_template.py. Units: cm and radians. Composition (anatomy.skull.jaw_transform):
+#   first pitch about pitch_axis, then yaw about yaw_axis, then translation protrusion * protrusion.direction.
+# pitch_axis: through the centres of the two condylar necks (where the mandible was cut from the temporal
+#   bone), direction = subject's left; positive pitch lowers the chin (opens the mouth).
+# yaw_axis: through the midpoint of the condyles, perpendicular to the occlusal plane (pointing up);
+#   positive yaw turns the chin towards the subject's left (+X).
+# protrusion: forward (+Z side) direction of the occlusal plane (best-fit plane of the dental cut) in the
+#   midsagittal plane; positive values push the jaw forward.
+units: cm
+pitch_axis: {{point: {_r(axes['centre'])}, direction: {_r(axes['pitch_dir'], 6)}}}
+yaw_axis: {{point: {_r(axes['centre'])}, direction: {_r(axes['yaw_dir'], 6)}}}
+protrusion: {{direction: {_r(axes['protrusion_dir'], 6)}}}
+condyles: {{left: {_r(axes['condyle_left'])}, right: {_r(axes['condyle_right'])}}}
+limits:
+  pitch: [-0.05, 0.4]        # rad; ~0.4 rad opens the incisors by ~4 cm
+  yaw: [-0.1, 0.1]           # rad
+  protrusion: [-0.2, 0.8]    # cm; retrusion 2 mm, protrusion 8 mm
+"""
+    path.write_text(text)
+
+
+def build(assets: Path, out: Path) -> dict:
+    """Run every step; write the four files into ``out``; return a summary dict."""
+    v, f = load_welded(assets / "anatomy/skull-yahoojapan/skull_low_resolution.obj")
+    v[:, 0] -= mirror_plane_offset(v)
+    v = symmetrise(v, f)
+    cranium, mandible, loops = split_skull(v, f)
+
+    head = trimesh.load(assets / "heads/ict/ict_face_headneck_neutral.obj", force="mesh", process=False)
+    head_v = np.asarray(head.vertices, dtype=float)
+    doc = yaml.safe_load((assets / "heads/ict/ict_face_headneck_neutral.fdp.yaml").read_text())
+    fdp = {k: np.asarray(d["position"], dtype=float) for k, d in doc["landmarks"].items()}
+    params = fit_into_head(v, head_v, np.asarray(head.vertex_normals, dtype=float), fdp)
+
+    cranium = (apply_similarity(params, cranium[0]), cranium[1])
+    mandible = (apply_similarity(params, mandible[0]), mandible[1])
+    loops = {k: apply_similarity(params, l) for k, l in loops.items()}
+    axes = jaw_axes(loops, mandible[0])
+    dental = max(loops.values(), key=len)
+    front = dental[np.abs(dental[:, 0]) < 0.5]
+    occlusal_y = float(front[np.argmax(front[:, 2]), 1])
+    marks = place_landmarks(cranium, mandible, head, fdp, occlusal_y)
+
+    table = {}
+    for line in (assets / "mpeg4/fdp_feature_points.csv").read_text().splitlines()[1:]:
+        parts = line.split(",")
+        table[parts[0]] = parts[2]
+    out.mkdir(parents=True, exist_ok=True)
+    src = ("derived from YahooJAPAN skull (Thingiverse 182365, remeshed by odedstein-meshes), CC BY 3.0\n"
+           "built by tools/build_template.py; units cm, +Y up, face +Z, subject's left +X")
+    write_obj(out / "cranium.obj", cranium[0], cranium[1], "template cranium (upper skull)\n" + src)
+    write_obj(out / "mandible.obj", mandible[0], mandible[1], "template mandible\n" + src)
+    write_landmarks(out / "landmarks.yaml", marks, table)
+    write_jaw(out / "jaw.yaml", axes)
+    return {"params": params, "cranium": cranium, "mandible": mandible, "landmarks": marks,
+            "axes": axes}
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--assets", type=Path, default=Path("/work/shared/assets"))
+    ap.add_argument("--out", type=Path, default=ROOT / "templates" / "skull")
+    args = ap.parse_args(argv)
+    s = build(args.assets, args.out)
+    print(f"scale {s['params'][0]:.4f}, pitch {s['params'][1]:.4f} rad; cranium {len(s['cranium'][0])} v, "
+          f"mandible {len(s['mandible'][0])} v, {len(s['landmarks'])} landmarks -> {args.out}")
+
+
+if __name__ == "__main__":
+    main()
