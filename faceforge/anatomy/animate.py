@@ -237,3 +237,114 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     return FrameReport(frames=len(frames), non_finite=int(np.count_nonzero(~finite)),
                        inverted_triangles=int(inv.sum()), skin_inside_skull=inside_total,
                        max_displacement=float(disp.max()) if len(disp) else 0.0, worst_frame=worst)
+
+
+# --------------------------------------------------------------------------- skull + skin
+
+@dataclass(frozen=True)
+class JawFrame:
+    """The mandible's three DOFs (§6.1), in skin space.
+
+    pitch_point, pitch_dir : (3,) float, the axis through the condyles (direction = subject's
+        left); positive pitch lowers the chin
+    yaw_point, yaw_dir : (3,) float, the vertical axis; positive yaw turns the chin to +X
+    protrusion_dir : (3,) float unit, forward
+    Composition (templates/skull/jaw.yaml): pitch, then yaw, then the protrusion translation.
+    """
+
+    pitch_point: np.ndarray
+    pitch_dir: np.ndarray
+    yaw_point: np.ndarray
+    yaw_dir: np.ndarray
+    protrusion_dir: np.ndarray
+
+    def lever(self, point: np.ndarray, axis: str = "pitch") -> float:
+        """Distance (skin units) from ``point`` (3,) to the pitch or yaw axis."""
+        p, d = (self.pitch_point, self.pitch_dir) if axis == "pitch" else (self.yaw_point, self.yaw_dir)
+        d = d / np.linalg.norm(d)
+        r = np.asarray(point, dtype=float) - p
+        return float(np.linalg.norm(r - (r @ d) * d))
+
+
+def _rotation(point: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
+    """(4, 4) rotation by ``angle`` rad about the line through ``point`` along ``axis`` (Rodrigues)."""
+    k = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    r = np.eye(3) + np.sin(angle) * kx + (1.0 - np.cos(angle)) * (kx @ kx)
+    t = np.eye(4)
+    t[:3, :3] = r
+    t[:3, 3] = point - r @ point
+    return t
+
+
+def jaw_matrix(dofs: np.ndarray, frame: JawFrame) -> np.ndarray:
+    """Rigid (4, 4) transform of the mandible for ``dofs`` = (pitch rad, yaw rad, protrusion).
+
+    Pitch about the pitch axis first, then yaw about the (rest) yaw axis carried along by
+    the pitch, then translation along the protrusion direction. ``jaw_matrix(0) = I``.
+    """
+    pitch, yaw, protrusion = (float(x) for x in dofs)
+    t_pitch = _rotation(frame.pitch_point, frame.pitch_dir, pitch)
+    yp = t_pitch[:3, :3] @ frame.yaw_point + t_pitch[:3, 3]
+    t_yaw = _rotation(yp, t_pitch[:3, :3] @ frame.yaw_dir, yaw)
+    t = t_yaw @ t_pitch
+    d = np.asarray(frame.protrusion_dir, dtype=float)
+    t[:3, 3] += protrusion * d / np.linalg.norm(d)
+    return t
+
+
+class SkinSim:
+    """The skin layer (§8): PBD skin whose anchors follow surface points on the bodies.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float, faces (m, 3) int : the working skin at rest
+    anchor_vertices : (k,) int, skin vertex of each anchor
+    anchor_body : (k,) int, index into ``body_names``
+    anchor_face_ids : (k,) int, triangle of that body; anchor_bary : (k, 3) float
+    body_names : sequence of str; body_faces : dict name -> (f, 3) int faces
+    body_rest : dict name -> (v, 3) float rest vertices
+    stiffness : faceforge.anatomy.skin.SkinStiffness; settings : faceforge.pbd.SolverSettings
+    """
+
+    def __init__(self, vertices, faces, anchor_vertices, anchor_body, anchor_face_ids, anchor_bary,
+                 body_names, body_faces: dict, body_rest: dict, stiffness, settings):
+        from faceforge.anatomy.skin import add_skin
+        from faceforge.pbd import ModelBuilder, Solver
+
+        self.body_names = [str(n) for n in body_names]
+        self.body_faces = body_faces
+        self.anchor_body = np.asarray(anchor_body, dtype=np.int64)
+        self.anchor_face_ids = np.asarray(anchor_face_ids, dtype=np.int64)
+        self.anchor_bary = np.asarray(anchor_bary, dtype=float)
+        points = self.targets(body_rest)
+        b = ModelBuilder()
+        self.layer = add_skin(b, vertices, faces, stiffness, anchor_vertices, points)
+        self.model = b.finalize()
+        self.solver = Solver(self.model, settings)
+        self.state = self.model.state()
+        self.control = self.model.control()
+        self.control.position_targets[self.layer.anchor_slots] = points
+
+    def targets(self, body_positions: dict) -> np.ndarray:
+        """(k, 3) anchor surface points on the bodies' current vertices ``{name: (v, 3)}``."""
+        out = np.zeros((len(self.anchor_body), 3))
+        for b, name in enumerate(self.body_names):
+            sel = self.anchor_body == b
+            if not sel.any():
+                continue
+            tri = np.asarray(body_positions[name], dtype=float)[self.body_faces[name][self.anchor_face_ids[sel]]]
+            out[sel] = np.einsum("ij,ijk->ik", self.anchor_bary[sel], tri)
+        return out
+
+    def step(self, body_positions: dict, dt: float) -> np.ndarray:
+        """Move the anchors onto the bodies, project the skin; (n, 3) skin positions (a view)."""
+        self.control.position_targets[self.layer.anchor_slots] = self.targets(body_positions)
+        self.solver.step(self.state, self.state, self.control, dt)
+        return self.layer.skin_positions(self.state.positions)
+
+    def reset(self, body_rest: dict) -> None:
+        fresh = self.model.state()
+        self.state.positions[:] = fresh.positions
+        self.state.velocities[:] = fresh.velocities
+        self.control.position_targets[self.layer.anchor_slots] = self.targets(body_rest)
