@@ -186,7 +186,7 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed):
 
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
-              normals=None) -> Binding:
+              normals=None, depth_rank=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -204,6 +204,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         0 elsewhere; see :func:`faceforge.anatomy.mouth.lip_side`.
     normals : (n, 3) float, optional
         Outward unit normals; default the area-weighted star average.
+    depth_rank : (len(bodies),) int, optional
+        Superficiality of each body, smaller = more superficial (e.g. minus the
+        muscle layer); among equal ranks the nearest hit wins. Default: the
+        muscles' order in ``bodies``.
 
     Returns
     -------
@@ -223,6 +227,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     skull = [i for i in range(nb) if kinds[i] != MUSCLE]
     rank = np.zeros(nb, INT)
     rank[muscles] = np.arange(len(muscles))  # superficial first; skull parts all rank 0
+    if depth_rank is not None:
+        rank = np.asarray(depth_rank, INT).reshape(-1)
+        if len(rank) != nb:
+            raise ValueError(f"depth_rank {rank.shape} must have one entry per body ({nb})")
 
     allowed = np.ones((n, max(nb, 1)), bool)
     allowed[np.ix_(sides > 0, kinds == MANDIBLE)] = False
@@ -421,7 +429,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     cranium, mandible : tuple (vertices (k, 3), faces (l, 3)) or None
         The fitted skull parts (skin units).
     muscles : sequence of tuple (name, layer, vertices, faces)
-        The fitted muscles' rest meshes; a higher layer is more superficial.
+        The fitted muscles' rest meshes; a higher layer is more superficial
+        (tested first); within one layer the nearest hit wins.
     max_ray_fraction : float
         ``bind.max_ray_distance``: longest ray as a fraction of the skin's
         bounding-box diagonal.
@@ -442,12 +451,16 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
 
     order = sorted(range(len(muscles)), key=lambda i: -int(muscles[i][1]))  # stable
     bodies = [Body(str(muscles[i][0]), "muscle", muscles[i][2], muscles[i][3]) for i in order]
+    rank = [-int(muscles[i][1]) for i in order]
     if cranium is not None:
         bodies.append(Body("cranium", "cranium", *cranium))
+        rank.append(0)
     if mandible is not None:
         bodies.append(Body("mandible", "mandible", *mandible))
+        rank.append(0)
     diagonal = float(np.linalg.norm(np.ptp(v, axis=0)))
-    binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides)
+    binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
+                        depth_rank=rank)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None

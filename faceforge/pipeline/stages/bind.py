@@ -30,18 +30,22 @@ from faceforge.pipeline import Stage, register_command, register_stage
 def load_fit(fit_dir):
     """The fitted head from the fit stage's ``fit.npz``.
 
-    Expected arrays: ``skin_vertices (n, 3)``, ``skin_faces (m, 3)``,
-    ``cranium_vertices``/``cranium_faces``, ``mandible_vertices``/``mandible_faces``,
-    ``landmark_ids (L,) str``, ``landmark_positions (L, 3)``, and the muscles as
-    CSR blocks: ``muscle_names (k,) str``, ``muscle_layers (k,)``,
-    ``muscle_vertex_start (k+1,)``, ``muscle_vertices``, ``muscle_face_start (k+1,)``,
-    ``muscle_faces`` (ids local to each muscle).
+    Arrays read (see :mod:`faceforge.pipeline.stages.fit`): ``skin_vertices (n, 3)``,
+    ``skin_faces (m, 3)`` (the fit's internal skin), ``cranium_vertices``/``cranium_faces``,
+    ``mandible_vertices``/``mandible_faces``, ``skin_landmark_ids (L,) str``,
+    ``skin_landmark_positions (L, 3)``, and the muscles as CSR blocks:
+    ``muscle_names (k,) str``, ``muscle_vertex_start (k+1,)``, ``muscle_vertices``,
+    ``muscle_face_start (k+1,)``, ``muscle_faces`` (ids local to each muscle), and
+    ``muscle_layers (k,)`` when present (else every muscle is in one layer and the
+    nearest hit wins).
 
     Returns
     -------
     dict with ``vertices``, ``faces``, ``landmarks`` {fdp: (3,)}, ``cranium``,
     ``mandible`` ((v, f) or None) and ``muscles`` [(name, layer, v, f)].
     """
+    import numpy as np
+
     from faceforge.exceptions import StageError
     from faceforge.io.stagefiles import load_npz
 
@@ -49,7 +53,7 @@ def load_fit(fit_dir):
     if not path.exists():
         raise StageError("fit.npz missing: run `faceforge fit` first", path)
     d = load_npz(path)
-    need = ("skin_vertices", "skin_faces", "landmark_ids", "landmark_positions")
+    need = ("skin_vertices", "skin_faces", "skin_landmark_ids", "skin_landmark_positions")
     missing = [k for k in need if k not in d]
     if missing:
         raise StageError(f"fit.npz lacks {', '.join(missing)}", path)
@@ -62,10 +66,11 @@ def load_fit(fit_dir):
     muscles = []
     if "muscle_names" in d:
         vs, fs = d["muscle_vertex_start"], d["muscle_face_start"]
+        layers = d.get("muscle_layers", np.zeros(len(d["muscle_names"]), np.int64))
         for i, name in enumerate(d["muscle_names"]):
-            muscles.append((str(name), int(d["muscle_layers"][i]),
+            muscles.append((str(name), int(layers[i]),
                             d["muscle_vertices"][vs[i]:vs[i + 1]], d["muscle_faces"][fs[i]:fs[i + 1]]))
-    landmarks = {str(k): p for k, p in zip(d["landmark_ids"], d["landmark_positions"])}
+    landmarks = {str(k): p for k, p in zip(d["skin_landmark_ids"], d["skin_landmark_positions"])}
     return {"vertices": d["skin_vertices"], "faces": d["skin_faces"], "landmarks": landmarks,
             "cranium": part("cranium"), "mandible": part("mandible"), "muscles": muscles}
 
