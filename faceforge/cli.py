@@ -77,7 +77,13 @@ class App:
         self.debug(f"remembered overrides in {path}")
 
     def run_stage(self, name: str, params: dict | None = None, force: bool = False):
-        """Remember ``params`` and overrides, then bring stage ``name`` and its upstream up to date."""
+        """Remember ``params`` and overrides, then bring stage ``name`` and its upstream up to date.
+
+        ``params`` update the inputs remembered in ``<workdir>/faceforge.yaml`` (a value of
+        None forgets that key; names listed in some stage's ``inputs`` are made absolute
+        paths). ``--config``/``--set`` are folded into ``<workdir>/config.yaml``. Returns
+        the list of :class:`~faceforge.pipeline.runner.StageStatus`.
+        """
         from faceforge.pipeline import runner
 
         stage = registry.get_stage(name)
@@ -86,8 +92,9 @@ class App:
         remembered = self.workspace.load_params()
         for key, value in (params or {}).items():
             if value is None:
-                continue
-            remembered[key] = os.path.abspath(value) if key in inputs else value
+                remembered.pop(key, None)  # given as None: forget the earlier value
+            else:
+                remembered[key] = os.path.abspath(value) if key in inputs else value
         if params:
             self.workspace.save_params(remembered)
         self.remember_overrides()
