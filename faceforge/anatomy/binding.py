@@ -110,22 +110,34 @@ class Binding:
     outward: np.ndarray
     normals: np.ndarray
 
-    def targets(self, body_vertices) -> np.ndarray:
+    def targets(self, surfaces) -> np.ndarray:
         """Anchor surface points ``(k, 3)`` on the current (deformed) bodies.
 
-        ``body_vertices`` is a sequence with, for each body in ``body_names``
-        order, its current vertex positions ``(n_b, 3)``; faces are the rest
-        faces given to :func:`bind_skin` (stored per body in ``faces``).
+        ``surfaces`` gives, for each body in ``body_names`` order, its current
+        ``(vertices (n_b, 3), faces (m_b, 3))`` with the faces used at bind time
+        (``MusculoskeletalSystem.surface(name)`` does).
         """
-        out = np.empty((len(self.vertex_ids), 3), FLOAT)
-        for b, verts in enumerate(body_vertices):
+        out = np.full((len(self.vertex_ids), 3), np.nan)
+        for b, (verts, faces) in enumerate(surfaces):
             sel = self.body == b
             if sel.any():
-                tri = np.asarray(verts, FLOAT)[self.body_faces[b][self.face_ids[sel]]]
+                tri = np.asarray(verts, FLOAT)[np.asarray(faces, INT)[self.face_ids[sel]]]
                 out[sel] = np.einsum("ij,ijk->ik", self.bary[sel], tri)
         return out
 
-    body_faces: tuple = field(default=(), repr=False)
+    @classmethod
+    def from_arrays(cls, arrays: dict, prefix: str = "anchor_") -> "Binding":
+        """Inverse of :meth:`as_arrays` (anchor arrays may carry ``prefix``, as in bind.npz)."""
+        def get(key):
+            return arrays[key] if key in arrays else arrays[prefix + key]
+
+        return cls(
+            body_names=tuple(str(n) for n in get("body_names")),
+            status=np.asarray(get("status"), np.int8), vertex_ids=np.asarray(get("vertex_ids"), INT),
+            body=np.asarray(get("body"), INT), face_ids=np.asarray(get("face_ids"), INT),
+            bary=np.asarray(get("bary"), FLOAT), points=np.asarray(get("points"), FLOAT),
+            distance=np.asarray(get("distance"), FLOAT), outward=np.asarray(get("outward"), bool),
+            normals=np.asarray(get("normals"), FLOAT))
 
     def as_arrays(self) -> dict:
         """Flat arrays for an npz stage file (no pickle)."""
@@ -261,7 +273,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     return Binding(
         body_names=tuple(b.name for b in bodies), status=status, vertex_ids=ids,
         body=body[ids], face_ids=face[ids], bary=bary, points=pts[ids], distance=dist[ids],
-        outward=outward[ids], normals=nrm, body_faces=tuple(b.faces for b in bodies),
+        outward=outward[ids], normals=nrm,
     )
 
 

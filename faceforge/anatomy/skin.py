@@ -220,3 +220,69 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
         builder.add_volume(first + topo.triangles, stiffness.volume)
     return SkinLayer(first=int(first), n_vertices=len(v), anchor_vertices=av,
                      anchor_particles=q, anchor_slots=slots)
+
+
+class SkinSimulation:
+    """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
+
+    Holds the skin's own PBD model (skin particles + anchor particles ``q``).
+    ``system.add_layer(sim)`` makes ``system.step`` call :meth:`step` after the
+    muscles: the anchors' position targets are recomputed from the surface
+    points on the *current* skull and muscles (``system.surface(name)``), then
+    the skin is stepped.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Working skin rest positions (after the mouth cut).
+    faces : (m, 3) int
+    binding : faceforge.anatomy.binding.Binding
+        Its ``body_names`` must be bodies of the system the layer is added to.
+    stiffness : SkinStiffness
+    settings : faceforge.pbd.SolverSettings, optional
+    weights : (n,) float, optional
+        Influence map; :meth:`positions` returns ``rest + w (simulated - rest)``.
+    """
+
+    def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None):
+        from faceforge.pbd import ModelBuilder, Solver, SolverSettings
+
+        self.rest = np.array(vertices, dtype=FLOAT)
+        self.faces = np.asarray(faces, dtype=INT)
+        self.binding = binding
+        builder = ModelBuilder()
+        self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, binding.points)
+        self.model = builder.finalize()
+        self.solver = Solver(self.model, settings or SolverSettings())
+        self.state = self.model.state()
+        self.control = self.model.control()
+        self.weights = None if weights is None else np.asarray(weights, FLOAT).reshape(-1)
+        if self.weights is not None and len(self.weights) != len(self.rest):
+            raise ValueError(f"weights {self.weights.shape} must have one entry per skin vertex")
+
+    def anchor_targets(self, system) -> np.ndarray:
+        """Surface points of every anchor on the system's current bodies, ``(k, 3)``."""
+        return self.binding.targets([system.surface(name) for name in self.binding.body_names])
+
+    def step(self, system, dt: float) -> None:
+        """One frame: anchor targets from ``system``, then a PBD step of the skin."""
+        if len(self.layer.anchor_slots):
+            self.control.position_targets[self.layer.anchor_slots] = self.anchor_targets(system)
+        self.solver.step(self.state, self.state, self.control, dt)
+
+    def simulated(self) -> np.ndarray:
+        """Current simulated skin positions ``(n, 3)`` (a copy, no influence weighting)."""
+        return self.layer.skin_positions(self.state.positions).copy()
+
+    def positions(self) -> np.ndarray:
+        """Animated skin ``(n, 3)``: the simulation weighted by the influence map."""
+        sim = self.simulated()
+        if self.weights is None:
+            return sim
+        return self.rest + self.weights[:, None] * (sim - self.rest)
+
+    def reset(self) -> None:
+        """Back to the rest state."""
+        fresh = self.model.state()
+        self.state.positions[:] = fresh.positions
+        self.state.velocities[:] = fresh.velocities

@@ -88,10 +88,21 @@ def test_targets_round_trip_and_follow_rigid_motion(skin):
     muscle = Body("m", "muscle", *_cap(0.9, 0.3))
     skull = Body("cranium", "cranium", *sphere(0.8, 3))
     b = bind_skin(v, f, [muscle, skull], max_distance=0.5)
-    rest = b.targets([muscle.vertices, skull.vertices])
+    rest = b.targets([(muscle.vertices, muscle.faces), (skull.vertices, skull.faces)])
     np.testing.assert_allclose(rest, b.points, atol=1e-12)
     shift = np.array([0.1, -0.2, 0.3])
-    moved = b.targets([muscle.vertices + shift, skull.vertices])
+    moved = b.targets([(muscle.vertices + shift, muscle.faces), (skull.vertices, skull.faces)])
     d = moved - b.points
     np.testing.assert_allclose(d[b.body == 0], np.broadcast_to(shift, d[b.body == 0].shape), atol=1e-12)
     np.testing.assert_allclose(d[b.body == 1], 0.0, atol=1e-12)
+
+
+def test_arrays_round_trip(skin):
+    from faceforge.anatomy.binding import Binding
+
+    v, f = skin
+    b = bind_skin(v, f, [Body("cranium", "cranium", *sphere(0.8, 2))], max_distance=0.5)
+    again = Binding.from_arrays({"anchor_" + k if k not in ("status", "normals", "body_names") else k: a
+                                 for k, a in b.as_arrays().items()})
+    for key, a in b.as_arrays().items():
+        np.testing.assert_array_equal(getattr(again, key), a)

@@ -43,7 +43,7 @@ def test_rest_state_is_a_fixed_point_over_1000_frames(bound_sphere):
     solver = Solver(model, SolverSettings(iterations=10, substeps=1, damping=0.1))
     state = model.state()
     control = model.control()
-    control.position_targets[layer.anchor_slots] = b.targets([upper.vertices])
+    control.position_targets[layer.anchor_slots] = b.targets([(upper.vertices, upper.faces)])
     for _ in range(1000):
         solver.step(state, state, control, 1 / 25)
     drift = np.abs(layer.skin_positions(state.positions) - v).max()
@@ -64,7 +64,7 @@ def test_moving_anchors_drag_the_bound_skin():
     # along the anchor rays: a distance constraint keeps |p - q|, so a sideways
     # translation of parallel anchors is a free (pendulum) mode; a normal one is not
     shift = np.array([0.0, 0.0, -0.05])
-    control.position_targets[layer.anchor_slots] = b.targets([lower.vertices + shift])
+    control.position_targets[layer.anchor_slots] = b.targets([(lower.vertices + shift, lower.faces)])
     for _ in range(200):
         solver.step(state, state, control, 1 / 25)
     moved = layer.skin_positions(state.positions) - v
