@@ -8,7 +8,7 @@ FAPU     neutral-face distance (model units)          definition on FDPs
 =======  ===========================================  ===========================
 IRISD    IRISD0 / 1024, upper to lower eyelid         3.1.y - 3.3.y (= 3.2.y - 3.4.y)
 ES       ES0 / 1024, between the pupils               3.5.x - 3.6.x
-ENS      ENS0 / 1024, eyes to nose (vertical)         3.5.y - 9.15.y
+ENS      ENS0 / 1024, eyes to nose (vertical)         3.5.y - 9.15.y (pupils' mean y)
 MNS      MNS0 / 1024, mouth to nose (vertical)        9.15.y - 2.2.y
 MW       MW0 / 1024, mouth width                      8.3.x - 8.4.x
 AU       1e-5 rad                                     --
@@ -17,7 +17,8 @@ AU       1e-5 rad                                     --
 The FDP coordinates are components in the MPEG-4 frame (+Y up, +X = subject's left,
 face along +Z); a non-positive distance means the landmarks are not in that frame
 and raises :class:`~faceforge.exceptions.LandmarkError`. IRISD0 is the mean over
-the eyes whose two eyelid points are both given. A pupil may be a point that is
+the eyes whose two eyelid points are both given, and ENS0 uses the mean height of the two
+pupils (the FDP table lists both for ENS0; equal on a level, symmetric face). A pupil may be a point that is
 not a mesh vertex (eyeless meshes): only its position is used.
 """
 
@@ -39,7 +40,7 @@ FAPU_DIVISOR = 1024.0
 #: FDPs needed by each neutral-face distance (IRISD0: either eye)
 _REQUIRED = {
     "ES0": ("3.5", "3.6"),
-    "ENS0": ("3.5", "9.15"),
+    "ENS0": ("3.5", "3.6", "9.15"),
     "MNS0": ("9.15", "2.2"),
     "MW0": ("8.3", "8.4"),
 }
@@ -122,7 +123,7 @@ def fapu_from_landmarks(landmarks: Mapping[str, object], source: str | Path | No
     p = {fdp: _position(landmarks, fdp) for fdps in _REQUIRED.values() for fdp in fdps}
     values = {
         "ES0": p["3.5"][0] - p["3.6"][0],
-        "ENS0": p["3.5"][1] - p["9.15"][1],
+        "ENS0": (p["3.5"][1] + p["3.6"][1]) / 2 - p["9.15"][1],
         "MNS0": p["9.15"][1] - p["2.2"][1],
         "MW0": p["8.3"][0] - p["8.4"][0],
         "IRISD0": float(np.mean([_position(landmarks, a)[1] - _position(landmarks, b)[1] for a, b in eyes])),
