@@ -1,0 +1,491 @@
+"""The animate and calibrate stages: FAP playback on the bound head (paper §9).
+
+``faceforge animate --fap track.fap -o out.pc2`` (or ``--expression joy [--intensity 0.8]``)
+plays an MPEG-4 FAP track on the head bound in the workdir and writes ``<workdir>/animate/``:
+
+animation.npz
+    ``frames (F, n_user, 3) float32``: skin positions per frame in the **user's** vertex
+    order and count (the mouth cut's appended vertices dropped, the fit's merged vertices
+    expanded); ``fps``; ``contractions (F, m)``, ``muscle_names (m,)``, ``jaw (F, 3)``.
+report.json
+    frames, fps, the mapping used (template or calibrated), FAPs with values but no mapping,
+    per-layer time per frame, and the physical checks (NaN, inverted triangles, skin inside
+    the skull).
+
+then exports ``-o`` by suffix (:mod:`faceforge.io.export`: .pc2, .mdd, .glb, or a folder of
+OBJ files) and ``--preview sheet.png`` (a contact sheet). Exports are not cached: a new
+``-o`` reuses the simulated frames.
+
+``faceforge calibrate`` writes ``<workdir>/calibrate/``: ``fap_mapping.yaml`` (the mapping with
+fitted response curves and measured jaw couplings; ``animate`` uses it when present),
+``report.json`` and ``report.txt`` (per FAP: requested, achieved, relative error).
+
+The mapping template is ``animate.fap_mapping`` (relative paths are resolved against the
+current folder, then the repository).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from faceforge.pipeline import Stage, register_command, register_stage
+
+#: FDPs on the lower lip (inner and outer contour), located on the lower side of a cut lip line
+LOWER_LIP_FDPS = ("2.3", "2.8", "2.9", "8.2", "8.7", "8.8")
+UPPER_LIP_FDPS = ("2.2", "2.6", "2.7", "8.1", "8.5", "8.6")
+
+
+# --------------------------------------------------------------------------- paths
+
+def mapping_template_path(config) -> Path:
+    """``animate.fap_mapping`` as an existing path (cwd first, then the repository)."""
+    from faceforge.exceptions import ConfigError
+
+    raw = Path(str(config.get("animate.fap_mapping")))
+    candidates = [raw] if raw.is_absolute() else [Path.cwd() / raw, Path(__file__).resolve().parents[3] / raw]
+    for c in candidates:
+        if c.exists():
+            return c.resolve()
+    raise ConfigError(f"animate.fap_mapping: {raw} not found")
+
+
+def calibrated_mapping_path(workdir) -> Path:
+    return Path(workdir) / "calibrate" / "fap_mapping.yaml"
+
+
+# --------------------------------------------------------------------------- the bound head
+
+class BoundHead:
+    """Everything animate and calibrate need, loaded from the fit and bind stages.
+
+    Attributes
+    ----------
+    rig : faceforge.anatomy.animate.Rig (working skin)
+    muscle_names : tuple of str, column order of the contractions
+    jaw_frame : JawFrame; levers : JawLevers; fapu : faceforge.mpeg4.Fapu
+    rest : (n, 3) working skin at rest; faces : (m, 3) working faces
+    user_index : (n_user,) int, working vertex of each of the user's vertices
+    fdp_vertex : dict FDP -> working vertex index
+    cranium, mandible : (vertices, faces) at rest
+    """
+
+    def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
+        import numpy as np
+
+        from faceforge.anatomy.animate import JawFrame, Rig, SkinSim, jaw_matrix
+        from faceforge.anatomy.fap_mapping import JawLevers
+        from faceforge.anatomy.skin import SkinStiffness
+        from faceforge.exceptions import StageError
+        from faceforge.io.stagefiles import load_npz
+        from faceforge.mpeg4 import fapu_from_landmarks
+        from faceforge.pbd import SolverSettings
+
+        fit = load_npz(fit_dir / "fit.npz")
+        bind = load_npz(bind_dir / "bind.npz")
+        self.cranium = (fit["cranium_vertices"], fit["cranium_faces"])
+        self.mandible = (fit["mandible_vertices"], fit["mandible_faces"])
+        self.rest = np.asarray(bind["vertices"], dtype=float)
+        self.faces = np.asarray(bind["faces"], dtype=np.int64)
+        n_internal = int(bind["n_user"])
+        u2i = fit["skin_user_to_internal"] if "skin_user_to_internal" in fit else np.arange(n_internal)
+        self.user_index = np.asarray(u2i, dtype=np.int64)
+        try:
+            self.jaw_frame = JawFrame(
+                fit["jaw_pitch_axis_point"], fit["jaw_pitch_axis_direction"],
+                fit["jaw_yaw_axis_point"], fit["jaw_yaw_axis_direction"], fit["jaw_protrusion_direction"])
+        except KeyError as exc:
+            raise StageError(f"fit.npz lacks the jaw axes ({exc.args[0]}); rerun `faceforge fit`",
+                             fit_dir / "fit.npz") from None
+        skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"])}
+        self.fapu = fapu_from_landmarks(skin_lm, fit_dir / "fit.npz")
+        self.fdp_vertex = _fdp_vertices(skin_lm, self.rest, bind.get("lip_sides"))
+        chin = skin_lm.get("2.1", self.rest[self.fdp_vertex.get("2.1", 0)])
+        self.levers = JawLevers(self.jaw_frame.lever(chin, "pitch"), self.jaw_frame.lever(chin, "yaw"))
+
+        settings = SolverSettings(iterations=int(config.get("solver.iterations")),
+                                  substeps=int(config.get("solver.substeps")),
+                                  damping=float(config.get("solver.damping")),
+                                  stiffness_mode=str(config.get("solver.stiffness_mode")))
+        self.system = _muscle_system(fit, self.cranium, self.mandible, settings, config, log)
+        self.muscle_names = tuple(self.system.muscles) if self.system is not None else ()
+        body_names = [str(n) for n in bind["body_names"]]
+        body_rest, body_faces = self._bodies(body_names, rest=True)
+        self.skin = SkinSim(self.rest, self.faces, bind["anchor_vertex_ids"], bind["anchor_body"],
+                            bind["anchor_face_ids"], bind["anchor_bary"], body_names, body_faces, body_rest,
+                            SkinStiffness.from_config(config), settings)
+        self._body_names, self._body_rest = body_names, body_rest
+        system, skin = self.system, self.skin
+
+        def skull(jaw):
+            t = jaw_matrix(jaw, self.jaw_frame)
+            if system is not None:
+                system.set_jaw(t)
+            return t
+
+        def muscles(c, t, dt):
+            if system is not None:
+                system.step(dict(zip(self.muscle_names, c)), None, dt)
+
+        def skin_step(t, _m, dt):
+            return skin.step(self._positions(t), dt)
+
+        def reset():
+            if system is not None:
+                system.reset()
+            skin.reset(self._body_rest)
+
+        self.rig = Rig(skull=skull, muscles=muscles, skin=skin_step, rest=self.rest,
+                       influence=np.asarray(bind["influence"], dtype=float), reset=reset)
+
+    def _bodies(self, names, rest: bool):
+        pos, faces = {}, {}
+        for n in names:
+            if self.system is not None and n in self.system.names:
+                pos[n] = self.system.rest_positions(n) if rest else self.system.positions(n)
+                faces[n] = self.system.faces(n)
+            elif n in ("cranium", "mandible"):
+                pos[n], faces[n] = getattr(self, n)
+            else:
+                from faceforge.exceptions import StageError
+
+                raise StageError(f"bind.npz binds the skin to {n!r}, which the fitted head lacks; "
+                                 "rerun `faceforge bind`")
+        return pos, faces
+
+    def _positions(self, jaw_t):
+        import numpy as np
+
+        if self.system is not None:
+            return {n: self.system.positions(n) for n in self._body_names}
+        v, _ = self.mandible
+        moved = dict(self._body_rest)
+        moved["mandible"] = np.asarray(v) @ jaw_t[:3, :3].T + jaw_t[:3, 3]
+        return moved
+
+    def skull_at(self, jaw_dofs):
+        """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
+        from faceforge.anatomy.animate import jaw_matrix
+
+        t = jaw_matrix(jaw_dofs, self.jaw_frame)
+        v, f = self.mandible
+        return [self.cranium, (v @ t[:3, :3].T + t[:3, 3], f)]
+
+    def to_user(self, frames):
+        """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order."""
+        return frames[:, self.user_index]
+
+
+def _fdp_vertices(landmarks: dict, rest, lip_sides) -> dict:
+    """FDP -> nearest working vertex; lower-lip FDPs only among lower-lip vertices (cut lips)."""
+    import numpy as np
+
+    out = {}
+    sides = None if lip_sides is None else np.asarray(lip_sides)
+    for fdp, p in landmarks.items():
+        d = np.linalg.norm(rest - np.asarray(p, dtype=float), axis=1)
+        if sides is not None and fdp in LOWER_LIP_FDPS and np.any(sides < 0):
+            d = np.where(sides < 0, d, np.inf) if d[sides < 0].min() <= 1e-6 + d.min() * 2 else d
+        elif sides is not None and fdp in UPPER_LIP_FDPS and np.any(sides > 0):
+            d = np.where(sides >= 0, d, np.inf)
+        out[fdp] = int(np.argmin(d))
+    return out
+
+
+def _muscle_system(fit, cranium, mandible, settings, config, log):
+    """The layered muscles of the fitted head, or the skull alone when they cannot be rebuilt."""
+    from faceforge.anatomy.layers import MusculoskeletalSystem
+
+    muscles = []
+    try:
+        from faceforge.anatomy.fit_template import muscles_from_fit  # provided by the fit stage
+    except ImportError:
+        muscles_from_fit = None
+    if muscles_from_fit is not None and "muscle_names" in fit and len(fit["muscle_names"]):
+        muscles = muscles_from_fit(fit, config)
+    elif "muscle_names" in fit and len(fit["muscle_names"]):
+        log("muscles cannot be rebuilt from fit.npz yet (no fit_template.muscles_from_fit): "
+            "animating the jaw only")
+    return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
+
+
+# --------------------------------------------------------------------------- FAPs -> controls
+
+def track_controls(track, mapping, head):
+    """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values)."""
+    import numpy as np
+
+    from faceforge.anatomy.fap_mapping import expression_faps, fap_controls
+
+    faps = np.nan_to_num(np.asarray(track.values, dtype=float))
+    faps[:, :2] = 0.0
+    faps = faps + expression_faps(mapping, track.expression)
+    mapped = set(mapping.mapped_faps().tolist())
+    unmapped = sorted(int(k + 1) for k in np.flatnonzero(np.abs(faps).max(axis=0) > 0) if k + 1 not in mapped)
+    c, jaw = controls(mapping, faps, head)
+    return c, jaw, unmapped
+
+
+def controls(mapping, faps, head):
+    """Contractions in ``head.muscle_names`` order (F, m) and jaw DOFs (F, 3) for FAPs (F, 68).
+
+    With muscles, every muscle the mapping names must exist (TemplateError otherwise);
+    without (a jaw-only head), the muscle part is dropped.
+    """
+    import numpy as np
+
+    from faceforge.anatomy.fap_mapping import fap_controls
+
+    names = head.muscle_names if head.muscle_names else mapping.muscles
+    c, jaw = fap_controls(mapping, faps, names, head.fapu.as_dict(), head.levers)
+    return (c if head.muscle_names else np.zeros((len(c), 0))), jaw
+
+
+def _mapping(ctx):
+    from faceforge.anatomy.fap_mapping import load_fap_mapping
+
+    path = ctx.params.get("calibration") or ctx.param("fap_mapping")
+    mapping = load_fap_mapping(path)
+    return mapping, str(path)
+
+
+def run_animate(ctx):
+    """Simulate the FAP track in ``ctx.params['fap']``; write animation.npz and report.json."""
+    import numpy as np
+
+    from faceforge.anatomy.animate import Timings, check_animation, play
+    from faceforge.io.stagefiles import save_json, save_npz
+    from faceforge.mpeg4 import read_fap
+
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    mapping, mapping_path = _mapping(ctx)
+    track = read_fap(ctx.param("fap"))
+    c, jaw, unmapped = track_controls(track, mapping, head)
+    if unmapped:
+        ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
+    ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
+    head.rig.reset()
+    timings = Timings()
+    frames = play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings)
+    checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
+    user = head.to_user(frames).astype(np.float32)
+    save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
+             muscle_names=np.asarray(head.muscle_names, dtype=str), jaw=jaw)
+    save_json(ctx.out_dir / "report.json", {
+        "fap": str(ctx.param("fap")), "frames": track.n_frames, "fps": track.fps,
+        "mapping": mapping_path, "unmapped_faps": unmapped,
+        "user_vertices": int(user.shape[1]), "working_vertices": int(len(head.rest)),
+        "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict(),
+        "max_contraction": float(c.max()) if c.size else 0.0,
+        "max_jaw": jaw.max(axis=0).tolist() if len(jaw) else [0, 0, 0]})
+    ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame; checks: "
+            f"{'ok' if checks.ok else checks.as_dict()}")
+
+
+ANIMATE = register_stage(Stage(
+    name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
+    inputs=("fap", "fap_mapping", "calibration?"), outputs=("animation.npz", "report.json"),
+    version="1", run=run_animate, description="play a FAP track on the bound head (§9)"))
+
+
+# --------------------------------------------------------------------------- calibrate
+
+def calibration_probes(mapping, head):
+    """FAP number -> Probe for every mapped FAP whose FDP(s) the skin has."""
+    import numpy as np
+
+    from faceforge.anatomy.calibrate import Probe
+    from faceforge.mpeg4 import DIRECTION_VECTORS, fap_record
+
+    probes = {}
+    for entry in mapping.entries:
+        for fap in entry.faps:
+            rec = fap_record(fap)
+            if not rec.is_translation:
+                continue
+            m = entry.measure.get(fap)
+            fdp, rel = (m.fdp, m.relative_to) if m is not None else (rec.fdp, None)
+            if fdp not in head.fdp_vertex or (rel is not None and rel not in head.fdp_vertex):
+                continue
+            probes[fap] = Probe(fap, head.fdp_vertex[fdp], -1 if rel is None else head.fdp_vertex[rel],
+                                np.asarray(DIRECTION_VECTORS[rec.direction], dtype=float),
+                                head.fapu.unit(rec.unit))
+    return probes
+
+
+def requested_values(mapping, config) -> dict:
+    """FAP number -> requested FAPU values (half and full typical magnitude, both signs where the
+    mapping can produce them)."""
+    mags = dict(config.get("animate.calibrate.magnitude"))
+    jaw_mag = float(config.get("animate.calibrate.jaw_magnitude"))
+    out = {}
+    for e in mapping.entries:
+        top = jaw_mag if (e.jaw is not None and e.jaw[0] == "pitch") else float(mags[e.fapu])
+        values = [0.5 * top, top]
+        two_sided = bool(e.negative) or (e.jaw is not None and e.jaw[0] == "yaw")
+        if two_sided:
+            values = [-top, -0.5 * top] + values
+        out[e.faps[0]] = values
+    return out
+
+
+def run_calibrate(ctx):
+    """Fit the mapping's response curves on the bound head; write the mapping and the report."""
+    import numpy as np
+
+    from faceforge.anatomy.animate import static_poses
+    from faceforge.anatomy.calibrate import (calibrate_mapping, format_table, measure_coupling,
+                                             summarize)
+    from faceforge.anatomy.fap_mapping import load_fap_mapping, save_fap_mapping
+    from faceforge.io.stagefiles import save_json
+
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    template = load_fap_mapping(ctx.param("fap_mapping"))
+    fps = float(ctx.config.get("animate.fps"))
+    settle = int(ctx.config.get("animate.calibrate.settle_frames"))
+
+    def simulate(mapping, faps):
+        c, jaw = controls(mapping, faps, head)
+        return static_poses(head.rig, c, jaw, fps, settle=settle)
+
+    probes = calibration_probes(template, head)
+    requested = requested_values(template, ctx.config)
+    ctx.log(f"calibrating {len(template.entries)} entries ({len(probes)} FAPs observable), "
+            f"{settle} settle frames per pose")
+    calibrated, rows = calibrate_mapping(
+        template, simulate, head.rest, probes, requested,
+        refine=int(ctx.config.get("animate.calibrate.refine")),
+        progress=lambda it: ctx.progress(it, total=len(template.entries), desc="FAPs"))
+    if 3 in probes:
+        calibrated = measure_coupling(calibrated, simulate, head.rest, probes,
+                                      value=float(ctx.config.get("animate.calibrate.jaw_magnitude")))
+    summary = summarize(rows)
+    lips = _lip_opening(calibrated, simulate, head, float(ctx.config.get("animate.calibrate.jaw_magnitude")))
+    save_fap_mapping(calibrated, ctx.out_dir / "fap_mapping.yaml",
+                     header=f"calibrated by `faceforge calibrate` from {ctx.param('fap_mapping')}\n"
+                            f"median relative error {summary['all']['median_relative_error']}")
+    save_json(ctx.out_dir / "report.json", {
+        "summary": summary, "open_jaw_lip_separation": lips,
+        "fapu": head.fapu.as_dict(), "jaw_levers": {"pitch": head.levers.pitch, "yaw": head.levers.yaw},
+        "rows": [r.as_dict() for r in rows],
+        "unobservable_faps": sorted(int(f) for f in template.mapped_faps() if int(f) not in probes)})
+    table = format_table(rows)
+    med = summary["all"]["median_relative_error"]
+    (ctx.out_dir / "report.txt").write_text(
+        table + f"\n\nmedian relative error (lip, jaw, cheek, eyebrow): "
+        f"{'n/a' if med is None else f'{100 * med:.1f}%'}\n")
+    ctx.log(f"median relative error {'n/a' if med is None else f'{100 * med:.1f}%'} "
+            f"(uncalibrated {summary['all_uncalibrated']['median_relative_error']})")
+
+
+def _lip_opening(mapping, simulate, head, value):
+    """open_jaw alone at ``value`` MNS: how far the inner lips part (2.3 - 2.2), in MNS units."""
+    import numpy as np
+
+    if "2.2" not in head.fdp_vertex or "2.3" not in head.fdp_vertex:
+        return None
+    faps = np.zeros((1, 68))
+    faps[0, 2] = value
+    skin = simulate(mapping, faps)[0]
+    a, b = head.fdp_vertex["2.2"], head.fdp_vertex["2.3"]
+    gap0 = head.rest[a, 1] - head.rest[b, 1]
+    gap = skin[a, 1] - skin[b, 1]
+    opened = (gap - gap0) / head.fapu.unit("MNS")
+    return {"requested": value, "achieved": float(opened), "relative_error": float(abs(opened - value) / value)}
+
+
+CALIBRATE = register_stage(Stage(
+    name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
+    inputs=("fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
+    version="1", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
+
+
+# --------------------------------------------------------------------------- commands
+
+def _expression_file(app, name: str, intensity: float, seconds: float) -> Path:
+    """Write the preset as a FAP file in the workdir (its content keys the cache)."""
+    from faceforge.mpeg4 import expression_track, write_fap
+
+    cfg = app.config
+    track = expression_track(name, intensity=intensity, fps=float(cfg.get("animate.fps")),
+                             seconds=seconds, ramp=float(cfg.get("animate.expression_ramp")))
+    path = app.workspace.root / "inputs" / f"expression_{name}_{intensity:g}.fap"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_fap(path, track)
+    return path
+
+
+def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
+    """Write ``-o`` and ``--preview`` from the animate stage's frames."""
+    from faceforge.exceptions import StageError
+    from faceforge.io.mesh import load_mesh
+    from faceforge.io.stagefiles import load_npz
+
+    d = load_npz(app.workspace.stage_dir("animate") / "animation.npz")
+    frames, fps = d["frames"], float(d["fps"])
+    mesh = app.workspace.load_params().get("mesh")
+    if not mesh:
+        raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
+    v, faces, _ = load_mesh(mesh)
+    if len(v) != frames.shape[1]:
+        raise StageError(f"{mesh} has {len(v)} vertices but the animation {frames.shape[1]}; "
+                         "rerun `faceforge fit`", mesh)
+    if output:
+        from faceforge.io.export import export_animation
+
+        written = export_animation(output, frames, faces, fps)
+        app.log(f"animate: wrote {written} ({len(frames)} frames, {frames.shape[1]} vertices, {fps:g} fps)")
+    if preview:
+        from faceforge.viz.contact_sheet import contact_sheet, pick_frames
+
+        try:
+            idx = pick_frames(len(frames), int(app.config.get("animate.preview_frames")), preview_frames)
+        except ValueError as exc:
+            raise StageError(f"--preview-frames: {exc}") from None
+        contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name)
+        app.log(f"animate: wrote {preview}")
+
+
+@click.command("animate", help="Play an MPEG-4 FAP track or an expression on the bound head (§9).")
+@click.option("--fap", "fap", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="FAP file (.fap, MPEG-4 v2.0/2.1).")
+@click.option("--expression", type=click.Choice(["joy", "sadness", "surprise", "anger", "disgust", "fear"]),
+              default=None, help="Play a basic expression instead (ramps in, holds, ramps out).")
+@click.option("--intensity", type=click.FloatRange(0.0, 1.0), default=1.0, show_default=True,
+              help="Peak strength of --expression.")
+@click.option("--seconds", type=click.FloatRange(min=0.1), default=None,
+              help="Length of --expression [default: animate.expression_seconds].")
+@click.option("-o", "--output", type=click.Path(), default=None,
+              help="Output by suffix: .pc2, .mdd (Blender Mesh Cache), .glb, or a folder (OBJ sequence).")
+@click.option("--preview", type=click.Path(dir_okay=False), default=None, help="Contact sheet PNG.")
+@click.option("--preview-frames", default=None, help="Frames for --preview, e.g. 0,20,40 [default: evenly spaced].")
+@click.option("--force", is_flag=True, help="Resimulate even if up to date.")
+@click.pass_obj
+def animate_command(app, fap, expression, intensity, seconds, output, preview, preview_frames, force):
+    from faceforge.exceptions import StageError
+
+    if (fap is None) == (expression is None):
+        raise StageError("give exactly one of --fap FILE or --expression NAME")
+    if expression is not None:
+        seconds = seconds or float(app.config.get("animate.expression_seconds"))
+        fap = _expression_file(app, expression, intensity, seconds)
+    calibrated = calibrated_mapping_path(app.workspace.root)
+    app.run_stage("animate", params={"fap": str(fap), "fap_mapping": str(mapping_template_path(app.config)),
+                                     "calibration": str(calibrated) if calibrated.exists() else ""},
+                  force=force)
+    export_outputs(app, output, preview, preview_frames)
+
+
+@click.command("calibrate", help="Measure how precisely FAPs move the skin and fit the mapping (§9).")
+@click.option("--force", is_flag=True, help="Rerun even if up to date.")
+@click.pass_obj
+def calibrate_command(app, force):
+    app.run_stage("calibrate", params={"fap_mapping": str(mapping_template_path(app.config))}, force=force)
+    out = app.workspace.stage_dir("calibrate")
+    app.log((out / "report.txt").read_text())
+    app.log(f"calibrate: wrote {out / 'fap_mapping.yaml'} (used by `faceforge animate`)")
+
+
+register_command(animate_command)
+register_command(calibrate_command)
