@@ -486,7 +486,7 @@ def write_obj(path: Path, v: np.ndarray, f: np.ndarray, header: str) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def _r(p, nd: int = 5) -> list[float]:
+def _r(p, nd: int = 6) -> list[float]:
     return [round(float(x), nd) + 0.0 for x in p]
 
 
