@@ -182,3 +182,15 @@ def test_clean_removes_stage_folders_only(invoke, echo_stage, tmp_path):
     assert (work / "notes.txt").read_text() == "mine" and (work / "faceforge.yaml").exists()
     assert invoke("-w", work, "clean", "--forget").exit_code == 0
     assert not (work / "faceforge.yaml").exists() and (work / "notes.txt").exists()
+
+
+def test_app_run_stage_updates_and_forgets_params(echo_stage, tmp_path):
+    from faceforge.cli import App
+
+    src = tmp_path / "src.txt"
+    src.write_text("x")
+    app = App(str(tmp_path / "w"), None, (), -1, False)
+    app.run_stage("t_echo", {"src": str(src), "note": "kept as given"})
+    assert app.workspace.load_params() == {"src": str(src), "note": "kept as given"}
+    app.run_stage("t_echo", {"note": None})
+    assert app.workspace.load_params() == {"src": str(src)}

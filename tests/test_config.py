@@ -166,3 +166,13 @@ def test_relative_paths_resolve_against_the_setting_file(tmp_path):
 def test_config_equality_of_values_not_identity():
     a, b = Config({"x": {"y": 1}}), Config({"x": {"y": 1}})
     assert a.as_dict() == b.as_dict() and a.get("x.y") == 1
+
+
+def test_packaged_templates_link_resolves_like_the_default_paths(repo_root):
+    import faceforge
+
+    package = Path(faceforge.__file__).resolve().parent
+    # in a checkout faceforge/templates links to templates/; in a wheel it is a copy beside data/
+    assert (package / "templates").resolve() == (repo_root / "templates").resolve()
+    skull = Path(load_default().tree["template"]["skull"])
+    assert skull == (repo_root / "templates" / "skull").resolve()
