@@ -144,6 +144,22 @@ def test_glb_structure_read_by_pygltflib(tmp_path):
         assert accessor.min is not None and accessor.max is not None
 
 
+def test_glb_base_mesh_read_by_trimesh(tmp_path):
+    """A second, independent reader sees frame 0 with the input's vertex order."""
+    trimesh = pytest.importorskip("trimesh")
+    frames, faces = animation(n_frames=3)
+    scene = trimesh.load(write_glb(tmp_path / "a.glb", frames, faces, 25.0), process=False)
+    (mesh,) = scene.geometry.values()
+    np.testing.assert_array_equal(np.asarray(mesh.vertices, dtype=np.float32), frames[0].astype(np.float32))
+    np.testing.assert_array_equal(mesh.faces, triangulate(*faces_to_csr(faces, 12)))
+
+
+def test_point_caches_need_no_faces(tmp_path):
+    frames, _ = animation(n_frames=2)
+    np.testing.assert_array_equal(read_pc2(write_pc2(tmp_path / "a.pc2", frames, None, 25.0))[0], frames.astype(np.float32))
+    np.testing.assert_array_equal(read_mdd(write_mdd(tmp_path / "a.mdd", frames, None, 25.0))[0], frames.astype(np.float32))
+
+
 def test_single_frame_glb_is_a_static_mesh(tmp_path):
     frames, faces = animation(n_frames=1)
     gltf, _ = parse_glb(write_glb(tmp_path / "s.glb", frames, faces, 25.0))

@@ -38,7 +38,7 @@ def write_pc2(path: str | Path, frames: object, faces: object, fps: float, *, st
     path : path ending in ``.pc2``
     frames : (n_frames, n_verts, 3) float
         Positions per frame, model units, stored as float32.
-    faces : faces of the mesh (validated against ``n_verts``, not stored)
+    faces : faces of the mesh, or None (validated against ``n_verts`` when given; not stored)
     fps : float
         Not stored by PC2 (it counts in frames, sampling = 1 frame per sample); the Blender
         scene's frame rate must equal it. Validated.
@@ -50,7 +50,8 @@ def write_pc2(path: str | Path, frames: object, faces: object, fps: float, *, st
     Path
     """
     data = validate_animation(frames, fps)
-    faces_to_csr(faces, data.shape[1])
+    if faces is not None:
+        faces_to_csr(faces, data.shape[1])
     header = np.zeros((), dtype=_PC2_HEADER)
     header["signature"] = PC2_SIGNATURE
     header["version"] = 1
@@ -94,7 +95,8 @@ def write_mdd(path: str | Path, frames: object, faces: object, fps: float) -> Pa
     Parameters are those of :func:`write_pc2` (without ``start_frame``).
     """
     data = validate_animation(frames, fps)
-    faces_to_csr(faces, data.shape[1])
+    if faces is not None:
+        faces_to_csr(faces, data.shape[1])
     n_frames, n_points = data.shape[:2]
     times = (np.arange(n_frames, dtype=np.float64) / float(fps)).astype(">f4")
     header = np.array([n_frames, n_points], dtype=">i4")
