@@ -157,31 +157,3 @@ def test_contact_sheet_writes_a_png_with_the_chosen_frames(tmp_path):
     img = mpimg.imread(png)
     assert img.shape[1] > img.shape[0] > 50          # two panels side by side
     assert img[..., :3].std() > 0.01                 # something was drawn
-
-
-def test_jaw_matrix_is_rigid_and_moves_the_chin_the_right_way():
-    from scipy.spatial.transform import Rotation
-
-    from faceforge.anatomy.animate import JawFrame, jaw_matrix
-
-    frame = JawFrame(pitch_point=np.array([0.0, 1.4, 1.9]), pitch_dir=np.array([1.0, 0.0, 0.0]),
-                     yaw_point=np.array([0.0, 1.4, 1.9]), yaw_dir=np.array([0.0, 0.98, -0.2]),
-                     protrusion_dir=np.array([0.0, 0.2, 0.98]))
-    chin = np.array([0.0, -5.0, 8.0, 1.0])
-    assert np.allclose(jaw_matrix([0, 0, 0], frame), np.eye(4))
-    for dofs in ([0.3, 0, 0], [0, 0.1, 0], [0.2, -0.05, 0.4]):
-        t = jaw_matrix(dofs, frame)
-        r = t[:3, :3]
-        assert np.allclose(r @ r.T, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
-    # twin: pitch alone is scipy's rotation about the axis through the pitch point
-    t = jaw_matrix([0.3, 0, 0], frame)
-    r = Rotation.from_rotvec(0.3 * frame.pitch_dir).as_matrix()
-    assert np.allclose(t[:3, :3], r)
-    assert np.allclose(t[:3, 3], frame.pitch_point - r @ frame.pitch_point)
-    assert (t @ chin)[1] < chin[1]                              # positive pitch lowers the chin
-    assert (jaw_matrix([0, 0.1, 0], frame) @ chin)[0] > 0       # positive yaw: chin to +X
-    moved = jaw_matrix([0, 0, 0.5], frame) @ chin - chin
-    assert np.allclose(moved[:3], 0.5 * frame.protrusion_dir / np.linalg.norm(frame.protrusion_dir))
-    # the pitch point stays on the axis: the condyles do not move under pitch
-    assert np.allclose((t @ np.append(frame.pitch_point + [3.0, 0, 0], 1.0))[:3], frame.pitch_point + [3.0, 0, 0])
-    assert frame.lever(chin[:3]) == pytest.approx(np.hypot(6.4, 6.1))

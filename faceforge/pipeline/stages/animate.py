@@ -64,7 +64,8 @@ class BoundHead:
     ----------
     rig : faceforge.anatomy.animate.Rig (working skin)
     muscle_names : tuple of str, column order of the contractions
-    jaw_frame : JawFrame; levers : JawLevers; fapu : faceforge.mpeg4.Fapu
+    skull : faceforge.anatomy.skull.Skull (fitted; jaw_transform); levers : JawLevers
+    fapu : faceforge.mpeg4.Fapu
     rest : (n, 3) working skin at rest; faces : (m, 3) working faces
     user_index : (n_user,) int, working vertex of each of the user's vertices
     fdp_vertex : dict FDP -> working vertex index
@@ -74,9 +75,11 @@ class BoundHead:
     def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
         import numpy as np
 
-        from faceforge.anatomy.animate import JawFrame, Rig, SkinSim, jaw_matrix
+        from faceforge.anatomy.animate import Rig
+        from faceforge.anatomy.binding import Binding
         from faceforge.anatomy.fap_mapping import JawLevers
-        from faceforge.anatomy.skin import SkinStiffness
+        from faceforge.anatomy.skin import SkinSimulation, SkinStiffness
+        from faceforge.anatomy.skull import JawAxes, Skull
         from faceforge.exceptions import StageError
         from faceforge.io.stagefiles import load_npz
         from faceforge.mpeg4 import fapu_from_landmarks
@@ -92,89 +95,69 @@ class BoundHead:
         u2i = fit["skin_user_to_internal"] if "skin_user_to_internal" in fit else np.arange(n_internal)
         self.user_index = np.asarray(u2i, dtype=np.int64)
         try:
-            self.jaw_frame = JawFrame(
-                fit["jaw_pitch_axis_point"], fit["jaw_pitch_axis_direction"],
-                fit["jaw_yaw_axis_point"], fit["jaw_yaw_axis_direction"], fit["jaw_protrusion_direction"])
+            axes = JawAxes(*(np.asarray(fit[f"jaw_{k}"], dtype=float) for k in (
+                "pitch_axis_point", "pitch_axis_direction", "yaw_axis_point", "yaw_axis_direction",
+                "protrusion_direction")), limits={}, condyles=np.zeros((2, 3)))
         except KeyError as exc:
             raise StageError(f"fit.npz lacks the jaw axes ({exc.args[0]}); rerun `faceforge fit`",
                              fit_dir / "fit.npz") from None
+        self.skull = Skull(self.cranium, self.mandible, {}, {}, axes)
         skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"])}
         self.fapu = fapu_from_landmarks(skin_lm, fit_dir / "fit.npz")
         self.fdp_vertex = _fdp_vertices(skin_lm, self.rest, bind.get("lip_sides"))
         chin = skin_lm.get("2.1", self.rest[self.fdp_vertex.get("2.1", 0)])
-        self.levers = JawLevers(self.jaw_frame.lever(chin, "pitch"), self.jaw_frame.lever(chin, "yaw"))
+        self.levers = JawLevers(_lever(chin, axes.pitch_point, axes.pitch_dir),
+                                _lever(chin, axes.yaw_point, axes.yaw_dir))
 
         settings = SolverSettings(iterations=int(config.get("solver.iterations")),
                                   substeps=int(config.get("solver.substeps")),
                                   damping=float(config.get("solver.damping")),
                                   stiffness_mode=str(config.get("solver.stiffness_mode")))
-        self.system = _muscle_system(fit, self.cranium, self.mandible, settings, config, log)
-        self.muscle_names = tuple(self.system.muscles) if self.system is not None else ()
-        body_names = [str(n) for n in bind["body_names"]]
-        body_rest, body_faces = self._bodies(body_names, rest=True)
-        self.skin = SkinSim(self.rest, self.faces, bind["anchor_vertex_ids"], bind["anchor_body"],
-                            bind["anchor_face_ids"], bind["anchor_bary"], body_names, body_faces, body_rest,
-                            SkinStiffness.from_config(config), settings)
-        self._body_names, self._body_rest = body_names, body_rest
-        system, skin = self.system, self.skin
+        self.system = system = _muscle_system(fit, self.cranium, self.mandible, settings, config, log)
+        self.muscle_names = tuple(system.muscles)
+        binding = Binding.from_arrays(bind)
+        missing = [n for n in binding.body_names if n not in system.names]
+        if missing:
+            raise StageError(f"bind.npz binds the skin to {missing}, which the fitted head lacks; "
+                             "rerun `faceforge bind`", bind_dir / "bind.npz")
+        self.skin = skin = SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
+                                          settings)
 
         def skull(jaw):
-            t = jaw_matrix(jaw, self.jaw_frame)
-            if system is not None:
-                system.set_jaw(t)
-            return t
+            system.set_jaw(self.skull.jaw_transform(*jaw))
 
-        def muscles(c, t, dt):
-            if system is not None:
-                system.step(dict(zip(self.muscle_names, c)), None, dt)
+        def muscles(c, _bones, dt):
+            system.step(dict(zip(self.muscle_names, c)), None, dt)
 
-        def skin_step(t, _m, dt):
-            return skin.step(self._positions(t), dt)
+        def skin_step(_bones, _muscles, dt):
+            skin.step(system, dt)
+            return skin.simulated()
 
         def reset():
-            if system is not None:
-                system.reset()
-            skin.reset(self._body_rest)
+            system.reset()
+            skin.reset()
 
         self.rig = Rig(skull=skull, muscles=muscles, skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset)
 
-    def _bodies(self, names, rest: bool):
-        pos, faces = {}, {}
-        for n in names:
-            if self.system is not None and n in self.system.names:
-                pos[n] = self.system.rest_positions(n) if rest else self.system.positions(n)
-                faces[n] = self.system.faces(n)
-            elif n in ("cranium", "mandible"):
-                pos[n], faces[n] = getattr(self, n)
-            else:
-                from faceforge.exceptions import StageError
-
-                raise StageError(f"bind.npz binds the skin to {n!r}, which the fitted head lacks; "
-                                 "rerun `faceforge bind`")
-        return pos, faces
-
-    def _positions(self, jaw_t):
-        import numpy as np
-
-        if self.system is not None:
-            return {n: self.system.positions(n) for n in self._body_names}
-        v, _ = self.mandible
-        moved = dict(self._body_rest)
-        moved["mandible"] = np.asarray(v) @ jaw_t[:3, :3].T + jaw_t[:3, 3]
-        return moved
-
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
-        from faceforge.anatomy.animate import jaw_matrix
-
-        t = jaw_matrix(jaw_dofs, self.jaw_frame)
+        t = self.skull.jaw_transform(*jaw_dofs)
         v, f = self.mandible
         return [self.cranium, (v @ t[:3, :3].T + t[:3, 3], f)]
 
     def to_user(self, frames):
         """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order."""
         return frames[:, self.user_index]
+
+
+def _lever(point, axis_point, axis_dir) -> float:
+    """Distance from ``point`` (3,) to the line through ``axis_point`` along ``axis_dir``."""
+    import numpy as np
+
+    d = np.asarray(axis_dir, dtype=float) / np.linalg.norm(axis_dir)
+    r = np.asarray(point, dtype=float) - axis_point
+    return float(np.linalg.norm(r - (r @ d) * d))
 
 
 def _fdp_vertices(landmarks: dict, rest, lip_sides) -> dict:
