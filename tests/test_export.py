@@ -156,8 +156,9 @@ def test_glb_base_mesh_read_by_trimesh(tmp_path):
 
 def test_point_caches_need_no_faces(tmp_path):
     frames, _ = animation(n_frames=2)
-    np.testing.assert_array_equal(read_pc2(write_pc2(tmp_path / "a.pc2", frames, None, 25.0))[0], frames.astype(np.float32))
-    np.testing.assert_array_equal(read_mdd(write_mdd(tmp_path / "a.mdd", frames, None, 25.0))[0], frames.astype(np.float32))
+    f32 = frames.astype(np.float32)
+    np.testing.assert_array_equal(read_pc2(write_pc2(tmp_path / "a.pc2", frames, None, 25.0))[0], f32)
+    np.testing.assert_array_equal(read_mdd(write_mdd(tmp_path / "a.mdd", frames, None, 25.0))[0], f32)
 
 
 def test_single_frame_glb_is_a_static_mesh(tmp_path):

@@ -22,11 +22,25 @@ from pathlib import Path
 
 import numpy as np
 
-from .export_common import ExportError, atomic_write_bytes, faces_to_csr, read_bytes, register_exporter, validate_animation
+from .export_common import (
+    ExportError,
+    atomic_write_bytes,
+    faces_to_csr,
+    read_bytes,
+    register_exporter,
+    validate_animation,
+)
 
 PC2_SIGNATURE = b"POINTCACHE2\0"
 _PC2_HEADER = np.dtype(
-    [("signature", "S12"), ("version", "<i4"), ("n_points", "<i4"), ("start", "<f4"), ("sampling", "<f4"), ("n_samples", "<i4")]
+    [
+        ("signature", "S12"),
+        ("version", "<i4"),
+        ("n_points", "<i4"),
+        ("start", "<f4"),
+        ("sampling", "<f4"),
+        ("n_samples", "<i4"),
+    ]
 )
 
 

@@ -78,7 +78,9 @@ class _Buffer:
         self.offset += len(blob) + pad
         return len(self.views) - 1
 
-    def accessor(self, view: int, array: np.ndarray, kind: str, ctype: int, offset: int = 0, bounds: bool = False) -> int:
+    def accessor(
+        self, view: int, array: np.ndarray, kind: str, ctype: int, offset: int = 0, bounds: bool = False
+    ) -> int:
         count = array.shape[0]
         accessor = {"bufferView": view, "byteOffset": offset, "componentType": ctype, "count": count, "type": kind}
         if bounds:
