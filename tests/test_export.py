@@ -23,7 +23,7 @@ from faceforge.io.export import (
     write_obj_sequence,
     write_pc2,
 )
-from faceforge.io.export_common import atomic_write_bytes, faces_to_csr, triangulate
+from faceforge.io.export_common import atomic_write_bytes, faces_to_csr, polygons_from_fan, triangulate
 
 MAKEHUMAN = Path("/work/shared/assets/heads/makehuman/mh_head_default.obj")
 
@@ -186,6 +186,26 @@ def test_fan_triangulation_covers_each_convex_polygon():
     shoelace = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
     assert areas[:4].sum() == pytest.approx(shoelace) and areas[4:].sum() == pytest.approx(1.0)
     assert set(tris[:4].ravel()) == set(range(6)) and set(tris[4:].ravel()) == {6, 7, 8, 9}
+
+
+def test_polygons_from_fan_undoes_the_triangulation():
+    _, faces = animation()
+    indices, starts = faces_to_csr(faces, 12)
+    triangles = triangulate(indices, starts)
+    source = np.repeat(np.arange(len(faces)), np.diff(starts) - 2)
+    assert polygons_from_fan(triangles, source) == faces
+    with pytest.raises(ValueError, match="not a fan"):
+        polygons_from_fan(triangles[:, [1, 0, 2]], source)
+    with pytest.raises(ValueError, match="consecutive"):
+        polygons_from_fan(triangles, source[::-1])
+
+
+def test_polygons_from_fan_matches_the_mesh_loader():
+    if not MAKEHUMAN.exists():
+        pytest.skip("shared assets not available")
+    mesh = pytest.importorskip("faceforge.io.mesh")
+    _, triangles, info = mesh.load_mesh(MAKEHUMAN)
+    assert polygons_from_fan(triangles, info.face_source) == read_obj(MAKEHUMAN)[1]
 
 
 def test_array_faces_and_list_faces_agree():

@@ -11,7 +11,8 @@
 
 Every writer has the signature ``write_<fmt>(path, frames, faces, fps) -> Path`` with
 ``frames (n_frames, n_verts, 3)`` in the input mesh's units and vertex order, ``faces`` as
-a ``(m, k)`` array or a list of polygons (quads allowed), and writes to a temporary name
+a ``(m, k)`` array or a list of polygons (quads allowed; :func:`polygons_from_fan` recovers
+them from ``load_mesh``'s triangles and ``MeshInfo.face_source``), and writes to a temporary name
 renamed into place. :data:`EXPORTERS` is the suffix registry (a plain dict each format
 module fills with one line); :func:`export_animation` dispatches through it.
 
@@ -47,7 +48,7 @@ from pathlib import Path
 
 from . import export_cache, export_gltf, export_obj  # noqa: F401  (each registers its suffixes)
 from .export_cache import read_mdd, read_pc2, write_mdd, write_pc2
-from .export_common import EXPORTERS, ExportError, register_exporter
+from .export_common import EXPORTERS, ExportError, polygons_from_fan, register_exporter
 from .export_gltf import parse_glb, read_glb, write_glb
 from .export_obj import read_obj_sequence, write_obj_sequence
 
@@ -102,6 +103,7 @@ __all__ = [
     "export_animation",
     "exporter_for",
     "parse_glb",
+    "polygons_from_fan",
     "read_glb",
     "read_mdd",
     "read_obj_sequence",

@@ -116,6 +116,43 @@ def triangulate(indices: np.ndarray, starts: np.ndarray) -> np.ndarray:
     ).astype(np.int64)
 
 
+def polygons_from_fan(faces: object, face_source: object) -> list[tuple[int, ...]]:
+    """Undo a fan triangulation: recover the input's polygons (quads, n-gons).
+
+    Parameters
+    ----------
+    faces : (m, 3) int
+        Triangles ``(c0, ci, ci+1)`` of each polygon, consecutive, as :func:`triangulate`
+        and ``faceforge.io.mesh.load_mesh`` produce them.
+    face_source : (m,) int
+        Polygon index of each triangle (``MeshInfo.face_source``), non-decreasing from 0.
+
+    Returns
+    -------
+    list of tuples of int
+        One polygon per source index, corners in the original order.
+
+    Raises
+    ------
+    ValueError
+        If the triangles are not such a fan (so the polygons cannot be recovered).
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    source = np.asarray(face_source, dtype=np.int64)
+    if faces.ndim != 2 or faces.shape[1] != 3 or source.shape != (faces.shape[0],):
+        raise ValueError(f"faces must be (m, 3) and face_source (m,); got {faces.shape} and {source.shape}")
+    if source.size and (source[0] != 0 or np.any(np.diff(source) < 0) or np.any(np.diff(source) > 1)):
+        raise ValueError("face_source must count polygons 0, 1, 2, ... with their triangles consecutive")
+    bounds = np.flatnonzero(np.diff(source)) + 1
+    polygons = []
+    for group in np.split(faces, bounds) if source.size else []:
+        fan_ok = np.all(group[:, 0] == group[0, 0]) and np.all(group[1:, 1] == group[:-1, 2])
+        if not fan_ok:
+            raise ValueError(f"triangles of polygon {len(polygons)} are not a fan (c0, ci, ci+1)")
+        polygons.append(tuple(int(x) for x in (*group[0], *group[1:, 2])))
+    return polygons
+
+
 def atomic_write_bytes(path: str | Path, chunks: Sequence[bytes] | bytes) -> Path:
     """Write bytes to a temporary file next to ``path`` and rename it into place.
 
