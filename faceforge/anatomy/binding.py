@@ -19,6 +19,8 @@ every frame.
 Lips: skin of the upper lip may bind only to the cranium (upper structures),
 skin of the lower lip only to the mandible (``lip_sides`` from
 :func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
+A lip vertex whose rays meet only the other jaw's bone binds to the closest
+point of its own bone instead (within ``max_distance``).
 
 Ray casting uses :class:`faceforge.geometry.rays.RayCaster` (trimesh, Embree
 where installed); all bodies of one pass are merged into one mesh so every pass
@@ -197,6 +199,30 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed):
     return body, face, pts, dist
 
 
+def _lip_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist) -> None:
+    """Lip vertices whose rays met only the other jaw's bone: closest point on their own.
+
+    Along the lip line the normal ray may graze the gap between the teeth and
+    meet only the disallowed bone; such a vertex binds to the closest point of
+    its own bone (cranium above the lip line, mandible below) when that lies
+    within ``max_distance``. Updates the arrays in place.
+    """
+    from faceforge.geometry.surface_points import closest_points
+
+    for side, kind in ((1, CRANIUM), (-1, MANDIBLE)):
+        todo = np.flatnonzero((body < 0) & (sides == side))
+        own = [i for i in range(len(bodies)) if kinds[i] == kind]
+        if len(todo) == 0 or not own:
+            continue
+        best = np.full(len(todo), np.inf)
+        for i in own:
+            p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
+            take = (d < best) & (d <= max_distance)
+            best[take] = d[take]
+            t = todo[take]
+            body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
+
+
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
@@ -262,6 +288,8 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         t = todo[hit]
         body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
         outward[t] = sign > 0
+
+    _lip_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     bary = np.zeros((len(ids), 3), FLOAT)
