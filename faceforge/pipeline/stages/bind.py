@@ -28,7 +28,25 @@ from faceforge.pipeline import Stage, register_command, register_stage
 
 
 def load_fit(fit_dir):
-    """The fitted head from the fit stage's ``fit.npz``.
+    """The fitted head from the fit stage's ``fit.npz`` (see :func:`head_from_fit_arrays`)."""
+    from faceforge.exceptions import StageError
+    from faceforge.io.stagefiles import load_npz
+
+    path = fit_dir / "fit.npz"
+    if not path.exists():
+        raise StageError("fit.npz missing: run `faceforge fit` first", path)
+    d = load_npz(path)
+    missing = [k for k in _NEEDED if k not in d]
+    if missing:
+        raise StageError(f"fit.npz lacks {', '.join(missing)}", path)
+    return head_from_fit_arrays(d)
+
+
+_NEEDED = ("skin_vertices", "skin_faces", "skin_landmark_ids", "skin_landmark_positions")
+
+
+def head_from_fit_arrays(d: dict) -> dict:
+    """The fitted head from the fit stage's arrays.
 
     Arrays read (see :mod:`faceforge.pipeline.stages.fit`): ``skin_vertices (n, 3)``,
     ``skin_faces (m, 3)`` (the fit's internal skin), ``cranium_vertices``/``cranium_faces``,
@@ -46,18 +64,6 @@ def load_fit(fit_dir):
     """
     import numpy as np
 
-    from faceforge.exceptions import StageError
-    from faceforge.io.stagefiles import load_npz
-
-    path = fit_dir / "fit.npz"
-    if not path.exists():
-        raise StageError("fit.npz missing: run `faceforge fit` first", path)
-    d = load_npz(path)
-    need = ("skin_vertices", "skin_faces", "skin_landmark_ids", "skin_landmark_positions")
-    missing = [k for k in need if k not in d]
-    if missing:
-        raise StageError(f"fit.npz lacks {', '.join(missing)}", path)
-
     def part(name):
         if f"{name}_vertices" in d and len(d[f"{name}_vertices"]):
             return d[f"{name}_vertices"], d[f"{name}_faces"]
@@ -66,7 +72,7 @@ def load_fit(fit_dir):
     muscles = []
     if "muscle_names" in d:
         vs, fs = d["muscle_vertex_start"], d["muscle_face_start"]
-        layers = d.get("muscle_layers", np.zeros(len(d["muscle_names"]), np.int64))
+        layers = d["muscle_layers"] if "muscle_layers" in d else np.zeros(len(d["muscle_names"]), np.int64)
         for i, name in enumerate(d["muscle_names"]):
             muscles.append((str(name), int(layers[i]),
                             d["muscle_vertices"][vs[i]:vs[i + 1]], d["muscle_faces"][fs[i]:fs[i + 1]]))
