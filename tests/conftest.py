@@ -19,11 +19,17 @@ def repo_root() -> Path:
 
 @pytest.fixture
 def stage_registry():
-    """The real registries after discovery; stages/commands a test registers are removed after it."""
+    """Empty stage and command registries for one test (the real ones are restored after it).
+
+    Discovery has already run, so the project's own stage modules do not come back
+    during the test: tests see only the dummy stages they register.
+    """
     from faceforge.pipeline import stage as registry
 
     registry.discover()
     stages, commands = dict(registry.STAGES), dict(registry.COMMANDS)
+    registry.STAGES.clear()
+    registry.COMMANDS.clear()
     yield registry
     registry.STAGES.clear()
     registry.STAGES.update(stages)

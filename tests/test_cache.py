@@ -259,3 +259,13 @@ def test_two_processes_on_one_workdir_are_serialized(tmp_path, subprocess_env):
     # the second found the stage complete when it got the lock: it ran once, by the first
     assert "t_slow: up to date" in err2
     assert (tmp_path / "counter").read_text().split() == ["first"]
+
+
+def test_status_lists_a_stage_with_an_unregistered_dep_instead_of_failing(stage_registry, tmp_path):
+    stage_registry.register_stage(Stage("t_ok", lambda ctx: None))
+    stage_registry.register_stage(Stage("t_orphan", lambda ctx: None, deps=("t_missing",)))
+    statuses = runner.plan(runner.Workspace(tmp_path), load_config(), {})
+    assert [(s.stage.name, s.reasons) for s in statuses] == [
+        ("t_ok", ["never run"]), ("t_orphan", ["depends on unknown stage 't_missing'"])]
+    with pytest.raises(StageError, match="stage 't_orphan' depends on unknown stage 't_missing'"):
+        runner.run(runner.Workspace(tmp_path), load_config(), {}, ["t_orphan"])

@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterable, Mapping
 from faceforge.exceptions import StageError
 from faceforge.pipeline.cache import file_digest, read_stage_json, record_key, stale_reasons
 from faceforge.pipeline.lock import WorkdirLock
-from faceforge.pipeline.stage import Stage, StageContext, stage_order
+from faceforge.pipeline.stage import STAGES, Stage, StageContext, broken_stages, stage_order
 
 PARAMS_FILE = "faceforge.yaml"
 CONFIG_FILE = "config.yaml"
@@ -136,7 +136,11 @@ def current_record(stage: Stage, config, params: Mapping, upstream: Mapping[str,
 
 def plan(workspace: Workspace, config, params: Mapping,
          targets: Iterable[str] | None = None) -> list[StageStatus]:
-    """Status of the stages needed for ``targets`` (all when None), upstream first."""
+    """Status of the stages needed for ``targets`` (all when None), upstream first.
+
+    With ``targets=None``, stages whose deps are not registered are listed last with
+    the reason instead of failing the whole listing.
+    """
     statuses: list[StageStatus] = []
     keys: dict[str, str] = {}
     for stage in stage_order(targets):
@@ -153,6 +157,8 @@ def plan(workspace: Workspace, config, params: Mapping,
                 if absent:
                     reasons = [f"output missing: {', '.join(absent)}"]
         statuses.append(StageStatus(stage, record, key, reasons))
+    if targets is None:
+        statuses += [StageStatus(STAGES[n], None, None, [r]) for n, r in broken_stages().items()]
     return statuses
 
 
@@ -235,7 +241,7 @@ def clean(workspace: Workspace, names: Iterable[str] | None = None,
         return removed
     with workspace.lock(notify=log):
         workspace.clean_temp()
-        wanted = [s.name for s in stage_order()] if names is None else list(names)
+        wanted = list(STAGES) if names is None else list(names)
         for name in wanted:
             folder = workspace.stage_dir(name)
             if not folder.is_dir():

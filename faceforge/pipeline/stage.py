@@ -105,10 +105,40 @@ def get_stage(name: str) -> Stage:
     return STAGES[name]
 
 
-def stage_order(targets: Iterable[str] | None = None) -> list[Stage]:
-    """Stages needed for ``targets`` (all when None), upstream first, registry order kept."""
+def broken_stages() -> dict[str, str]:
+    """Registered stages that cannot run because a dep (direct or not) is not registered."""
     discover()
-    names = list(STAGES) if targets is None else list(targets)
+    broken: dict[str, str] = {}
+
+    def check(name: str, path: tuple[str, ...]) -> str | None:
+        if name in path:
+            return f"dependency cycle {' -> '.join(path + (name,))}"
+        if name not in STAGES:
+            return f"depends on unknown stage {name!r}"
+        for dep in STAGES[name].deps:
+            reason = check(dep, path + (name,))
+            if reason:
+                return reason
+        return None
+
+    for name in STAGES:
+        reason = check(name, ())
+        if reason:
+            broken[name] = reason
+    return broken
+
+
+def stage_order(targets: Iterable[str] | None = None) -> list[Stage]:
+    """Stages needed for ``targets`` upstream first, registry order kept.
+
+    With ``targets=None``: every registered stage except the :func:`broken_stages`.
+    """
+    discover()
+    if targets is None:
+        broken = broken_stages()
+        names = [name for name in STAGES if name not in broken]
+    else:
+        names = list(targets)
     order: list[Stage] = []
     seen: set[str] = set()
 
