@@ -19,7 +19,7 @@ from faceforge.pbd.constraints.volume import _project_volume
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project(x, w, blocks, iterations,
+def _project(x, w, blocks, iterations, xpbd,
              d_idx, d_rest, d_k, d_c, d_lam,
              b_idx, b_rest, b_k, b_c, b_lam,
              a_idx, a_rest, a_k, a_c, a_lam,
@@ -33,18 +33,18 @@ def _project(x, w, blocks, iterations,
             start = blocks[b, 1]
             stop = blocks[b, 2]
             if kind == 0:
-                _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, start, stop)
+                _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, xpbd, start, stop)
             elif kind == 1:
-                _project_bending(x, w, b_idx, b_rest, b_k, b_c, b_lam, start, stop)
+                _project_bending(x, w, b_idx, b_rest, b_k, b_c, b_lam, xpbd, start, stop)
             elif kind == 2:
-                _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, start, stop)
+                _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, xpbd, start, stop)
             elif kind == 3:
                 _project_volume(x, w, v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref,
-                                v_rest, v_k, v_c, v_lam, v_g, start, stop)
+                                v_rest, v_k, v_c, v_lam, v_g, xpbd, start, stop)
             elif kind == 4:
-                _project_position(x, w, p_idx, p_target, p_k, p_c, p_lam, start, stop)
+                _project_position(x, w, p_idx, p_target, p_k, p_c, p_lam, xpbd, start, stop)
             else:
-                _project_attachment(x, w, t_idx, t_tri, t_bary, t_k, t_c, t_lam, start, stop)
+                _project_attachment(x, w, t_idx, t_tri, t_bary, t_k, t_c, t_lam, xpbd, start, stop)
 
 
 @numba.njit(**NUMBA_OPTIONS)
@@ -76,7 +76,7 @@ def _velocities(x, v, prev, inv_h):
 
 @numba.njit(**NUMBA_OPTIONS)
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
-          substeps, iterations, blocks, lams,
+          substeps, iterations, xpbd, blocks, lams,
           d_idx, d_rest, d_k, d_c,
           b_idx, b_rest, b_k, b_c,
           a_idx, a_rest, a_k, a_c,
@@ -112,7 +112,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
                 else:
                     x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
         lams[:] = 0.0
-        _project(x_out, w, blocks, iterations,
+        _project(x_out, w, blocks, iterations, xpbd,
                  d_idx, d_rest, d_k, d_c, lams[:o1],
                  b_idx, b_rest, b_k, b_c, lams[o1:o2],
                  a_idx, a_rest, a_k, a_c, lams[o2:o3],

@@ -84,7 +84,8 @@ class Solver:
         k = self._k
         _step(state_in.positions, state_in.velocities, state_out.positions, state_out.velocities,
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
-              self._damp, dt / s.substeps, s.substeps, s.iterations, m.blocks, self._lams,
+              self._damp, dt / s.substeps, s.substeps, s.iterations,
+              s.stiffness_mode == "xpbd", m.blocks, self._lams,
               m.distance_indices, m.distance_rest_length, *k["distance"],
               m.bending_indices, m.bending_rest_angle, *k["bending"],
               m.area_indices, m.area_rest_area, *k["area"],

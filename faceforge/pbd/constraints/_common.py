@@ -4,9 +4,9 @@ Every kind linearises its constraint ``C(p)`` as in the paper's Eq. 1 and moves 
 particle along its gradient, ``dp_i = s * w_i * grad_i C``. The scalar ``s`` unifies
 the three stiffness modes (see :mod:`faceforge.pbd.settings`):
 
-* PBD (``c == 0``): ``s = -k C / D`` with ``D = sum_i w_i |grad_i C|^2`` (Müller 2007,
+* PBD (``xpbd`` False): ``s = -k C / D`` with ``D = sum_i w_i |grad_i C|^2`` (Müller 2007,
   Eq. 9 scaled by k, the paper's Eq. 1);
-* XPBD (``k == 1``, ``c = (1 - k_user) / k_user``): ``s = (-C - a lam) / (D + a)`` with
+* XPBD (``xpbd`` True, ``k == 1``, ``c = (1 - k_user) / k_user``): ``s = (-C - a lam) / (D + a)`` with
   the time-step scaled compliance ``a = c D`` (Macklin et al. 2016, Eq. 18). ``lam`` is
   the multiplier accumulated since the start of the substep.
 """
@@ -23,10 +23,13 @@ DEGENERATE = 1e-24
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _multiplier(value, denom, k, c, lam):
+def _multiplier(value, denom, k, c, lam, xpbd):
     """Scaled multiplier ``s`` of one projection (float, units of C / |grad C|^2).
 
     value : C(p); denom : sum_i w_i |grad_i C|^2 (> 0); k : PBD stiffness in [0, 1];
-    c : compliance ratio >= 0 (0 in the PBD modes); lam : accumulated multiplier.
+    c : compliance ratio >= 0; lam : accumulated multiplier; xpbd : bool, False for the
+    PBD modes (then c and lam are ignored: ``s = -k C / D``).
     """
-    return (-k * value - c * denom * lam) / (denom * (1.0 + c))
+    if xpbd:
+        return (-k * value - c * denom * lam) / (denom * (1.0 + c))
+    return -k * value / denom

@@ -31,7 +31,7 @@ def residual_area(positions, triangles, rest_area) -> np.ndarray:
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _solve_area(x, w, i0, i1, i2, rest, k, c, lam):
+def _solve_area(x, w, i0, i1, i2, rest, k, c, lam, xpbd):
     """Project one area constraint in place on ``x (n, 3)``; return the multiplier increment."""
     w0 = w[i0]
     w1 = w[i1]
@@ -71,7 +71,7 @@ def _solve_area(x, w, i0, i1, i2, rest, k, c, lam):
              + w2 * (g2x * g2x + g2y * g2y + g2z * g2z))
     if denom <= 0.0:
         return 0.0
-    s = _multiplier(0.5 * nlen - rest, denom, k, c, lam)
+    s = _multiplier(0.5 * nlen - rest, denom, k, c, lam, xpbd)
     f = s * w0
     x[i0, 0] += f * g0x
     x[i0, 1] += f * g0y
@@ -88,10 +88,15 @@ def _solve_area(x, w, i0, i1, i2, rest, k, c, lam):
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_area(x, w, idx, rest, k, c, lam, start, stop):
-    """Gauss-Seidel sweep over constraints ``start:stop`` in order."""
-    for j in range(start, stop):
-        lam[j] += _solve_area(x, w, idx[j, 0], idx[j, 1], idx[j, 2], rest[j], k[j], c[j], lam[j])
+def _project_area(x, w, idx, rest, k, c, lam, xpbd, start, stop):
+    """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
+    if xpbd:
+        for j in range(start, stop):
+            lam[j] += _solve_area(x, w, idx[j, 0], idx[j, 1], idx[j, 2], rest[j], k[j], c[j],
+                                  lam[j], True)
+    else:
+        for j in range(start, stop):
+            _solve_area(x, w, idx[j, 0], idx[j, 1], idx[j, 2], rest[j], k[j], 0.0, 0.0, False)
 
 
 def solve_area(positions, inv_mass, triangles, rest_area, stiffness) -> np.ndarray:
@@ -102,5 +107,5 @@ def solve_area(positions, inv_mass, triangles, rest_area, stiffness) -> np.ndarr
     k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
     _project_area(x, np.ascontiguousarray(inv_mass, dtype=np.float64), idx,
                   np.ascontiguousarray(rest_area, dtype=np.float64), k,
-                  np.zeros(m), np.zeros(m), 0, m)
+                  np.zeros(m), np.zeros(m), False, 0, m)
     return x

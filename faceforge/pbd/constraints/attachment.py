@@ -35,20 +35,20 @@ def residual_attachment(positions, particles, triangles, bary) -> np.ndarray:
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _solve_attachment(x, w, i, t0, t1, t2, b0, b1, b2, k, c, lam):
+def _solve_attachment(x, w, i, t0, t1, t2, b0, b1, b2, k, c, lam, xpbd):
     """Project one attachment in place (moves ``x[i]`` only); return the multiplier increment."""
     tx = b0 * x[t0, 0] + b1 * x[t1, 0] + b2 * x[t2, 0]
     ty = b0 * x[t0, 1] + b1 * x[t1, 1] + b2 * x[t2, 1]
     tz = b0 * x[t0, 2] + b1 * x[t1, 2] + b2 * x[t2, 2]
-    return _pull(x, w, i, tx, ty, tz, k, c, lam)
+    return _pull(x, w, i, tx, ty, tz, k, c, lam, xpbd)
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_attachment(x, w, idx, tri, bary, k, c, lam, start, stop):
-    """Sweep over constraints ``start:stop`` in order."""
+def _project_attachment(x, w, idx, tri, bary, k, c, lam, xpbd, start, stop):
+    """Sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
     for j in range(start, stop):
         lam[j] += _solve_attachment(x, w, idx[j], tri[j, 0], tri[j, 1], tri[j, 2],
-                                    bary[j, 0], bary[j, 1], bary[j, 2], k[j], c[j], lam[j])
+                                    bary[j, 0], bary[j, 1], bary[j, 2], k[j], c[j], lam[j], xpbd)
 
 
 def solve_attachment(positions, inv_mass, particles, triangles, bary, stiffness) -> np.ndarray:
@@ -60,5 +60,5 @@ def solve_attachment(positions, inv_mass, particles, triangles, bary, stiffness)
     _project_attachment(x, np.ascontiguousarray(inv_mass, dtype=np.float64), idx,
                         np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3),
                         np.ascontiguousarray(bary, dtype=np.float64).reshape(-1, 3), k,
-                        np.zeros(m), np.zeros(m), 0, m)
+                        np.zeros(m), np.zeros(m), False, 0, m)
     return x

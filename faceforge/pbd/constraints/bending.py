@@ -59,7 +59,7 @@ def residual_bending(positions, quads, rest_angle) -> np.ndarray:
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _solve_bending(x, w, i0, i1, i2, i3, rest, k, c, lam):
+def _solve_bending(x, w, i0, i1, i2, i3, rest, k, c, lam, xpbd):
     """Project one dihedral constraint in place on ``x (n, 3)``; return the multiplier increment."""
     w0 = w[i0]
     w1 = w[i1]
@@ -126,7 +126,7 @@ def _solve_bending(x, w, i0, i1, i2, i3, rest, k, c, lam):
              + w2 * a2 * a2 * na_ + w3 * b3 * b3 * nb_)
     if denom <= 0.0:
         return 0.0
-    s = _multiplier(value, denom, k, c, lam)
+    s = _multiplier(value, denom, k, c, lam, xpbd)
     f = s * w0
     x[i0, 0] += f * (a0 * ax + b0 * bx)
     x[i0, 1] += f * (a0 * ay + b0 * by)
@@ -147,11 +147,16 @@ def _solve_bending(x, w, i0, i1, i2, i3, rest, k, c, lam):
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_bending(x, w, idx, rest, k, c, lam, start, stop):
-    """Gauss-Seidel sweep over constraints ``start:stop`` in order."""
-    for j in range(start, stop):
-        lam[j] += _solve_bending(x, w, idx[j, 0], idx[j, 1], idx[j, 2], idx[j, 3],
-                                 rest[j], k[j], c[j], lam[j])
+def _project_bending(x, w, idx, rest, k, c, lam, xpbd, start, stop):
+    """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
+    if xpbd:
+        for j in range(start, stop):
+            lam[j] += _solve_bending(x, w, idx[j, 0], idx[j, 1], idx[j, 2], idx[j, 3],
+                                     rest[j], k[j], c[j], lam[j], True)
+    else:
+        for j in range(start, stop):
+            _solve_bending(x, w, idx[j, 0], idx[j, 1], idx[j, 2], idx[j, 3],
+                           rest[j], k[j], 0.0, 0.0, False)
 
 
 def solve_bending(positions, inv_mass, quads, rest_angle, stiffness) -> np.ndarray:
@@ -162,5 +167,5 @@ def solve_bending(positions, inv_mass, quads, rest_angle, stiffness) -> np.ndarr
     k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
     _project_bending(x, np.ascontiguousarray(inv_mass, dtype=np.float64), idx,
                      np.ascontiguousarray(rest_angle, dtype=np.float64), k,
-                     np.zeros(m), np.zeros(m), 0, m)
+                     np.zeros(m), np.zeros(m), False, 0, m)
     return x

@@ -29,7 +29,7 @@ def residual_distance(positions, indices, rest_length) -> np.ndarray:
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _solve_distance(x, w, i0, i1, rest, k, c, lam):
+def _solve_distance(x, w, i0, i1, rest, k, c, lam, xpbd):
     """Project one distance constraint in place on ``x (n, 3)``; return the multiplier increment."""
     w0 = w[i0]
     w1 = w[i1]
@@ -43,7 +43,7 @@ def _solve_distance(x, w, i0, i1, rest, k, c, lam):
     if d2 <= DEGENERATE * rest * rest or d2 == 0.0:
         return 0.0  # coincident particles: no direction to push along
     d = math.sqrt(d2)
-    s = _multiplier(d - rest, denom, k, c, lam) / d
+    s = _multiplier(d - rest, denom, k, c, lam, xpbd) / d
     x[i0, 0] += s * w0 * dx
     x[i0, 1] += s * w0 * dy
     x[i0, 2] += s * w0 * dz
@@ -54,10 +54,14 @@ def _solve_distance(x, w, i0, i1, rest, k, c, lam):
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_distance(x, w, idx, rest, k, c, lam, start, stop):
-    """Gauss-Seidel sweep over constraints ``start:stop`` in order."""
-    for j in range(start, stop):
-        lam[j] += _solve_distance(x, w, idx[j, 0], idx[j, 1], rest[j], k[j], c[j], lam[j])
+def _project_distance(x, w, idx, rest, k, c, lam, xpbd, start, stop):
+    """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
+    if xpbd:
+        for j in range(start, stop):
+            lam[j] += _solve_distance(x, w, idx[j, 0], idx[j, 1], rest[j], k[j], c[j], lam[j], True)
+    else:
+        for j in range(start, stop):
+            _solve_distance(x, w, idx[j, 0], idx[j, 1], rest[j], k[j], 0.0, 0.0, False)
 
 
 def solve_distance(positions, inv_mass, indices, rest_length, stiffness) -> np.ndarray:
@@ -68,5 +72,5 @@ def solve_distance(positions, inv_mass, indices, rest_length, stiffness) -> np.n
     k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
     _project_distance(x, np.ascontiguousarray(inv_mass, dtype=np.float64), idx,
                       np.ascontiguousarray(rest_length, dtype=np.float64), k,
-                      np.zeros(m), np.zeros(m), 0, m)
+                      np.zeros(m), np.zeros(m), False, 0, m)
     return x

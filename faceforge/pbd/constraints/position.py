@@ -30,7 +30,7 @@ def residual_position(positions, particles, targets) -> np.ndarray:
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _pull(x, w, i, tx, ty, tz, k, c, lam):
+def _pull(x, w, i, tx, ty, tz, k, c, lam, xpbd):
     """Move particle ``i`` toward ``t`` (one-sided); return the multiplier increment."""
     wi = w[i]
     if wi == 0.0:
@@ -41,7 +41,7 @@ def _pull(x, w, i, tx, ty, tz, k, c, lam):
     d = math.sqrt(dx * dx + dy * dy + dz * dz)
     if d == 0.0:
         return 0.0
-    s = _multiplier(d, wi, k, c, lam)
+    s = _multiplier(d, wi, k, c, lam, xpbd)
     f = s * wi / d
     x[i, 0] += f * dx
     x[i, 1] += f * dy
@@ -50,16 +50,16 @@ def _pull(x, w, i, tx, ty, tz, k, c, lam):
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _solve_position(x, w, i, target, slot, k, c, lam):
+def _solve_position(x, w, i, target, slot, k, c, lam, xpbd):
     """Project one position constraint (target row ``slot`` of ``target (m, 3)``)."""
-    return _pull(x, w, i, target[slot, 0], target[slot, 1], target[slot, 2], k, c, lam)
+    return _pull(x, w, i, target[slot, 0], target[slot, 1], target[slot, 2], k, c, lam, xpbd)
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_position(x, w, idx, target, k, c, lam, start, stop):
-    """Sweep over constraints ``start:stop`` in order."""
+def _project_position(x, w, idx, target, k, c, lam, xpbd, start, stop):
+    """Sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
     for j in range(start, stop):
-        lam[j] += _solve_position(x, w, idx[j], target, j, k[j], c[j], lam[j])
+        lam[j] += _solve_position(x, w, idx[j], target, j, k[j], c[j], lam[j], xpbd)
 
 
 def solve_position(positions, inv_mass, particles, targets, stiffness) -> np.ndarray:
@@ -70,5 +70,5 @@ def solve_position(positions, inv_mass, particles, targets, stiffness) -> np.nda
     k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
     _project_position(x, np.ascontiguousarray(inv_mass, dtype=np.float64), idx,
                       np.ascontiguousarray(targets, dtype=np.float64).reshape(-1, 3), k,
-                      np.zeros(m), np.zeros(m), 0, m)
+                      np.zeros(m), np.zeros(m), False, 0, m)
     return x

@@ -60,7 +60,7 @@ def residual_volume(positions, triangles, rest_volume) -> float:
 
 
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g):
+def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     """Project one volume constraint in place on ``x (n, 3)``.
 
     particles : (p,) int global ids of the body; tris : (f, 3) int local ids;
@@ -138,7 +138,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g):
     denom /= 36.0
     if denom <= 0.0:
         return 0.0
-    s = _multiplier(vol / 6.0 - rest, denom, k, c, lam)
+    s = _multiplier(vol / 6.0 - rest, denom, k, c, lam, xpbd)
     f6 = s / 6.0
     for q in range(npart):
         i = particles[q]
@@ -151,12 +151,12 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g):
 
 @numba.njit(**NUMBA_OPTIONS)
 def _project_volume(x, w, pstart, particles, tstart, tris, rstart, ref, rest, k, c, lam,
-                    g, start, stop):
+                    g, xpbd, start, stop):
     """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``tstart``, ``rstart``)."""
     for j in range(start, stop):
         lam[j] += _solve_volume(x, w, particles[pstart[j]:pstart[j + 1]],
                                 tris[tstart[j]:tstart[j + 1]], ref[rstart[j]:rstart[j + 1]],
-                                rest[j], k[j], c[j], lam[j], g)
+                                rest[j], k[j], c[j], lam[j], g, xpbd)
 
 
 def localize(triangles: np.ndarray):
@@ -181,5 +181,5 @@ def solve_volume(positions, inv_mass, triangles, rest_volume, stiffness) -> np.n
                     np.array([0, len(particles)]), particles, np.array([0, len(local)]), local,
                     np.array([0, len(ref)]), ref, np.array([float(rest_volume)]),
                     one * float(stiffness), one * 0.0, one * 0.0,
-                    np.zeros((len(particles), 3)), 0, 1)
+                    np.zeros((len(particles), 3)), False, 0, 1)
     return x
