@@ -19,8 +19,10 @@ every frame.
 Lips: skin of the upper lip may bind only to the cranium (upper structures),
 skin of the lower lip only to the mandible (``lip_sides`` from
 :func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
-A lip vertex whose rays meet only the other jaw's bone binds to the closest
-point of its own bone instead (within ``max_distance``).
+A lip vertex ignores muscle hits on the other side of the lip line (the lower
+lip never binds to the upper half of the orbicularis oris). A lip vertex whose
+rays meet only the other jaw's bone binds to the closest point of its own bone
+instead (within ``max_distance``).
 
 Ray casting uses :class:`faceforge.geometry.rays.RayCaster` (trimesh, Embree
 where installed); all bodies of one pass are merged into one mesh so every pass
@@ -162,10 +164,11 @@ def _merge(bodies: list[Body], ids: list[int]):
     return np.concatenate(verts), np.concatenate(faces), np.concatenate(owner)
 
 
-def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed):
+def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None, side_of=None):
     """Best hit per ray among ``bodies[ids]``: smallest ``rank`` then distance.
 
-    ``allowed (k, n_bodies) bool`` filters bodies per ray. Returns
+    ``allowed (k, n_bodies) bool`` filters bodies per ray; with ``side_of`` a hit
+    on the other side of the lip line than its ray's ``ray_side`` is dropped. Returns
     ``(body (k,), local_face (k,), points (k, 3), dist (k,))``, body -1 on a miss.
     """
     k = len(origins)
@@ -185,6 +188,12 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed):
     b = owner[tri]
     keep = (t >= 0) & (t <= max_distance) & allowed[ray, b]
     ray, tri, loc, t, b = ray[keep], tri[keep], loc[keep], t[keep], b[keep]
+    if side_of is not None and len(ray):
+        rs = np.asarray(ray_side)[ray]
+        check = rs != 0
+        ok = np.ones(len(ray), bool)
+        ok[check] = np.asarray(side_of(loc[check])) * rs[check] >= 0
+        ray, tri, loc, t, b = ray[ok], tri[ok], loc[ok], t[ok], b[ok]
     if len(ray) == 0:
         return body, face, pts, dist
     order = np.lexsort((t, rank[b], ray))
@@ -224,7 +233,7 @@ def _lip_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist) 
 
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
-              normals=None, depth_rank=None) -> Binding:
+              normals=None, depth_rank=None, side_of=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -246,6 +255,11 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         Superficiality of each body, smaller = more superficial (e.g. minus the
         muscle layer); among equal ranks the nearest hit wins. Default: the
         muscles' order in ``bodies``.
+    side_of : callable, optional
+        ``points (k, 3) -> (k,) int`` side of the lip line (+1 above, -1 below,
+        0 far; :func:`faceforge.anatomy.mouth.side_of_points`). A lip vertex
+        (``lip_sides != 0``) ignores hits on the other side, so the lower lip
+        never binds to the upper part of a muscle around the mouth.
 
     Returns
     -------
@@ -283,7 +297,8 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     passes = ((muscles, +1.0), (muscles, -1.0), (skull, -1.0))
     for p, (ids, sign) in enumerate(passes):
         todo = np.flatnonzero((body < 0) & has_dir)
-        res = _cast(bodies, ids, rank, v[todo], sign * nrm[todo], max_distance, allowed[todo])
+        res = _cast(bodies, ids, rank, v[todo], sign * nrm[todo], max_distance, allowed[todo],
+                    sides[todo], side_of)
         hit = res[0] >= 0
         t = todo[hit]
         body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
@@ -480,7 +495,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     BoundSkin
     """
     from faceforge.anatomy.influence import influence_weights
-    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side
+    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side, side_of_points
 
     v, f = check_mesh(vertices, faces)
     pts = {k: np.asarray(p, FLOAT) for k, p in landmarks.items()}
@@ -488,6 +503,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     lip_ids = dict(zip(lips, _nearest_vertex(v, np.array([pts[k] for k in lips])))) if lips else {}
     cut = cut_mouth(v, f, lip_ids, up=up)
     sides = lip_side(cut, up=up)
+
+    def side_of(points):
+        return side_of_points(points, cut, up=up)
+
 
     order = sorted(range(len(muscles)), key=lambda i: -int(muscles[i][1]))  # stable
     bodies = [Body(str(muscles[i][0]), "muscle", muscles[i][2], muscles[i][3]) for i in order]
@@ -500,7 +519,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         rank.append(0)
     diagonal = float(np.linalg.norm(np.ptp(v, axis=0)))
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
-                        depth_rank=rank)
+                        depth_rank=rank, side_of=side_of)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None

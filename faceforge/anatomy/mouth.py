@@ -36,7 +36,7 @@ import numpy as np
 
 from faceforge.constants import FLOAT, INT
 
-__all__ = ["MouthCut", "LIP_FDPS", "lip_contours", "cut_mouth", "lip_side"]
+__all__ = ["MouthCut", "LIP_FDPS", "lip_contours", "cut_mouth", "lip_side", "side_of_points"]
 
 #: FDPs of the inner lip contour, corner to corner
 UPPER_FDPS = ("2.4", "2.6", "2.2", "2.7", "2.5")
@@ -276,37 +276,63 @@ def _cut_ring(v: np.ndarray, f: np.ndarray, ring: np.ndarray, up: np.ndarray) ->
                     np.asarray(lower, INT))
 
 
-def lip_side(cut: MouthCut, up=(0.0, 1.0, 0.0), radius: float | None = None) -> np.ndarray:
-    """Which lip each working vertex belongs to: +1 upper, -1 lower, 0 neither.
+def _lip_line(cut: MouthCut) -> np.ndarray:
+    """Midpoints between each contour vertex and the nearest vertex of the other contour."""
+    from scipy.spatial import cKDTree
+
+    pu, pl = cut.vertices[cut.upper], cut.vertices[cut.lower]
+    return np.concatenate([0.5 * (pu + pl[cKDTree(pl).query(pu)[1]]),
+                           0.5 * (pl + pu[cKDTree(pu).query(pl)[1]])])
+
+
+def side_of_points(points, cut: MouthCut, up=(0.0, 1.0, 0.0), radius: float | None = None) -> np.ndarray:
+    """+1 above the lip line, -1 below, 0 farther than ``radius`` from it (or no lips).
 
     The lip line is the chain of midpoints between each contour vertex and the
-    nearest vertex of the other contour. A vertex within ``radius`` of it is
-    upper when it lies above its nearest lip-line point along ``up``, lower
-    otherwise; the contours' own interior vertices are upper / lower by
-    definition and the two corners are 0. ``radius`` defaults to the mouth
+    nearest vertex of the other contour; a point is above when it lies above
+    its nearest lip-line point along ``up``. ``radius`` defaults to the mouth
     width (corner to corner).
+
+    Parameters
+    ----------
+    points : (k, 3) float
 
     Returns
     -------
-    (n,) int8 over ``cut.vertices``
+    (k,) int8
     """
-    p = cut.vertices
+    p = np.asarray(points, FLOAT).reshape(-1, 3)
     out = np.zeros(len(p), np.int8)
-    if len(cut.upper) < 2 or len(cut.lower) < 2:
+    if len(cut.upper) < 2 or len(cut.lower) < 2 or len(p) == 0:
         return out
     from scipy.spatial import cKDTree
 
     u = np.asarray(up, FLOAT) / np.linalg.norm(up)
-    pu, pl = p[cut.upper], p[cut.lower]
-    line = np.concatenate([0.5 * (pu + pl[cKDTree(pl).query(pu)[1]]),
-                           0.5 * (pl + pu[cKDTree(pu).query(pl)[1]])])
-    width = np.linalg.norm(pu[0] - pu[-1])
+    line = _lip_line(cut)
+    width = np.linalg.norm(cut.vertices[cut.upper[0]] - cut.vertices[cut.upper[-1]])
     r = width if radius is None else float(radius)
     dist, idx = cKDTree(line).query(p)
     near = dist <= r
     above = p @ u >= line[np.minimum(idx, len(line) - 1)] @ u
     out[near & above] = 1
     out[near & ~above] = -1
+    return out
+
+
+def lip_side(cut: MouthCut, up=(0.0, 1.0, 0.0), radius: float | None = None) -> np.ndarray:
+    """Which lip each working vertex belongs to: +1 upper, -1 lower, 0 neither.
+
+    :func:`side_of_points` of the working vertices, except that the contours'
+    own interior vertices are upper / lower by definition and the two corners
+    are 0.
+
+    Returns
+    -------
+    (n,) int8 over ``cut.vertices``
+    """
+    out = side_of_points(cut.vertices, cut, up, radius)
+    if len(cut.upper) < 2 or len(cut.lower) < 2:
+        return out
     out[cut.upper[1:-1]] = 1
     out[cut.lower[1:-1]] = -1
     out[[cut.upper[0], cut.upper[-1]]] = 0

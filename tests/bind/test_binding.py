@@ -106,3 +106,20 @@ def test_arrays_round_trip(skin):
                                  for k, a in b.as_arrays().items()})
     for key, a in b.as_arrays().items():
         np.testing.assert_array_equal(getattr(again, key), a)
+
+
+def test_side_of_drops_hits_across_the_lip_line(skin):
+    v, f = skin
+    muscle = Body("ring", "muscle", *sphere(0.9, 3))
+    sides = np.where(v[:, 1] >= 0, 1, -1)
+
+    def side_of(points):  # the "lip line" is y = 0.3: hits above it are "upper"
+        return np.where(points[:, 1] >= 0.3, 1, -1)
+
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of)
+    bound = b.vertex_ids
+    hit_side = side_of(b.points)
+    assert np.all(hit_side * sides[bound] >= 0)
+    # vertices in 0 <= y < 0.3 (upper side, hits below the line) are left unbound
+    band = (v[:, 1] >= 0) & (v[:, 1] < 0.3 * 0.9)
+    assert band.any() and np.all(b.status[band] == UNBOUND)
