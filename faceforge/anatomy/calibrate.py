@@ -254,7 +254,7 @@ def measure_coupling(mapping: FapMapping, simulate, rest: np.ndarray, probes: di
     """Set each ``coupling[jaw_fap]`` ratio to what open_jaw alone does to the entry's FDP.
 
     Applies ``jaw_fap`` alone at ``value`` FAPU and, for every entry coupled to it, stores
-    (displacement of the entry's lead FDP in its FAPU) / value. Entries without a probe
+    (displacement of the first of the entry's FDPs the skin has, in its FAPU) / value. Entries without a probe
     keep their ratio. Units must agree (open_jaw and the lower-lip FAPs are both MNS).
     """
     frames = np.zeros((1, N_FAPS))
@@ -262,7 +262,8 @@ def measure_coupling(mapping: FapMapping, simulate, rest: np.ndarray, probes: di
     skin = simulate(mapping, frames)
     out = mapping
     for idx, e in enumerate(mapping.entries):
-        if jaw_fap in e.coupling and e.faps[0] in probes:
-            ratio = float(measure(rest, skin, probes[e.faps[0]])[0]) / value
+        seen = [f for f in e.faps if f in probes]
+        if jaw_fap in e.coupling and seen:
+            ratio = float(measure(rest, skin, probes[seen[0]])[0]) / value
             out = with_entry(out, idx, coupling={**e.coupling, jaw_fap: ratio})
     return out

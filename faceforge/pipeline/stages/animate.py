@@ -304,6 +304,8 @@ def requested_values(mapping, config) -> dict:
     jaw_mag = float(config.get("animate.calibrate.jaw_magnitude"))
     out = {}
     for e in mapping.entries:
+        if not (e.positive or e.negative or e.jaw is not None):
+            continue                      # nothing to drive (e.g. a pure jaw-coupling entry)
         top = jaw_mag if (e.jaw is not None and e.jaw[0] == "pitch") else float(mags[e.fapu])
         values = [0.5 * top, top]
         two_sided = bool(e.negative) or (e.jaw is not None and e.jaw[0] == "yaw")

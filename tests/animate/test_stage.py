@@ -1,0 +1,152 @@
+"""Scenario tests: the animate and calibrate stages on a synthetic fitted + bound head.
+
+The head (tests/animate/synthetic.py) goes through the real bind stage; the stages then run
+the real layered system (kinematic skull, one PBD muscle, the PBD skin) frame by frame.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from tests.animate import synthetic as S
+
+ROOT = Path(__file__).resolve().parents[2]
+JOY = ROOT / "samples" / "fap" / "joy.fap"
+SETS = ("animate.calibrate.settle_frames=15", "animate.calibrate.refine=1")
+
+
+@pytest.fixture(scope="session")
+def workdir(tmp_path_factory):
+    """A workdir with fit/ and bind/ of the synthetic head and the synthetic mapping."""
+    from faceforge.io.config import load_config
+    from faceforge.pipeline import StageContext
+    from faceforge.pipeline.stages.bind import run as run_bind
+
+    root = tmp_path_factory.mktemp("animate_head")
+    S.write_fit(root / "fit")
+    (root / "bind").mkdir()
+    run_bind(StageContext(name="bind", config=load_config(), params={}, out_dir=root / "bind",
+                          workdir=root, deps=("fit",)))
+    (root / "mapping.yaml").write_text(yaml.safe_dump(S.MAPPING))
+    return root
+
+
+@pytest.fixture(scope="session")
+def patched():
+    """The fit stage does not yet rebuild muscles from fit.npz: use the synthetic builder."""
+    import faceforge.pipeline.stages.animate as stage
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(stage, "_muscle_system", S.muscle_system)
+    yield stage
+    mp.undo()
+
+
+def run_stage(stage_name, workdir, params, sets=SETS):
+    from faceforge.io.config import load_config
+    from faceforge.pipeline import StageContext, get_stage
+
+    out = workdir / f"{stage_name}.out"
+    if out.exists():
+        import shutil
+        shutil.rmtree(out)
+    out.mkdir()
+    ctx = StageContext(name=stage_name, config=load_config(None, sets), params=params, out_dir=out,
+                       workdir=workdir, deps=("fit", "bind"))
+    get_stage(stage_name).run(ctx)
+    return out
+
+
+@pytest.fixture(scope="session")
+def calibrated(workdir, patched):
+    return run_stage("calibrate", workdir, {"fap_mapping": str(workdir / "mapping.yaml")})
+
+
+@pytest.fixture(scope="session")
+def joy(workdir, patched):
+    return run_stage("animate", workdir, {"fap": str(JOY), "fap_mapping": str(workdir / "mapping.yaml")})
+
+
+def test_joy_plays_clean_in_user_vertex_order(joy):
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import read_fap
+
+    d = load_npz(joy / "animation.npz")
+    report = json.loads((joy / "report.json").read_text())
+    v, _ = S.skin_mesh()
+    track = read_fap(JOY)
+    assert d["frames"].shape == (track.n_frames, len(v), 3)       # the lip cut's copies dropped
+    assert float(d["fps"]) == track.fps
+    checks = report["checks"]
+    assert checks["non_finite"] == 0 and checks["inverted_triangles"] == 0
+    assert checks["skin_inside_skull"] == 0
+    assert report["max_contraction"] > 0.1 and report["max_jaw"][0] > 0.0
+    # the Xface joy file carries eyelid/eyeball/head FAPs that this head cannot play
+    assert {19, 23, 48} <= set(report["unmapped_faps"])
+    # frame 0 of joy.fap is nearly neutral; the peak moves the skin
+    assert np.abs(d["frames"][0] - v).max() < 0.02
+    assert np.abs(d["frames"] - v).max() > 0.02
+
+
+def test_exports_round_trip_with_the_input_vertex_order(joy, tmp_path):
+    from faceforge.io.export import export_animation, read_glb, read_mdd, read_obj_sequence, read_pc2
+    from faceforge.io.stagefiles import load_npz
+
+    d = load_npz(joy / "animation.npz")
+    frames, fps = d["frames"][:12], float(d["fps"])
+    _, faces = S.skin_mesh()
+    pc2 = read_pc2(export_animation(tmp_path / "a.pc2", frames, faces, fps))[0]
+    mdd = read_mdd(export_animation(tmp_path / "a.mdd", frames, faces, fps))[0]
+    assert np.array_equal(pc2, frames) and np.array_equal(mdd, frames)
+    obj = read_obj_sequence(export_animation(tmp_path / "seq", frames, faces, fps))
+    assert np.allclose(obj[0], frames, atol=1e-5)
+    glb = read_glb(export_animation(tmp_path / "a.glb", frames, faces, fps))
+    assert np.allclose(glb[0], frames, atol=1e-5)
+
+
+def test_neutral_track_is_a_fixed_point(workdir, patched, tmp_path):
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import FapTrack, write_fap
+
+    n = 6
+    track = FapTrack.from_given(25.0, np.ones((n, 68), bool), np.zeros((n, 68)))
+    write_fap(tmp_path / "zero.fap", track)
+    out = run_stage("animate", workdir, {"fap": str(tmp_path / "zero.fap"),
+                                         "fap_mapping": str(workdir / "mapping.yaml")})
+    frames = load_npz(out / "animation.npz")["frames"]
+    v, _ = S.skin_mesh()
+    assert np.abs(frames - v.astype(np.float32)).max() < 1e-5
+
+
+def test_calibration_report_meets_the_acceptance(calibrated):
+    report = json.loads((calibrated / "report.json").read_text())
+    s = report["summary"]
+    assert s["all"]["count"] >= 6
+    assert s["all"]["median_relative_error"] <= 0.10
+    assert s["all"]["median_relative_error"] < s["all_uncalibrated"]["median_relative_error"]
+    # open_jaw parts the lips by the requested amount within 15 %
+    assert report["open_jaw_lip_separation"]["relative_error"] <= 0.15
+    # the calibrated mapping is a valid mapping with response curves and a measured coupling
+    from faceforge.anatomy.fap_mapping import load_fap_mapping
+
+    m = load_fap_mapping(calibrated / "fap_mapping.yaml")
+    assert m.entry_of(3).response is not None and m.entry_of(59).response is not None
+    assert m.entry_of(52).coupling[3] < 0.0           # open_jaw lowers the lower lip
+    assert "relative_error" in json.dumps(report["rows"][0]) or "relative_error" in report["rows"][0]
+    assert "median relative error" in (calibrated / "report.txt").read_text()
+
+
+def test_expression_preset_through_fap2(workdir, patched, tmp_path):
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import expression_track, write_fap
+
+    write_fap(tmp_path / "joy_preset.fap", expression_track("joy", intensity=0.8, fps=25, seconds=0.6, ramp=0.2))
+    out = run_stage("animate", workdir, {"fap": str(tmp_path / "joy_preset.fap"),
+                                         "fap_mapping": str(workdir / "mapping.yaml")})
+    d = load_npz(out / "animation.npz")
+    c = d["contractions"][:, 0]
+    assert c[0] == 0.0 and c[-1] == 0.0                        # ramps in from and out to neutral
+    assert c.max() == pytest.approx(0.8 * 150 * 0.003)         # joy's corner FAPs x intensity x gain
