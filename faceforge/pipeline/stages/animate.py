@@ -412,14 +412,16 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
     mesh = app.workspace.load_params().get("mesh")
     if not mesh:
         raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
-    v, faces, _ = load_mesh(mesh)
+    v, faces, info = load_mesh(mesh)
     if len(v) != frames.shape[1]:
         raise StageError(f"{mesh} has {len(v)} vertices but the animation {frames.shape[1]}; "
                          "rerun `faceforge fit`", mesh)
     if output:
         from faceforge.io.export import export_animation
+        from faceforge.io.export_common import polygons_from_fan
 
-        written = export_animation(output, frames, faces, fps)
+        polygons = polygons_from_fan(faces, info.face_source)      # the input's quads / n-gons
+        written = export_animation(output, frames, polygons, fps)
         app.log(f"animate: wrote {written} ({len(frames)} frames, {frames.shape[1]} vertices, {fps:g} fps)")
     if preview:
         from faceforge.viz.contact_sheet import contact_sheet, pick_frames
