@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from faceforge.pbd._kernels import _step
+from faceforge.pbd.constraints.bending import rest_cos_sin
 from faceforge.pbd.model import Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
@@ -54,6 +55,7 @@ class Solver:
         counts = np.diff(m.volume_particle_start)
         self._vol_g = np.zeros((int(counts.max()) if len(counts) else 1, 3))
         self._damp = (1.0 - s.damping) ** (1.0 / s.substeps)
+        self._bend_cs = rest_cos_sin(m.bending_rest_angle)
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
@@ -87,7 +89,7 @@ class Solver:
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", m.blocks, self._lams,
               m.distance_indices, m.distance_rest_length, *k["distance"],
-              m.bending_indices, m.bending_rest_angle, *k["bending"],
+              m.bending_indices, self._bend_cs, *k["bending"],
               m.area_indices, m.area_rest_area, *k["area"],
               m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
               m.volume_local_triangles, m.volume_reference_start, m.volume_reference,

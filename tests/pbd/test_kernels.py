@@ -9,7 +9,7 @@ from faceforge.pbd.constraints import (
     init_area, init_bending, init_distance, init_volume, solve_attachment, solve_position,
     solve_volume)
 from faceforge.pbd.constraints.area import _project_area
-from faceforge.pbd.constraints.bending import _project_bending, dihedral_angle
+from faceforge.pbd.constraints.bending import _project_bending, dihedral_angle, rest_cos_sin
 from faceforge.pbd.constraints.distance import _project_distance
 from faceforge.pbd.constraints.volume import reference_vertices
 from tests.pbd import twins
@@ -57,10 +57,22 @@ def test_bending_matches_twin(mesh, xpbd):
     lam0 = rng.normal(size=m) * 0.01 if xpbd else np.zeros(m)
     want, want_lam = twins.bending(x, w, q, r, k, c, lam0)
     got, lam = x.copy(), lam0.copy()
-    _project_bending(got, w, q, r, k, c, lam, xpbd, 0, m)
+    _project_bending(got, w, q, rest_cos_sin(r), k, c, lam, xpbd, 0, m)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
     if xpbd:
         np.testing.assert_allclose(lam, want_lam, rtol=1e-8, atol=1e-12)
+
+
+def test_deviation_is_atan2_of_the_rotated_pair():
+    from faceforge.pbd.constraints.bending import _deviation
+    rng = np.random.default_rng(9)
+    for theta in np.concatenate([rng.uniform(-np.pi, np.pi, 200), [0.0, 1e-12, -0.24, 0.25]]):
+        y, x = np.sin(theta) * 3.0, np.cos(theta) * 3.0
+        got = _deviation(y, x)
+        assert got == twins.deviation(y, x, 0.0)
+        assert abs(got - theta) <= 1.3e-9 * abs(theta) + 1e-15  # Padé branch is this close
+        assert np.sign(got) == np.sign(theta)
+    assert _deviation(0.0, 1.0) == 0.0
 
 
 def test_bending_gradient_is_the_derivative_of_the_angle():

@@ -36,11 +36,22 @@ def distance(x, w, pairs, rest, k, c=None, lam=None):
     return x, lam
 
 
-def _angle(p0, p1, p2, p3):
+def _sin_cos(p0, p1, p2, p3):
     e = p1 - p0
     na = np.cross(e, p2 - p0)
     nb = np.cross(p0 - p1, p3 - p1)
-    return math.atan2(float(np.cross(na, nb) @ e) / float(np.linalg.norm(e)), float(na @ nb))
+    return float(np.cross(na, nb) @ e) / float(np.linalg.norm(e)), float(na @ nb)
+
+
+def deviation(sin, cos, rest):
+    """theta - rest from the (sin, cos) pair, as the kernel: Padé atan near 0, else atan2."""
+    y = sin * math.cos(rest) - cos * math.sin(rest)
+    x = cos * math.cos(rest) + sin * math.sin(rest)
+    if x > 0 and abs(y) <= 0.25 * x:
+        z = y / x
+        z2 = z * z
+        return z * (945.0 + z2 * (735.0 + 64.0 * z2)) / (945.0 + z2 * (1050.0 + 225.0 * z2))
+    return math.atan2(y, x)
 
 
 def bending_gradient(p0, p1, p2, p3):
@@ -69,7 +80,7 @@ def bending(x, w, quads, rest, k, c=None, lam=None):
         ee = float(e @ e)
         if ee == 0 or na @ na <= 1e-24 * ee * ee or nb @ nb <= 1e-24 * ee * ee:
             continue
-        value = (_angle(*p) - rest[j] + math.pi) % (2 * math.pi) - math.pi
+        value = deviation(*_sin_cos(*p), rest[j])
         lam[j] += _apply(x, w, q, bending_gradient(*p), value, k[j], c[j], lam[j])
     return x, lam
 

@@ -9,7 +9,8 @@ normals ``nA = (p1 - p0) x (p2 - p0)``, ``nB = (p0 - p1) x (p3 - p1)`` and
     theta = atan2((nA x nB) . e / |e|, nA . nB)            (0 when flat, in (-pi, pi])
 
 and ``C = wrap(theta - theta0)`` (Müller et al. 2007, appendix A, here with a signed
-angle so that flat and folded configurations stay well defined). With
+angle so that flat and folded configurations stay well defined). The kernel
+evaluates ``C`` as ``atan2`` of the rotated pair (sin, cos) (see ``_deviation``). With
 ``a = nA / |nA|^2`` and ``b = nB / |nB|^2`` (Bridson et al. 2003):
 
     grad_p2 = -|e| a                  grad_p3 = -|e| b
@@ -58,88 +59,106 @@ def residual_bending(positions, quads, rest_angle) -> np.ndarray:
     return _wrap(dihedral_angle(positions, quads) - np.asarray(rest_angle, dtype=np.float64))
 
 
+#: below this |tan(theta - theta0)| the deviation uses a rational approximation of atan
+SMALL_TAN = 0.25
+
+
 @numba.njit(inline="always", **NUMBA_OPTIONS)
-def _solve_bending(x, w, i0, i1, i2, i3, rest, k, c, lam, xpbd):
-    """Project one dihedral constraint in place on ``x (n, 3)``; return the multiplier increment."""
+def _deviation(y, x):
+    """``atan2(y, x)`` for the angle deviation: libm for large angles, and for
+    ``x > 0, |y| <= SMALL_TAN x`` (within 14 degrees) the [5/4] Padé approximant of atan,
+    ``z (945 + 735 z^2 + 64 z^4) / (945 + 1050 z^2 + 225 z^4)`` with ``z = y / x``
+    (relative error < 1.3e-9 there). Odd, monotone and exact at 0, so the constraint's
+    solution (deviation 0) is unchanged; only the step length differs by < 1.3e-9
+    relative. It saves the ~30 ns of a libm atan2 in the common case."""
+    if x > 0.0 and abs(y) <= SMALL_TAN * x:
+        z = y / x
+        z2 = z * z
+        return z * (945.0 + z2 * (735.0 + 64.0 * z2)) / (945.0 + z2 * (1050.0 + 225.0 * z2))
+    return math.atan2(y, x)
+
+
+@numba.njit(inline="always", **NUMBA_OPTIONS)
+def _solve_bending(x, w, i0, i1, i2, i3, rest_cos, rest_sin, k, c, lam, xpbd):
+    """Project one dihedral constraint in place on ``x (n, 3)``; return the multiplier increment.
+
+    The rest angle enters as its cosine and sine: the deviation is
+    ``atan2(sin(theta - theta0), cos(theta - theta0))``, so no wrapping is needed.
+    """
     w0 = w[i0]
     w1 = w[i1]
     w2 = w[i2]
     w3 = w[i3]
     if w0 + w1 + w2 + w3 == 0.0:
         return 0.0
-    ex = x[i1, 0] - x[i0, 0]
-    ey = x[i1, 1] - x[i0, 1]
-    ez = x[i1, 2] - x[i0, 2]
-    e2 = ex * ex + ey * ey + ez * ez
-    if e2 == 0.0:
-        return 0.0
-    # triangle A (p0, p1, p2): nA = e x (p2 - p0)
-    ux = x[i2, 0] - x[i0, 0]
-    uy = x[i2, 1] - x[i0, 1]
-    uz = x[i2, 2] - x[i0, 2]
-    ax = ey * uz - ez * uy
+    p0x = x[i0, 0]
+    p0y = x[i0, 1]
+    p0z = x[i0, 2]
+    p1x = x[i1, 0]
+    p1y = x[i1, 1]
+    p1z = x[i1, 2]
+    ex = p1x - p0x
+    ey = p1y - p0y
+    ez = p1z - p0z
+    ux = x[i2, 0] - p0x  # p2 - p0
+    uy = x[i2, 1] - p0y
+    uz = x[i2, 2] - p0z
+    vx = x[i3, 0] - p1x  # p3 - p1
+    vy = x[i3, 1] - p1y
+    vz = x[i3, 2] - p1z
+    ax = ey * uz - ez * uy  # nA = e x u
     ay = ez * ux - ex * uz
     az = ex * uy - ey * ux
-    # triangle B (p1, p0, p3): nB = (p0 - p1) x (p3 - p1) = (p3 - p1) x e
-    vx = x[i3, 0] - x[i1, 0]
-    vy = x[i3, 1] - x[i1, 1]
-    vz = x[i3, 2] - x[i1, 2]
-    bx = vy * ez - vz * ey
+    bx = vy * ez - vz * ey  # nB = v x e
     by = vz * ex - vx * ez
     bz = vx * ey - vy * ex
+    ee = ex * ex + ey * ey + ez * ez
     na2 = ax * ax + ay * ay + az * az
     nb2 = bx * bx + by * by + bz * bz
-    tiny = DEGENERATE * e2 * e2
-    if na2 <= tiny or nb2 <= tiny:
-        return 0.0  # a zero-area triangle has no normal
-    elen = math.sqrt(e2)
-    # signed angle
-    cx = ay * bz - az * by
-    cy = az * bx - ax * bz
-    cz = ax * by - ay * bx
-    sin = (cx * ex + cy * ey + cz * ez) / elen
+    if not (na2 > DEGENERATE * ee * ee and nb2 > DEGENERATE * ee * ee):
+        return 0.0  # zero-length edge or zero-area triangle: no normal
+    elen = math.sqrt(ee)
+    # sin-part (nA x nB) . e / |e| = -det(e, u, v) |e| ; cos-part nA . nB
+    det = ex * (uy * vz - uz * vy) + ey * (uz * vx - ux * vz) + ez * (ux * vy - uy * vx)
+    sin = -det * elen
     cos = ax * bx + ay * by + az * bz
-    value = math.atan2(sin, cos) - rest
-    if value > math.pi:
-        value -= 2.0 * math.pi
-    elif value < -math.pi:
-        value += 2.0 * math.pi
-    # gradient coefficients along a = nA/|nA|^2 and b = nB/|nB|^2
-    ia = 1.0 / na2
-    ib = 1.0 / nb2
-    ie = 1.0 / elen
-    # (p2 - p1).e = (p2 - p0).e - e.e ; (p3 - p0).e = (p3 - p1).e + e.e
+    value = _deviation(sin * rest_cos - cos * rest_sin, cos * rest_cos + sin * rest_sin)
+    prod = na2 * nb2
+    inv = 1.0 / (prod * elen)
+    ia = nb2 * elen * inv  # 1 / |nA|^2
+    ib = na2 * elen * inv  # 1 / |nB|^2
+    ie = prod * inv        # 1 / |e|
     ue = (ux * ex + uy * ey + uz * ez) * ie
     ve = (vx * ex + vy * ey + vz * ez) * ie
-    a2 = -elen * ia
-    b3 = -elen * ib
-    a0 = -(ue - elen) * ia
-    b0 = -ve * ib
-    a1 = ue * ia
-    b1 = (ve + elen) * ib
-    na_ = ax * ax + ay * ay + az * az
-    nb_ = bx * bx + by * by + bz * bz
-    ab = ax * bx + ay * by + az * bz
-    # |a0 nA + b0 nB|^2 = a0^2 |nA|^2 + 2 a0 b0 nA.nB + b0^2 |nB|^2
-    denom = (w0 * (a0 * a0 * na_ + 2.0 * a0 * b0 * ab + b0 * b0 * nb_)
-             + w1 * (a1 * a1 * na_ + 2.0 * a1 * b1 * ab + b1 * b1 * nb_)
-             + w2 * a2 * a2 * na_ + w3 * b3 * b3 * nb_)
-    if denom <= 0.0:
+    # grad_p0 = a0 nA/|nA|^2 + b0 nB/|nB|^2, grad_p1 likewise, grad_p2 = -|e| nA/|nA|^2, ...
+    a0 = elen - ue
+    b0 = -ve
+    a1 = ue
+    b1 = ve + elen
+    cab = 2.0 * cos * ia * ib
+    denom = (w0 * (a0 * a0 * ia + a0 * b0 * cab + b0 * b0 * ib)
+             + w1 * (a1 * a1 * ia + a1 * b1 * cab + b1 * b1 * ib)
+             + (w2 * ia + w3 * ib) * ee)
+    if not denom > 0.0:
         return 0.0
     s = _multiplier(value, denom, k, c, lam, xpbd)
     f = s * w0
-    x[i0, 0] += f * (a0 * ax + b0 * bx)
-    x[i0, 1] += f * (a0 * ay + b0 * by)
-    x[i0, 2] += f * (a0 * az + b0 * bz)
+    fa = f * a0 * ia
+    fb = f * b0 * ib
+    x[i0, 0] = p0x + fa * ax + fb * bx
+    x[i0, 1] = p0y + fa * ay + fb * by
+    x[i0, 2] = p0z + fa * az + fb * bz
     f = s * w1
-    x[i1, 0] += f * (a1 * ax + b1 * bx)
-    x[i1, 1] += f * (a1 * ay + b1 * by)
-    x[i1, 2] += f * (a1 * az + b1 * bz)
-    f = s * w2 * a2
+    fa = f * a1 * ia
+    fb = f * b1 * ib
+    x[i1, 0] = p1x + fa * ax + fb * bx
+    x[i1, 1] = p1y + fa * ay + fb * by
+    x[i1, 2] = p1z + fa * az + fb * bz
+    f = -s * w2 * elen * ia
     x[i2, 0] += f * ax
     x[i2, 1] += f * ay
     x[i2, 2] += f * az
-    f = s * w3 * b3
+    f = -s * w3 * elen * ib
     x[i3, 0] += f * bx
     x[i3, 1] += f * by
     x[i3, 2] += f * bz
@@ -147,16 +166,25 @@ def _solve_bending(x, w, i0, i1, i2, i3, rest, k, c, lam, xpbd):
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_bending(x, w, idx, rest, k, c, lam, xpbd, start, stop):
-    """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
+def _project_bending(x, w, idx, rest_cs, k, c, lam, xpbd, start, stop):
+    """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``).
+
+    rest_cs : (m, 2) float, cosine and sine of the rest angles.
+    """
     if xpbd:
         for j in range(start, stop):
             lam[j] += _solve_bending(x, w, idx[j, 0], idx[j, 1], idx[j, 2], idx[j, 3],
-                                     rest[j], k[j], c[j], lam[j], True)
+                                     rest_cs[j, 0], rest_cs[j, 1], k[j], c[j], lam[j], True)
     else:
         for j in range(start, stop):
             _solve_bending(x, w, idx[j, 0], idx[j, 1], idx[j, 2], idx[j, 3],
-                           rest[j], k[j], 0.0, 0.0, False)
+                           rest_cs[j, 0], rest_cs[j, 1], k[j], 0.0, 0.0, False)
+
+
+def rest_cos_sin(rest_angle) -> np.ndarray:
+    """``(m, 2) float64`` cosine and sine of ``rest_angle (m,)`` (the kernel's rest input)."""
+    a = np.asarray(rest_angle, dtype=np.float64).reshape(-1)
+    return np.ascontiguousarray(np.c_[np.cos(a), np.sin(a)])
 
 
 def solve_bending(positions, inv_mass, quads, rest_angle, stiffness) -> np.ndarray:
@@ -166,6 +194,6 @@ def solve_bending(positions, inv_mass, quads, rest_angle, stiffness) -> np.ndarr
     m = len(idx)
     k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,)).copy()
     _project_bending(x, np.ascontiguousarray(inv_mass, dtype=np.float64), idx,
-                     np.ascontiguousarray(rest_angle, dtype=np.float64), k,
+                     rest_cos_sin(rest_angle), k,
                      np.zeros(m), np.zeros(m), False, 0, m)
     return x
