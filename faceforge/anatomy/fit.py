@@ -13,14 +13,19 @@ Functions on arrays. The construction, in order:
    aligned skull landmarks to the targets; exact at the landmarks.
 4. **Enhancement landmarks** (red dots of Fig. 8). Candidate points are the outer-surface
    vertices of the morphed skull in front of the ears (a vertex is *outer* when a ray
-   along its normal leaves the skull without hitting it again). Farthest-point sampling
-   picks ``enhancement_samples`` of them at least ``enhancement_spacing`` apart from
-   every existing source. From each, the line along the skull normal is intersected with
-   the skin; the nearest place where that line leaves the skin volume gives the local
-   thickness ``D`` (negative when the bone pokes through). Where ``D`` is below
-   ``enhancement_min_ratio`` times the expected depth ``t*`` (Shepard interpolation of the
-   landmark depths), the pair (skull point -> skin exit point - ``t*`` along the normal)
-   is added and the RBF is rebuilt; ``enhancement_rounds`` rounds. Points whose line
+   along its normal leaves the skull without hitting it again) that face the skin (their
+   normal within ~70 degrees of the skin normal at their closest skin point: this leaves
+   out the back of the teeth and the inside of the jaw). The signed depth ``D`` beneath
+   the closest skin point (:func:`signed_skin_depth`; negative when the bone pokes
+   through) is compared with the expected depth ``t*`` (Shepard interpolation of the
+   landmark depths); where ``D < enhancement_min_ratio * t*`` the vertex is *bad*.
+   Up to ``enhancement_samples`` bad vertices are taken, worst first, each at least
+   ``enhancement_spacing`` apart from the others and from every existing source; each
+   pair (skull point -> closest skin point - ``t*`` along the skin normal) is a ray from
+   the skin inward to the bone (the red dots of Fig. 8), and the RBF is rebuilt with the
+   landmarks' shape parameter; ``enhancement_rounds`` rounds or until nothing is bad.
+   Points in pockets (teeth in a modelled mouth) and points no skin covers (beyond a
+   mask's rim, the back of the head) are left alone: the back need not fit (§7). Points whose line
    misses the skin (the back of an open head, beyond a face mask) are left alone: the
    back of the skull need not fit (§7).
 5. **Muscles** (:mod:`faceforge.anatomy.fit_muscles`): the muscle map is morphed by the
@@ -40,7 +45,7 @@ from typing import Callable
 import numpy as np
 
 from faceforge.anatomy import fit_tissue
-from faceforge.geometry.rbf import hardy_rbf
+from faceforge.geometry.rbf import hardy_epsilon, hardy_rbf
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import vertex_normals
 
@@ -83,11 +88,21 @@ class SkinSurface:
     boundary_vertices: np.ndarray
 
     @classmethod
-    def build(cls, vertices, faces) -> "SkinSurface":
-        from faceforge.io.mesh_check import edge_face_counts
+    def build(cls, vertices, faces, close_holes: bool = True) -> "SkinSurface":
+        """The skin as the fit sees it: outward winding, and with ``close_holes`` every hole
+        but the longest (eyes, the mouth behind the lips, not the neck or a mask's rim)
+        closed virtually by a fan, as an eyeball or closed lips would. Only the largest
+        connected piece is the skin (iris points, eyeballs are left out). Fan centres are
+        appended after the skin's own vertices."""
+        from faceforge.io.mesh_check import edge_face_counts, fill_holes
+
+        from faceforge.io.mesh_check import largest_component
 
         v = np.asarray(vertices, dtype=np.float64)
-        f = orient_outward(v, np.asarray(faces, dtype=np.int64))
+        f = largest_component(np.asarray(faces, dtype=np.int64), len(v))
+        if close_holes:
+            v, f, _ = fill_holes(v, f, keep_open=1)
+        f = orient_outward(v, f)
         edges, counts = edge_face_counts(f)
         bnd = np.unique(edges[counts == 1])
         return cls(v, f, vertex_normals(v, f), float(np.linalg.norm(np.ptp(v, axis=0))), RayCaster(v, f), bnd)
@@ -174,24 +189,27 @@ class Warp:
 # ----------------------------------------------------------------------------- queries
 
 
-def farthest_point_sample(points: np.ndarray, k: int, existing: np.ndarray, min_distance: float) -> np.ndarray:
-    """Indices (<= k,) of ``points`` (n, 3), greedily farthest from ``existing`` (e, 3) and each other,
-    all at least ``min_distance`` away. Deterministic."""
+def worst_first_sample(points: np.ndarray, badness: np.ndarray, k: int, existing: np.ndarray,
+                       min_distance: float) -> np.ndarray:
+    """Indices (<= k,) of ``points`` (n, 3), worst (largest ``badness`` (n,)) first, each at
+    least ``min_distance`` from ``existing`` (e, 3) and from the ones already taken.
+    Deterministic (ties by index)."""
     if len(points) == 0 or k <= 0:
         return np.zeros(0, dtype=np.int64)
     if len(existing):
         from scipy.spatial import cKDTree
 
-        dist = cKDTree(existing).query(points)[0]
+        free = cKDTree(existing).query(points)[0] >= min_distance
     else:
-        dist = np.full(len(points), np.inf)
+        free = np.ones(len(points), bool)
     chosen = []
-    for _ in range(k):
-        i = int(np.argmax(dist))
-        if dist[i] < min_distance:
+    for i in np.argsort(-badness, kind="stable"):
+        if not free[i]:
+            continue
+        chosen.append(int(i))
+        if len(chosen) == k:
             break
-        chosen.append(i)
-        dist = np.minimum(dist, np.linalg.norm(points - points[i], axis=1))
+        free &= np.linalg.norm(points - points[i], axis=1) >= min_distance
     return np.asarray(chosen, dtype=np.int64)
 
 
@@ -207,30 +225,43 @@ def outer_vertices(vertices: np.ndarray, faces: np.ndarray, caster: RayCaster | 
     return face < 0
 
 
-def skin_exit_along(skin: SkinSurface, points: np.ndarray, directions: np.ndarray, reach: float):
-    """Signed thickness of the skin volume along lines through ``points`` (k, 3).
+def signed_skin_depth(points: np.ndarray, skin: SkinSurface):
+    """How deep points (k, 3) lie beneath the skin, by their closest skin point.
 
-    For each line ``p + s d`` (``d`` unit, ``|s| <= reach``) the crossings where the line
-    leaves the skin volume (the skin's outward normal agrees with ``d``) are found; the
-    one nearest to ``p`` gives ``s`` (positive: ``p`` lies inside, beneath the skin;
-    negative: ``p`` pokes out). Returns ``(s (k,) float, NaN where none; exit points (k, 3))``.
+    Returns ``(depth (k,), closest (k, 3), normal (k, 3), covered (k,) bool, pocket (k,) bool)``.
+    ``depth`` is the distance to the closest skin point, positive when the point lies on
+    the inner side of the skin there (smooth normal, interpolated area-weighted vertex
+    normals). A point on the outer side whose ray along that outward normal meets the skin
+    again lies in a *pocket* the skin wraps around (a modelled mouth cavity or eye socket,
+    where teeth and orbits belong): ``pocket`` is true and ``depth`` 0. A point whose
+    closest skin point lies on the skin's open boundary (beyond a mask's rim, below the
+    neck) is not ``covered``.
     """
-    d = directions / np.linalg.norm(directions, axis=1, keepdims=True)
-    ray, tri, loc, dist = skin.caster.all_hits(points - reach * d, d)
-    s = dist - reach
-    fn = np.cross(*(skin.vertices[skin.faces[tri]][:, i] - skin.vertices[skin.faces[tri]][:, 0] for i in (1, 2)))
-    leaving = np.einsum("ij,ij->i", fn, d[ray]) > 0
-    keep = leaving & (np.abs(s) <= reach)
-    ray, s, loc = ray[keep], s[keep], loc[keep]
-    out = np.full(len(points), np.nan)
-    pts = np.full((len(points), 3), np.nan)
-    if len(ray):
-        order = np.lexsort((np.abs(s), ray))
-        ray, s, loc = ray[order], s[order], loc[order]
-        first = np.r_[True, ray[1:] != ray[:-1]]
-        out[ray[first]] = s[first]
-        pts[ray[first]] = loc[first]
-    return out, pts
+    import trimesh
+
+    from faceforge.geometry.triangles import barycentric
+
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    k = len(points)
+    if k == 0:
+        z = np.zeros((0, 3))
+        return np.zeros(0), z, z, np.zeros(0, bool), np.zeros(0, bool)
+    mesh = trimesh.Trimesh(skin.vertices, skin.faces, process=False, validate=False)
+    closest, dist, tri = trimesh.proximity.closest_point(mesh, points)
+    bary = barycentric(closest, skin.vertices, skin.faces, tri)
+    normal = skin.normals_at(tri, bary)
+    sign = np.where(np.einsum("ij,ij->i", normal, closest - points) >= 0, 1.0, -1.0)
+    covered = np.ones(k, bool)
+    if len(skin.boundary_vertices):
+        on_bnd = np.isin(skin.faces[tri], skin.boundary_vertices)
+        covered = (on_bnd * bary).sum(axis=1) <= 0.999
+    pocket = np.zeros(k, bool)
+    out = np.flatnonzero(sign < 0)
+    if len(out):
+        face, _, _ = skin.caster.first_hit(points[out] + 1e-6 * skin.diagonal * normal[out], normal[out])
+        pocket[out[face >= 0]] = True
+    depth = np.where(pocket, 0.0, sign * dist)
+    return depth, closest, normal, covered, pocket
 
 
 def front_mask(points: np.ndarray, skin_landmarks: dict, offset_es0: float) -> np.ndarray:
@@ -302,7 +333,10 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
     sim = similarity_transform(pairs.source, pairs.target)
     src = apply_affine(sim, pairs.source)
     dst = pairs.target.copy()
-    warp = Warp(sim, [hardy_rbf(src, dst)])
+    # the shape parameter stays that of the FDP landmarks: adding sources must not make
+    # every kernel narrower (Hardy's R shrinks with the mean source spacing)
+    eps = hardy_epsilon(src)
+    warp = Warp(sim, [hardy_rbf(src, dst, epsilon=eps)])
     rounds = []
     if not settings.enhancement_rays:
         return SkullFit(warp, src, dst, len(src), rounds)
@@ -313,23 +347,21 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
     for _ in range(settings.enhancement_rounds):
         moved = warp.rbfs[0](aligned)
         cand = np.flatnonzero(outer & front_mask(moved, skin_landmarks, settings.front_offset_es0))
-        pick = cand[farthest_point_sample(aligned[cand], settings.enhancement_samples, src, spacing)]
+        depth, closest, normal, covered, pocket = signed_skin_depth(moved[cand], skin)
+        facing = np.einsum("ij,ij->i", vertex_normals(moved, skull_faces)[cand], normal) > 0.3
+        expected = fit_tissue.depth_field(moved[cand], depth_sites, site_depth) if settings.tissue_depth \
+            else np.zeros(len(cand))
+        bad = np.flatnonzero(covered & facing & ~pocket
+                             & (depth < settings.enhancement_min_ratio * expected + 1e-9 * skin.diagonal))
+        badness = (settings.enhancement_min_ratio * expected[bad] - depth[bad]) / np.maximum(expected[bad], 1e-300)
+        pick = bad[worst_first_sample(aligned[cand[bad]], badness, settings.enhancement_samples, src, spacing)]
         if len(pick) == 0:
-            break
-        normals = vertex_normals(moved, skull_faces)[pick]
-        expected = fit_tissue.depth_field(moved[pick], depth_sites, site_depth) if settings.tissue_depth \
-            else np.zeros(len(pick))
-        s, exit_pts = skin_exit_along(skin, moved[pick], normals, reach=0.1 * skin.diagonal)
-        bad = np.isfinite(s) & (s < settings.enhancement_min_ratio * expected + 1e-9 * skin.diagonal)
-        # a source whose twin target crosses existing ones would fold the map: keep moderate moves
-        if not np.any(bad):
             rounds.append(0)
             break
-        new_src = aligned[pick[bad]]
-        new_dst = exit_pts[bad] - expected[bad, None] * normals[bad]
-        src, dst = np.vstack([src, new_src]), np.vstack([dst, new_dst])
-        warp = Warp(sim, [hardy_rbf(src, dst)])
-        rounds.append(int(bad.sum()))
+        src = np.vstack([src, aligned[cand[pick]]])
+        dst = np.vstack([dst, closest[pick] - expected[pick, None] * normal[pick]])
+        warp = Warp(sim, [hardy_rbf(src, dst, epsilon=eps)])
+        rounds.append(int(len(pick)))
     return SkullFit(warp, src, dst, len(pairs.fdps), rounds)
 
 

@@ -7,7 +7,10 @@ closest skin point along the skin's smooth normal there (interpolated area-weigh
 vertex normals): positive beneath the skin. A point whose closest skin point lies on
 the skin's boundary (beyond the edge of a mask, through an eye hole) is *not covered*:
 no skin is above it, so it is neither inside nor outside and is left out of the
-fractions (the back of the skull need not fit, §7).
+fractions (the back of the skull need not fit, §7). A point on the outer side of its
+closest skin point whose ray along that outward normal meets the skin again lies in a
+pocket the skin wraps around (a modelled mouth cavity or eye socket: teeth and orbits
+belong there) and counts as inside, at depth 0.
 """
 
 from __future__ import annotations
@@ -16,31 +19,12 @@ import numpy as np
 
 
 def depth_below_skin(points: np.ndarray, skin) -> tuple[np.ndarray, np.ndarray]:
-    """Signed depth (k,) float (positive beneath the skin, head units) and covered (k,) bool.
+    """Signed depth (k,) float (positive beneath the skin, head units; 0 in a pocket) and
+    covered (k,) bool; see :func:`faceforge.anatomy.fit.signed_skin_depth`."""
+    from faceforge.anatomy.fit import signed_skin_depth
 
-    ``skin``: :class:`faceforge.anatomy.fit.SkinSurface`.
-    """
-    import trimesh
-
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(points) == 0:
-        return np.zeros(0), np.zeros(0, bool)
-    mesh = trimesh.Trimesh(skin.vertices, skin.faces, process=False, validate=False)
-    closest, dist, tri = trimesh.proximity.closest_point(mesh, points)
-    from faceforge.geometry.triangles import barycentric
-
-    bary = barycentric(closest, skin.vertices, skin.faces, tri)
-    normal = skin.normals_at(tri, bary)
-    sign = np.sign(np.einsum("ij,ij->i", normal, closest - points))
-    sign[sign == 0] = 1.0
-    covered = np.ones(len(points), bool)
-    if len(skin.boundary_vertices):
-        on_bnd = np.isin(skin.faces[tri], skin.boundary_vertices)
-        near = (on_bnd * bary).sum(axis=1) > 0.999   # closest point on a boundary edge/vertex
-        covered = ~near
-    elif mesh.is_watertight:
-        sign = np.where(mesh.contains(points), 1.0, -1.0)
-    return sign * dist, covered
+    depth, _, _, covered, _ = signed_skin_depth(points, skin)
+    return depth, covered
 
 
 def inside_stats(depth: np.ndarray, covered: np.ndarray, diagonal: float, tol: float = 0.0) -> dict:
@@ -52,7 +36,7 @@ def inside_stats(depth: np.ndarray, covered: np.ndarray, diagonal: float, tol: f
     poke = float(max(0.0, -d.min()))
     return {
         "count": int(len(d)),
-        "inside_fraction": float(np.mean(d > -tol)),
+        "inside_fraction": float(np.mean(d >= -tol)),
         "max_outside": poke,
         "max_outside_rel": poke / diagonal,
         "min_depth": float(d.min()),

@@ -7,8 +7,11 @@ millimetres of skin, fat and muscle between a craniofacial landmark and the bone
 beneath it. They are facts, copied as numbers.
 
 Each FDP with a bony counterpart is mapped to the nearest craniofacial landmark of
-that table; FDPs over cartilage or soft parts only (nose tip, lips' inner contour,
-pupils, ears) have no depth and are not used as skull targets. The depths are
+that table; FDPs over cartilage or soft parts only (nose tip, lips, pupils, ears)
+have no depth and are not used as skull targets. The lips are left out on purpose:
+their outer contour lies over the teeth's crowns, a centimetre below prosthion and
+above infradentale, so "depth along the skin normal" would pull the jaws' front up or
+down; the ear-face contact points lie over cartilage, not over the supraglenoid point. The depths are
 scaled to the head: ``units_per_mm = ES0 / 63 mm`` (ES0 = pupil distance of the head,
 63 mm is the adult average), so a decimetre, centimetre or millimetre head, a child
 or an adult all get proportionate depths.
@@ -36,15 +39,12 @@ FDP_TISSUE_CODE = {
     "4.1": "g", "4.2": "g",             # inner brow ends -> glabella
     "4.3": "mso", "4.4": "mso",         # brow tops -> supraorbital rim
     "4.5": "mso", "4.6": "mso",         # outer brow ends -> supraorbital rim (lateral)
-    "5.1": "im", "5.2": "im",           # cheek centres -> inferior malar
+    "5.1": "ecm2_sup", "5.2": "ecm2_sup",   # cheek centres -> over the maxilla's buccal side
     "5.3": "lo", "5.4": "lo",           # cheek bones -> zygomatic body below the orbit
-    "8.1": "pr",        # upper lip (outer) -> prosthion
-    "8.2": "id",        # lower lip (outer) -> infradentale
     "8.3": "ecm2_sup", "8.4": "ecm2_sup",   # mouth corners -> buccal alveolar margin (deep)
     "9.6": "n", "9.7": "n",             # upper nose bone edges -> nasion
     "9.12": "rhi",      # nose bump -> rhinion
     "9.15": "mp",       # nose base -> mid-philtrum / anterior nasal spine
-    "10.9": "sgl", "10.10": "sgl",      # ear-face contact (upper) -> supraglenoid
     "11.1": "sg",       # hairline, midline -> supraglabella (frontal bone)
     "11.2": "fe", "11.3": "fe",         # hairline, sides -> frontal eminence
 }

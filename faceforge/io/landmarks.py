@@ -371,9 +371,27 @@ def check_landmarks(lm: Landmarks, vertices: np.ndarray, required=REQUIRED_FDPS)
         raise LandmarkError("head upside down: the eyes (3.7, 3.12) are not above the chin 2.1 along +Y", path)
 
 
+def remap_vertices(raw: RawLandmarks, user_to_internal: np.ndarray) -> RawLandmarks:
+    """Landmarks whose vertex ids refer to the user's mesh, re-expressed on the internal
+    (merged) mesh via ``user_to_internal (n,) int64``. Raises for ids out of range."""
+    bad = [f"{raw.ids[i]} ({raw.vertex[i]})" for i in np.flatnonzero(raw.vertex >= len(user_to_internal))]
+    if bad:
+        raise LandmarkError(f"vertex id out of range (mesh has {len(user_to_internal)} vertices) "
+                            f"for FDP {', '.join(bad)}", raw.path)
+    vertex = np.where(raw.vertex >= 0, np.asarray(user_to_internal)[np.maximum(raw.vertex, 0)], -1)
+    return RawLandmarks(raw.path, raw.ids, vertex.astype(np.int64), raw.position.copy())
+
+
 def load_landmarks(path: str | Path, vertices: np.ndarray, faces: np.ndarray,
-                   required=REQUIRED_FDPS) -> Landmarks:
-    """Read, snap and validate a landmark file for the mesh ``(vertices, faces)``."""
-    lm = snap_landmarks(read_landmarks(path), vertices, faces)
+                   required=REQUIRED_FDPS, user_to_internal: np.ndarray | None = None) -> Landmarks:
+    """Read, snap and validate a landmark file for the mesh ``(vertices, faces)``.
+
+    With ``user_to_internal`` (from :func:`faceforge.io.mesh_check.check_mesh`) the file's
+    vertex ids refer to the user's mesh and ``(vertices, faces)`` is the internal one.
+    """
+    raw = read_landmarks(path)
+    if user_to_internal is not None:
+        raw = remap_vertices(raw, user_to_internal)
+    lm = snap_landmarks(raw, vertices, faces)
     check_landmarks(lm, vertices, required)
     return lm

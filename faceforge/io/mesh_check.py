@@ -226,3 +226,35 @@ def largest_component(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     """Faces (k, 3) of the component with the most triangles."""
     labels = face_components(faces, n_vertices)
     return faces[labels == np.bincount(labels).argmax()]
+
+
+def fill_holes(vertices: np.ndarray, faces: np.ndarray, keep_open: int = 1):
+    """Close holes virtually with a fan around each loop's centroid.
+
+    The ``keep_open`` longest loops (by length in space: the neck, the rim of a face mask)
+    stay open. Fan triangles follow the winding of the faces along the hole, so the
+    result is consistently oriented. Returns ``(vertices (n + h, 3), faces (m + e, 3),
+    n_filled)``: the original arrays come first, unchanged.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    loops = boundary_loops(f)
+    if len(loops) <= keep_open:
+        return v, f, 0
+    length = [float(np.linalg.norm(v[lp] - v[np.roll(lp, -1)], axis=1).sum()) for lp in loops]
+    order = np.argsort(length)[::-1]
+    fill = [loops[i] for i in order[keep_open:]]
+    directed = f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    unique, counts = edge_face_counts(f)
+    single = {tuple(e) for e in unique[counts == 1].tolist()}
+    new_v, new_f = [v], [f]
+    n = len(v)
+    for k, lp in enumerate(fill):
+        members = set(lp.tolist())
+        mask = np.array([a in members and b in members and (min(a, b), max(a, b)) in single
+                         for a, b in directed.tolist()])
+        edges = directed[mask]
+        c = n + k
+        new_v.append(v[lp].mean(axis=0, keepdims=True))
+        new_f.append(np.column_stack([edges[:, 1], edges[:, 0], np.full(len(edges), c)]))
+    return np.vstack(new_v), np.vstack(new_f), len(fill)
