@@ -42,6 +42,7 @@ class App:
         from faceforge.io.config import load_config, parse_sets, read_config_file
         from faceforge.pipeline.runner import Workspace
 
+        registry.discover()  # stage modules may add config rules (faceforge.io.config.add_rule)
         self.workspace = Workspace(workdir)
         self.verbosity = verbosity
         self.progress = (sys.stderr.isatty() and verbosity >= 0) if progress is None else progress
@@ -164,7 +165,10 @@ def status(app: App):
         return
     width = max(len(s.stage.name) for s in statuses)
     for s in statuses:
-        state = "up to date" if s.up_to_date else "stale: " + "; ".join(s.reasons)
+        if s.up_to_date:
+            state = "up to date"
+        else:
+            state = ("stale: " if s.key else "cannot run: ") + "; ".join(s.reasons)
         click.echo(f"{s.stage.name:<{width}}  {state}")
         if app.verbosity >= 1 and s.key:
             click.echo(f"{'':<{width}}  key {s.key[:16]}  {s.stage.description}")

@@ -176,3 +176,19 @@ def test_packaged_templates_link_resolves_like_the_default_paths(repo_root):
     assert (package / "templates").resolve() == (repo_root / "templates").resolve()
     skull = Path(load_default().tree["template"]["skull"])
     assert skull == (repo_root / "templates" / "skull").resolve()
+
+
+def test_rules_inferred_from_default_types_and_added_rules(monkeypatch):
+    from faceforge.io import config as cfg
+
+    assert cfg.rule_for("x.count", 3) == cfg.Integer(1)
+    assert cfg.rule_for("x.seed", 0) == cfg.Integer(0)
+    assert cfg.rule_for("x.offset", -2) == cfg.Integer(None)
+    assert cfg.rule_for("x.any.stiffness.k", 0.5) == cfg.Number(0.0, 1.0)
+    monkeypatch.setattr(cfg, "RULES", list(cfg.RULES))
+    cfg.add_rule("animate.fps", cfg.Number(1, 240))
+    with pytest.raises(ConfigError, match=r"^--set: animate.fps: expected a number in \[1, 240\], got 500$"):
+        parse_sets(["animate.fps=500"])
+    monkeypatch.undo()
+    cfg._DEFAULT_CACHE.clear()
+    assert parse_sets(["animate.fps=500"]).tree == {"animate": {"fps": 500}}

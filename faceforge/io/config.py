@@ -73,15 +73,15 @@ class Number(Rule):
 
 @dataclass(frozen=True)
 class Integer(Rule):
-    """An integer (not a bool) >= ``low``."""
+    """An integer (not a bool) >= ``low`` (no bound when ``low`` is None)."""
 
-    low: int = 1
+    low: int | None = 1
 
     def check(self, value, base):
         if isinstance(value, float) and value.is_integer():
             value = int(value)
-        if isinstance(value, bool) or not isinstance(value, int) or value < self.low:
-            raise ValueError(f"an integer >= {self.low}")
+        if isinstance(value, bool) or not isinstance(value, int) or (self.low is not None and value < self.low):
+            raise ValueError("an integer" if self.low is None else f"an integer >= {self.low}")
         return value
 
 
@@ -140,6 +140,8 @@ class Anything(Rule):
         return value
 
 
+_DEFAULT_CACHE: dict[str, tuple[dict, dict[str, int], str]] = {}
+
 #: (glob over the dotted key, rule); the first match wins, else the default's type decides
 RULES: list[tuple[str, Rule]] = [
     ("*.stiffness.*", Number(0.0, 1.0)),
@@ -152,15 +154,30 @@ RULES: list[tuple[str, Rule]] = [
 ]
 
 
+def add_rule(pattern: str, rule: Rule) -> None:
+    """Give keys matching ``pattern`` a rule, ahead of the built-in ones.
+
+    For stage modules (``faceforge/pipeline/stages/``): the CLI imports them before it
+    validates, e.g. ``add_rule("animate.fps", Number(1, 240))``.
+    """
+    RULES.insert(0, (pattern, rule))
+    _DEFAULT_CACHE.clear()
+
+
 def rule_for(key: str, default: Any) -> Rule:
-    """The rule of a leaf ``key`` whose default value is ``default``."""
+    """The rule of a leaf ``key`` whose default value is ``default``.
+
+    Without a matching :data:`RULES` entry: bool -> true/false; int -> an integer >= 1
+    (>= 0 if the default is 0, unbounded if negative); float -> a finite number;
+    str -> a string; list -> a list; null -> anything.
+    """
     for pattern, rule in RULES:
         if fnmatch.fnmatchcase(key, pattern):
             return rule
     if isinstance(default, bool):
         return Boolean()
     if isinstance(default, int):
-        return Integer(1)
+        return Integer(1 if default >= 1 else 0 if default == 0 else None)
     if isinstance(default, float):
         return Number()
     if isinstance(default, str):
@@ -243,9 +260,6 @@ def default_config_path() -> Path:
 def default_base() -> Path:
     """Folder against which relative paths of the default file resolve (repo root in a checkout)."""
     return default_config_path().resolve().parent.parent
-
-
-_DEFAULT_CACHE: dict[str, tuple[dict, dict[str, int], str]] = {}
 
 
 def load_default() -> Layer:
