@@ -269,3 +269,25 @@ def test_status_lists_a_stage_with_an_unregistered_dep_instead_of_failing(stage_
         ("t_ok", ["never run"]), ("t_orphan", ["depends on unknown stage 't_missing'"])]
     with pytest.raises(StageError, match="stage 't_orphan' depends on unknown stage 't_missing'"):
         runner.run(runner.Workspace(tmp_path), load_config(), {}, ["t_orphan"])
+
+
+def test_a_user_folder_with_a_stage_name_is_never_overwritten(chain):
+    calls, ws, params = chain
+    (ws.stage_dir("t_a")).mkdir(parents=True)
+    (ws.stage_dir("t_a") / "mine.txt").write_text("keep")
+    with pytest.raises(StageError, match="exists but is not a faceforge stage folder"):
+        run_chain(ws, params)
+    assert (ws.stage_dir("t_a") / "mine.txt").read_text() == "keep"
+    assert not [p for p in ws.root.iterdir() if p.name.startswith((".tmp-", ".trash-"))]
+
+
+def test_same_inputs_give_the_same_stage_bytes(chain, tmp_path):
+    calls, ws, params = chain
+    run_chain(ws, params)
+    other = runner.Workspace(tmp_path / "other")
+    run_chain(other, params)
+    for name in ("t_a", "t_b", "t_c"):
+        files = sorted(p.name for p in ws.stage_dir(name).iterdir())
+        assert files == sorted(p.name for p in other.stage_dir(name).iterdir())
+        for f in files:
+            assert (ws.stage_dir(name) / f).read_bytes() == (other.stage_dir(name) / f).read_bytes()

@@ -194,3 +194,12 @@ def test_app_run_stage_updates_and_forgets_params(echo_stage, tmp_path):
     assert app.workspace.load_params() == {"src": str(src), "note": "kept as given"}
     app.run_stage("t_echo", {"note": None})
     assert app.workspace.load_params() == {"src": str(src)}
+
+
+def test_workdir_from_the_environment(invoke, echo_stage, tmp_path):
+    src = tmp_path / "src.txt"
+    src.write_text("x")
+    result = invoke("run", "t_echo", "--param", f"src={src}", auto_envvar_prefix="FACEFORGE",
+                    env={"FACEFORGE_WORKDIR": str(tmp_path / "envwork")})
+    assert result.exit_code == 0, result.stderr
+    assert (tmp_path / "envwork" / "t_echo" / "stage.json").exists()

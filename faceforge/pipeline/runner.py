@@ -5,7 +5,8 @@ Workdir layout::
     <workdir>/faceforge.yaml      remembered params (input paths) of the last runs
     <workdir>/config.yaml         remembered config overrides (--config/--set of stage runs)
     <workdir>/.faceforge.lock     fcntl lock serializing processes
-    <workdir>/<stage>/            one folder per complete stage, stage.json inside
+    <workdir>/<stage>/            one folder per complete stage, stage.json inside (a folder
+                                  of that name without stage.json is never overwritten)
     <workdir>/.tmp-<stage>-*      a stage being written (removed on the next run if stale)
 
 A stage is written into ``.tmp-<stage>-<pid>-<token>/``, its ``stage.json`` last,
@@ -166,6 +167,8 @@ def _commit(workspace: Workspace, tmp: Path, name: str) -> None:
     """Rename the finished temp folder to ``<workdir>/<name>`` (old folder moved aside first)."""
     final = workspace.stage_dir(name)
     trash = None
+    if final.exists() and not (final / "stage.json").exists():
+        raise StageError(f"{final} exists but is not a faceforge stage folder (no stage.json); move it away")
     if final.exists():
         trash = workspace.root / f".trash-{name}-{os.getpid()}-{secrets.token_hex(4)}"
         os.rename(final, trash)
@@ -192,9 +195,9 @@ def run_stage(workspace: Workspace, status: StageStatus, config, params: Mapping
         if absent:
             raise StageError(f"stage {stage.name} did not write {', '.join(absent)}")
         status.seconds = time.perf_counter() - start
+        # no timings or dates: same inputs give the same bytes
         save_json(tmp / "stage.json", {**status.record, "key": status.key, "outputs": list(stage.outputs),
-                                        "faceforge_version": __version__,
-                                        "seconds": round(status.seconds, 3)})
+                                        "faceforge_version": __version__})
         _commit(workspace, tmp, stage.name)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

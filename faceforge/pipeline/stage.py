@@ -205,7 +205,13 @@ class StageContext:
 
     def log(self, message: str) -> None:
         """One progress line on stderr, prefixed with the stage name (silent with ``-q``)."""
-        self.logger(f"{self.name}: {message}")
+        if not self.progress_enabled:
+            self.logger(f"{self.name}: {message}")
+            return
+        from tqdm import tqdm
+
+        with tqdm.external_write_mode(file=sys.stderr):  # keep open bars intact
+            self.logger(f"{self.name}: {message}")
 
     def progress(self, iterable: Iterable | None = None, total: int | None = None, desc: str | None = None):
         """Wrap ``iterable`` in a tqdm bar on stderr (silent with -q / without a TTY unless asked)."""
