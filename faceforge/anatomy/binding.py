@@ -20,9 +20,12 @@ Lips: skin of the upper lip may bind only to the cranium (upper structures),
 skin of the lower lip only to the mandible (``lip_sides`` from
 :func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
 A lip vertex ignores muscle hits on the other side of the lip line (the lower
-lip never binds to the upper half of the orbicularis oris). A lip vertex whose
-rays meet only the other jaw's bone binds to the closest point of its own bone
-instead (within ``max_distance``).
+lip never binds to the upper half of the orbicularis oris).
+
+Beyond the paper: a vertex whose two rays both miss (they look into a hole of
+the skull: eye sockets, nostrils, the gap between the teeth) binds to the
+closest point of the skull within ``max_distance`` (its own jaw's bone near
+the lips); :attr:`Binding.closest` marks those anchors and the report counts them.
 
 Ray casting uses :class:`faceforge.geometry.rays.RayCaster` (trimesh, Embree
 where installed); all bodies of one pass are merged into one mesh so every pass
@@ -101,6 +104,8 @@ class Binding:
         True when found by the outward ray.
     normals : (n, 3) float64
         The skin normals used for the rays.
+    closest : (k,) bool
+        True when both rays missed and the anchor is the closest skull point.
     """
 
     body_names: tuple
@@ -113,6 +118,11 @@ class Binding:
     distance: np.ndarray
     outward: np.ndarray
     normals: np.ndarray
+    closest: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.closest is None:
+            object.__setattr__(self, "closest", np.zeros(len(self.vertex_ids), bool))
 
     def targets(self, surfaces) -> np.ndarray:
         """Anchor surface points ``(k, 3)`` on the current (deformed) bodies.
@@ -141,7 +151,9 @@ class Binding:
             body=np.asarray(get("body"), INT), face_ids=np.asarray(get("face_ids"), INT),
             bary=np.asarray(get("bary"), FLOAT), points=np.asarray(get("points"), FLOAT),
             distance=np.asarray(get("distance"), FLOAT), outward=np.asarray(get("outward"), bool),
-            normals=np.asarray(get("normals"), FLOAT))
+            normals=np.asarray(get("normals"), FLOAT),
+            closest=np.asarray(get("closest"), bool) if ("closest" in arrays or prefix + "closest" in arrays)
+            else None)
 
     def as_arrays(self) -> dict:
         """Flat arrays for an npz stage file (no pickle)."""
@@ -149,6 +161,7 @@ class Binding:
             "status": self.status, "vertex_ids": self.vertex_ids, "body": self.body,
             "face_ids": self.face_ids, "bary": self.bary, "points": self.points,
             "distance": self.distance, "outward": self.outward, "normals": self.normals,
+            "closest": self.closest,
             "body_names": np.asarray(self.body_names, dtype=str),
         }
 
@@ -208,19 +221,22 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
     return body, face, pts, dist
 
 
-def _lip_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist) -> None:
-    """Lip vertices whose rays met only the other jaw's bone: closest point on their own.
+def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist) -> np.ndarray:
+    """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
-    Along the lip line the normal ray may graze the gap between the teeth and
-    meet only the disallowed bone; such a vertex binds to the closest point of
-    its own bone (cranium above the lip line, mandible below) when that lies
-    within ``max_distance``. Updates the arrays in place.
+    Rays miss where the skin looks into a hole of the skull (eyelids and eye
+    sockets into the orbits, nostrils into the nasal aperture) or along the lip
+    line when they meet only the other jaw's bone. Such a vertex binds to the
+    closest point of the skull within ``max_distance``: of the cranium above the
+    lip line, of the mandible below it, of either elsewhere. Updates the arrays
+    in place; returns the ``(n,) bool`` mask of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
 
-    for side, kind in ((1, CRANIUM), (-1, MANDIBLE)):
+    done = np.zeros(len(v), bool)
+    for side, allowed_kinds in ((1, (CRANIUM,)), (-1, (MANDIBLE,)), (0, (CRANIUM, MANDIBLE))):
         todo = np.flatnonzero((body < 0) & (sides == side))
-        own = [i for i in range(len(bodies)) if kinds[i] == kind]
+        own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
         if len(todo) == 0 or not own:
             continue
         best = np.full(len(todo), np.inf)
@@ -230,6 +246,8 @@ def _lip_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist) 
             best[take] = d[take]
             t = todo[take]
             body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
+            done[t] = True
+    return done
 
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
@@ -304,7 +322,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
         outward[t] = sign > 0
 
-    _lip_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist)
+    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     bary = np.zeros((len(ids), 3), FLOAT)
@@ -316,7 +334,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     return Binding(
         body_names=tuple(b.name for b in bodies), status=status, vertex_ids=ids,
         body=body[ids], face_ids=face[ids], bary=bary, points=pts[ids], distance=dist[ids],
-        outward=outward[ids], normals=nrm,
+        outward=outward[ids], normals=nrm, closest=closest[ids],
     )
 
 
@@ -392,8 +410,10 @@ def bind_report(binding: Binding, regions: dict, n_user: int | None = None) -> d
 
     Returns
     -------
-    dict (JSON-ready): per region the vertex count and fractions; ``missed`` =
-    vertices whose outward and inward rays both found nothing.
+    dict (JSON-ready): per region the vertex count and fractions;
+    ``missed_rays`` = vertices whose outward and inward rays both found nothing,
+    ``closest_point_anchors`` = those of them bound to the closest skull point,
+    ``unbound`` = the rest.
     """
     status = binding.status if n_user is None else binding.status[:n_user]
     out = {"vertices": int(len(status)), "regions": {}}
@@ -405,7 +425,12 @@ def bind_report(binding: Binding, regions: dict, n_user: int | None = None) -> d
         frac["bound"] = 1.0 - frac["none"]
         out["regions"][name] = {"vertices": count, "fraction": frac,
                                 "unbound_vertices": int((status[m] == UNBOUND).sum())}
-    out["missed_rays"] = int((status == UNBOUND).sum())
+    closest = np.zeros(len(binding.status), bool)
+    closest[binding.vertex_ids[binding.closest]] = True
+    closest = closest[: len(status)]
+    out["missed_rays"] = int((status == UNBOUND).sum() + closest.sum())
+    out["closest_point_anchors"] = int(closest.sum())
+    out["unbound"] = int((status == UNBOUND).sum())
     out["outward_anchors"] = int(binding.outward.sum())
     per_body = np.bincount(binding.body, minlength=len(binding.body_names))
     out["anchors_per_body"] = {n: int(c) for n, c in zip(binding.body_names, per_body) if c}

@@ -123,3 +123,21 @@ def test_side_of_drops_hits_across_the_lip_line(skin):
     # vertices in 0 <= y < 0.3 (upper side, hits below the line) are left unbound
     band = (v[:, 1] >= 0) & (v[:, 1] < 0.3 * 0.9)
     assert band.any() and np.all(b.status[band] == UNBOUND)
+
+
+def test_rays_into_a_hole_fall_back_to_the_closest_skull_point(skin):
+    v, f = skin
+    sv, sf = sphere(0.8, 3)
+    hole = (sv[sf][:, :, 2] > 0.6).any(axis=1)  # an "orbit": no bone over the front cap
+    skull = Body("cranium", "cranium", sv, sf[~hole])
+    b = bind_skin(v, f, [skull], max_distance=0.8)
+    over = v[:, 2] > 0.85  # their rays pass through the hole and the far wall is 1.8 away
+    assert over.any() and np.all(b.status[over] == CRANIUM)
+    sel = np.isin(b.vertex_ids, np.flatnonzero(over))
+    assert np.all(b.closest[sel])
+    # only vertices looking into the (jagged-edged) hole needed the fallback
+    assert np.all(v[b.vertex_ids[b.closest], 2] > 0.6)
+    # the fallback anchor is the nearest bone point: on the rim, within max_distance
+    assert np.all(b.distance[sel] <= 0.8) and np.all(b.points[sel, 2] <= 0.6 + 1e-9)
+    near = np.linalg.norm(b.points[sel][:, None] - sv[None], axis=2).min(axis=1)
+    assert np.all(near < 0.2)  # on the bone that is left, by the rim
