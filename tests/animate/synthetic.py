@@ -14,10 +14,11 @@ import numpy as np
 SKIN_R = 1.2
 
 
-def skin_mesh():
+def skin_mesh(count=(24, 32)):
+    """UV sphere skin; ``count`` (24, 32) gives 1,410 vertices, (44, 58) a Mesh_D-sized 4,874."""
     import trimesh
 
-    m = trimesh.creation.uv_sphere(radius=SKIN_R, count=[24, 32])
+    m = trimesh.creation.uv_sphere(radius=SKIN_R, count=list(count))
     v = np.asarray(m.vertices) @ np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
     return v, np.asarray(m.faces, np.int64)
 
@@ -69,18 +70,19 @@ JAW = {"pitch_axis_point": [0.0, -0.1, -0.1], "pitch_axis_direction": [1.0, 0.0,
        "protrusion_direction": [0.0, 0.0, 1.0]}
 
 
-def write_fit(fit_dir):
+def write_fit(fit_dir, count=(24, 32), extra_muscles: int = 0):
     """fit.npz of the synthetic head (the keys of the fit stage's contract)."""
     from faceforge.io.stagefiles import save_npz
 
-    v, f = skin_mesh()
+    v, f = skin_mesh(count)
     (cv, cf), (mv, mf) = skull_meshes()
     lm = landmarks(v)
     fit_dir.mkdir(parents=True, exist_ok=True)
     from faceforge.io.config import load_config
     from faceforge.pbd import SolverSettings
 
-    system = muscle_system(None, (cv, cf), (mv, mf), SolverSettings(), load_config(), None)
+    system = muscle_system(None, (cv, cf), (mv, mf), SolverSettings(), load_config(), None,
+                           extra=extra_muscles)
     names = [n for n in system.names if n not in ("cranium", "mandible")]
     muscles = [(system.rest_positions(n), system.faces(n)) for n in names]
     vstart = np.cumsum([0] + [len(a) for a, _ in muscles])
@@ -96,25 +98,34 @@ def write_fit(fit_dir):
     return v, f, lm
 
 
-def muscle_system(fit, cranium, mandible, settings, config, log):
-    """Stand-in for the fit stage's muscle rebuild: one zygomaticus on the cranium."""
+def muscle_system(fit, cranium, mandible, settings, config, log, extra: int = 0):
+    """Stand-in for the fit stage's muscle rebuild: a zygomaticus on the cranium, plus
+    ``extra`` passive sheets (h 6, w 3) around the upper skull (for timing a full map)."""
     from faceforge.anatomy.action_line import ActionLine
     from faceforge.anatomy.layers import MusculoskeletalSystem
     from faceforge.anatomy.muscle import build_linear_muscle
 
     cv, cf = cranium
+    stiff = {k: float(v) for k, v in config.get("muscle.linear.stiffness").items()}
 
     def line(a, b):
         pts = np.linspace(a, b, 5)
         pts = pts / np.linalg.norm(pts, axis=1, keepdims=True)
         return ActionLine.from_points(pts, cv, cf)
 
-    o0, o1 = np.array([0.55, 0.2, 0.8]), np.array([0.75, 0.05, 0.65])
-    i0, i1 = np.array([0.25, -0.2, 0.92]), np.array([0.45, -0.2, 0.84])
-    stiff = {k: float(v) for k, v in config.get("muscle.linear.stiffness").items()}
-    m = build_linear_muscle("zygomaticus_major_L", line(o0, o1), line(i0, i1), line(o0, i0), line(o1, i1),
-                            cv, cf, 6, 4, 0.08, stiff, lies_on=("cranium",), layer=1)
-    return MusculoskeletalSystem.from_parts(cranium, mandible, [m], settings)
+    def sheet(name, o0, o1, i0, i1, h, w, t, active=True):
+        return build_linear_muscle(name, line(o0, o1), line(i0, i1), line(o0, i0), line(o1, i1),
+                                   cv, cf, h, w, t, stiff, lies_on=("cranium",), layer=1, active=active)
+
+    muscles = [sheet("zygomaticus_major_L", np.array([0.55, 0.2, 0.8]), np.array([0.75, 0.05, 0.65]),
+                     np.array([0.25, -0.2, 0.92]), np.array([0.45, -0.2, 0.84]), 6, 4, 0.08)]
+    for k in range(extra):
+        a = -2.4 + 4.8 * (k + 0.5) / extra                   # azimuth around the skull, rad
+        y0 = 0.45 + 0.15 * (k % 2)
+        d = lambda az, y: np.array([np.sin(az), y, np.cos(az)])  # noqa: E731
+        muscles.append(sheet(f"sheet_{k}", d(a, y0 + 0.25), d(a + 0.12, y0 + 0.25), d(a, y0),
+                             d(a + 0.12, y0), 6, 3, 0.04, active=False))
+    return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
 
 
 MAPPING = {
