@@ -1,0 +1,697 @@
+"""Many heads in one run: plan, run one head, executors, summary (issue 8).
+
+A batch is a list of :class:`HeadJob` (plain, picklable: paths and overrides). Each
+head runs its stages (fit, bind, animate) in its own workdir ``<out>/<name>/`` through
+the ordinary runner, so the stage cache makes a rerun skip what is done and resume
+what was interrupted. :func:`run_head` never raises for a head's own failure: it
+returns a :class:`HeadResult` whose ``error`` is the one-line message. Workers share
+no in-process state: :func:`run_head` builds its own config and runner from the job.
+
+Executors: in-process (``jobs=1``), local processes (``ProcessPoolExecutor`` with the
+spawn context), or a Dask distributed scheduler (``dask[distributed]``, imported on use).
+
+Manifest (YAML; relative paths resolve against the manifest's folder)::
+
+    fap: tracks/joy.fap          # or  expression: joy  (+ intensity: 0.8, seconds: 2)
+    output: .pc2                 # optional: export each head to <out>/<name>/<name>.pc2
+    set: {solver.iterations: 8}  # optional: overrides for every head (dotted keys)
+    heads:
+      - mesh: heads/anna.obj
+        landmarks: heads/anna.fdp.yaml   # optional [default: <mesh stem>.fdp.yaml]
+        name: anna                       # optional [default: the mesh stem]; the workdir name
+        set: {fit.iterations: 3}         # optional per-head overrides
+
+Besides the stages' own files, each head's workdir holds ``batch.log`` (the runner's
+lines, appended by every run, tracebacks of unexpected errors) and the batch writes
+``<out>/batch_report.json`` (:func:`batch_report`).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+import traceback
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+from faceforge.exceptions import FaceforgeError, StageError
+
+#: the stages every head goes through (the last one's upstream comes along)
+DEFAULT_TARGETS = ("fit", "bind", "animate")
+REPORT_NAME = "batch_report.json"
+HEAD_LOG = "batch.log"
+#: stages whose report.json is summarized in the batch report
+METRIC_STAGES = ("fit", "bind")
+#: (stage, dotted key, column title) shown in the terminal table when present
+HEADLINE_METRICS = (("fit", "landmarks.max_residual", "fit resid"),
+                    ("bind", "regions.face_front.fraction.bound", "bound front"))
+EXPRESSIONS = ("joy", "sadness", "surprise", "anger", "disgust", "fear")
+
+
+@dataclass(frozen=True)
+class HeadJob:
+    """Everything one head needs; travels to a worker by pickling (paths are absolute).
+
+    Attributes
+    ----------
+    name : the head's name, also its workdir's folder name.
+    mesh : skin mesh path. workdir : the head's workdir.
+    landmarks : FDP landmark file (None: ``<mesh stem>.fdp.yaml`` next to the mesh).
+    fap : FAP track, or ``expression`` (one of :data:`EXPRESSIONS`) with ``intensity`` in
+        [0, 1] and ``seconds`` (None: ``animate.expression_seconds``).
+    output : export path of the animation (suffix picks the format) or None.
+    overrides : dotted config key -> value, validated (the head's ``set:`` over the shared ones).
+    config_file : a config YAML merged under ``overrides``. base : folder that relative
+        paths in ``overrides`` resolve against.
+    targets : stage names to bring up to date, in order. plugins : modules (dotted names
+        or ``.py`` paths) imported before running, e.g. to register extra stages.
+    """
+
+    name: str
+    mesh: str
+    workdir: str
+    landmarks: str | None = None
+    fap: str | None = None
+    expression: str | None = None
+    intensity: float = 1.0
+    seconds: float | None = None
+    output: str | None = None
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    config_file: str | None = None
+    base: str = "."
+    targets: tuple[str, ...] = DEFAULT_TARGETS
+    plugins: tuple[str, ...] = ()
+
+
+@dataclass
+class HeadResult:
+    """Outcome of one head (JSON-ready via :meth:`as_dict`).
+
+    ``stages`` maps a stage name to ``{"state": "ran"|"cached"|"failed"|"not run",
+    "seconds": float}`` (seconds of this run; 0 when cached). ``metrics`` holds the
+    numeric/boolean/string leaves of the fit and bind ``report.json`` as dotted keys.
+    """
+
+    name: str
+    workdir: str
+    status: str = "failed"
+    error: str | None = None
+    stages: dict = field(default_factory=dict)
+    metrics: dict = field(default_factory=dict)
+    outputs: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+# --------------------------------------------------------------------------- planning
+
+def nest(overrides: Mapping[str, Any]) -> dict:
+    """``{"a.b": 1, "a.c": 2}`` -> ``{"a": {"b": 1, "c": 2}}`` (later keys win)."""
+    tree: dict = {}
+    for key, value in overrides.items():
+        node = tree
+        parts = str(key).split(".")
+        for part in parts[:-1]:
+            child = node.get(part)
+            if not isinstance(child, dict):
+                child = node[part] = {}
+            node = child
+        node[parts[-1]] = value
+    return tree
+
+
+def flatten(tree: Mapping, prefix: str = "") -> dict:
+    """Inverse of :func:`nest` for the scalar leaves (lists and empty mappings kept as leaves)."""
+    out = {}
+    for key, value in tree.items():
+        dotted = f"{prefix}.{key}" if prefix else str(key)
+        if isinstance(value, Mapping) and value:
+            out.update(flatten(value, dotted))
+        else:
+            out[dotted] = value
+    return out
+
+
+def validate_overrides(overrides: Mapping[str, Any], source: str, base: str | Path,
+                       lines: Mapping[str, int] | None = None) -> dict:
+    """Check dotted overrides against the config schema; ``ConfigError`` naming ``source:line``."""
+    from faceforge.io.config import validate_tree
+
+    nested_lines: dict[str, int] = {}
+    for key, line in (lines or {}).items():
+        parts = key.split(".")
+        for i in range(len(parts), 0, -1):   # a bad prefix ("fitt" of "fitt.x") gets the line too
+            for k in (".".join(parts[:i]), "\0key:" + ".".join(parts[:i])):
+                nested_lines.setdefault(k, line)
+    layer = validate_tree(nest(overrides), source, nested_lines, Path(base))
+    return flatten(layer.tree)
+
+
+def import_plugins(plugins: Iterable[str]) -> None:
+    """Import each plugin once: a dotted module name, or a ``.py`` file path."""
+    import importlib
+    import importlib.util
+
+    for plugin in plugins:
+        if plugin.endswith(".py"):
+            name = "faceforge_plugin_" + "".join(c if c.isalnum() else "_" for c in Path(plugin).stem)
+            if name in sys.modules:
+                continue
+            spec = importlib.util.spec_from_file_location(name, plugin)
+            if spec is None or not Path(plugin).is_file():
+                raise StageError("plugin file not found", plugin)
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[name] = module
+            try:
+                spec.loader.exec_module(module)
+            except BaseException:
+                del sys.modules[name]
+                raise
+        else:
+            try:
+                importlib.import_module(plugin)
+            except ImportError as exc:
+                raise StageError(f"cannot import plugin {plugin!r}: {exc}") from None
+
+
+def check_targets(targets: Sequence[str]) -> None:
+    """``StageError`` unless every target stage (and its upstream) is registered."""
+    from faceforge.pipeline.stage import stage_order
+
+    stage_order(targets)
+
+
+def head_name(mesh: str | Path) -> str:
+    """Default workdir name of a head: its mesh's stem."""
+    return Path(mesh).stem
+
+
+def check_unique(jobs: Sequence[HeadJob], source: str) -> None:
+    """Two heads must not share a workdir; the error names both meshes."""
+    seen: dict[str, HeadJob] = {}
+    for job in jobs:
+        if job.workdir in seen:
+            raise StageError(f"heads {seen[job.workdir].mesh} and {job.mesh} would share the workdir "
+                             f"{job.workdir}; give them distinct names in a manifest", source)
+        seen[job.workdir] = job
+
+
+def output_path(workdir: Path, name: str, suffix: str | None) -> str | None:
+    """Export path ``<workdir>/<name><suffix>`` (``suffix`` "/" or "" -> an OBJ folder)."""
+    if suffix is None:
+        return None
+    if suffix in ("", "/"):
+        return str(workdir / f"{name}_frames")
+    return str(workdir / f"{name}{suffix if suffix.startswith('.') else '.' + suffix}")
+
+
+@dataclass(frozen=True)
+class SharedOptions:
+    """Options common to every head of a batch (command line over manifest)."""
+
+    fap: str | None = None
+    expression: str | None = None
+    intensity: float = 1.0
+    seconds: float | None = None
+    output: str | None = None
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+    config_file: str | None = None
+    targets: tuple[str, ...] = DEFAULT_TARGETS
+    plugins: tuple[str, ...] = ()
+
+    def check(self, source: str) -> None:
+        """One of ``fap``/``expression`` (when animating), valid expression and suffix."""
+        if "animate" in self.targets and (self.fap is None) == (self.expression is None):
+            raise StageError("give exactly one of a FAP track (fap) or an expression", source)
+        if self.expression is not None and self.expression not in EXPRESSIONS:
+            raise StageError(f"unknown expression {self.expression!r} (valid: {', '.join(EXPRESSIONS)})", source)
+        if not 0.0 <= float(self.intensity) <= 1.0:
+            raise StageError(f"intensity must be in [0, 1], got {self.intensity}", source)
+        if self.fap is not None and not Path(self.fap).is_file():
+            raise StageError("FAP file not found", self.fap)
+        if self.output not in (None, "", "/"):
+            from faceforge.io.export import exporter_for
+
+            exporter_for(output_path(Path("."), "x", self.output))
+
+
+def make_job(mesh: str | Path, out: str | Path, shared: SharedOptions, name: str | None = None,
+             landmarks: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
+             base: str | Path = ".") -> HeadJob:
+    """A :class:`HeadJob` for ``mesh`` in ``<out>/<name>/`` (paths made absolute)."""
+    name = name or head_name(mesh)
+    workdir = Path(out).absolute() / name
+    return HeadJob(name=name, mesh=str(Path(mesh).absolute()), workdir=str(workdir),
+                   landmarks=None if landmarks is None else str(Path(landmarks).absolute()),
+                   fap=None if shared.fap is None else str(Path(shared.fap).absolute()),
+                   expression=shared.expression, intensity=float(shared.intensity), seconds=shared.seconds,
+                   output=output_path(workdir, name, shared.output),
+                   overrides={**shared.overrides, **(overrides or {})}, config_file=shared.config_file,
+                   base=str(Path(base).absolute()), targets=tuple(shared.targets), plugins=tuple(shared.plugins))
+
+
+def jobs_from_meshes(meshes: Sequence[str | Path], out: str | Path, shared: SharedOptions) -> list[HeadJob]:
+    """One job per mesh (landmarks next to each mesh); ``StageError`` before any work if invalid."""
+    if not meshes:
+        raise StageError("no head meshes given")
+    shared.check("command line")
+    for mesh in meshes:
+        if not Path(mesh).is_file():
+            raise StageError("head mesh not found", mesh)
+    jobs = [make_job(m, out, shared) for m in meshes]
+    check_unique(jobs, "command line")
+    return jobs
+
+
+def is_manifest(path: str | Path) -> bool:
+    return Path(path).suffix.lower() in (".yaml", ".yml")
+
+
+_MANIFEST_KEYS = ("heads", "fap", "expression", "intensity", "seconds", "output", "set")
+_HEAD_KEYS = ("mesh", "landmarks", "name", "set")
+
+
+def _yaml_lines(text: str, source: str) -> tuple[Any, dict]:
+    """Parsed YAML and the 1-based line of every node, keyed by its path tuple (keys and items)."""
+    import yaml
+
+    try:
+        root = yaml.compose(text)
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        raise StageError(f"not valid YAML: {getattr(exc, 'problem', None) or exc}", source,
+                         None if mark is None else mark.line + 1) from None
+    lines: dict = {}
+
+    def walk(node, path):
+        lines[path] = node.start_mark.line + 1
+        if isinstance(node, yaml.MappingNode):
+            for k, v in node.value:
+                lines[path + (str(k.value),)] = k.start_mark.line + 1
+                walk(v, path + (str(k.value),))
+                lines[path + (str(k.value),)] = k.start_mark.line + 1
+        elif isinstance(node, yaml.SequenceNode):
+            for i, v in enumerate(node.value):
+                walk(v, path + (i,))
+
+    if root is not None:
+        walk(root, ())
+    return data, lines
+
+
+def _overrides(value, where: tuple, source: str, lines: dict, base: Path) -> dict:
+    """A manifest ``set:`` mapping, validated; errors name the manifest line of the bad key."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise StageError("set: expected a mapping of dotted config keys", source, lines.get(where))
+    keyed = {str(k): lines.get(where + (str(k),)) for k in value}
+    flat = {}
+    for key, v in value.items():
+        flat.update(flatten({str(key): v}) if isinstance(v, Mapping) and v else {str(key): v})
+    line_of = {k: keyed.get(k) or keyed.get(k.split(".")[0]) or lines.get(where) for k in flat}
+    return validate_overrides(flat, source, base, {k: v for k, v in line_of.items() if v})
+
+
+def load_manifest(path: str | Path, out: str | Path, cli: SharedOptions,
+                  cli_given: Iterable[str] = ()) -> list[HeadJob]:
+    """Jobs from a manifest, all validated before any work.
+
+    ``cli`` supplies what the command line gave; names in ``cli_given`` (``fap``,
+    ``expression``, ``intensity``, ``seconds``, ``output``) win over the manifest's.
+    Raises :class:`StageError`/:class:`ConfigError` ``<manifest>:<line>: <key>: <cause>``.
+    """
+    from dataclasses import replace
+
+    path = Path(path)
+    source, base = str(path), path.absolute().parent
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise StageError("manifest not found", path) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StageError(f"cannot read manifest: {exc}", path) from None
+    data, lines = _yaml_lines(text, source)
+    if not isinstance(data, Mapping):
+        raise StageError("expected a mapping with a 'heads' list", source, 1)
+    for key in data:
+        if str(key) not in _MANIFEST_KEYS:
+            raise StageError(f"{key}: unknown key (valid: {', '.join(_MANIFEST_KEYS)})", source, lines.get((str(key),)))
+    heads = data.get("heads")
+    if not isinstance(heads, list) or not heads:
+        raise StageError("heads: expected a non-empty list of heads", source, lines.get(("heads",), 1))
+
+    def resolve(value, where):
+        if not isinstance(value, str) or not value:
+            raise StageError(f"{'.'.join(map(str, where))}: expected a path", source, lines.get(where))
+        p = Path(value).expanduser()
+        p = p if p.is_absolute() else base / p
+        if not p.is_file():
+            raise StageError(f"{'.'.join(map(str, where))}: file not found: {p}", source, lines.get(where))
+        return str(p)
+
+    given = set(cli_given)
+    picked = {k: getattr(cli, k) for k in ("fap", "expression", "intensity", "seconds", "output")}
+    for key in picked:
+        if key in data and key not in given:
+            value = data[key]
+            if key == "fap":
+                value = resolve(value, ("fap",))
+            elif key in ("intensity", "seconds"):
+                if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= (0 if key == "seconds" else -1e-12):
+                    raise StageError(f"{key}: expected a positive number, got {value!r}", source, lines.get((key,)))
+            elif not isinstance(value, str):
+                raise StageError(f"{key}: expected a string, got {value!r}", source, lines.get((key,)))
+            picked[key] = value
+    if "fap" in given or "expression" in given:   # the command line picks the animation source
+        picked["fap"], picked["expression"] = cli.fap, cli.expression
+    shared_set = _overrides(data.get("set"), ("set",), source, lines, base)
+    shared = replace(cli, **picked, overrides={**shared_set, **cli.overrides})
+    try:
+        shared.check(source)
+    except FaceforgeError as exc:
+        raise StageError(exc.message, exc.path or source, exc.line or lines.get(("fap",)) or lines.get(("expression",))) from None
+    jobs = []
+    for i, head in enumerate(heads):
+        where = ("heads", i)
+        if not isinstance(head, Mapping) or "mesh" not in head:
+            raise StageError(f"heads[{i}]: expected a mapping with a 'mesh' path", source, lines.get(where))
+        for key in head:
+            if str(key) not in _HEAD_KEYS:
+                raise StageError(f"heads[{i}].{key}: unknown key (valid: {', '.join(_HEAD_KEYS)})",
+                                 source, lines.get(where + (str(key),)))
+        name = head.get("name")
+        if name is not None and (not isinstance(name, str) or not name or "/" in name or name.startswith(".")):
+            raise StageError(f"heads[{i}].name: expected a folder name, got {name!r}", source, lines.get(where + ("name",)))
+        mesh = resolve(head["mesh"], where + ("mesh",))
+        landmarks = resolve(head["landmarks"], where + ("landmarks",)) if head.get("landmarks") else None
+        own = _overrides(head.get("set"), where + ("set",), source, lines, base)
+        jobs.append(make_job(mesh, out, shared, name=name, landmarks=landmarks, overrides=own, base=base))
+    check_unique(jobs, source)
+    return jobs
+
+
+# --------------------------------------------------------------------------- one head
+
+def _append_log(path: Path, message: str) -> None:
+    stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
+    with open(path, "a", encoding="utf-8") as fh:
+        for line in str(message).splitlines() or [""]:
+            fh.write(f"{stamp} {line}\n")
+
+
+def head_config(job: HeadJob):
+    """The head's validated Config: defaults <- ``config_file`` <- ``overrides``."""
+    from faceforge.io.config import build_config, read_config_file, validate_tree
+
+    layers = []
+    if job.config_file:
+        layers.append(read_config_file(job.config_file))
+    if job.overrides:
+        layers.append(validate_tree(nest(job.overrides), f"{job.name}: set", {}, Path(job.base)))
+    return build_config(layers), layers
+
+
+def _remember(workspace, layers, params: Mapping) -> None:
+    """Write the workdir's remembered inputs and overrides, so single-head commands agree."""
+    from faceforge.io.config import merge_trees
+    from faceforge.io.stagefiles import save_yaml
+
+    workspace.save_params(params)
+    tree: dict = {}
+    for layer in layers:
+        tree = merge_trees(tree, layer.tree)
+    if tree:
+        save_yaml(workspace.config_path, tree, header="config overrides of this head (written by faceforge batch)")
+    elif workspace.config_path.exists():
+        workspace.config_path.unlink()
+
+
+def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> dict:
+    """Stage params of the head: mesh, landmarks, the FAP track and the FAP mapping."""
+    from faceforge.io.landmarks import default_landmark_path
+    from faceforge.pipeline.stage import stage_order
+
+    params = {"mesh": str(Path(job.mesh).absolute()),
+              "landmarks": str(Path(job.landmarks or default_landmark_path(job.mesh)).absolute())}
+    needed = {n.rstrip("?") for s in stage_order(targets) for n in s.inputs}
+    if "fap" in needed:
+        params["fap"] = str(Path(job.fap).absolute()) if job.fap else str(_expression_fap(job, config, root))
+    if "fap_mapping" in needed:
+        from faceforge.pipeline.stages.animate import calibrated_mapping_path, mapping_template_path
+
+        params["fap_mapping"] = str(mapping_template_path(config))
+        calibrated = calibrated_mapping_path(root)
+        params["calibration"] = str(calibrated) if calibrated.exists() else ""
+    return params
+
+
+def _expression_fap(job: HeadJob, config, root: Path) -> Path:
+    """Write the job's expression as a FAP file in the workdir (its content keys the cache)."""
+    from faceforge.mpeg4 import expression_track, write_fap
+
+    if job.expression is None:
+        raise StageError("no FAP track or expression given", job.mesh)
+    seconds = job.seconds or float(config.get("animate.expression_seconds"))
+    track = expression_track(job.expression, intensity=job.intensity, fps=float(config.get("animate.fps")),
+                             seconds=seconds, ramp=float(config.get("animate.expression_ramp")))
+    path = root / "inputs" / f"expression_{job.expression}_{job.intensity:g}_{seconds:g}s.fap"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_fap(path, track)
+    return path
+
+
+def report_metrics(report: Mapping) -> dict:
+    """Dotted scalar leaves (numbers, booleans, short strings) of a stage's report.json."""
+    out = {}
+    for key, value in flatten(report).items():
+        if isinstance(value, (bool, int, float)) or (isinstance(value, str) and len(value) <= 80):
+            out[key] = value
+        elif value is None:
+            out[key] = None
+    return out
+
+
+def _collect(result: HeadResult, root: Path) -> None:
+    """Metrics from the fit/bind reports and the output paths of every complete stage."""
+    import json
+
+    for name in METRIC_STAGES:
+        path = root / name / "report.json"
+        if path.exists():
+            try:
+                result.metrics[name] = report_metrics(json.loads(path.read_text(encoding="utf-8")))
+            except (OSError, ValueError):
+                result.metrics[name] = {}
+    for name in result.stages:
+        folder = root / name
+        if (folder / "stage.json").exists():
+            result.outputs[name] = sorted(str(p) for p in folder.iterdir() if p.name != "stage.json")
+
+
+def _export(job: HeadJob, root: Path) -> str:
+    """Write the animate stage's frames to ``job.output`` with the user's faces."""
+    from faceforge.io.export import export_animation
+    from faceforge.io.mesh import load_mesh
+    from faceforge.io.stagefiles import load_npz
+
+    animation = root / "animate" / "animation.npz"
+    if not animation.exists():
+        raise StageError("no animation to export (the animate stage did not run)", root)
+    d = load_npz(animation)
+    _, faces, _ = load_mesh(job.mesh)
+    return str(export_animation(job.output, d["frames"], faces, float(d["fps"])))
+
+
+def run_head(job: HeadJob) -> HeadResult:
+    """Bring one head's stages up to date in its workdir; never raises for the head's own errors.
+
+    A :class:`FaceforgeError` becomes ``result.error`` (its one-line message); any
+    other exception becomes ``"<Type>: <message>"`` with its traceback in ``batch.log``.
+    Runs anywhere: it reads only the job and files.
+    """
+    from faceforge.pipeline import runner
+    from faceforge.pipeline.stage import stage_order
+
+    start = time.perf_counter()
+    root = Path(job.workdir)
+    root.mkdir(parents=True, exist_ok=True)
+    log_path = root / HEAD_LOG
+    result = HeadResult(job.name, str(root))
+    _append_log(log_path, f"batch: head {job.name} ({job.mesh}) pid {os.getpid()}")
+    current = None
+    try:
+        import_plugins(job.plugins)
+        order = [s.name for s in stage_order(job.targets)]
+        result.stages = {name: {"state": "not run", "seconds": 0.0} for name in order}
+        config, layers = head_config(job)
+        workspace = runner.Workspace(root)
+        params = {**workspace.load_params(), **_head_params(job, config, root, job.targets)}
+        _remember(workspace, layers, params)
+        for name in order:
+            current, t0 = name, time.perf_counter()
+            statuses = runner.run(workspace, config, params, [name],
+                                  log=lambda msg: _append_log(log_path, msg))
+            status = next(s for s in statuses if s.stage.name == name)
+            result.stages[name] = {"state": "ran" if status.ran else "cached",
+                                   "seconds": round(status.seconds if status.ran else 0.0, 3)}
+            current = None
+        if job.output:
+            current = "export"
+            result.outputs["export"] = _export(job, root)
+            current = None
+        result.status = "ok"
+    except FaceforgeError as exc:
+        result.error = str(exc)
+    except Exception as exc:  # a bug must fail this head only, with its traceback kept
+        result.error = f"{type(exc).__name__}: {exc}".splitlines()[0]
+        _append_log(log_path, traceback.format_exc())
+    if current is not None and current in result.stages:
+        result.stages[current] = {"state": "failed", "seconds": round(time.perf_counter() - t0, 3)}
+    if result.error:
+        where = f" in {current}" if current else ""
+        _append_log(log_path, f"batch: failed{where}: {result.error}")
+    _collect(result, root)
+    result.seconds = round(time.perf_counter() - start, 3)
+    _append_log(log_path, f"batch: {result.status} in {result.seconds:.1f} s")
+    return result
+
+
+# --------------------------------------------------------------------------- executors
+
+def _limit_threads(threads: int) -> None:
+    """Worker initializer: cap BLAS/numba threads, and die with the parent (Linux)."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(var, str(threads))
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except OSError:
+            pass
+
+
+def _failed(job: HeadJob, message: str) -> HeadResult:
+    return HeadResult(job.name, job.workdir, status="failed", error=message)
+
+
+def run_local(jobs: Sequence[HeadJob], n_jobs: int,
+              on_result: Callable[[HeadResult], None] = lambda r: None) -> list[HeadResult]:
+    """Run the heads in ``n_jobs`` spawned processes (in this process when ``n_jobs == 1``)."""
+    if n_jobs <= 1 or len(jobs) <= 1:
+        results = []
+        for job in jobs:
+            results.append(run_head(job))
+            on_result(results[-1])
+        return results
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    workers = min(n_jobs, len(jobs))
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    done: dict[int, HeadResult] = {}
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                             initializer=_limit_threads, initargs=(threads,)) as pool:
+        futures = {pool.submit(run_head, job): i for i, job in enumerate(jobs)}
+        for future in as_completed(futures):
+            i = futures[future]
+            try:
+                done[i] = future.result()
+            except BrokenProcessPool:
+                done[i] = _failed(jobs[i], "worker process died (killed or out of memory)")
+            on_result(done[i])
+    return [done[i] for i in range(len(jobs))]
+
+
+def run_dask(jobs: Sequence[HeadJob], scheduler: str,
+             on_result: Callable[[HeadResult], None] = lambda r: None) -> list[HeadResult]:
+    """Run the heads on the Dask distributed scheduler at ``scheduler`` (``tcp://host:port``).
+
+    Workers must be able to import faceforge and read the heads' paths (a shared
+    filesystem); each head is one task, never retried.
+    """
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise StageError("--scheduler needs dask.distributed: pip install 'faceforge[dask]'") from None
+    try:
+        client = Client(scheduler, timeout="15s", set_as_default=False)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise StageError(f"cannot reach the Dask scheduler: {exc}".splitlines()[0], scheduler) from None
+    done: dict[int, HeadResult] = {}
+    try:
+        futures = client.map(run_head, list(jobs), pure=False)
+        index = {f.key: i for i, f in enumerate(futures)}
+        for future in as_completed(futures):
+            i = index[future.key]
+            try:
+                done[i] = future.result()
+            except Exception as exc:  # worker lost, unpicklable result: this head fails alone
+                done[i] = _failed(jobs[i], f"dask task failed: {type(exc).__name__}: {exc}".splitlines()[0])
+            on_result(done[i])
+    finally:
+        client.close()
+    return [done[i] for i in range(len(jobs))]
+
+
+def run_batch(jobs: Sequence[HeadJob], n_jobs: int | None = None, scheduler: str | None = None,
+              on_result: Callable[[HeadResult], None] = lambda r: None) -> list[HeadResult]:
+    """Run every head with the chosen executor; results in the order of ``jobs``."""
+    if scheduler:
+        return run_dask(jobs, scheduler, on_result)
+    return run_local(jobs, n_jobs or os.cpu_count() or 1, on_result)
+
+
+# --------------------------------------------------------------------------- summary
+
+def batch_report(results: Sequence[HeadResult], out_dir: str | Path, seconds: float,
+                 executor: str) -> dict:
+    """The JSON report: counts, wall time, heads per minute and one entry per head."""
+    ok = sum(r.ok for r in results)
+    return {"out": str(Path(out_dir).absolute()), "executor": executor, "heads": len(results), "ok": ok,
+            "failed": len(results) - ok, "seconds": round(seconds, 3),
+            "heads_per_minute": round(60.0 * len(results) / seconds, 3) if seconds > 0 else None,
+            "results": [r.as_dict() for r in results]}
+
+
+def _cell(stage: Mapping | None) -> str:
+    if not stage:
+        return "-"
+    state, secs = stage["state"], stage["seconds"]
+    return {"ran": f"{secs:.1f}s", "cached": "cached", "failed": f"FAIL {secs:.1f}s"}.get(state, "-")
+
+
+def format_summary(results: Sequence[HeadResult]) -> str:
+    """A plain-text table: head, status, per-stage time (or cached), headline metrics, error."""
+    stages: list[str] = []
+    for r in results:
+        stages += [s for s in r.stages if s not in stages]
+    metrics = [(st, key, title) for st, key, title in HEADLINE_METRICS
+               if any(key in r.metrics.get(st, {}) for r in results)]
+    header = ["head", "status"] + stages + [title for _, _, title in metrics] + ["total"]
+    rows = []
+    for r in results:
+        cells = [r.name, r.status] + [_cell(r.stages.get(s)) for s in stages]
+        for st, key, _ in metrics:
+            value = r.metrics.get(st, {}).get(key)
+            cells.append(f"{value:.3g}" if isinstance(value, float) else ("-" if value is None else str(value)))
+        rows.append(cells + [f"{r.seconds:.1f}s"])
+    widths = [max(len(str(row[i])) for row in [header] + rows) for i in range(len(header))]
+    lines = ["  ".join(str(c).ljust(w) for c, w in zip(row, widths)).rstrip() for row in [header] + rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    errors = [f"{r.name}: {r.error}" for r in results if r.error]
+    ok = sum(r.ok for r in results)
+    tail = [f"{ok} of {len(results)} heads ok" + (f", {len(results) - ok} failed:" if errors else "")]
+    return "\n".join(lines + [""] + tail + [f"  {e}" for e in errors])
