@@ -25,7 +25,9 @@ lip never binds to the upper half of the orbicularis oris).
 Beyond the paper: a vertex whose two rays both miss (they look into a hole of
 the skull: eye sockets, nostrils, the gap between the teeth) binds to the
 closest point of the skull within ``max_distance`` (its own jaw's bone near
-the lips); :attr:`Binding.closest` marks those anchors and the report counts them.
+the lips); :attr:`Binding.closest` marks those anchors and the report counts
+them. :func:`bind_head` allows this only on the face front (in front of the
+ears, below the hairline, above the chin), so the neck is not tied to the jaw.
 
 Ray casting uses :class:`faceforge.geometry.rays.RayCaster` (trimesh, Embree
 where installed); all bodies of one pass are merged into one mesh so every pass
@@ -221,7 +223,7 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
     return body, face, pts, dist
 
 
-def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist) -> np.ndarray:
+def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask) -> np.ndarray:
     """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
     Rays miss where the skin looks into a hole of the skull (eyelids and eye
@@ -235,7 +237,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
 
     done = np.zeros(len(v), bool)
     for side, allowed_kinds in ((1, (CRANIUM,)), (-1, (MANDIBLE,)), (0, (CRANIUM, MANDIBLE))):
-        todo = np.flatnonzero((body < 0) & (sides == side))
+        todo = np.flatnonzero((body < 0) & (sides == side) & mask)
         own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
         if len(todo) == 0 or not own:
             continue
@@ -251,7 +253,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
 
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
-              normals=None, depth_rank=None, side_of=None) -> Binding:
+              normals=None, depth_rank=None, side_of=None, fallback=True) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -278,6 +280,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         0 far; :func:`faceforge.anatomy.mouth.side_of_points`). A lip vertex
         (``lip_sides != 0``) ignores hits on the other side, so the lower lip
         never binds to the upper part of a muscle around the mouth.
+    fallback : bool or (n,) bool
+        Vertices (all, or those of the mask) whose two rays miss bind to the
+        closest skull point within ``max_distance`` (:attr:`Binding.closest`);
+        False keeps the paper's rays only.
 
     Returns
     -------
@@ -322,7 +328,8 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
         outward[t] = sign > 0
 
-    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist)
+    mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
+    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     bary = np.zeros((len(ids), 3), FLOAT)
@@ -543,14 +550,14 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         bodies.append(Body("mandible", "mandible", *mandible))
         rank.append(0)
     diagonal = float(np.linalg.norm(np.ptp(v, axis=0)))
+    front, rule = face_front_mask(cut.vertices, pts)
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
-                        depth_rank=rank, side_of=side_of)
+                        depth_rank=rank, side_of=side_of, fallback=front)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None
     weights, dist, scale = influence_weights(cut.vertices, cut.faces, sources, back_vertex=back)
 
-    front, rule = face_front_mask(cut.vertices, pts)
     report = bind_report(binding, {"face_front": front, "back_and_neck": ~front})
     report["region_rules"] = rule
     report["max_ray_distance"] = max_ray_fraction * diagonal
