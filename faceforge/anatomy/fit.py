@@ -400,6 +400,8 @@ class FitResult:
     muscles: list                       # [(name, vertices, faces)] built on the fitted skull
     warp: Warp
     info: dict                          # counts for the report
+    cranium_faces: np.ndarray = None    # (m, 3) template faces
+    mandible_faces: np.ndarray = None
 
 
 def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, skin_face_ids, skin_bary,
@@ -456,4 +458,5 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, sk
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
     reached = np.array([fitted_lm[f] for f in pairs.fdps])
     return FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
-                     {n: warp(p) for n, p in template.muscle_points.items()}, muscles, warp, info)
+                     {n: warp(p) for n, p in template.muscle_points.items()}, muscles, warp, info,
+                     np.asarray(cf), np.asarray(mf))

@@ -116,3 +116,79 @@ def refit_rbf(refit: Refit, fixed_points: np.ndarray):
     _, keep = np.unique(np.round(src, 12), axis=0, return_index=True)
     keep = np.sort(keep)
     return hardy_rbf(src[keep], dst[keep])
+
+
+def morph_spec(spec, warp):
+    """A :class:`faceforge.anatomy.muscle_map.MuscleSpec` with every point mapped by ``warp``
+    ((k, 3) -> (k, 3)); thickness stays a fraction (Eq. 5 applies when building)."""
+    from dataclasses import replace
+
+    fields = ("origin", "insertion", "fibre_a", "fibre_b", "inner", "outer")
+    return replace(spec, **{k: (warp(getattr(spec, k)) if len(getattr(spec, k)) else getattr(spec, k))
+                            for k in fields})
+
+
+def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None) -> list:
+    """Build every muscle of ``specs`` on the given skull, deepest layer first.
+
+    Each muscle's action lines are projected (outermost surface) onto the concatenation of
+    the bodies it lies on (cranium, mandible, deeper muscles); thickness is Eq. 5:
+    ``spec.thickness * skull_diagonal``. ``stiffness``: ``{"linear": {...}, "sphincter":
+    {...}}`` of the config (empty: geometry only). Returns ``[Muscle]`` in build order.
+    """
+    from faceforge.anatomy.action_line import ActionLine
+    from faceforge.anatomy.layers import expand_lies_on
+    from faceforge.anatomy.muscle import align_loops, build_linear_muscle, build_sphincter_muscle
+    from faceforge.exceptions import TemplateError
+
+    stiffness = stiffness or {}
+    bodies = {"cranium": cranium, "mandible": mandible}
+    built = []
+    for spec in sorted(specs, key=lambda s: s.layer):
+        parts = []
+        for name in expand_lies_on(spec.lies_on):
+            if name not in bodies:
+                raise TemplateError(f"muscle {spec.name!r} lies on {name!r}, which is not built before it")
+            parts.append(bodies[name])
+        offsets = np.cumsum([0] + [len(v) for v, _ in parts])
+        v = np.vstack([p[0] for p in parts])
+        f = np.vstack([p[1] + o for p, o in zip(parts, offsets)])
+        t = eq5_thickness(spec.thickness, skull_diagonal)
+        kw = dict(lies_on=tuple(spec.lies_on), layer=spec.layer, active=spec.active)
+        lines = spec.action_lines()
+
+        def line(points, closed=False):
+            return ActionLine.from_points(points, v, f, closed=closed, project="outermost")
+
+        if spec.type == "linear":
+            m = build_linear_muscle(spec.name, line(lines["A3"]), line(lines["A1"]), line(lines["A0"]),
+                                    line(lines["A2"]), v, f, spec.h, spec.w, t,
+                                    stiffness.get("linear", {}), **kw)
+        else:
+            inner, outer = align_loops(spec.inner, spec.outer)
+            m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h, spec.w,
+                                       t, stiffness.get("sphincter", {}), **kw)
+        bodies[spec.name] = (m.rest_positions, m.faces)
+        built.append(m)
+    return built
+
+
+def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float) -> list:
+    """Muscles built on the template skull, carried into the head by ``warp`` (Eq. 5).
+
+    The bottom sheet of each muscle (first ``h w`` particles) is mapped by ``warp``; the
+    top sheet is put back at the rescaled thickness ``t = fraction * skull_diagonal``
+    along the mapped bottom -> top direction, so the muscle keeps its shape while its
+    thickness follows the fitted skull (Eq. 5) rather than the local stretch of the map.
+
+    template_muscles : [(name, rest_positions (2hw, 3), faces, hw, thickness fraction)]
+    Returns ``[(name, vertices (2hw, 3), faces)]``.
+    """
+    out = []
+    for name, rest, faces, hw, fraction in template_muscles:
+        p = warp(rest)
+        bottom = p[:hw]
+        up = p[hw:] - bottom
+        up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-300)
+        out.append((name, np.vstack([bottom, bottom + eq5_thickness(fraction, skull_diagonal) * up]), faces))
+    return out

@@ -60,3 +60,97 @@ def save_fit_png(path, skin_v, skin_f, layers: list, title: str = "fit") -> None
     drawn = [Layer(v, f, color=c, label=name) for name, v, f, c in layers]
     drawn.append(Layer(skin_v, skin_f, color=(0.95, 0.78, 0.68), alpha=0.25, label="skin"))
     render_meshes(path, drawn, views=("front", "side"), title=title)
+
+
+def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_es0: float = 0.75) -> dict:
+    """The fit report (JSON-friendly) of a :class:`faceforge.anatomy.fit.FitResult`.
+
+    Skull numbers cover the *front* vertices (in front of the coronal plane ``front_offset_es0``
+    ES0 behind the outer eye corners) that the skin covers; muscle numbers cover every
+    muscle vertex the skin covers. Depths are in head units and in millimetres of an
+    average adult (``units_per_mm``).
+    """
+    from faceforge.anatomy.fit import front_mask
+
+    diag = skin.diagonal
+    mm = result.info["units_per_mm"]
+    skin_lm = skin_landmarks.as_dict()
+    skull = np.vstack([result.cranium, result.mandible])
+    depth, covered = depth_below_skin(skull, skin)
+    front = front_mask(skull, skin_lm, front_offset_es0)
+    skull_stats = inside_stats(depth, covered & front, diag)
+    residuals = landmark_residuals(result.fdps, result.reached, result.targets, diag)
+    muscles, per_muscle = [], {}
+    all_depth, all_cov = [], []
+    for name, v, _ in result.muscles:
+        d, c = depth_below_skin(v, skin)
+        all_depth.append(d)
+        all_cov.append(c)
+        st = inside_stats(d, c, diag)
+        per_muscle[name] = {"inside_fraction": st["inside_fraction"], "max_outside_rel": st["max_outside_rel"]}
+        if st["max_outside"] > 0:
+            muscles.append(name)
+    muscle_stats = inside_stats(np.concatenate(all_depth) if all_depth else np.zeros(0),
+                                np.concatenate(all_cov) if all_cov else np.zeros(0, bool), diag)
+    muscle_stats["per_muscle"] = per_muscle
+    muscle_stats["poking_through"] = sorted(muscles, key=lambda n: -per_muscle[n]["max_outside_rel"])
+    for st in (skull_stats, muscle_stats):
+        for key in ("min_depth", "median_depth"):
+            st[key + "_mm"] = None if st[key] is None else st[key] / mm
+    sim = result.warp.similarity[:3, :3]
+    return {
+        "mesh": mesh_report,
+        "diagonal": diag,
+        "units_per_mm": mm,
+        "similarity_scale": float(np.cbrt(abs(np.linalg.det(sim)))),
+        "landmarks": {
+            "file": skin_landmarks.path,
+            "count": len(skin_landmarks.ids),
+            "max_snap_rel": float(skin_landmarks.snap_distance.max() / diag),
+            "skull_targets": list(result.fdps),
+            "residuals_rel": residuals,
+            "max_residual": max(residuals.values()) if residuals else 0.0,
+            "enhancement_landmarks": result.info["enhancement_landmarks"],
+            "enhancement_rounds": result.info["enhancement_rounds"],
+            "covered_by_muscles": result.info["covered_landmarks"],
+            "refit": result.info["refit"],
+        },
+        "skull": skull_stats,
+        "muscles": muscle_stats,
+        "tissue_thickness": {"min": skull_stats["min_depth"], "median": skull_stats["median_depth"],
+                             "min_mm": skull_stats["min_depth_mm"], "median_mm": skull_stats["median_depth_mm"]},
+    }
+
+
+def npz_arrays(result, skin_vertices, skin_faces, user_to_internal, skin_landmarks, layers: dict) -> dict:
+    """The arrays of ``fit.npz`` (see :mod:`faceforge.pipeline.stages.fit`)."""
+    out = {
+        "skin_vertices": np.asarray(skin_vertices, np.float64),
+        "skin_faces": np.asarray(skin_faces, np.int64),
+        "skin_user_to_internal": np.asarray(user_to_internal, np.int64),
+        "cranium_vertices": result.cranium, "cranium_faces": result.cranium_faces,
+        "mandible_vertices": result.mandible, "mandible_faces": result.mandible_faces,
+        "landmark_ids": np.array(list(result.landmarks), dtype=str),
+        "landmark_positions": np.array(list(result.landmarks.values()), dtype=np.float64).reshape(-1, 3),
+        "skin_landmark_ids": np.array(skin_landmarks.ids, dtype=str),
+        "skin_landmark_positions": skin_landmarks.positions,
+        "target_ids": np.array(result.fdps, dtype=str),
+        "target_positions": result.targets,
+        "similarity": result.warp.similarity,
+    }
+    for name, (point, direction) in result.jaw_axes.items():
+        out[f"jaw_{name}_point"] = point
+        out[f"jaw_{name}_direction"] = direction
+    names = [n for n, _, _ in result.muscles]
+    out["muscle_names"] = np.array(names, dtype=str)
+    out["muscle_layers"] = np.array([layers.get(n, 0) for n in names], dtype=np.int64)
+    out["muscle_vertex_start"] = np.cumsum([0] + [len(v) for _, v, _ in result.muscles]).astype(np.int64)
+    out["muscle_face_start"] = np.cumsum([0] + [len(f) for _, _, f in result.muscles]).astype(np.int64)
+    out["muscle_vertices"] = np.vstack([v for _, v, _ in result.muscles]) if names else np.zeros((0, 3))
+    out["muscle_faces"] = np.vstack([f for _, _, f in result.muscles]).astype(np.int64) if names \
+        else np.zeros((0, 3), np.int64)
+    mp = list(result.muscle_points.items())
+    out["muscle_map_names"] = np.array([n for n, _ in mp], dtype=str)
+    out["muscle_map_start"] = np.cumsum([0] + [len(p) for _, p in mp]).astype(np.int64)
+    out["muscle_map_points"] = np.vstack([p for _, p in mp]) if mp else np.zeros((0, 3))
+    return out

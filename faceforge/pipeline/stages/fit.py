@@ -1,0 +1,192 @@
+"""The fit stage: skull and muscle map morphed into the user's skin (§7).
+
+``faceforge fit skin.obj [--landmarks skin.fdp.yaml]`` writes ``<workdir>/fit/``:
+
+fit.npz (no pickle; head space, mesh units)
+    ``skin_vertices (n,3)``, ``skin_faces (m,3)``: the internal (checked, merged) skin;
+    ``skin_user_to_internal (n_user,)``: internal vertex of each of the user's vertices;
+    ``cranium_vertices``, ``cranium_faces``, ``mandible_vertices``, ``mandible_faces``;
+    ``landmark_ids (k,) str``, ``landmark_positions (k,3)``: fitted bone landmarks;
+    ``skin_landmark_ids (s,) str``, ``skin_landmark_positions (s,3)``: snapped skin landmarks;
+    ``target_ids``, ``target_positions``: the bone-landmark targets (tissue depth, refit);
+    ``jaw_<axis>_point (3,)``, ``jaw_<axis>_direction (3,)`` for each template jaw axis;
+    ``muscle_names (q,) str``, ``muscle_vertices (sum,3)``, ``muscle_vertex_start (q+1,)``,
+    ``muscle_faces (sum,3)`` (muscle-local ids), ``muscle_face_start (q+1,)``, ``muscle_thickness (q,)``;
+    ``muscle_map_names (r,)``, ``muscle_map_points (sum,3)``, ``muscle_map_start (r+1,)``:
+    every point of the morphed muscle map; ``similarity (4,4)``: the initial alignment.
+report.json
+    mesh check, landmark residuals (fraction of the skin diagonal), inside fractions of
+    front skull and muscle vertices, tissue thickness, muscles poking through, timings.
+fit.png
+    skull and muscles inside the translucent skin, front and side (Fig. 8b).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from faceforge.pipeline import Stage, register_command, register_stage
+
+VERSION = "1"
+
+
+def run(ctx) -> None:
+    """Stage body: read mesh + landmarks + template, fit, write fit.npz, report.json, fit.png."""
+    import time
+
+    from faceforge.io.landmarks import default_landmark_path
+
+    t0 = time.perf_counter()
+    mesh_path = ctx.param("mesh")
+    lm_path = ctx.params.get("landmarks") or str(default_landmark_path(mesh_path))
+    template = load_template(ctx.config.get("template.skull"), ctx.config.get("template.muscle_map"))
+    result, report, extra = fit_files(mesh_path, lm_path, template, dict(ctx.config.get("fit") or {}),
+                                      log=ctx.log)
+    report["timings"]["stage_total_s"] = time.perf_counter() - t0
+    write_outputs(ctx.out_dir, result, report, extra)
+    m = report["muscles"]
+    ctx.log(f"landmark residual max {report['landmarks']['max_residual']:.2%} of the diagonal, "
+            f"skull inside {report['skull']['inside_fraction']:.1%}, muscles inside "
+            + (f"{m['inside_fraction']:.1%}" if m["count"] else "n/a"))
+
+
+class Template:
+    """The template skull and muscle map, with the muscles built once on the template skull.
+
+    skull : :class:`faceforge.anatomy.skull.Skull`; specs : [MuscleSpec]; muscles :
+    [(name, rest positions, faces, hw, thickness fraction)]; layers : {name: layer}.
+    """
+
+    def __init__(self, skull, specs, built):
+        from faceforge.anatomy.fit import FitTemplate
+
+        self.skull, self.specs = skull, specs
+        self.muscles = [(m.name, m.rest_positions, m.faces, m.topology.h * m.topology.w, s.thickness)
+                        for m, s in zip(built, sorted(specs, key=lambda s: s.layer))]
+        self.layers = {s.name: s.layer for s in specs}
+        jaw = skull.jaw
+        self.fit_template = FitTemplate(
+            skull.cranium, skull.mandible, skull.landmarks,
+            {"pitch": (jaw.pitch_point, jaw.pitch_dir), "yaw": (jaw.yaw_point, jaw.yaw_dir),
+             "protrusion": (jaw.pitch_point, jaw.protrusion_dir)},
+            {s.name: s.points() for s in specs})
+
+    def build_muscles(self, cranium, mandible, warp):
+        """The template muscles carried by ``warp`` with Eq. 5 thickness (fitted skull diagonal)."""
+        import numpy as np
+
+        from faceforge.anatomy.fit_muscles import morph_muscle_meshes
+
+        v = np.vstack([cranium[0], mandible[0]])
+        return morph_muscle_meshes(self.muscles, warp, float(np.linalg.norm(np.ptp(v, axis=0))))
+
+
+_TEMPLATES: dict = {}
+
+
+def load_template(skull_dir, muscle_map) -> Template:
+    """Load (once per process and file version) the template named by ``template.*``."""
+    import os
+
+    from faceforge.anatomy.fit_muscles import build_muscles_on
+    from faceforge.anatomy.muscle_map import load_muscle_map
+    from faceforge.anatomy.skull import load_skull
+
+    skull_dir, muscle_map = _resolve(skull_dir), _resolve(muscle_map)
+    key = (str(skull_dir), str(muscle_map),
+           tuple(os.stat(p).st_mtime_ns for p in sorted(Path(skull_dir).glob("*")) + [Path(muscle_map)]))
+    if key not in _TEMPLATES:
+        skull = load_skull(skull_dir)
+        specs = load_muscle_map(muscle_map, skull)
+        _TEMPLATES.clear()
+        _TEMPLATES[key] = Template(skull, specs, build_muscles_on(specs, skull.cranium, skull.mandible,
+                                                                  skull.diagonal))
+    return _TEMPLATES[key]
+
+
+def _resolve(path) -> Path:
+    """A template path as given, or relative to the package's repository root."""
+    p = Path(path)
+    if p.exists() or p.is_absolute():
+        return p
+    root = Path(__file__).resolve().parents[3]
+    return root / p if (root / p).exists() else p
+
+
+def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lambda m: None):
+    """Load and check the skin and its landmarks, fit ``template``.
+
+    Returns ``(FitResult, report dict, extra)``; ``extra`` holds the checked mesh and the
+    landmarks for :func:`write_outputs`.
+    """
+    import time
+
+    from faceforge.anatomy.fit import FitSettings, SkinSurface, fit_head
+    from faceforge.anatomy.fit_report import build_report
+    from faceforge.io.landmarks import load_landmarks
+    from faceforge.io.mesh import load_mesh
+    from faceforge.io.mesh_check import check_mesh
+
+    t = time.perf_counter()
+    v, f, _ = load_mesh(mesh_path)
+    checked = check_mesh(v, f, str(mesh_path))
+    for w in checked.report.warnings:
+        log(f"{mesh_path}: {w}")
+    lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal)
+    t_load = time.perf_counter() - t
+    t = time.perf_counter()
+    settings = FitSettings.from_config(fit_config)
+    skin = SkinSurface.build(checked.vertices, checked.faces)
+    result = fit_head(template.fit_template, skin, lm.ids, lm.positions, lm.face_ids, lm.bary, settings,
+                      template.build_muscles)
+    t_fit = time.perf_counter() - t
+    t = time.perf_counter()
+    mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
+    report = build_report(result, skin, lm, mesh_report, settings.front_offset_es0)
+    report["settings"] = dict(settings.__dict__)
+    report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
+    return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template}
+
+
+def write_outputs(out_dir, result, report, extra) -> None:
+    """fit.npz, report.json and fit.png into ``out_dir``."""
+    from faceforge.anatomy.fit_report import npz_arrays, save_fit_png
+    from faceforge.io.stagefiles import save_json, save_npz
+
+    checked, lm = extra["checked"], extra["landmarks"]
+    out_dir = Path(out_dir)
+    save_npz(out_dir / "fit.npz", **npz_arrays(result, checked.vertices, checked.faces, checked.user_to_internal,
+                                               lm, extra["template"].layers))
+    save_json(out_dir / "report.json", report)
+    layers = [("cranium", result.cranium, result.cranium_faces, (0.93, 0.91, 0.84)),
+              ("mandible", result.mandible, result.mandible_faces, (0.88, 0.86, 0.78))]
+    layers += [(n, v, f, (0.78, 0.25, 0.22)) for n, v, f in result.muscles]
+    save_fit_png(out_dir / "fit.png", checked.vertices, checked.faces, layers,
+                 title=f"fit: {Path(report['mesh']['path']).name}")
+
+
+STAGE = register_stage(Stage(
+    name="fit", deps=(), config_keys=("fit", "template"),
+    inputs=("mesh", "landmarks?", "template.skull", "template.muscle_map"),
+    outputs=("fit.npz", "report.json", "fit.png"), version=VERSION, run=run,
+    description="fit the skull and muscle map into the skin (§7)"))
+
+
+@click.command("fit", help="Fit the template skull and muscle map into a skin mesh (§7).")
+@click.argument("mesh", type=click.Path(dir_okay=False))
+@click.option("--landmarks", type=click.Path(dir_okay=False), default=None,
+              help="FDP landmark file (.yaml, .json, .csv) [default: <mesh stem>.fdp.yaml next to the mesh].")
+@click.option("--force", is_flag=True, help="Rerun even if up to date.")
+@click.pass_obj
+def command(app, mesh, landmarks, force):
+    from faceforge.io.landmarks import default_landmark_path
+
+    if landmarks is None:
+        landmarks = str(default_landmark_path(mesh))
+    app.run_stage("fit", params={"mesh": mesh, "landmarks": landmarks}, force=force)
+    app.log(f"fit: wrote {app.workspace.stage_dir('fit')}")
+
+
+register_command(command)
