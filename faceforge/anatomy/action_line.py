@@ -28,7 +28,8 @@ from faceforge.constants import FLOAT
 from faceforge.geometry.surface_points import SurfacePoints, project_to_surface
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
-__all__ = ["ActionLine", "sample_polyline", "mean_edge_length"]
+__all__ = ["ActionLine", "sample_polyline", "polyline_parameters", "eval_polyline", "mean_edge_length",
+           "project_outermost"]
 
 
 def mean_edge_length(vertices, faces) -> float:
@@ -36,6 +37,49 @@ def mean_edge_length(vertices, faces) -> float:
     v, f = check_mesh(vertices, faces)
     e = v[f[:, [1, 2, 0]]] - v[f]
     return float(np.linalg.norm(e, axis=2).mean())
+
+
+def polyline_parameters(points, n: int, closed: bool = False, step_scale: float = 1.0):
+    """Where the regular samples of Eq. 3/4 fall: segment index and fraction.
+
+    Returns ``(segment (n,) int64, t (n,) float64, arc (n,) float64)``: sample
+    ``s`` lies at ``(1 - t) p[segment] + t p[segment + 1]`` (indices into the
+    points with the first appended again for a closed line), at arc length
+    ``arc[s] = s * step * step_scale`` from the first point, clipped to the
+    line. See :func:`sample_polyline` for the arguments.
+    """
+    p = np.asarray(points, dtype=FLOAT)
+    if closed:
+        p = np.vstack([p, p[:1]])
+    if len(p) < 2:
+        raise ValueError("an action line needs at least two surface points")
+    if n < (3 if closed else 2):
+        raise ValueError(f"cannot sample {'a closed' if closed else 'an open'} line with {n} samples")
+    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    length = cum[-1]
+    step = length / (n if closed else n - 1)
+    arc = np.clip(np.arange(n) * step * float(step_scale), 0.0, length)
+    k = np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(seg) - 1)
+    t = np.divide(arc - cum[k], seg[k], out=np.zeros_like(arc), where=seg[k] > 0)
+    return k.astype(np.int64), np.clip(t, 0.0, 1.0), arc
+
+
+def eval_polyline(points, normals, segment, t, closed: bool = False):
+    """Positions (and unit normals, or None) at ``(segment, t)`` of :func:`polyline_parameters`."""
+    p = np.asarray(points, dtype=FLOAT)
+    nn = None if normals is None else np.asarray(normals, dtype=FLOAT)
+    if closed:
+        p = np.vstack([p, p[:1]])
+        nn = None if nn is None else np.vstack([nn, nn[:1]])
+    k = np.asarray(segment)
+    tt = np.asarray(t, dtype=FLOAT)[:, None]
+    pos = (1.0 - tt) * p[k] + tt * p[k + 1]
+    if nn is None:
+        return pos, None
+    nrm = (1.0 - tt) * nn[k] + tt * nn[k + 1]
+    length_n = np.linalg.norm(nrm, axis=1, keepdims=True)
+    return pos, np.divide(nrm, length_n, out=np.zeros_like(nrm), where=length_n > 0)
 
 
 def sample_polyline(points, normals, n: int, closed: bool = False, step_scale: float = 1.0):
@@ -46,6 +90,7 @@ def sample_polyline(points, normals, n: int, closed: bool = False, step_scale: f
     points, normals : (p, 3) float
         Polyline vertices and their unit normals (p >= 2; for ``closed`` the
         segment from the last point back to the first is included).
+        ``normals=None`` skips the normals (None is returned for them).
     n : int
         Number of samples (>= 2 open, >= 3 closed).
     step_scale : float
@@ -60,29 +105,31 @@ def sample_polyline(points, normals, n: int, closed: bool = False, step_scale: f
         the sample, the normal the same combination of their normals,
         normalized (§5.1.2).
     """
-    p = np.asarray(points, dtype=FLOAT)
-    nn = np.asarray(normals, dtype=FLOAT)
-    if closed:
-        p = np.vstack([p, p[:1]])
-        nn = np.vstack([nn, nn[:1]])
-    if len(p) < 2:
-        raise ValueError("an action line needs at least two surface points")
-    if n < (3 if closed else 2):
-        raise ValueError(f"cannot sample {'a closed' if closed else 'an open'} line with {n} samples")
-    seg = np.linalg.norm(np.diff(p, axis=0), axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(seg)])
-    length = cum[-1]
-    step = length / (n if closed else n - 1)
-    arc = np.arange(n) * step * float(step_scale)
-    arc = np.clip(arc, 0.0, length)
-    k = np.clip(np.searchsorted(cum, arc, side="right") - 1, 0, len(seg) - 1)
-    t = np.divide(arc - cum[k], seg[k], out=np.zeros_like(arc), where=seg[k] > 0)
-    t = np.clip(t, 0.0, 1.0)[:, None]
-    pos = (1.0 - t) * p[k] + t * p[k + 1]
-    nrm = (1.0 - t) * nn[k] + t * nn[k + 1]
-    length_n = np.linalg.norm(nrm, axis=1, keepdims=True)
-    nrm = np.divide(nrm, length_n, out=np.zeros_like(nrm), where=length_n > 0)
+    k, t, arc = polyline_parameters(points, n, closed, step_scale)
+    pos, nrm = eval_polyline(points, normals, k, t, closed)
     return pos, nrm, arc
+
+
+def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePoints:
+    """Surface points seen from outside along the local normal (see ActionLine.from_points)."""
+    from faceforge.geometry.rays import RayCaster
+    from faceforge.geometry.triangles import barycentric
+
+    v, f = check_mesh(vertices, faces)
+    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+    near = project_to_surface(p, v, f)
+    n = near.normals(v, f)
+    r = reach * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    face, hit, _ = RayCaster(v, f).first_hit(p + r * n, -n)
+    ok = face >= 0
+    if not ok.any():
+        return near
+    w = np.clip(barycentric(hit[ok], v, f, face[ok]), 0.0, None)
+    w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+    ids = near.face_ids.copy()
+    bary = near.bary.copy()
+    ids[ok], bary[ok] = face[ok], w
+    return SurfacePoints(ids, bary)
 
 
 @dataclass(frozen=True)
@@ -104,7 +151,8 @@ class ActionLine:
         return len(self.points)
 
     @classmethod
-    def from_points(cls, points, vertices, faces, closed: bool = False, spacing: float | None = None):
+    def from_points(cls, points, vertices, faces, closed: bool = False, spacing: float | None = None,
+                    project: str = "closest"):
         """Build a line through the 3D ``points (p, 3)`` that hugs the surface.
 
         Every straight segment between consecutive given points is subdivided
@@ -114,6 +162,14 @@ class ActionLine:
         points that project onto the same spot are merged. The given points
         themselves are kept (projected), so the line's ends are the projections
         of the first and last given points.
+
+        ``project``: "closest" takes the closest point of the layer; "outermost"
+        (for layers stacked on each other, e.g. a muscle over the skull, whose
+        surfaces nearly touch) finds the closest point's normal ``n``, casts a
+        ray from ``p + r n`` along ``-n`` (``r`` = 5 % of the layer's bounding-box
+        diagonal) and keeps the first hit, i.e. what an artist clicking on the
+        layer from outside would pick; points whose ray misses fall back to the
+        closest point.
         """
         v, f = check_mesh(vertices, faces)
         p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
@@ -130,7 +186,12 @@ class ActionLine:
         dense = np.asarray(dense)
         if closed:
             dense = dense[:-1]
-        sp = project_to_surface(dense, v, f)
+        if project == "closest":
+            sp = project_to_surface(dense, v, f)
+        elif project == "outermost":
+            sp = project_outermost(dense, v, f)
+        else:
+            raise ValueError(f"project must be 'closest' or 'outermost', got {project!r}")
         pos = sp.positions(v, f)
         keep = np.r_[True, np.linalg.norm(np.diff(pos, axis=0), axis=1) > 1e-12 * max(spacing, 1e-300)]
         if closed and keep.sum() > 1 and np.linalg.norm(pos[-1] - pos[0]) <= 1e-12 * spacing:
@@ -152,15 +213,28 @@ class ActionLine:
             p = np.vstack([p, p[:1]])
         return float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum())
 
-    def sample(self, vertices, faces, n: int, step_scale: float = 1.0, vnormals=None):
+    def sample(self, vertices, faces, n: int, step_scale: float = 1.0, vnormals=None,
+               with_normals: bool = True):
         """``n`` samples at a regular step (Eq. 3) scaled by ``step_scale = 1 - c`` (Eq. 4).
 
         Returns ``positions (n, 3), normals (n, 3)`` on the current layer
-        ``(vertices, faces)``; see :func:`sample_polyline`.
+        ``(vertices, faces)``; see :func:`sample_polyline`. With
+        ``with_normals=False`` the normals (and the vertex normals they need)
+        are skipped and None is returned in their place.
         """
         v, f = check_mesh(vertices, faces)
-        vn = vertex_normals(v, f) if vnormals is None else vnormals
-        pos, nrm, _ = sample_polyline(
-            self.positions(v, f), self.normals(v, f, vn), n, self.closed, step_scale
-        )
+        nrm = None
+        if with_normals:
+            vn = vertex_normals(v, f) if vnormals is None else vnormals
+            nrm = self.normals(v, f, vn)
+        pos, nrm, _ = sample_polyline(self.positions(v, f), nrm, n, self.closed, step_scale)
         return pos, nrm
+
+    def parameters(self, vertices, faces, n: int, step_scale: float = 1.0):
+        """``(segment, t)`` of the ``n`` regular samples on the current layer (Eq. 3, 4)."""
+        k, t, _ = polyline_parameters(self.positions(vertices, faces), n, self.closed, step_scale)
+        return k, t
+
+    def sample_at(self, vertices, faces, segment, t) -> np.ndarray:
+        """Positions ``(n, 3)`` at fixed ``(segment, t)`` parameters (material sampling)."""
+        return eval_polyline(self.positions(vertices, faces), None, segment, t, self.closed)[0]

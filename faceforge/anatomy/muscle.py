@@ -32,7 +32,7 @@ moves every sample to the centre at c = 0, contradicting "c = 0 is rest". We
 read ``(1 - c)`` as the *remaining* fraction of the orifice and use
 ``delta = c kappa (o - s1) cos(pi/2 (1 - r))``: c = 0 is the rest state and c = 1
 the maximal contraction, which moves each inner sample the fraction ``kappa``
-(``max_closure``, default :data:`SPHINCTER_MAX_CLOSURE` = 0.5) of the way to the
+(``max_contraction``, default :data:`SPHINCTER_MAX_CONTRACTION` = 0.5) of the way to the
 centre, times the fall-off. kappa = 1 (a fully closed orifice) collapses the
 inner loop to a point; its wall triangles degenerate and the dihedral bending
 projection diverges, so the default stops half way (a puckered mouth). ``r`` is the ellipse
@@ -68,7 +68,8 @@ __all__ = [
     "fit_ellipse",
     "sphincter_displacement",
     "align_loops",
-    "SPHINCTER_MAX_CLOSURE",
+    "SPHINCTER_MAX_CONTRACTION",
+    "LINEAR_MAX_CONTRACTION",
 ]
 
 STIFFNESS_KEYS = (
@@ -161,7 +162,9 @@ def fit_ellipse(points) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, floa
 
 
 #: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
-SPHINCTER_MAX_CLOSURE = 0.5
+SPHINCTER_MAX_CONTRACTION = 0.5
+#: fraction of the fibre length that c = 1 removes from a linear muscle
+LINEAR_MAX_CONTRACTION = 0.5
 
 
 def sphincter_displacement(inner, outer, c: float) -> np.ndarray:
@@ -217,7 +220,8 @@ class Muscle:
     layer: int = 0
     active: bool = True
     thickness: float = 0.0
-    max_closure: float = SPHINCTER_MAX_CLOSURE
+    max_contraction: float = SPHINCTER_MAX_CONTRACTION
+    rest_parameters: dict = field(default_factory=dict)
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -249,31 +253,53 @@ class Muscle:
         p = np.asarray(positions, FLOAT)[: topo.h * topo.w].reshape(topo.h, topo.w, 3)
         return np.linalg.norm(np.diff(p, axis=0), axis=2).sum(axis=0)
 
-    def inverted_faces(self, positions) -> np.ndarray:
-        """Boolean mask over the bottom and top sheet faces that are folded over.
+    def inverted_faces(self, positions, vertices, faces, vnormals=None) -> np.ndarray:
+        """Boolean mask over the bottom and top sheet faces that are turned over.
 
-        A bottom face is inverted when its outward normal points toward the top
-        sheet (positive dot with the mean bottom-to-top connection vector of its
-        three columns), a top face when its outward normal points toward the
-        bottom; zero-area faces count as inverted. ``(2 s,) bool`` for the ``s``
-        faces of each sheet.
+        Each sheet face is compared with the underlying layer's normal below
+        it: the normals of the samples on the two fibre-side columns ``j = 0``
+        and ``j = w - 1`` (A0/A2, or the sphincter's inner/outer loop) on the
+        current layer ``(vertices, faces)`` (the concatenation of
+        :attr:`lies_on`, or the world mesh for a muscle taken from a
+        ``MusculoskeletalSystem``), blended linearly in ``j`` and summed over
+        the face's three grid nodes. A bottom face must face into the layer
+        (outward normal . reference < 0), a top face away from it (> 0);
+        zero-area faces count as inverted. Sliding of the top sheet over the
+        bottom (shear, which §5.2.1 leaves free) is not an inversion.
+        ``vnormals`` may pass the layer's vertex normals already computed.
+
+        Returns ``(2 s,) bool`` for the ``s`` faces of each sheet (bottom first).
         """
         p = np.asarray(positions, FLOAT)
-        hw = self.topology.h * self.topology.w
-        sheets = self.faces[: 2 * self._sheet_count]
+        v, f = check_mesh(vertices, faces)
+        h, w = self.topology.h, self.topology.w
+        grid = _grid_normals(self, v, f, vertex_normals(v, f) if vnormals is None else vnormals)
+        t = np.linspace(0.0, 1.0, w)[None, :, None]
+        ref = ((1.0 - t) * grid[:, :1] + t * grid[:, -1:]).reshape(h * w, 3)
+        S = self._sheet_count
+        sheets = self.faces[: 2 * S]
+        node = sheets % (h * w)
         a, b, c = p[sheets[:, 0]], p[sheets[:, 1]], p[sheets[:, 2]]
-        n = np.cross(b - a, c - a)
-        col = np.where(sheets >= hw, sheets - hw, sheets)
-        d = (p[col + hw] - p[col]).mean(axis=1)
-        sign = np.where(np.arange(len(sheets)) < self._sheet_count, -1.0, 1.0)
-        return (sign * np.einsum("ij,ij->i", n, d)) <= 0.0
+        side = np.einsum("ij,ij->i", np.cross(b - a, c - a), ref[node].sum(axis=1))
+        sign = np.where(np.arange(2 * S) < S, -1.0, 1.0)
+        return sign * side <= 0.0
+
+    @property
+    def top_faces(self) -> np.ndarray:
+        """The top sheet's faces ``(s, 3)``: the surface shallower layers lie on."""
+        return self.faces[self._sheet_count: 2 * self._sheet_count]
+
+    @property
+    def top_face_ids(self) -> np.ndarray:
+        """Indices of :attr:`top_faces` within :attr:`faces`, ``(s,) int64``."""
+        return np.arange(self._sheet_count, 2 * self._sheet_count, dtype=INT)
 
     @property
     def _sheet_count(self) -> int:
         rows = self.topology.h if self.topology.closed else self.topology.h - 1
         return 2 * rows * (self.topology.w - 1)
 
-    def sample_targets(self, c: float, vertices, faces, vnormals=None) -> np.ndarray:
+    def sample_targets(self, c: float, vertices, faces) -> np.ndarray:
         """Position targets of :attr:`bound`, ``(k, 3)``, for contraction ``c`` in [0, 1].
 
         ``(vertices, faces)`` is the current concatenated mesh of :attr:`lies_on`.
@@ -281,23 +307,22 @@ class Muscle:
         """
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         v, f = check_mesh(vertices, faces)
-        vn = vertex_normals(v, f) if vnormals is None else vnormals
-        grid = self._grid_targets(c, v, f, vn)
+        grid = self._grid_targets(c, v, f)
         g = self.topology.contour_grid()
         return grid[g[:, 0], g[:, 1]]
 
-    def _grid_targets(self, c, v, f, vn) -> np.ndarray:
+    def _grid_targets(self, c, v, f) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
         grid = np.full((h, w, 3), np.nan)
         L = self.lines
         if self.kind == "linear":
-            a0, _ = L["A0"].sample(v, f, h, 1.0 - c, vn)
-            a2, _ = L["A2"].sample(v, f, h, 1.0 - c, vn)
-            a3, _ = L["A3"].sample(v, f, w, 1.0, vn)
-            a1, _ = L["A1"].sample(v, f, w, 1.0, vn)
+            a0 = _pos(L["A0"], v, f, h, 1.0 - c * self.max_contraction)
+            a2 = _pos(L["A2"], v, f, h, 1.0 - c * self.max_contraction)
+            a3 = _pos(L["A3"], v, f, w, 1.0)
+            a1 = _pos(L["A1"], v, f, w, 1.0)
             if c > 0:
-                r0, _ = L["A0"].sample(v, f, h, 1.0, vn)
-                r2, _ = L["A2"].sample(v, f, h, 1.0, vn)
+                r0 = _pos(L["A0"], v, f, h, 1.0)
+                r2 = _pos(L["A2"], v, f, h, 1.0)
                 t = np.linspace(0.0, 1.0, w)[:, None]
                 a1 = a1 + (1.0 - t) * (a0[-1] - r0[-1]) + t * (a2[-1] - r2[-1])
             grid[0, :] = a3
@@ -305,10 +330,14 @@ class Muscle:
             grid[:, 0] = a0
             grid[:, -1] = a2
         else:
-            s1, _ = L["A1"].sample(v, f, h, 1.0, vn)
-            s3, _ = L["A3"].sample(v, f, h, 1.0, vn)
+            if self.rest_parameters:  # material sampling, see build_sphincter_muscle
+                s1 = L["A1"].sample_at(v, f, *self.rest_parameters["A1"])
+                s3 = L["A3"].sample_at(v, f, *self.rest_parameters["A3"])
+            else:
+                s1 = _pos(L["A1"], v, f, h, 1.0)
+                s3 = _pos(L["A3"], v, f, h, 1.0)
             if c > 0:
-                d = sphincter_displacement(s1, s3, c * self.max_closure)
+                d = sphincter_displacement(s1, s3, c * self.max_contraction)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3
@@ -340,15 +369,24 @@ class Muscle:
 
 def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw) -> Muscle:
     v, f = check_mesh(vertices, faces)
+    material = kw.pop("material_sampling", False)
     proto = Muscle(name, kind, topo, np.zeros((topo.n_particles, 3)), topo.faces, lines,
                    tuple(kw.pop("lies_on", ())), stiffness, **kw)
+    kw["material_sampling"] = material
     vn = vertex_normals(v, f)
-    samples = proto.sample_targets(0.0, v, f, vn)
+    samples = proto.sample_targets(0.0, v, f)
     g = topo.contour_grid()
     normals = _grid_normals(proto, v, f, vn)[g[:, 0], g[:, 1]]
     pos, mfaces = morph_hex(topo, samples, normals, thickness)
+    params = {}
+    if kw.get("material_sampling", False):
+        params = {key: lines[key].parameters(v, f, topo.h) for key in ("A1", "A3")}
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
-                  proto.layer, proto.active, float(thickness), proto.max_closure)
+                  proto.layer, proto.active, float(thickness), proto.max_contraction, params)
+
+
+def _pos(line: ActionLine, v, f, n, scale) -> np.ndarray:
+    return line.sample(v, f, n, scale, with_normals=False)[0]
 
 
 def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:
@@ -367,7 +405,8 @@ def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:
 
 
 def build_linear_muscle(name, origin, insertion, fibre_a, fibre_b, vertices, faces, h, w,
-                        thickness, stiffness, *, lies_on=(), layer=0, active=True) -> Muscle:
+                        thickness, stiffness, *, lies_on=(), layer=0, active=True,
+                        max_contraction=LINEAR_MAX_CONTRACTION) -> Muscle:
     """A sheet muscle (§5.2.1) from its four action lines on the layer ``(vertices, faces)``.
 
     Parameters
@@ -383,17 +422,32 @@ def build_linear_muscle(name, origin, insertion, fibre_a, fibre_b, vertices, fac
         In mesh units.
     stiffness : dict
         ``muscle.linear.stiffness`` of the config.
+    max_contraction : float in (0, 1]
+        Fibre shortening at c = 1 (Eq. 4 becomes ``step' = step (1 - c kappa)``);
+        see the module docstring for why the default is 0.5, not 1.
     """
+    if not 0.0 < max_contraction <= 1.0:
+        raise ValueError(f"muscle {name}: max_contraction must lie in (0, 1], got {max_contraction}")
     topo = hex_topology(int(h), int(w), closed=False)
     lines = {"A0": fibre_a, "A1": insertion, "A2": fibre_b, "A3": origin}
     return _build(name, "linear", topo, lines, vertices, faces, thickness, stiffness,
-                  lies_on=lies_on, layer=layer, active=active)
+                  lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction)
 
 
 def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness, stiffness, *,
                            lies_on=(), layer=0, active=True,
-                           max_closure=SPHINCTER_MAX_CLOSURE) -> Muscle:
+                           max_contraction=SPHINCTER_MAX_CONTRACTION, material_sampling=True) -> Muscle:
     """A sphincter (§5.2.2) from its closed inner (A1) and outer (A3) loops.
+
+    ``material_sampling`` (default True, a deliberate departure from a literal
+    Eq. 3): the loops are sampled at regular arc length once, at rest, and the
+    samples then keep their place *between the loop's surface points* (segment
+    index and fraction), so they ride on the anatomy. Re-sampling both loops by
+    their current arc length every frame (False, the literal reading) makes the
+    inner and outer samples slide apart when the jaw stretches the lower half of
+    the loops more than the upper half; the cells between them shear until they
+    fold (observed from a 5 degree jaw opening on the synthetic head). The
+    ellipse displacement of §5.2.2 is applied on top of either.
 
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
@@ -403,10 +457,11 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
         raise ValueError(f"sphincter {name}: inner and outer action lines must be closed loops")
     topo = hex_topology(int(h), int(w), closed=True)
     lines = {"A1": inner, "A3": outer}
-    if not 0.0 <= max_closure < 1.0:
-        raise ValueError(f"sphincter {name}: max_closure must lie in [0, 1), got {max_closure}")
+    if not 0.0 < max_contraction < 1.0:
+        raise ValueError(f"sphincter {name}: max_contraction must lie in (0, 1), got {max_contraction}")
     return _build(name, "sphincter", topo, lines, vertices, faces, thickness, stiffness,
-                  lies_on=lies_on, layer=layer, active=active, max_closure=max_closure)
+                  lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
+                  material_sampling=material_sampling)
 
 
 def align_loops(inner, outer) -> tuple[np.ndarray, np.ndarray]:

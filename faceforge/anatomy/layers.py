@@ -1,0 +1,349 @@
+"""The layered musculoskeletal system of §6: kinematic skull, muscles in layers.
+
+Design: one ``pbd.Model`` + ``Solver`` **per muscle layer**, solved in order
+from the deepest layer up. Before layer ``n`` is stepped, the position
+targets of its muscles are sampled from the action lines on the *already
+solved* positions of the skull and of layers ``< n`` of the same frame. This
+(rather than one Model with constraints ordered deep to shallow) is chosen
+because
+
+* coupling between layers goes only through position targets, which are
+  read-only inputs of a layer's solve, so a shallower layer can never move a
+  deeper one (Fig. 7, "each layer influences the layers on top of it, but not
+  those underlying it") — by construction, not by constraint order;
+* in a single Model the targets of layer ``n`` would have to be computed
+  before the step from the *previous* frame's deeper positions, so a jaw
+  motion would reach layer ``n`` only ``n`` frames late; here it arrives in
+  the same frame;
+* muscles of one layer never share constraints, so one Model per layer keeps
+  every solve as small as it can be.
+
+The skull is not simulated at all: the cranium stays at rest and the mandible
+is the rest mandible transformed by the frame's rigid 4x4 jaw matrix (§6.1).
+
+All bodies live in one "world" mesh (cranium, mandible, then the muscles in
+layer order): :meth:`MusculoskeletalSystem.world` returns its current vertices
+and faces, and every muscle's action-line surface points are re-expressed on
+the world faces once, at construction, so each frame only gathers positions.
+
+Extension point for the skin (next issue: bind)
+-----------------------------------------------
+The skin is the shallowest layer. It binds its anchor particles ``q`` to
+surface points of the skull and muscles at rest, then follows them:
+
+1. at bind time: ``v, f = system.world(rest=True)`` (or
+   ``system.composite(names, rest=True)`` for chosen bodies) and
+   ``faceforge.geometry.surface_points.project_to_surface`` or a ray cast on it
+   gives ``SurfacePoints`` on world faces; ``system.body_of_faces(face_ids)``
+   says which body each lies on;
+2. write a class with ``step(system, dt)`` that reads
+   ``system.world()`` (the current, solved deeper layers), evaluates its
+   surface points (``SurfacePoints.positions(*system.world())``), sets them as
+   the anchors' kinematic positions / position targets of its own
+   ``pbd.Model`` and steps its solver;
+3. ``system.add_layer(skin_layer)``: :meth:`MusculoskeletalSystem.step` calls
+   every added layer's ``step`` after the muscles, in the order added. Such a
+   layer must not write into the system (it only reads ``world()``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from faceforge.anatomy.action_line import ActionLine
+from faceforge.anatomy.muscle import Muscle
+from faceforge.constants import FLOAT, INT
+from faceforge.exceptions import TemplateError
+from faceforge.geometry.surface_points import SurfacePoints
+from faceforge.geometry.triangles import check_mesh
+
+__all__ = ["MusculoskeletalSystem", "SKULL", "expand_lies_on", "underlying_mesh"]
+
+#: bodies that are not simulated; "skull" in ``lies_on`` means both
+SKULL = ("cranium", "mandible")
+
+
+def expand_lies_on(names) -> tuple[str, ...]:
+    """``lies_on`` with "skull" replaced by ``("cranium", "mandible")``, duplicates removed."""
+    out: list[str] = []
+    for n in names:
+        for m in (SKULL if n == "skull" else (n,)):
+            if m not in out:
+                out.append(m)
+    return tuple(out)
+
+
+@dataclass
+class _Layer:
+    index: int
+    muscles: list          # Muscle, with action lines on world faces
+    firsts: list           # first particle of each muscle in the layer model
+    slots: list            # position slots of each muscle
+    model: object
+    solver: object
+    state: object
+    control: object
+
+
+class MusculoskeletalSystem:
+    """Kinematic skull + layered muscles (§6), stepped frame by frame.
+
+    Build with :meth:`from_parts`. ``step(contractions, jaw_matrix, dt)``
+    advances one frame; ``positions(name)`` reads any body's current vertices.
+    """
+
+    def __init__(self, bodies, layers, settings):
+        self._names = [b[0] for b in bodies]
+        self._faces = {name: f for name, _, f in bodies}
+        offsets = np.cumsum([0] + [len(v) for _, v, _ in bodies])
+        self._vslice = {name: slice(int(offsets[i]), int(offsets[i + 1])) for i, name in enumerate(self._names)}
+        foffsets = np.cumsum([0] + [len(f) for _, _, f in bodies])
+        self._fslice = {name: slice(int(foffsets[i]), int(foffsets[i + 1])) for i, name in enumerate(self._names)}
+        self._rest = np.concatenate([v for _, v, _ in bodies]).astype(FLOAT)
+        self._world_f = np.concatenate(
+            [f + offsets[i] for i, (_, _, f) in enumerate(bodies)]).astype(INT)
+        self._world_v = self._rest.copy()
+        self._layers: list[_Layer] = layers
+        self._muscles = {m.name: m for layer in layers for m in layer.muscles}
+        self.settings = settings
+        self._extra: list = []
+        self._jaw = np.eye(4)
+
+    # -- construction -------------------------------------------------------------
+    @classmethod
+    def from_parts(cls, cranium, mandible, muscles, settings=None) -> "MusculoskeletalSystem":
+        """Assemble the system.
+
+        Parameters
+        ----------
+        cranium, mandible : (vertices (n, 3), faces (m, 3))
+            Rest skull meshes (template or fitted space).
+        muscles : sequence of Muscle
+            Each built on the concatenation (in ``expand_lies_on(m.lies_on)``
+            order) of the rest meshes of the bodies it lies on; ``m.layer``
+            must exceed the layer of every muscle in ``lies_on``.
+        settings : pbd.SolverSettings, optional
+            Shared by every layer (default: the paper's 10 iterations).
+
+        Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle
+        when a name is duplicated, unknown, or a muscle lies on a layer that
+        is not deeper.
+        """
+        from faceforge.pbd import ModelBuilder, Solver, SolverSettings
+
+        settings = settings or SolverSettings()
+        bodies = [("cranium", *check_mesh(*cranium)), ("mandible", *check_mesh(*mandible))]
+        muscles = sorted(muscles, key=lambda m: m.layer)  # stable: keeps the given order in a layer
+        layer_of: dict[str, int] = {}
+        for m in muscles:
+            if m.name in layer_of or m.name in SKULL or m.name == "skull":
+                raise TemplateError(f"muscle {m.name!r}: duplicate or reserved name")
+            for dep in expand_lies_on(m.lies_on):
+                if dep in SKULL:
+                    continue
+                if dep not in layer_of:
+                    raise TemplateError(f"muscle {m.name!r} lies on unknown or later-listed body {dep!r}")
+                if layer_of[dep] >= m.layer:
+                    raise TemplateError(f"muscle {m.name!r} (layer {m.layer}) lies on {dep!r} "
+                                        f"(layer {layer_of[dep]}): it must be deeper")
+            layer_of[m.name] = m.layer
+            bodies.append((m.name, m.rest_positions, m.faces))
+        by_name = {m.name: m for m in muscles}
+        fstart = np.cumsum([0] + [len(f) for _, _, f in bodies])
+        fstart = {name: int(fstart[i]) for i, (name, _, _) in enumerate(bodies)}
+        fcount = {name: len(f) for name, _, f in bodies}
+        layers: list[_Layer] = []
+        for index in sorted(set(layer_of.values())):
+            group = [_to_world(m, fstart, fcount, by_name) for m in muscles if m.layer == index]
+            b = ModelBuilder()
+            firsts, slots = [], []
+            for m in group:
+                first, s = m.add_to_builder(b)
+                firsts.append(first)
+                slots.append(s)
+            model = b.finalize()
+            layers.append(_Layer(index, group, firsts, slots, model, Solver(model, settings),
+                                 model.state(), model.control()))
+        system = cls(bodies, layers, settings)
+        for layer in layers:  # rest targets: the rest state is a fixed point
+            system._set_targets(layer, {})
+        return system
+
+    # -- reading --------------------------------------------------------------------
+    @property
+    def names(self) -> tuple[str, ...]:
+        """All bodies, deepest first: cranium, mandible, muscles by layer."""
+        return tuple(self._names)
+
+    @property
+    def muscles(self) -> dict:
+        """``{name: Muscle}`` (action lines expressed on the world faces)."""
+        return dict(self._muscles)
+
+    @property
+    def layer_indices(self) -> tuple[int, ...]:
+        return tuple(layer.index for layer in self._layers)
+
+    def positions(self, name: str) -> np.ndarray:
+        """Current vertices of body ``name``, ``(n, 3)`` copy."""
+        return self._world_v[self._slice(name)].copy()
+
+    def rest_positions(self, name: str) -> np.ndarray:
+        return self._rest[self._slice(name)].copy()
+
+    def faces(self, name: str) -> np.ndarray:
+        """Faces of body ``name`` in its own vertex numbering, ``(m, 3)``."""
+        self._slice(name)
+        return self._faces[name]
+
+    def surface(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Current ``(vertices, faces)`` of one body."""
+        return self.positions(name), self.faces(name)
+
+    def world(self, rest: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """All bodies as one mesh ``(vertices (N, 3), faces (M, 3))`` (current or rest).
+
+        Vertex/face ranges of each body: :meth:`vertex_range`, :meth:`face_range`.
+        The returned vertices are a copy.
+        """
+        return (self._rest if rest else self._world_v).copy(), self._world_f
+
+    def composite(self, names, rest: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The bodies ``names`` ("skull" allowed) concatenated, faces renumbered."""
+        from faceforge.geometry.triangles import concatenate_meshes
+
+        src = self._rest if rest else self._world_v
+        v, f, _ = concatenate_meshes([(src[self._slice(n)], self._faces[n]) for n in expand_lies_on(names)])
+        return v, f
+
+    def vertex_range(self, name: str) -> slice:
+        return self._slice(name)
+
+    def face_range(self, name: str) -> slice:
+        self._slice(name)
+        return self._fslice[name]
+
+    def body_of_faces(self, face_ids) -> np.ndarray:
+        """Name of the body owning each world face id, ``(k,) object``."""
+        ids = np.asarray(face_ids, INT)
+        starts = np.array([self._fslice[n].start for n in self._names])
+        return np.asarray(self._names, dtype=object)[np.searchsorted(starts, ids, side="right") - 1]
+
+    def _slice(self, name: str) -> slice:
+        try:
+            return self._vslice[name]
+        except KeyError:
+            raise KeyError(f"unknown body {name!r}; bodies: {', '.join(self._names)}") from None
+
+    # -- stepping -------------------------------------------------------------------
+    def add_layer(self, layer) -> None:
+        """Append a shallower layer (e.g. the skin): an object with ``step(system, dt)``."""
+        if not callable(getattr(layer, "step", None)):
+            raise TypeError("a layer must have a step(system, dt) method")
+        self._extra.append(layer)
+
+    def set_jaw(self, jaw_matrix) -> None:
+        """Place the mandible: rest vertices transformed by the rigid ``(4, 4)`` matrix."""
+        T = np.asarray(jaw_matrix, dtype=FLOAT)
+        if T.shape != (4, 4):
+            raise ValueError(f"jaw_matrix must be (4, 4), got {T.shape}")
+        sl = self._vslice["mandible"]
+        self._world_v[sl] = self._rest[sl] @ T[:3, :3].T + T[:3, 3]
+        self._jaw = T.copy()
+
+    def step(self, contractions=None, jaw_matrix=None, dt: float = 1.0 / 25.0) -> None:
+        """Advance one frame.
+
+        Parameters
+        ----------
+        contractions : dict[str, float], optional
+            Muscle name -> c in [0, 1] (Eq. 4); missing muscles are at rest (0).
+            Unknown names raise ``KeyError`` listing the muscles.
+        jaw_matrix : (4, 4) float, optional
+            Rigid transform of the mandible from its rest pose; None keeps the last.
+        dt : float
+            Frame time in seconds.
+        """
+        contractions = dict(contractions or {})
+        unknown = sorted(set(contractions) - set(self._muscles))
+        if unknown:
+            raise KeyError(f"unknown muscle(s) {unknown}; muscles: {', '.join(self._muscles)}")
+        if jaw_matrix is not None:
+            self.set_jaw(jaw_matrix)
+        for layer in self._layers:
+            self._set_targets(layer, contractions)
+            layer.solver.step(layer.state, layer.state, layer.control, dt)
+            for m, first in zip(layer.muscles, layer.firsts):
+                self._world_v[self._vslice[m.name]] = layer.state.positions[first:first + m.n_particles]
+        for extra in self._extra:
+            extra.step(self, dt)
+
+    def _set_targets(self, layer: _Layer, contractions) -> None:
+        v, f = self._world_v, self._world_f
+        for m, s in zip(layer.muscles, layer.slots):
+            if len(s):
+                layer.control.position_targets[s] = m.sample_targets(contractions.get(m.name, 0.0), v, f)
+
+    def reset(self) -> None:
+        """Back to the rest state (jaw closed, muscles at rest, zero velocities)."""
+        self._world_v[:] = self._rest
+        self._jaw = np.eye(4)
+        for layer in self._layers:
+            fresh = layer.model.state()
+            layer.state.positions[:] = fresh.positions
+            layer.state.velocities[:] = fresh.velocities
+            self._set_targets(layer, {})
+
+    def constraint_count(self) -> int:
+        """Constraints in all layer models."""
+        return sum(m.constraint_count() for m in self._muscles.values())
+
+    def particle_count(self) -> int:
+        return sum(m.n_particles for m in self._muscles.values())
+
+
+def underlying_mesh(lies_on, cranium, mandible, muscles=()) -> tuple[np.ndarray, np.ndarray]:
+    """The rest surface a muscle with ``lies_on`` is built on: ``(vertices, faces)``.
+
+    The bodies of ``expand_lies_on(lies_on)`` concatenated in that order: the
+    whole cranium / mandible, and the **top sheet** (:attr:`Muscle.top_faces`)
+    of each deeper muscle (a muscle lies on the upper surface of another, never
+    on its bottom or side walls; all its particles are kept so the numbering
+    stays the muscle's own). Build a muscle's action lines on this mesh (use
+    ``project="outermost"`` in :meth:`ActionLine.from_points` so that points
+    drawn on the skull under a deeper muscle land on that muscle's top).
+    ``muscles`` is any iterable of the deeper :class:`Muscle` objects.
+    """
+    from faceforge.geometry.triangles import concatenate_meshes
+
+    by_name = {m.name: m for m in muscles}
+    parts = []
+    for name in expand_lies_on(lies_on):
+        if name == "cranium":
+            parts.append(check_mesh(*cranium))
+        elif name == "mandible":
+            parts.append(check_mesh(*mandible))
+        elif name in by_name:
+            parts.append((by_name[name].rest_positions, by_name[name].top_faces))
+        else:
+            raise TemplateError(f"lies_on names unknown body {name!r}")
+    v, f, _ = concatenate_meshes(parts)
+    return v, f
+
+
+def _to_world(m: Muscle, fstart: dict, fcount: dict, muscles: dict) -> Muscle:
+    """Re-express the muscle's action lines (on :func:`underlying_mesh`) on world faces."""
+    names = expand_lies_on(m.lies_on)
+    mapping = np.concatenate([
+        fstart[n] + (muscles[n].top_face_ids if n in muscles else np.arange(fcount[n])) for n in names
+    ]).astype(INT)
+    lines = {}
+    for key, line in m.lines.items():
+        ids = line.points.face_ids
+        if len(ids) and ids.max() >= len(mapping):
+            raise TemplateError(f"muscle {m.name!r}: action line {key} refers to face {ids.max()}, "
+                                f"but {'+'.join(names)} have only {len(mapping)} faces")
+        lines[key] = ActionLine(SurfacePoints(mapping[ids], line.points.bary), line.closed)
+    return replace(m, lines=lines, constraints=dict(m.constraints))
