@@ -445,7 +445,7 @@ def place_landmarks(cranium, mandible, head: trimesh.Trimesh, fdp: dict[str, np.
 
 
 # ------------------------------------------------------------------------------------ jaw
-def jaw_axes(cut_loops: dict[str, np.ndarray], mandible_v: np.ndarray) -> dict:
+def jaw_axes(cut_loops: dict[str, np.ndarray]) -> dict:
     """Pitch, yaw and protrusion axes from the mandible's cut loops (template frame).
 
     The two condylar loops are the most posterior loop on each side; the dental loop is
@@ -551,7 +551,7 @@ def build(assets: Path, out: Path) -> dict:
     cranium = (apply_similarity(params, cranium[0]), cranium[1])
     mandible = (apply_similarity(params, mandible[0]), mandible[1])
     loops = {k: apply_similarity(params, l) for k, l in loops.items()}
-    axes = jaw_axes(loops, mandible[0])
+    axes = jaw_axes(loops)
     dental = max(loops.values(), key=len)
     front = dental[np.abs(dental[:, 0]) < 0.5]
     occlusal_y = float(front[np.argmax(front[:, 2]), 1])
@@ -572,6 +572,11 @@ def build(assets: Path, out: Path) -> dict:
             "axes": axes}
 
 
+#: FDP -> (tissue-depth code, Rhine 1983 depth in cm) for the build's plausibility check
+DEPTH_CHECK = {"2.10": ("pg", 1.3), "2.1": ("me", 0.8), "4.1": ("g", 0.45), "4.3": ("mso", 0.85),
+               "5.3": ("im", 1.2), "2.13": ("go", 1.05), "10.9": ("sgl", 0.625), "11.1": ("sg", 0.45)}
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--assets", type=Path, default=Path("/work/shared/assets"))
@@ -580,6 +585,9 @@ def main(argv=None) -> None:
     s = build(args.assets, args.out)
     print(f"scale {s['params'][0]:.4f}, pitch {s['params'][1]:.4f} rad; cranium {len(s['cranium'][0])} v, "
           f"mandible {len(s['mandible'][0])} v, {len(s['landmarks'])} landmarks -> {args.out}")
+    print("skin-to-bone distance at the landmarks vs. the soft-tissue depth table (cm):")
+    for k, (code, depth) in DEPTH_CHECK.items():
+        print(f"  {k:>5} {code:>4}: template {s['landmarks'][k][3]:.2f}, table {depth:.2f}")
 
 
 if __name__ == "__main__":
