@@ -133,3 +133,13 @@ def test_render_template_headless(tmp_path, template):
     render_template(skull, pick, out, jaw=(0.2, 0.0, 0.0), contractions={"mentalis": 0.5}, size=2.5, dpi=60)
     img = matplotlib.image.imread(out)
     assert img.std() > 0.05
+
+
+def test_given_meshes_replace_the_proxy(template):
+    skull, muscles = template
+    pick = [m for m in muscles if m.name in ("mentalis", "risorius_L")]
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    layers = muscle_layers(skull, pick, meshes={"mentalis": (box.vertices, box.faces)})
+    drawn = {l.label: l for l in layers[2:]}
+    assert np.array_equal(drawn["mentalis"].vertices, box.vertices)
+    assert len(drawn["risorius L"].vertices) != len(box.vertices)

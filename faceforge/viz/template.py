@@ -175,15 +175,25 @@ def place_sheet(ps: "_PosedSkull", grid: np.ndarray, closed: bool, lift: float) 
     return out
 
 
-def muscle_layers(skull, muscles, jaw=(0.0, 0.0, 0.0), contractions=None) -> list[Layer]:
-    """Drawable layers: cranium, mandible (posed) and one sheet per muscle."""
+def muscle_layers(skull, muscles, jaw=(0.0, 0.0, 0.0), contractions=None, meshes=None) -> list[Layer]:
+    """Drawable layers: cranium, mandible (posed) and one sheet per muscle.
+
+    ``meshes`` ({muscle name: (vertices (n, 3), faces (m, 3))}, e.g. simulated muscle
+    meshes of the layered model) replaces the drawing proxy of the muscles it names.
+    """
     ps = _PosedSkull(skull, jaw)
     nc = len(skull.cranium[0])
     out = [Layer(ps.v[:nc], skull.cranium[1], BONE_COLOUR),
            Layer(ps.v[nc:], skull.mandible[1], MANDIBLE_COLOUR)]
     diag = skull.diagonal
     contractions = contractions or {}
+    meshes = meshes or {}
     for spec in sorted(muscles, key=lambda s: s.layer):
+        if spec.name in meshes:
+            mv, mf = meshes[spec.name]
+            out.append(Layer(np.asarray(mv, dtype=float), np.asarray(mf), colour_of(spec.name),
+                             label=_short(spec.name)))
+            continue
         closed = spec.type == "sphincter"
         grid = refine(muscle_sheet(spec, contractions.get(spec.name, 0.0)), closed)
         # deeper layers first: each layer lifted above the previous ones so the picture shows
@@ -205,7 +215,7 @@ def _short(name: str) -> str:
 
 def render_template(skull, muscles, out_png, jaw=(0.0, 0.0, 0.0), contractions=None,
                     views=("front", "side"), title: str | None = None, landmarks: bool = False,
-                    size: float = 6.0, dpi: int = 150) -> None:
+                    size: float = 6.0, dpi: int = 150, meshes=None) -> None:
     """Draw the skull and the muscle map (front and side) into ``out_png``; headless (Agg).
 
     Parameters
@@ -216,12 +226,14 @@ def render_template(skull, muscles, out_png, jaw=(0.0, 0.0, 0.0), contractions=N
     jaw : (pitch rad, yaw rad, protrusion template units)
     contractions : {muscle name: c in [0, 1]} or None (passive muscles ignore theirs)
     landmarks : also mark the skull's FDP landmarks (posed with the jaw)
+    meshes : {muscle name: (vertices, faces)} drawn instead of the contour proxy (e.g. the
+        muscle meshes of a simulated frame, Fig. 7)
     """
     import matplotlib.pyplot as plt
 
     from faceforge.anatomy.skull import posed_landmarks
 
-    layers = muscle_layers(skull, muscles, jaw, contractions)
+    layers = muscle_layers(skull, muscles, jaw, contractions, meshes)
     pts = None
     if landmarks:
         pts = np.array(list(posed_landmarks(skull, *jaw).values()))
