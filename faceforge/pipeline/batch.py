@@ -616,7 +616,7 @@ def run_local(jobs: Sequence[HeadJob], n_jobs: int,
 
 
 def run_dask(jobs: Sequence[HeadJob], scheduler: str,
-             on_result: Callable[[HeadResult], None] = lambda r: None) -> list[HeadResult]:
+             on_result: Callable[[HeadResult], None] = lambda r: None, timeout: str = "15s") -> list[HeadResult]:
     """Run the heads on the Dask distributed scheduler at ``scheduler`` (``tcp://host:port``).
 
     Workers must be able to import faceforge and read the heads' paths (a shared
@@ -627,7 +627,7 @@ def run_dask(jobs: Sequence[HeadJob], scheduler: str,
     except ImportError:
         raise StageError("--scheduler needs dask.distributed: pip install 'faceforge[dask]'") from None
     try:
-        client = Client(scheduler, timeout="15s", set_as_default=False)
+        client = Client(scheduler, timeout=timeout)
     except (OSError, TimeoutError, ValueError) as exc:
         raise StageError(f"cannot reach the Dask scheduler: {exc}".splitlines()[0], scheduler) from None
     done: dict[int, HeadResult] = {}
