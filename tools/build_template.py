@@ -528,7 +528,7 @@ yaw_axis: {{point: {_r(axes['centre'])}, direction: {_r(axes['yaw_dir'], 6)}}}
 protrusion: {{direction: {_r(axes['protrusion_dir'], 6)}}}
 condyles: {{left: {_r(axes['condyle_left'])}, right: {_r(axes['condyle_right'])}}}
 limits:
-  pitch: [-0.05, 0.4]        # rad; ~0.4 rad opens the incisors by ~4 cm
+  pitch: [-0.05, 0.4]        # rad; 0.4 rad parts the incisal edges by ~3.5 cm (8.9 cm from the axis)
   yaw: [-0.1, 0.1]           # rad
   protrusion: [-0.2, 0.8]    # cm; retrusion 2 mm, protrusion 8 mm
 """
