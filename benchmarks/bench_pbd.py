@@ -140,16 +140,20 @@ def bench_frames(repeat):
     for name, nv, nf, paper_c, paper_ms in TABLE_I:
         v, f = sphere_skin(nv, nf)
         model = skin_model(v, f)
-        solver = Solver(model, SolverSettings(iterations=10, substeps=1))
-        state, control = model.state(), model.control()
-        rng = np.random.default_rng(1)
-        free = model.inv_mass > 0
-        state.positions[free] += rng.normal(scale=0.01, size=(free.sum(), 3))
-        t = timeit(lambda: solver.step(state, state, control, DT), repeat=repeat, number=10)
-        rows.append({"mesh": name, "vertices": len(v), "faces": len(f),
-                     "constraints": model.constraint_count, "paper_constraints": paper_c,
-                     "ms_per_frame": t["best"] * 1e3, "ms_median": t["median"] * 1e3,
-                     "paper_ms": paper_ms})
+        row = {"mesh": name, "vertices": len(v), "faces": len(f),
+               "constraints": model.constraint_count, "paper_constraints": paper_c}
+        for colouring in (False, True):
+            solver = Solver(model, SolverSettings(iterations=10, substeps=1, colouring=colouring))
+            state, control = model.state(), model.control()
+            rng = np.random.default_rng(1)
+            free = model.inv_mass > 0
+            state.positions[free] += rng.normal(scale=0.002, size=(free.sum(), 3))
+            t = timeit(lambda: solver.step(state, state, control, DT), repeat=repeat, number=10)
+            key = "coloured" if colouring else "builder_order"
+            row[f"ms_{key}"] = t["best"] * 1e3
+            row[f"ms_{key}_median"] = t["median"] * 1e3
+        row["paper_ms"] = paper_ms
+        rows.append(row)
     return rows
 
 
@@ -213,17 +217,19 @@ def bench_cloth(repeat, steps=100, n=70):
     b.add_distance(e, 1.0)
     b.add_bending(q, 0.5)
     model = b.finalize()
-    solver = Solver(model, SolverSettings(iterations=10, substeps=1, damping=0.0, gravity=9.81))
+    for colouring in (False, True):
+        solver = Solver(model, SolverSettings(iterations=10, substeps=1, damping=0.0,
+                                              gravity=9.81, colouring=colouring))
 
-    def run_ff():
-        state, control = model.state(), model.control()
-        for _ in range(steps):
-            solver.step(state, state, control, out["dt"])
-        return state
+        def run_ff():
+            state, control = model.state(), model.control()
+            for _ in range(steps):
+                solver.step(state, state, control, out["dt"])
+            return state
 
-    t_ff = timeit(run_ff, repeat=repeat, number=1)["best"]
-    out["faceforge_ms_per_step"] = t_ff / steps * 1e3
-    out["faceforge_sag"] = float(-run_ff().positions[:, 1].min())
+        key = "faceforge_coloured" if colouring else "faceforge"
+        out[f"{key}_ms_per_step"] = timeit(run_ff, repeat=repeat, number=1)["best"] / steps * 1e3
+        out[f"{key}_sag"] = float(-run_ff().positions[:, 1].min())
     try:
         import pypbd  # optional, benchmark only
     except ImportError as exc:  # pragma: no cover
@@ -260,12 +266,15 @@ def bench_cloth(repeat, steps=100, n=70):
             ts.step(pm)
 
     t_pbd = timeit(run_pbd, repeat=repeat, number=1)["best"]
+    run_pbd()  # leave the final state of one full run for the sag
     pd = pm.getParticles()
     out["pypbd_ms_per_step"] = t_pbd / steps * 1e3
     out["pypbd_sag"] = float(-min(np.ravel(pd.getPosition(i))[1] for i in range(len(v))))
     out["pypbd_constraints"] = len(pm.getConstraints())
     out["pypbd_constraint_groups"] = len(pm.getConstraintGroups())
-    out["speedup_faceforge_over_pypbd"] = t_pbd / t_ff
+    out["speedup_faceforge_over_pypbd"] = out["pypbd_ms_per_step"] / out["faceforge_ms_per_step"]
+    out["speedup_faceforge_coloured_over_pypbd"] = (out["pypbd_ms_per_step"]
+                                                    / out["faceforge_coloured_ms_per_step"])
     out["pypbd_step_extras"] = (
         "pypbd's TimeStepController.step also clears accelerations and applies gravity "
         "through per-particle accessors, loops over (empty) rigid bodies/joints, runs its "
@@ -318,11 +327,11 @@ def main():
                 title="ns per constraint-iteration (Mesh_D-sized skin)")
     frames = bench_frames(repeat)
     print_table(frames, ["mesh", "vertices", "faces", "constraints", "paper_constraints",
-                         "ms_per_frame", "ms_median", "paper_ms"],
+                         "ms_builder_order", "ms_coloured", "ms_coloured_median", "paper_ms"],
                 title="ms per frame, §8 skin set, 10 iterations, 1 substep (best of runs)")
     cloth = bench_cloth(repeat)
-    print_table([{k: cloth[k] for k in cloth if k != "pypbd_step_extras"}],
-                title="cloth 70x70, faceforge vs pypbd")
+    keys = [k for k in cloth if k.endswith(("ms_per_step", "sag")) or k.startswith("speedup")]
+    print_table([{k: cloth[k] for k in keys}], title="cloth 70x70, 10 iterations: faceforge vs pypbd")
     path = write_results("pbd", {"compile": compile_, "kinds": kinds, "frames": frames,
                                  "cloth": cloth, "target_ms_mesh_d": 3.0,
                                  "wall_s": time.perf_counter() - t0})

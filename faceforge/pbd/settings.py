@@ -37,6 +37,9 @@ class SolverSettings:
     damping : fraction of the velocity removed per step, in [0, 1) (spread over substeps).
     stiffness_mode : one of ``STIFFNESS_MODES`` (see module docstring).
     gravity : acceleration along -Y, length units / s^2 (0 for the face, §8).
+    colouring : visit the distance, bending and area constraints of each builder block
+        colour by colour (greedy graph colouring, see :mod:`faceforge.pbd.colouring`);
+        blocks keep their order. About 1.5-2x faster; False keeps the exact builder order.
     """
 
     iterations: int = 10
@@ -44,6 +47,7 @@ class SolverSettings:
     damping: float = 0.1
     stiffness_mode: str = "paper"
     gravity: float = 0.0
+    colouring: bool = False
 
     def __post_init__(self):
         errors = self.problems()
@@ -62,6 +66,8 @@ class SolverSettings:
         g = self.gravity
         if isinstance(g, bool) or not isinstance(g, (int, float)) or g != g:
             out.append(("gravity", f"expected a number, got {g!r}"))
+        if not isinstance(self.colouring, bool):
+            out.append(("colouring", f"expected true or false, got {self.colouring!r}"))
         if self.stiffness_mode not in STIFFNESS_MODES:
             out.append(("stiffness_mode", f"expected one of {', '.join(STIFFNESS_MODES)}, "
                         f"got {self.stiffness_mode!r}"))

@@ -14,8 +14,9 @@ from __future__ import annotations
 import numpy as np
 
 from faceforge.pbd._kernels import _step
+from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints.bending import rest_cos_sin
-from faceforge.pbd.model import Control, Model, State
+from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
 
@@ -55,7 +56,18 @@ class Solver:
         counts = np.diff(m.volume_particle_start)
         self._vol_g = np.zeros((int(counts.max()) if len(counts) else 1, 3))
         self._damp = (1.0 - s.damping) ** (1.0 / s.substeps)
-        self._bend_cs = rest_cos_sin(m.bending_rest_angle)
+        self._arrays = {  # per kind (indices, rest, k_eff, c), permuted when colouring
+            "distance": (m.distance_indices, m.distance_rest_length),
+            "bending": (m.bending_indices, rest_cos_sin(m.bending_rest_angle)),
+            "area": (m.area_indices, m.area_rest_area),
+        }
+        for code, kind in ((DISTANCE, "distance"), (BENDING, "bending"), (AREA, "area")):
+            idx, rest = self._arrays[kind]
+            kk, c = self._k[kind]
+            if s.colouring:
+                order = colour_order(idx, m.particle_count, m.blocks[m.blocks[:, 0] == code, 1:])
+                idx, rest, kk, c = (np.ascontiguousarray(a[order]) for a in (idx, rest, kk, c))
+            self._arrays[kind] = (idx, rest, kk, c)
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
@@ -88,9 +100,7 @@ class Solver:
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", m.blocks, self._lams,
-              m.distance_indices, m.distance_rest_length, *k["distance"],
-              m.bending_indices, self._bend_cs, *k["bending"],
-              m.area_indices, m.area_rest_area, *k["area"],
+              *self._arrays["distance"], *self._arrays["bending"], *self._arrays["area"],
               m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
               m.volume_local_triangles, m.volume_reference_start, m.volume_reference,
               m.volume_rest_volume, *k["volume"], self._vol_g,

@@ -118,9 +118,9 @@ def _solve_bending(x, w, i0, i1, i2, i3, rest_cos, rest_sin, k, c, lam, xpbd):
     if not (na2 > DEGENERATE * ee * ee and nb2 > DEGENERATE * ee * ee):
         return 0.0  # zero-length edge or zero-area triangle: no normal
     elen = math.sqrt(ee)
-    # sin-part (nA x nB) . e / |e| = -det(e, u, v) |e| ; cos-part nA . nB
-    det = ex * (uy * vz - uz * vy) + ey * (uz * vx - ux * vz) + ez * (ux * vy - uy * vx)
-    sin = -det * elen
+    # sin-part (nA x nB) . e / |e| = -det(e, u, v) |e| with det(e, u, v) = u . (v x e) = u . nB;
+    # cos-part nA . nB
+    sin = -(ux * bx + uy * by + uz * bz) * elen
     cos = ax * bx + ay * by + az * bz
     value = _deviation(sin * rest_cos - cos * rest_sin, cos * rest_cos + sin * rest_sin)
     prod = na2 * nb2
