@@ -586,32 +586,48 @@ def _failed(job: HeadJob, message: str) -> HeadResult:
     return HeadResult(job.name, job.workdir, status="failed", error=message)
 
 
+def _pool(workers: int):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_limit_threads, initargs=(threads,))
+
+
 def run_local(jobs: Sequence[HeadJob], n_jobs: int,
               on_result: Callable[[HeadResult], None] = lambda r: None) -> list[HeadResult]:
-    """Run the heads in ``n_jobs`` spawned processes (in this process when ``n_jobs == 1``)."""
+    """Run the heads in ``n_jobs`` spawned processes (in this process when ``n_jobs == 1``).
+
+    A worker that dies (killed, out of memory, a crash in native code) breaks the pool;
+    the heads it left unfinished then run one at a time, each in a fresh process, so
+    only the head that kills its process fails ("worker process died").
+    """
     if n_jobs <= 1 or len(jobs) <= 1:
         results = []
         for job in jobs:
             results.append(run_head(job))
             on_result(results[-1])
         return results
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
-    workers = min(n_jobs, len(jobs))
-    threads = max(1, (os.cpu_count() or 1) // workers)
     done: dict[int, HeadResult] = {}
-    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                             initializer=_limit_threads, initargs=(threads,)) as pool:
+    with _pool(min(n_jobs, len(jobs))) as pool:
         futures = {pool.submit(run_head, job): i for i, job in enumerate(jobs)}
         for future in as_completed(futures):
-            i = futures[future]
             try:
-                done[i] = future.result()
+                done[futures[future]] = future.result()
             except BrokenProcessPool:
-                done[i] = _failed(jobs[i], "worker process died (killed or out of memory)")
-            on_result(done[i])
+                continue
+            on_result(done[futures[future]])
+    for i in [i for i in range(len(jobs)) if i not in done]:   # after a worker died: isolate
+        with _pool(1) as pool:
+            try:
+                done[i] = pool.submit(run_head, jobs[i]).result()
+            except BrokenProcessPool:
+                done[i] = _failed(jobs[i], "worker process died (killed, out of memory or crashed)")
+        on_result(done[i])
     return [done[i] for i in range(len(jobs))]
 
 

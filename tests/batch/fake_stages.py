@@ -6,13 +6,15 @@ garbage OBJ fails with the real MeshError; the FAP track through ``read_fap``) a
 the files the batch reads (``report.json`` metrics, ``animation.npz`` frames), in well
 under a second, so the batch machinery is tested without the minutes the real
 stages take. ``FACEFORGE_FAKE_DELAY`` (seconds, default 0) makes each stage slower, for
-the kill test.
+the kill test; ``FACEFORGE_FAKE_CRASH=<mesh stem>`` makes fit SIGKILL its own process on that head.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import time
+from pathlib import Path
 
 from faceforge.pipeline import Stage, register_stage
 from faceforge.pipeline.stage import discover
@@ -29,6 +31,8 @@ def run_fit(ctx):
     from faceforge.io.stagefiles import save_json, save_npz
 
     v, f, _ = load_mesh(ctx.param("mesh"))
+    if os.environ.get("FACEFORGE_FAKE_CRASH") == Path(ctx.param("mesh")).stem:
+        os.kill(os.getpid(), signal.SIGKILL)           # a worker dying in native code / OOM
     _delay()
     save_npz(ctx.out_dir / "fit.npz", skin_vertices=v, skin_faces=f)
     diag = float(np.linalg.norm(v.max(0) - v.min(0)))

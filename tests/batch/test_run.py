@@ -146,3 +146,13 @@ def test_summary_lists_every_head_and_each_error(tmp_path):
     report = batch.batch_report([ok, bad], tmp_path, 30.0, "processes x2")
     assert (report["ok"], report["failed"], report["heads_per_minute"]) == (1, 1, 4.0)
     assert json.loads(json.dumps(report))["results"][1]["error"] == "b.obj:1: bad line"
+
+
+def test_a_head_that_kills_its_worker_fails_alone(fake_stages, tmp_path, heads_dir, short_fap, monkeypatch):
+    monkeypatch.setenv("FACEFORGE_FAKE_CRASH", "ben")        # inherited by the spawned workers
+    shared = batch.SharedOptions(fap=str(short_fap), plugins=(fake_stages,))
+    names = ("anna", "ben", "carl", "broken")
+    results = batch.run_local([batch.make_job(heads_dir / f"{n}.obj", tmp_path, shared) for n in names], 2)
+    assert [r.status for r in results] == ["ok", "failed", "ok", "failed"]
+    assert results[1].error.startswith("worker process died")
+    assert "OBJ" in results[3].error
