@@ -119,6 +119,11 @@ def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePo
     p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
     near = project_to_surface(p, v, f)
     n = near.normals(v, f)
+    # "outside" is away from the layer's centre: a deeper muscle's bottom sheet
+    # touches the skull with the opposite normal, so orient n radially outward
+    centre = v[np.unique(f)].mean(axis=0)
+    flip = np.einsum("ij,ij->i", n, near.positions(v, f) - centre) < 0
+    n[flip] *= -1.0
     r = reach * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
     face, hit, _ = RayCaster(v, f).first_hit(p + r * n, -n)
     ok = face >= 0
@@ -165,11 +170,12 @@ class ActionLine:
 
         ``project``: "closest" takes the closest point of the layer; "outermost"
         (for layers stacked on each other, e.g. a muscle over the skull, whose
-        surfaces nearly touch) finds the closest point's normal ``n``, casts a
-        ray from ``p + r n`` along ``-n`` (``r`` = 5 % of the layer's bounding-box
-        diagonal) and keeps the first hit, i.e. what an artist clicking on the
-        layer from outside would pick; points whose ray misses fall back to the
-        closest point.
+        surfaces nearly touch) finds the closest point's normal ``n``, turned
+        to point away from the layer's centre (mean of its vertices: "outside"
+        for a head), casts a ray from ``p + r n`` along ``-n`` (``r`` = 5 % of
+        the layer's bounding-box diagonal) and keeps the first hit, i.e. what an
+        artist clicking on the layer from outside would pick; points whose ray
+        misses fall back to the closest point.
         """
         v, f = check_mesh(vertices, faces)
         p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)

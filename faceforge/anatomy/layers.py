@@ -150,13 +150,12 @@ class MusculoskeletalSystem:
                                         f"(layer {layer_of[dep]}): it must be deeper")
             layer_of[m.name] = m.layer
             bodies.append((m.name, m.rest_positions, m.faces))
-        by_name = {m.name: m for m in muscles}
         fstart = np.cumsum([0] + [len(f) for _, _, f in bodies])
         fstart = {name: int(fstart[i]) for i, (name, _, _) in enumerate(bodies)}
         fcount = {name: len(f) for name, _, f in bodies}
         layers: list[_Layer] = []
         for index in sorted(set(layer_of.values())):
-            group = [_to_world(m, fstart, fcount, by_name) for m in muscles if m.layer == index]
+            group = [_to_world(m, fstart, fcount) for m in muscles if m.layer == index]
             b = ModelBuilder()
             firsts, slots = [], []
             for m in group:
@@ -307,13 +306,14 @@ class MusculoskeletalSystem:
 def underlying_mesh(lies_on, cranium, mandible, muscles=()) -> tuple[np.ndarray, np.ndarray]:
     """The rest surface a muscle with ``lies_on`` is built on: ``(vertices, faces)``.
 
-    The bodies of ``expand_lies_on(lies_on)`` concatenated in that order: the
-    whole cranium / mandible, and the **top sheet** (:attr:`Muscle.top_faces`)
-    of each deeper muscle (a muscle lies on the upper surface of another, never
-    on its bottom or side walls; all its particles are kept so the numbering
-    stays the muscle's own). Build a muscle's action lines on this mesh (use
-    ``project="outermost"`` in :meth:`ActionLine.from_points` so that points
-    drawn on the skull under a deeper muscle land on that muscle's top).
+    The bodies of ``expand_lies_on(lies_on)`` concatenated in that order (whole
+    meshes: cranium, mandible, and each deeper muscle's closed surface, all
+    faces in their own order). This numbering is the contract with
+    :meth:`MusculoskeletalSystem.from_parts`, which re-expresses the action
+    lines on the world mesh. A muscle lies on the *top* of a deeper one: build
+    its lines with ``ActionLine.from_points(..., project="outermost")`` so that
+    points drawn on the skull under a deeper muscle land on that muscle's top
+    sheet rather than on its bottom (which touches the skull).
     ``muscles`` is any iterable of the deeper :class:`Muscle` objects.
     """
     from faceforge.geometry.triangles import concatenate_meshes
@@ -326,19 +326,17 @@ def underlying_mesh(lies_on, cranium, mandible, muscles=()) -> tuple[np.ndarray,
         elif name == "mandible":
             parts.append(check_mesh(*mandible))
         elif name in by_name:
-            parts.append((by_name[name].rest_positions, by_name[name].top_faces))
+            parts.append((by_name[name].rest_positions, by_name[name].faces))
         else:
             raise TemplateError(f"lies_on names unknown body {name!r}")
     v, f, _ = concatenate_meshes(parts)
     return v, f
 
 
-def _to_world(m: Muscle, fstart: dict, fcount: dict, muscles: dict) -> Muscle:
+def _to_world(m: Muscle, fstart: dict, fcount: dict) -> Muscle:
     """Re-express the muscle's action lines (on :func:`underlying_mesh`) on world faces."""
     names = expand_lies_on(m.lies_on)
-    mapping = np.concatenate([
-        fstart[n] + (muscles[n].top_face_ids if n in muscles else np.arange(fcount[n])) for n in names
-    ]).astype(INT)
+    mapping = np.concatenate([fstart[n] + np.arange(fcount[n]) for n in names]).astype(INT)
     lines = {}
     for key, line in m.lines.items():
         ids = line.points.face_ids
