@@ -65,8 +65,8 @@ def landmarks(v):
     return lm
 
 
-JAW = {"pitch_axis_point": [0.0, -0.1, -0.1], "pitch_axis_direction": [1.0, 0.0, 0.0],
-       "yaw_axis_point": [0.0, -0.1, -0.1], "yaw_axis_direction": [0.0, 1.0, 0.0],
+JAW = {"pitch_point": [0.0, -0.1, -0.1], "pitch_direction": [1.0, 0.0, 0.0],
+       "yaw_point": [0.0, -0.1, -0.1], "yaw_direction": [0.0, 1.0, 0.0],
        "protrusion_direction": [0.0, 0.0, 1.0]}
 
 

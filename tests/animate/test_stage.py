@@ -62,12 +62,12 @@ def run_stage(stage_name, workdir, params, sets=SETS):
 
 @pytest.fixture(scope="session")
 def calibrated(workdir, patched):
-    return run_stage("calibrate", workdir, {"fap_mapping": str(workdir / "mapping.yaml")})
+    return run_stage("calibrate", workdir, {"fap_mapping_template": str(workdir / "mapping.yaml")})
 
 
 @pytest.fixture(scope="session")
 def joy(workdir, patched):
-    return run_stage("animate", workdir, {"fap": str(JOY), "fap_mapping": str(workdir / "mapping.yaml")})
+    return run_stage("animate", workdir, {"fap": str(JOY), "animate_mapping": str(workdir / "mapping.yaml")})
 
 
 def test_joy_plays_clean_in_user_vertex_order(joy):
@@ -115,7 +115,7 @@ def test_neutral_track_is_a_fixed_point(workdir, patched, tmp_path):
     track = FapTrack.from_given(25.0, np.ones((n, 68), bool), np.zeros((n, 68)))
     write_fap(tmp_path / "zero.fap", track)
     out = run_stage("animate", workdir, {"fap": str(tmp_path / "zero.fap"),
-                                         "fap_mapping": str(workdir / "mapping.yaml")})
+                                         "animate_mapping": str(workdir / "mapping.yaml")})
     frames = load_npz(out / "animation.npz")["frames"]
     v, _ = S.skin_mesh()
     assert np.abs(frames - v.astype(np.float32)).max() < 1e-5
@@ -145,7 +145,7 @@ def test_expression_preset_through_fap2(workdir, patched, tmp_path):
 
     write_fap(tmp_path / "joy_preset.fap", expression_track("joy", intensity=0.8, fps=25, seconds=0.6, ramp=0.2))
     out = run_stage("animate", workdir, {"fap": str(tmp_path / "joy_preset.fap"),
-                                         "fap_mapping": str(workdir / "mapping.yaml")})
+                                         "animate_mapping": str(workdir / "mapping.yaml")})
     d = load_npz(out / "animation.npz")
     c = d["contractions"][:, 0]
     assert c[0] == 0.0 and c[-1] == 0.0                        # ramps in from and out to neutral

@@ -75,6 +75,8 @@ class BoundHead:
     def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
         import numpy as np
 
+        from dataclasses import replace
+
         from faceforge.anatomy.animate import Rig
         from faceforge.anatomy.binding import Binding
         from faceforge.anatomy.fap_mapping import JawLevers
@@ -96,7 +98,7 @@ class BoundHead:
         self.user_index = np.asarray(u2i, dtype=np.int64)
         try:
             axes = JawAxes(*(np.asarray(fit[f"jaw_{k}"], dtype=float) for k in (
-                "pitch_axis_point", "pitch_axis_direction", "yaw_axis_point", "yaw_axis_direction",
+                "pitch_point", "pitch_direction", "yaw_point", "yaw_direction",
                 "protrusion_direction")), limits={}, condyles=np.zeros((2, 3)))
         except KeyError as exc:
             raise StageError(f"fit.npz lacks the jaw axes ({exc.args[0]}); rerun `faceforge fit`",
@@ -120,6 +122,9 @@ class BoundHead:
         if missing:
             raise StageError(f"bind.npz binds the skin to {missing}, which the fitted head lacks; "
                              "rerun `faceforge bind`", bind_dir / "bind.npz")
+        # anchors on the system's own rest bodies (the rebuilt muscles may differ from the meshes
+        # bind saw by a projection): then the rest pose is an exact fixed point
+        binding = replace(binding, points=binding.targets([system.surface(n) for n in binding.body_names]))
         self.skin = skin = SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
                                           settings)
 
@@ -177,20 +182,55 @@ def _fdp_vertices(landmarks: dict, rest, lip_sides) -> dict:
 
 
 def _muscle_system(fit, cranium, mandible, settings, config, log):
-    """The layered muscles of the fitted head, or the skull alone when they cannot be rebuilt."""
-    from faceforge.anatomy.layers import MusculoskeletalSystem
+    """The layered muscles of the fitted head (§6), rebuilt from fit.npz.
 
-    muscles = []
-    try:
-        from faceforge.anatomy.fit_template import muscles_from_fit  # provided by the fit stage
-    except ImportError:
-        muscles_from_fit = None
-    if muscles_from_fit is not None and "muscle_names" in fit and len(fit["muscle_names"]):
-        muscles = muscles_from_fit(fit, config)
-    elif "muscle_names" in fit and len(fit["muscle_names"]):
-        log("muscles cannot be rebuilt from fit.npz yet (no fit_template.muscles_from_fit): "
-            "animating the jaw only")
+    The muscle map's specs (``template.muscle_map`` on ``template.skull``) get the fitted
+    points the fit stage stored (``muscle_map_points``, in ``MuscleSpec.points()`` order) and
+    are built on the fitted skull (Eq. 5 thickness from its diagonal), deepest layer first.
+    Without muscles in fit.npz the system is the skull alone.
+    """
+    from dataclasses import replace
+
+    import numpy as np
+
+    from faceforge.anatomy.fit_muscles import build_muscles_on
+    from faceforge.anatomy.layers import MusculoskeletalSystem
+    from faceforge.anatomy.muscle_map import load_muscle_map
+    from faceforge.anatomy.skull import load_skull
+    from faceforge.exceptions import StageError
+
+    if "muscle_map_names" not in fit or not len(fit["muscle_map_names"]):
+        log("fit.npz has no muscles: animating the skull alone")
+        return MusculoskeletalSystem.from_parts(cranium, mandible, [], settings)
+    specs = load_muscle_map(_template_path(config.get("template.muscle_map")),
+                            load_skull(_template_path(config.get("template.skull"))))
+    start = fit["muscle_map_start"]
+    points = {str(n): fit["muscle_map_points"][start[i]:start[i + 1]]
+              for i, n in enumerate(fit["muscle_map_names"])}
+    fields = ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer")
+    fitted = []
+    for spec in specs:
+        p = points.get(spec.name)
+        if p is None or len(p) != len(spec.points()):
+            raise StageError(f"fit.npz has no fitted points for muscle {spec.name!r} of the muscle map; "
+                             "rerun `faceforge fit`")
+        ends = np.cumsum([0] + [len(getattr(spec, k)) for k in fields])
+        fitted.append(replace(spec, **{k: p[ends[j]:ends[j + 1]] for j, k in enumerate(fields)}))
+    diagonal = float(np.linalg.norm(np.ptp(np.vstack([cranium[0], mandible[0]]), axis=0)))
+    stiffness = {"linear": dict(config.get("muscle.linear.stiffness")),
+                 "sphincter": dict(config.get("muscle.sphincter.stiffness"))}
+    muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness)
     return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
+
+
+def _template_path(raw) -> Path:
+    p = Path(str(raw))
+    if p.exists() or p.is_absolute():
+        return p
+    for root in (Path(__file__).resolve().parents[3], Path(__file__).resolve().parents[2]):
+        if (root / p).exists():
+            return root / p
+    return p
 
 
 # --------------------------------------------------------------------------- FAPs -> controls
@@ -228,7 +268,7 @@ def controls(mapping, faps, head):
 def _mapping(ctx):
     from faceforge.anatomy.fap_mapping import load_fap_mapping
 
-    path = ctx.params.get("calibration") or ctx.param("fap_mapping")
+    path = ctx.param("animate_mapping")
     mapping = load_fap_mapping(path)
     return mapping, str(path)
 
@@ -268,7 +308,7 @@ def run_animate(ctx):
 
 ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
-    inputs=("fap", "fap_mapping", "calibration?"), outputs=("animation.npz", "report.json"),
+    inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
     version="1", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
@@ -326,7 +366,7 @@ def run_calibrate(ctx):
     from faceforge.io.stagefiles import save_json
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
-    template = load_fap_mapping(ctx.param("fap_mapping"))
+    template = load_fap_mapping(ctx.param("fap_mapping_template"))
     fps = float(ctx.config.get("animate.fps"))
     settle = int(ctx.config.get("animate.calibrate.settle_frames"))
 
@@ -348,7 +388,7 @@ def run_calibrate(ctx):
     summary = summarize(rows)
     lips = _lip_opening(calibrated, simulate, head, float(ctx.config.get("animate.calibrate.jaw_magnitude")))
     save_fap_mapping(calibrated, ctx.out_dir / "fap_mapping.yaml",
-                     header=f"calibrated by `faceforge calibrate` from {ctx.param('fap_mapping')}\n"
+                     header=f"calibrated by `faceforge calibrate` from {ctx.param('fap_mapping_template')}\n"
                             f"median relative error {summary['all']['median_relative_error']}")
     save_json(ctx.out_dir / "report.json", {
         "summary": summary, "open_jaw_lip_separation": lips,
@@ -382,7 +422,7 @@ def _lip_opening(mapping, simulate, head, value):
 
 CALIBRATE = register_stage(Stage(
     name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
-    inputs=("fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
+    inputs=("fap_mapping_template",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="1", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
@@ -458,9 +498,9 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
         seconds = seconds or float(app.config.get("animate.expression_seconds"))
         fap = _expression_file(app, expression, intensity, seconds)
     calibrated = calibrated_mapping_path(app.workspace.root)
-    app.run_stage("animate", params={"fap": str(fap), "fap_mapping": str(mapping_template_path(app.config)),
-                                     "calibration": str(calibrated) if calibrated.exists() else ""},
-                  force=force)
+    mapping = calibrated if calibrated.exists() else mapping_template_path(app.config)
+    app.log(f"animate: mapping {mapping}")
+    app.run_stage("animate", params={"fap": str(fap), "animate_mapping": str(mapping)}, force=force)
     export_outputs(app, output, preview, preview_frames)
 
 
@@ -468,7 +508,8 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
 @click.option("--force", is_flag=True, help="Rerun even if up to date.")
 @click.pass_obj
 def calibrate_command(app, force):
-    app.run_stage("calibrate", params={"fap_mapping": str(mapping_template_path(app.config))}, force=force)
+    app.run_stage("calibrate", params={"fap_mapping_template": str(mapping_template_path(app.config))},
+                  force=force)
     out = app.workspace.stage_dir("calibrate")
     app.log((out / "report.txt").read_text())
     app.log(f"calibrate: wrote {out / 'fap_mapping.yaml'} (used by `faceforge animate`)")
