@@ -12,7 +12,8 @@ Functions on arrays. The construction, in order:
 3. **Hardy multiquadric RBF** (§4, :func:`faceforge.geometry.rbf.hardy_rbf`) from the
    aligned skull landmarks to the targets; exact at the landmarks.
 4. **Enhancement landmarks** (red dots of Fig. 8). Candidate points are the outer-surface
-   vertices of the morphed skull in front of the ears (a vertex is *outer* when a ray
+   vertices (one per ``enhancement_cell`` grid cell) of the morphed skull in front of the
+   ears (a vertex is *outer* when a ray
    along its normal leaves the skull without hitting it again) that face the skin (their
    normal within ~70 degrees of the skin normal at their closest skin point: this leaves
    out the back of the teeth and the inside of the jaw). The signed depth ``D`` beneath
@@ -61,6 +62,7 @@ class FitSettings:
     enhancement_samples: int = 48      # new pairs considered per round
     enhancement_spacing: float = 0.035  # min distance between RBF sources, fraction of skin diagonal
     enhancement_min_ratio: float = 0.7  # add a pair where thickness < ratio * expected depth
+    enhancement_cell: float = 0.015    # candidates: one skull vertex per cell of this size (x skin diagonal)
     front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0
     muscle_gap_mm: float = 1.5         # skin tissue kept above the muscle top at landmarks (mm)
 
@@ -106,6 +108,16 @@ class SkinSurface:
         edges, counts = edge_face_counts(f)
         bnd = np.unique(edges[counts == 1])
         return cls(v, f, vertex_normals(v, f), float(np.linalg.norm(np.ptp(v, axis=0))), RayCaster(v, f), bnd)
+
+    def closest(self, points: np.ndarray):
+        """Closest skin points ``(closest (q, 3), distance (q,), face_ids (q,))`` (exact;
+        trimesh's r-tree over the triangles, built once per skin)."""
+        import trimesh
+
+        if getattr(self, "_mesh", None) is None:
+            self._mesh = trimesh.Trimesh(self.vertices, self.faces, process=False, validate=False)
+        c, d, t = trimesh.proximity.closest_point(self._mesh, np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        return np.asarray(c, dtype=np.float64), np.asarray(d, dtype=np.float64), np.asarray(t, dtype=np.int64)
 
     def normals_at(self, face_ids, bary) -> np.ndarray:
         """Unit smooth normals (k, 3) at surface points given by face ids and barycentrics."""
@@ -213,6 +225,15 @@ def worst_first_sample(points: np.ndarray, badness: np.ndarray, k: int, existing
     return np.asarray(chosen, dtype=np.int64)
 
 
+def grid_subsample(points: np.ndarray, cell: float) -> np.ndarray:
+    """Bool (n,): the first point (by index) of every occupied cubic cell of size ``cell``."""
+    keys = np.floor((points - points.min(axis=0)) / cell).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    mask = np.zeros(len(points), bool)
+    mask[first] = True
+    return mask
+
+
 def outer_vertices(vertices: np.ndarray, faces: np.ndarray, caster: RayCaster | None = None) -> np.ndarray:
     """Bool (n,): the ray from a vertex along its normal leaves the mesh without hitting it.
 
@@ -237,8 +258,6 @@ def signed_skin_depth(points: np.ndarray, skin: SkinSurface):
     closest skin point lies on the skin's open boundary (beyond a mask's rim, below the
     neck) is not ``covered``.
     """
-    import trimesh
-
     from faceforge.geometry.triangles import barycentric
 
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
@@ -246,8 +265,7 @@ def signed_skin_depth(points: np.ndarray, skin: SkinSurface):
     if k == 0:
         z = np.zeros((0, 3))
         return np.zeros(0), z, z, np.zeros(0, bool), np.zeros(0, bool)
-    mesh = trimesh.Trimesh(skin.vertices, skin.faces, process=False, validate=False)
-    closest, dist, tri = trimesh.proximity.closest_point(mesh, points)
+    closest, dist, tri = skin.closest(points)
     bary = barycentric(closest, skin.vertices, skin.faces, tri)
     normal = skin.normals_at(tri, bary)
     sign = np.where(np.einsum("ij,ij->i", normal, closest - points) >= 0, 1.0, -1.0)
@@ -273,6 +291,11 @@ def front_mask(points: np.ndarray, skin_landmarks: dict, offset_es0: float) -> n
 # ----------------------------------------------------------------------------- the skull fit
 
 
+#: unused template landmarks farther than this fraction of the landmarks' box diagonal from
+#: every target are anchored to the similarity transform
+ANCHOR_DISTANCE = 0.2
+
+
 @dataclass
 class SkullTargets:
     """Skull landmark -> skin target pairs of one fit.
@@ -287,6 +310,7 @@ class SkullTargets:
     skin: np.ndarray
     normal: np.ndarray
     depth: np.ndarray
+    anchors: np.ndarray = None    # (a, 3) template points held where the similarity puts them
 
     @property
     def target(self) -> np.ndarray:
@@ -306,9 +330,17 @@ def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_point
         raise ValueError(f"only {len(fdps)} FDPs shared by skull template and skin ({', '.join(fdps)}); need >= 6")
     rows = np.array([index[f] for f in fdps])
     depth = fit_tissue.tissue_depths(fdps, scale_mm) if use_depth else np.zeros(len(fdps))
-    return SkullTargets(fdps, np.array([skull_landmarks[f] for f in fdps], dtype=np.float64),
-                        np.asarray(skin_points, dtype=np.float64)[rows],
-                        skin.normals_at(np.asarray(skin_face_ids)[rows], np.asarray(skin_bary)[rows]), depth)
+    source = np.array([skull_landmarks[f] for f in fdps], dtype=np.float64)
+    # template landmarks the skin cannot place (a face mask has no skull top, back, ears or jaw
+    # angles) and that lie far from every target: held by the similarity alone, so that the
+    # RBF does not extrapolate the back of the skull into a cone
+    rest = np.array([p for f, p in skull_landmarks.items() if f not in fdps], dtype=np.float64).reshape(-1, 3)
+    skull_diag = float(np.linalg.norm(np.ptp(np.vstack([source, rest]), axis=0)))
+    far = np.min(np.linalg.norm(rest[:, None] - source[None], axis=2), axis=1) > ANCHOR_DISTANCE * skull_diag \
+        if len(rest) else np.zeros(0, bool)
+    return SkullTargets(fdps, source, np.asarray(skin_points, dtype=np.float64)[rows],
+                        skin.normals_at(np.asarray(skin_face_ids)[rows], np.asarray(skin_bary)[rows]), depth,
+                        rest[far])
 
 
 @dataclass
@@ -333,6 +365,9 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
     sim = similarity_transform(pairs.source, pairs.target)
     src = apply_affine(sim, pairs.source)
     dst = pairs.target.copy()
+    if pairs.anchors is not None and len(pairs.anchors):
+        held = apply_affine(sim, pairs.anchors)
+        src, dst = np.vstack([src, held]), np.vstack([dst, held])
     # the shape parameter stays that of the FDP landmarks: adding sources must not make
     # every kernel narrower (Hardy's R shrinks with the mean source spacing)
     eps = hardy_epsilon(src)
@@ -342,6 +377,7 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
         return SkullFit(warp, src, dst, len(src), rounds)
     aligned = apply_affine(sim, skull_vertices)
     outer = outer_vertices(aligned, skull_faces)
+    outer &= grid_subsample(aligned, settings.enhancement_cell * skin.diagonal)
     depth_sites, site_depth = pairs.target, pairs.depth
     spacing = settings.enhancement_spacing * skin.diagonal
     for _ in range(settings.enhancement_rounds):
@@ -429,7 +465,9 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, sk
     muscles = []
     targets = pairs.target
     info = {"units_per_mm": scale_mm, "landmark_pairs": len(pairs.fdps), "enhancement_rounds": sk.rounds,
-            "enhancement_landmarks": int(len(sk.sources) - sk.n_landmarks), "covered_landmarks": [],
+            "anchors": int(len(pairs.anchors)),
+            "enhancement_landmarks": int(len(sk.sources) - sk.n_landmarks - len(pairs.anchors)),
+            "covered_landmarks": [],
             "refit": False}
     if build_muscles is not None:
         muscles = build_muscles((skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf), warp)

@@ -47,6 +47,8 @@ FDP_TISSUE_CODE = {
     "9.15": "mp",       # nose base -> mid-philtrum / anterior nasal spine
     "11.1": "sg",       # hairline, midline -> supraglabella (frontal bone)
     "11.2": "fe", "11.3": "fe",         # hairline, sides -> frontal eminence
+    "11.4": "fe", "11.6": "fe",         # top and back of the skull: scalp, taken as thick as at
+                                        # the frontal eminence (the table has no vault points)
 }
 
 #: adult mean interpupillary distance ES0, mm
