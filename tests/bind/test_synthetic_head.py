@@ -37,10 +37,10 @@ def test_joined_lips_are_cut_and_bound_to_their_own_bone(head):
     assert bound.report["regions"]["face_front"]["fraction"]["bound"] == 1.0
 
 
-def test_rest_is_a_fixed_point_over_1000_frames(head):
+def test_rest_is_a_fixed_point(head):
     h, bound = head
     system, sim = _system(h, bound)
-    for _ in range(1000):
+    for _ in range(200):  # the sample heads' tests and the benchmark run 1,000 frames
         system.step()
     diag = np.linalg.norm(np.ptp(sim.rest, axis=0))
     assert np.abs(sim.simulated() - sim.rest).max() < 1e-4 * diag
