@@ -43,10 +43,11 @@ DEFAULT_TARGETS = ("fit", "bind", "animate")
 REPORT_NAME = "batch_report.json"
 HEAD_LOG = "batch.log"
 #: stages whose report.json is summarized in the batch report
-METRIC_STAGES = ("fit", "bind")
+METRIC_STAGES = ("fit", "bind", "animate")
 #: (stage, dotted key, column title) shown in the terminal table when present
 HEADLINE_METRICS = (("fit", "landmarks.max_residual", "fit resid"),
-                    ("bind", "regions.face_front.fraction.bound", "bound front"))
+                    ("bind", "regions.face_front.fraction.bound", "bound front"),
+                    ("animate", "checks.ok", "checks"))
 EXPRESSIONS = ("joy", "sadness", "surprise", "anger", "disgust", "fear")
 
 
@@ -91,7 +92,7 @@ class HeadResult:
 
     ``stages`` maps a stage name to ``{"state": "ran"|"cached"|"failed"|"not run",
     "seconds": float}`` (seconds of this run; 0 when cached). ``metrics`` holds the
-    numeric/boolean/string leaves of the fit and bind ``report.json`` as dotted keys.
+    numeric/boolean/string leaves of the fit, bind and animate ``report.json`` as dotted keys.
     """
 
     name: str
@@ -436,6 +437,10 @@ def _remember(workspace, layers, params: Mapping) -> None:
         workspace.config_path.unlink()
 
 
+#: FAP-mapping inputs of the animate/calibrate stages (names as their modules declare them)
+_MAPPING_INPUTS = {"fap_mapping", "fap_mapping_template", "animate_mapping", "calibration"}
+
+
 def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> dict:
     """Stage params of the head: mesh, landmarks, the FAP track and the FAP mapping."""
     from faceforge.io.landmarks import default_landmark_path
@@ -446,12 +451,14 @@ def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> di
     needed = {n.rstrip("?") for s in stage_order(targets) for n in s.inputs}
     if "fap" in needed:
         params["fap"] = str(Path(job.fap).absolute()) if job.fap else str(_expression_fap(job, config, root))
-    if "fap_mapping" in needed:
+    if needed & _MAPPING_INPUTS:   # as `faceforge animate` does: the calibrated mapping if there is one
         from faceforge.pipeline.stages.animate import calibrated_mapping_path, mapping_template_path
 
-        params["fap_mapping"] = str(mapping_template_path(config))
-        calibrated = calibrated_mapping_path(root)
-        params["calibration"] = str(calibrated) if calibrated.exists() else ""
+        template, calibrated = str(mapping_template_path(config)), calibrated_mapping_path(root)
+        calibrated = str(calibrated) if calibrated.exists() else ""
+        known = {"fap_mapping": template, "fap_mapping_template": template,
+                 "animate_mapping": calibrated or template, "calibration": calibrated}
+        params.update({k: v for k, v in known.items() if k in needed})
     return params
 
 
