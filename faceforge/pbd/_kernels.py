@@ -12,7 +12,7 @@ import numba
 from faceforge.constants import NUMBA_OPTIONS
 from faceforge.pbd.constraints.area import _project_area
 from faceforge.pbd.constraints.attachment import _project_attachment
-from faceforge.pbd.constraints.bending import _project_bending
+from faceforge.pbd.constraints.bending import _project_bending, _project_bending_batched
 from faceforge.pbd.constraints.distance import _project_distance
 from faceforge.pbd.constraints.position import _project_position
 from faceforge.pbd.constraints.volume import _project_volume
@@ -21,12 +21,16 @@ from faceforge.pbd.constraints.volume import _project_volume
 @numba.njit(**NUMBA_OPTIONS)
 def _project(x, w, blocks, iterations, xpbd,
              d_idx, d_rest, d_k, d_c, d_lam,
-             b_idx, b_rest, b_k, b_c, b_lam,
+             b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_buf,
              a_idx, a_rest, a_k, a_c, a_lam,
              v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
              p_idx, p_target, p_k, p_c, p_lam,
              t_idx, t_tri, t_bary, t_k, t_c, t_lam):
-    """``iterations`` Gauss-Seidel sweeps over ``blocks (nb, 3)`` rows (kind, start, stop)."""
+    """``iterations`` Gauss-Seidel sweeps over ``blocks (nb, 3)`` rows (kind, start, stop).
+
+    ``b_runs`` (bending runs of independent constraints, empty unless colouring) selects
+    the vectorised bending sweep.
+    """
     for _ in range(iterations):
         for b in range(blocks.shape[0]):
             kind = blocks[b, 0]
@@ -35,7 +39,10 @@ def _project(x, w, blocks, iterations, xpbd,
             if kind == 0:
                 _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, xpbd, start, stop)
             elif kind == 1:
-                _project_bending(x, w, b_idx, b_rest, b_k, b_c, b_lam, xpbd, start, stop)
+                if b_runs.shape[0] > 1:  # coloured, PBD modes: vectorised batches
+                    _project_bending_batched(x, w, b_idx, b_rest, b_k, b_runs, b_buf, start, stop)
+                else:
+                    _project_bending(x, w, b_idx, b_rest, b_k, b_c, b_lam, xpbd, start, stop)
             elif kind == 2:
                 _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, xpbd, start, stop)
             elif kind == 3:
@@ -78,7 +85,7 @@ def _velocities(x, v, prev, inv_h):
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
           substeps, iterations, xpbd, blocks, lams,
           d_idx, d_rest, d_k, d_c,
-          b_idx, b_rest, b_k, b_c,
+          b_idx, b_rest, b_k, b_c, b_runs, b_buf,
           a_idx, a_rest, a_k, a_c,
           v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
@@ -114,7 +121,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
         lams[:] = 0.0
         _project(x_out, w, blocks, iterations, xpbd,
                  d_idx, d_rest, d_k, d_c, lams[:o1],
-                 b_idx, b_rest, b_k, b_c, lams[o1:o2],
+                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_buf,
                  a_idx, a_rest, a_k, a_c, lams[o2:o3],
                  v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                  lams[o3:o4], v_g,

@@ -64,12 +64,23 @@ def greedy_colouring(indices: np.ndarray, n_particles: int) -> np.ndarray:
     return _greedy(idx, n_particles, (max_colours + 63) // 64)
 
 
-def colour_order(indices: np.ndarray, n_particles: int, blocks: np.ndarray) -> np.ndarray:
-    """Permutation ``(m,) int64`` of one kind's constraints: within each ``(start, stop)``
-    of ``blocks (b, 2)``, sorted by greedy colour (stable)."""
+def colour_order(indices: np.ndarray, n_particles: int, blocks: np.ndarray):
+    """Order one kind's constraints colour by colour within each block.
+
+    indices : (m, k) int; blocks : (b, 2) int rows (start, stop) of this kind's blocks.
+    Returns ``(order (m,) int64, runs (r,) int64)``: the permutation (stable sort by greedy
+    colour inside each block) and the sorted boundaries, in the permuted order, of the
+    runs of constraints that share no particle (one colour of one block; starts with 0
+    and ends with m).
+    """
     idx = np.asarray(indices)
     order = np.arange(len(idx), dtype=np.int64)
+    runs = [0, len(idx)]
     for start, stop in blocks:
         colours = greedy_colouring(idx[start:stop], n_particles)
-        order[start:stop] = start + np.argsort(colours, kind="stable")
-    return order
+        perm = np.argsort(colours, kind="stable")
+        order[start:stop] = start + perm
+        sorted_colours = colours[perm]
+        runs.extend([start, stop])
+        runs.extend((start + 1 + np.flatnonzero(np.diff(sorted_colours))).tolist())
+    return order, np.unique(np.array(runs, dtype=np.int64))

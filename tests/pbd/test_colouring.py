@@ -43,9 +43,41 @@ def test_colour_order_keeps_blocks_in_place():
     v, f = sphere(1)
     e = edges(f)
     blocks = np.array([[0, 40], [40, len(e)]])
-    order = colour_order(e, len(v), blocks)
+    order, runs = colour_order(e, len(v), blocks)
     assert sorted(order[:40]) == list(range(40))
     assert sorted(order[40:]) == list(range(40, len(e)))
+    assert runs[0] == 0 and runs[-1] == len(e) and 40 in runs
+    permuted = e[order]
+    for a, b in zip(runs[:-1], runs[1:]):  # every run is a set of independent constraints
+        members = permuted[a:b].ravel()
+        assert len(members) == len(np.unique(members))
+
+
+@pytest.mark.parametrize("scale", [0.002, 0.2])  # small: Padé branch; large: atan2 fix-up
+def test_batched_bending_matches_the_sequential_sweep(scale):
+    from faceforge.pbd.constraints.bending import (
+        BATCH, BATCH_ROWS, _project_bending, _project_bending_batched, init_bending,
+        rest_cos_sin)
+    from tests.pbd import twins
+    v, f = sphere(3)
+    q = adjacent_quads(f)
+    order, runs = colour_order(q, len(v), np.array([[0, 100], [100, len(q)]]))
+    q = q[order]
+    rng = np.random.default_rng(8)
+    x0 = v + rng.normal(scale=scale, size=v.shape)
+    w = rng.uniform(0.0, 2.0, len(v))
+    rest = init_bending(v, q)
+    k = rng.uniform(0.1, 1.0, len(q))
+    got = x0.copy()
+    _project_bending_batched(got, w, q, rest_cos_sin(rest), k, runs, np.zeros(BATCH * BATCH_ROWS),
+                             0, len(q))
+    scalar = x0.copy()
+    zeros = np.zeros(len(q))
+    _project_bending(scalar, w, q, rest_cos_sin(rest), k, zeros, zeros, False, 0, len(q))
+    want, _ = twins.bending(x0, w, q, rest, k)
+    assert np.abs(got - x0).max() > 1e-4
+    np.testing.assert_allclose(got, scalar, rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
 
 
 def test_coloured_solver_rest_fixed_point_momentum_and_convergence():

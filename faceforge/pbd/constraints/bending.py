@@ -181,6 +181,176 @@ def _project_bending(x, w, idx, rest_cs, k, c, lam, xpbd, start, stop):
                            rest_cs[j, 0], rest_cs[j, 1], k[j], 0.0, 0.0, False)
 
 
+#: constraints per batch of the vectorised sweep, and its scratch rows
+BATCH = 64
+BATCH_ROWS = 32
+# offsets of the scratch rows in the flat buffer: one flat array with constant row offsets
+# lets LLVM prove the rows independent and vectorise the math loop (separate arrays do not)
+_E_X = 0 * BATCH
+_E_Y = 1 * BATCH
+_E_Z = 2 * BATCH
+_U_X = 3 * BATCH
+_U_Y = 4 * BATCH
+_U_Z = 5 * BATCH
+_V_X = 6 * BATCH
+_V_Y = 7 * BATCH
+_V_Z = 8 * BATCH
+_W_0 = 9 * BATCH
+_W_1 = 10 * BATCH
+_W_2 = 11 * BATCH
+_W_3 = 12 * BATCH
+_R_C = 13 * BATCH
+_R_S = 14 * BATCH
+_K_J = 15 * BATCH
+_A_X = 16 * BATCH
+_A_Y = 17 * BATCH
+_A_Z = 18 * BATCH
+_B_X = 19 * BATCH
+_B_Y = 20 * BATCH
+_B_Z = 21 * BATCH
+_F0A = 22 * BATCH
+_F0B = 23 * BATCH
+_F1A = 24 * BATCH
+_F1B = 25 * BATCH
+_F2A = 26 * BATCH
+_F3B = 27 * BATCH
+_VAL = 28 * BATCH
+_DEV_Y = 29 * BATCH
+_DEV_X = 30 * BATCH
+_GAIN = 31 * BATCH
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _project_bending_batched(x, w, idx, rest_cs, k, seg, buf, start, stop):
+    """PBD sweep over ``start:stop`` whose constraints are grouped in independent runs.
+
+    seg : (s,) int sorted boundaries of runs of constraints sharing no particle (one
+    colour of a block); buf : (BATCH_ROWS * BATCH,) float scratch (one row per quantity). Each batch is gathered,
+    computed in a branch-free loop that the compiler vectorises (the math of
+    ``_solve_bending``, Padé branch), fixed up with libm atan2 where the deviation is
+    large, then scattered. Constraints of a batch share no particle, so the result is
+    that of the sequential sweep in the same order.
+    """
+    for q in range(seg.shape[0] - 1):
+        lo = max(seg[q], start)
+        hi = min(seg[q + 1], stop)
+        for c0 in range(lo, hi, BATCH):
+            n = min(BATCH, hi - c0)
+            for t in range(n):  # gather
+                j = c0 + t
+                i0 = idx[j, 0]
+                i1 = idx[j, 1]
+                i2 = idx[j, 2]
+                i3 = idx[j, 3]
+                buf[_E_X + t] = x[i1, 0] - x[i0, 0]
+                buf[_E_Y + t] = x[i1, 1] - x[i0, 1]
+                buf[_E_Z + t] = x[i1, 2] - x[i0, 2]
+                buf[_U_X + t] = x[i2, 0] - x[i0, 0]
+                buf[_U_Y + t] = x[i2, 1] - x[i0, 1]
+                buf[_U_Z + t] = x[i2, 2] - x[i0, 2]
+                buf[_V_X + t] = x[i3, 0] - x[i1, 0]
+                buf[_V_Y + t] = x[i3, 1] - x[i1, 1]
+                buf[_V_Z + t] = x[i3, 2] - x[i1, 2]
+                buf[_W_0 + t] = w[i0]
+                buf[_W_1 + t] = w[i1]
+                buf[_W_2 + t] = w[i2]
+                buf[_W_3 + t] = w[i3]
+                buf[_R_C + t] = rest_cs[j, 0]
+                buf[_R_S + t] = rest_cs[j, 1]
+                buf[_K_J + t] = k[j]
+            for t in range(n):  # branch-free math of _solve_bending
+                ex = buf[_E_X + t]
+                ey = buf[_E_Y + t]
+                ez = buf[_E_Z + t]
+                ux = buf[_U_X + t]
+                uy = buf[_U_Y + t]
+                uz = buf[_U_Z + t]
+                vx = buf[_V_X + t]
+                vy = buf[_V_Y + t]
+                vz = buf[_V_Z + t]
+                ax = ey * uz - ez * uy
+                ay = ez * ux - ex * uz
+                az = ex * uy - ey * ux
+                bx = vy * ez - vz * ey
+                by = vz * ex - vx * ez
+                bz = vx * ey - vy * ex
+                ee = ex * ex + ey * ey + ez * ez
+                na2 = ax * ax + ay * ay + az * az
+                nb2 = bx * bx + by * by + bz * bz
+                ok = (na2 > DEGENERATE * ee * ee) & (nb2 > DEGENERATE * ee * ee)
+                ee1 = ee if ok else 1.0
+                na1 = na2 if ok else 1.0
+                nb1 = nb2 if ok else 1.0
+                elen = math.sqrt(ee1)
+                sin = -(ux * bx + uy * by + uz * bz) * elen
+                cos = ax * bx + ay * by + az * bz
+                yy = sin * buf[_R_C + t] - cos * buf[_R_S + t]
+                xx = cos * buf[_R_C + t] + sin * buf[_R_S + t]
+                small = (xx > 0.0) & (abs(yy) <= SMALL_TAN * xx)
+                z = yy / (xx if small else 1.0)
+                z2 = z * z
+                buf[_VAL + t] = z * (945.0 + z2 * (735.0 + 64.0 * z2)) / (945.0 + z2 * (1050.0 + 225.0 * z2))
+                buf[_DEV_Y + t] = yy
+                buf[_DEV_X + t] = xx
+                prod = na1 * nb1
+                inv = 1.0 / (prod * elen)
+                ia = nb1 * elen * inv
+                ib = na1 * elen * inv
+                ie = prod * inv
+                ue = (ux * ex + uy * ey + uz * ez) * ie
+                ve = (vx * ex + vy * ey + vz * ez) * ie
+                a0 = elen - ue
+                b0 = -ve
+                a1 = ue
+                b1 = ve + elen
+                cab = 2.0 * cos * ia * ib
+                denom = (buf[_W_0 + t] * (a0 * a0 * ia + a0 * b0 * cab + b0 * b0 * ib)
+                         + buf[_W_1 + t] * (a1 * a1 * ia + a1 * b1 * cab + b1 * b1 * ib)
+                         + (buf[_W_2 + t] * ia + buf[_W_3 + t] * ib) * ee1)
+                good = ok & (denom > 0.0)
+                buf[_GAIN + t] = -buf[_K_J + t] / (denom if good else 1.0) if good else 0.0
+                buf[_A_X + t] = ax
+                buf[_A_Y + t] = ay
+                buf[_A_Z + t] = az
+                buf[_B_X + t] = bx
+                buf[_B_Y + t] = by
+                buf[_B_Z + t] = bz
+                buf[_F0A + t] = buf[_W_0 + t] * a0 * ia
+                buf[_F0B + t] = buf[_W_0 + t] * b0 * ib
+                buf[_F1A + t] = buf[_W_1 + t] * a1 * ia
+                buf[_F1B + t] = buf[_W_1 + t] * b1 * ib
+                buf[_F2A + t] = -buf[_W_2 + t] * elen * ia
+                buf[_F3B + t] = -buf[_W_3 + t] * elen * ib
+            for t in range(n):  # scatter (libm atan2 for the large deviations)
+                j = c0 + t
+                value = buf[_VAL + t]
+                if not (buf[_DEV_X + t] > 0.0 and abs(buf[_DEV_Y + t]) <= SMALL_TAN * buf[_DEV_X + t]):
+                    value = math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
+                s = buf[_GAIN + t] * value
+                i0 = idx[j, 0]
+                i1 = idx[j, 1]
+                i2 = idx[j, 2]
+                i3 = idx[j, 3]
+                fa = s * buf[_F0A + t]
+                fb = s * buf[_F0B + t]
+                x[i0, 0] += fa * buf[_A_X + t] + fb * buf[_B_X + t]
+                x[i0, 1] += fa * buf[_A_Y + t] + fb * buf[_B_Y + t]
+                x[i0, 2] += fa * buf[_A_Z + t] + fb * buf[_B_Z + t]
+                fa = s * buf[_F1A + t]
+                fb = s * buf[_F1B + t]
+                x[i1, 0] += fa * buf[_A_X + t] + fb * buf[_B_X + t]
+                x[i1, 1] += fa * buf[_A_Y + t] + fb * buf[_B_Y + t]
+                x[i1, 2] += fa * buf[_A_Z + t] + fb * buf[_B_Z + t]
+                fa = s * buf[_F2A + t]
+                x[i2, 0] += fa * buf[_A_X + t]
+                x[i2, 1] += fa * buf[_A_Y + t]
+                x[i2, 2] += fa * buf[_A_Z + t]
+                fb = s * buf[_F3B + t]
+                x[i3, 0] += fb * buf[_B_X + t]
+                x[i3, 1] += fb * buf[_B_Y + t]
+                x[i3, 2] += fb * buf[_B_Z + t]
+
+
 def rest_cos_sin(rest_angle) -> np.ndarray:
     """``(m, 2) float64`` cosine and sine of ``rest_angle (m,)`` (the kernel's rest input)."""
     a = np.asarray(rest_angle, dtype=np.float64).reshape(-1)
