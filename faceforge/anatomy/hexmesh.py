@@ -146,7 +146,7 @@ def signed_volume(vertices, faces) -> float:
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
-def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float):
+def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float, surface=None):
     """Morph the template onto the contour samples (§5.1.2) and give it thickness.
 
     1. A Hardy-multiquadric RBF (§4) maps the template's bottom contour onto the
@@ -154,10 +154,14 @@ def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float):
        contour onto ``samples + thickness * sample_normals``; the second set of
        correspondences makes the 3D map well posed (the bottom contour alone
        may be planar). The samples are met exactly.
-    2. The top sheet is then placed at ``bottom + thickness * n`` with ``n`` the
+    2. With ``surface = (vertices, faces)`` (the layer the contour lies on), the
+       bottom vertices inside the contour are moved to their closest points on
+       it: the RBF interpolates between the contour samples and would cut
+       under a curved layer (chord sag) or float above it.
+    3. The top sheet is then placed at ``bottom + thickness * n`` with ``n`` the
        bottom sheet's vertex normals (oriented like the sample normals), which
        is the paper's "displace the upper surface along the normals".
-    3. If the morph mirrored the template, the faces are flipped so the
+    4. If the morph mirrored the template, the faces are flipped so the
        returned mesh is outward oriented.
 
     Returns
@@ -178,6 +182,12 @@ def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float):
     G = hardy_rbf(src, dst)
     bottom = G(tmpl[:hw])
     bottom[topo.contour] = s  # exact (the RBF meets them to round-off)
+    if surface is not None:
+        from faceforge.geometry.surface_points import closest_points
+
+        inner = np.setdiff1d(np.arange(hw), topo.contour)
+        if len(inner):
+            bottom[inner] = closest_points(bottom[inner], *surface)[0]
     sheet = topo.faces[: len(_sheet(topo.h, topo.w, topo.closed))]
     n = vertex_normals(bottom, sheet)
     # the bottom sheet faces point away from the top: its outward side is -n

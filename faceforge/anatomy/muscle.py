@@ -377,7 +377,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
     samples = proto.sample_targets(0.0, v, f)
     g = topo.contour_grid()
     normals = _grid_normals(proto, v, f, vn)[g[:, 0], g[:, 1]]
-    pos, mfaces = morph_hex(topo, samples, normals, thickness)
+    pos, mfaces = morph_hex(topo, samples, normals, thickness, surface=(v, f))
     params = {}
     if kw.get("material_sampling", False):
         params = {key: lines[key].parameters(v, f, topo.h) for key in ("A1", "A3")}

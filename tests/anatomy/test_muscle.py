@@ -1,0 +1,196 @@
+"""Linear (§5.2.1) and sphincter (§5.2.2) muscles: network, rest state, contraction."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from faceforge.anatomy.hexmesh import hex_topology, signed_volume
+from faceforge.anatomy.muscle import (
+    STIFFNESS_KEYS, bending_quads, distance_network, fit_ellipse, sphincter_displacement)
+from faceforge.pbd import ModelBuilder, Solver, SolverSettings
+
+from conftest import LINEAR_STIFFNESS, icosphere, linear_on, sphincter_on
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return icosphere(3)
+
+
+@pytest.fixture(scope="module")
+def linear(sphere):
+    v, f = sphere
+    return linear_on("zyg", v, f, [(-0.2, 0.4), (0.0, 0.45), (0.2, 0.4)], [(-0.15, -0.2), (0.15, -0.2)],
+                     h=6, w=3, thickness=0.05)
+
+
+@pytest.fixture(scope="module")
+def sphincter(sphere):
+    v, f = sphere
+    return sphincter_on("oris", v, f, (0.0, -0.3), (0.15, 0.07), (0.32, 0.17))
+
+
+def simulate(muscle, v, f, c, frames=150, ramp=25):
+    b = ModelBuilder()
+    first, slots = muscle.add_to_builder(b)
+    model = b.finalize()
+    state, control = model.state(), model.control()
+    solver = Solver(model, SolverSettings())
+    for k in range(frames):
+        control.position_targets[slots] = muscle.sample_targets(c * min(1.0, (k + 1) / ramp), v, f)
+        solver.step(state, state, control, 1 / 25)
+    return state.positions[first:first + muscle.n_particles]
+
+
+# -- network ---------------------------------------------------------------------------
+
+def test_distance_network_counts_and_uniqueness():
+    h, w = 6, 4
+    net = distance_network(hex_topology(h, w))
+    assert len(net["latitudinal_up"]) == h * (w - 1)
+    assert len(net["longitudinal_low"]) == (h - 1) * w
+    assert len(net["shear_up"]) == 2 * (h - 1) * (w - 1)
+    assert len(net["connection"]) == h * w
+    allpairs = np.sort(np.concatenate(list(net.values())), axis=1)
+    assert len(np.unique(allpairs, axis=0)) == len(allpairs)
+    closed = distance_network(hex_topology(h, w, closed=True))
+    assert len(closed["longitudinal_up"]) == h * w  # wraps around
+
+
+def test_bending_quads_cover_every_edge_once(linear):
+    q = bending_quads(linear.faces)
+    m = trimesh.Trimesh(linear.rest_positions, linear.faces, process=False)
+    assert len(q) == len(m.edges_unique)
+    assert len(np.unique(np.sort(q[:, :2], axis=1), axis=0)) == len(q)
+    with pytest.raises(ValueError, match="more than two"):
+        bending_quads(np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]]))
+
+
+def test_zero_stiffness_kinds_are_not_created(linear):
+    assert set(linear.constraints) == {"latitudinal_up", "longitudinal_up", "connection", "bend"}
+    b = ModelBuilder()
+    linear.add_to_builder(b)
+    model = b.finalize()
+    assert model.constraint_count == linear.constraint_count()
+    with pytest.raises(ValueError, match="unknown muscle stiffness"):
+        type(linear)(**{**linear.__dict__, "stiffness": {"lattitude": 1.0}})
+    assert set(STIFFNESS_KEYS) >= set(LINEAR_STIFFNESS)
+
+
+def test_rest_mesh_closed_and_on_its_samples(linear, sphincter, sphere):
+    v, f = sphere
+    for m in (linear, sphincter):
+        mesh = trimesh.Trimesh(m.rest_positions, m.faces, process=False)
+        assert mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0
+        np.testing.assert_allclose(m.sample_targets(0.0, v, f), m.rest_positions[m.bound], atol=1e-12)
+        assert not m.inverted_faces(m.rest_positions, v, f).any()
+        # the bottom lies on the sphere, the top one thickness above it
+        hw = m.topology.h * m.topology.w
+        r = np.linalg.norm(m.rest_positions, axis=1)
+        assert np.all(np.abs(r[:hw] - 1) < 0.01)
+        assert np.all(np.abs(r[hw:] - 1 - m.thickness) < 0.01)
+
+
+# -- dynamics ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("which", ["linear", "sphincter"])
+def test_rest_is_a_fixed_point(which, linear, sphincter, sphere):
+    m = linear if which == "linear" else sphincter
+    p = simulate(m, *sphere, c=0.0, frames=200)
+    np.testing.assert_allclose(p, m.rest_positions, atol=1e-12)
+
+
+def test_contraction_shortens_fibres_and_keeps_volume(linear, sphere):
+    """c shortens the fibre by c * max_contraction (Eq. 4); volume within 5 %.
+
+    Tolerances: the sample targets meet the request within 2 % (chords of a curved line);
+    the simulated bottom fibres A0/A2 within 0.1 of the rest length (measured: they shorten
+    0.02 too little at c = 0.3, 0.09 at c = 1), because the soft position constraints
+    (k = 0.2) balance the longitudinal (0.1), bending and volume ones.
+    """
+    v, f = sphere
+    rest_len = linear.fibre_lengths(linear.rest_positions)
+    rest_vol = signed_volume(linear.rest_positions, linear.faces)
+    hw = linear.topology.h * linear.topology.w
+    rest_thick = np.linalg.norm(linear.rest_positions[hw:] - linear.rest_positions[:hw], axis=1).mean()
+    for c in (0.3, 0.6, 1.0):
+        want = 1 - c * linear.max_contraction
+        tg = linear.sample_targets(c, v, f)
+        g = linear.topology.contour_grid()
+        grid = np.zeros((linear.topology.h, linear.topology.w, 3))
+        grid[g[:, 0], g[:, 1]] = tg
+        for j in (0, -1):
+            target_len = np.linalg.norm(np.diff(grid[:, j], axis=0), axis=1).sum()
+            assert target_len / rest_len[j] == pytest.approx(want, abs=0.02)
+        p = simulate(linear, v, f, c)
+        ratio = linear.fibre_lengths(p) / rest_len
+        assert abs(ratio[0] - want) < 0.1 and abs(ratio[-1] - want) < 0.1
+        assert signed_volume(p, linear.faces) / rest_vol == pytest.approx(1.0, abs=0.05)
+        thick = np.linalg.norm(p[hw:] - p[:hw], axis=1).mean()
+        assert thick > rest_thick  # a shortened muscle bulges
+        assert not linear.inverted_faces(p, v, f).any()
+
+
+def test_contraction_moves_insertion_toward_origin_only(linear, sphere):
+    v, f = sphere
+    g = linear.topology.contour_grid()
+    rest = linear.sample_targets(0.0, v, f)
+    tg = linear.sample_targets(0.6, v, f)
+    origin = g[:, 0] == 0
+    np.testing.assert_allclose(tg[origin], rest[origin], atol=1e-12)  # origin fixed
+    insertion = g[:, 0] == linear.topology.h - 1
+    o = rest[origin].mean(axis=0)
+    assert np.all(np.linalg.norm(tg[insertion] - o, axis=1) < np.linalg.norm(rest[insertion] - o, axis=1))
+
+
+def test_passive_muscle_ignores_contraction(sphere):
+    v, f = sphere
+    m = linear_on("fat", v, f, [(-0.2, 0.4), (0.2, 0.4)], [(-0.2, 0.0), (0.2, 0.0)], active=False)
+    np.testing.assert_array_equal(m.sample_targets(1.0, v, f), m.sample_targets(0.0, v, f))
+
+
+def test_sphincter_contracts_toward_its_centre(sphincter, sphere):
+    v, f = sphere
+    inner = sphincter.bound[: sphincter.topology.h]
+    o = sphincter.sample_targets(0.0, v, f).mean(axis=0)
+    rest_r = np.linalg.norm(sphincter.rest_positions[inner] - o, axis=1)
+    vol0 = signed_volume(sphincter.rest_positions, sphincter.faces)
+    last = rest_r.mean()
+    for c in (0.3, 0.6, 1.0):
+        tg = sphincter.sample_targets(c, v, f)
+        # targets: every inner sample moved toward the centre, by at most c * max_contraction
+        tr = np.linalg.norm(tg[: sphincter.topology.h] - o, axis=1)
+        assert np.all(tr < rest_r)
+        assert np.all(tr >= (1 - c * sphincter.max_contraction) * rest_r - 1e-9)
+        p = simulate(sphincter, v, f, c)
+        r = np.linalg.norm(p[inner] - o, axis=1).mean()
+        assert r < last
+        last = r
+        assert signed_volume(p, sphincter.faces) / vol0 == pytest.approx(1.0, abs=0.05)
+        assert not sphincter.inverted_faces(p, v, f).any()
+
+
+def test_fit_ellipse_recovers_axes():
+    a, b = 2.0, 0.7
+    ang = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    e1 = np.array([1.0, 1.0, 0.0]) / np.sqrt(2)
+    e2 = np.array([-1.0, 1.0, 0.5]) / np.linalg.norm([-1.0, 1.0, 0.5])
+    e2 -= (e2 @ e1) * e1
+    e2 /= np.linalg.norm(e2)
+    o = np.array([0.3, -1.0, 2.0])
+    pts = o + a * np.cos(ang)[:, None] * e1 + b * np.sin(ang)[:, None] * e2
+    c, da, db, fa, fb = fit_ellipse(pts)
+    np.testing.assert_allclose(c, o, atol=1e-12)
+    assert fa == pytest.approx(a) and fb == pytest.approx(b)
+    assert abs(da @ e1) == pytest.approx(1.0) and abs(db @ e2) == pytest.approx(1.0)
+
+
+def test_sphincter_displacement_formula():
+    """On the fitted ellipse r = 1, so delta = c (o - s1); c = 0 gives no motion."""
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    ring = np.stack([2 * np.cos(ang), np.sin(ang), np.zeros(16)], 1)
+    d0 = sphincter_displacement(0.5 * ring, ring, 0.0)
+    np.testing.assert_array_equal(d0, 0.0)
+    # inner and outer on one ellipse shape: fit to both, the outer samples sit at r > 1
+    d = sphincter_displacement(ring, ring, 0.4)
+    np.testing.assert_allclose(d, 0.4 * (0 - ring), atol=1e-9)
