@@ -357,6 +357,7 @@ class SkullFit:
     targets: np.ndarray
     n_landmarks: int
     rounds: list
+    epsilon: float = 1.0
 
 
 def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.ndarray, skin: SkinSurface,
@@ -374,7 +375,7 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
     warp = Warp(sim, [hardy_rbf(src, dst, epsilon=eps)])
     rounds = []
     if not settings.enhancement_rays:
-        return SkullFit(warp, src, dst, len(src), rounds)
+        return SkullFit(warp, src, dst, len(pairs.fdps), rounds, eps)
     aligned = apply_affine(sim, skull_vertices)
     outer = outer_vertices(aligned, skull_faces)
     outer &= grid_subsample(aligned, settings.enhancement_cell * skin.diagonal)
@@ -398,7 +399,7 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
         dst = np.vstack([dst, closest[pick] - expected[pick, None] * normal[pick]])
         warp = Warp(sim, [hardy_rbf(src, dst, epsilon=eps)])
         rounds.append(int(len(pick)))
-    return SkullFit(warp, src, dst, len(pairs.fdps), rounds)
+    return SkullFit(warp, src, dst, len(pairs.fdps), rounds, eps)
 
 
 # ----------------------------------------------------------------------------- the whole fit
@@ -438,6 +439,7 @@ class FitResult:
     info: dict                          # counts for the report
     cranium_faces: np.ndarray = None    # (m, 3) template faces
     mandible_faces: np.ndarray = None
+    tissue_targets: np.ndarray = None   # (n, 3) targets before the refit (skin - depth * normal)
 
 
 def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, skin_face_ids, skin_bary,
@@ -473,20 +475,19 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, sk
         muscles = build_muscles((skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf), warp)
         if settings.refit and muscles:
             diag = float(np.linalg.norm(np.ptp(skull_fit, axis=0)))
-            gap = settings.muscle_gap_mm * scale_mm
-            max_lift = 0.05 * diag
-            rf = fit_muscles.refit_pairs(warp(pairs.source), pairs.skin, pairs.normal, pairs.depth,
-                                         fit_muscles.vertical_axis(skull_fit[:len(cv)]),
-                                         [(v, f) for _, v, f in muscles], gap, skin.diagonal, max_lift)
-            fixed = np.vstack([warp(pairs.source)[~rf.covered], sk.targets[sk.n_landmarks:]])
-            g2 = fit_muscles.refit_rbf(rf, fixed)
+            fitted = warp(pairs.source)
+            rf = fit_muscles.refit_pairs(fitted, skin, fit_muscles.vertical_axis(skull_fit[:len(cv)]),
+                                         [(v, f) for _, v, f in muscles], settings.muscle_gap_mm * scale_mm,
+                                         skin.diagonal, 0.05 * diag)
+            g2 = fit_muscles.refit_rbf(rf, fitted, sk.targets[sk.n_landmarks:], sk.epsilon)
+            info["covered_landmarks"] = [f for f, c in zip(pairs.fdps, rf.covered) if c]
             if g2 is not None:
                 warp = Warp(warp.similarity, warp.rbfs + [g2])
                 skull_fit = g2(skull_fit)
                 muscles = [(n, g2(v), f) for n, v, f in muscles]
                 targets = rf.skull_targets
                 info["refit"] = True
-                info["covered_landmarks"] = [f for f, c in zip(pairs.fdps, rf.covered) if c]
+                info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
     # axes: points by the map, directions by mapping two points 1 % of the skin diagonal apart
     step = 0.01 * skin.diagonal / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
     jaw = {}
@@ -497,4 +498,4 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, sk
     reached = np.array([fitted_lm[f] for f in pairs.fdps])
     return FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
                      {n: warp(p) for n, p in template.muscle_points.items()}, muscles, warp, info,
-                     np.asarray(cf), np.asarray(mf))
+                     np.asarray(cf), np.asarray(mf), pairs.target)

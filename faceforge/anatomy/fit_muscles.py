@@ -9,12 +9,12 @@ box is much smaller than the head it belongs to.
 
 Cylindrical projection: a ray is cast from outside the head toward a vertical axis
 (+Y) through the centre of the fitted cranium, through each skull landmark; if it hits
-a muscle before reaching the landmark, the landmark is *covered* and is replaced by the
-first hit on the outermost muscle surface. The refit is a second Hardy RBF in head
-space taking those muscle points to the skin targets (the muscle top is kept at least
-``gap`` beneath the skin, and keeps the tissue depth to the bone where it is thick
-enough), with every other source (uncovered landmarks, enhancement landmarks) held
-fixed, so the muscle map ends up just beneath the skin.
+a muscle before reaching the landmark, the landmark is *covered* and the first hit on
+the outermost muscle surface is its muscle point. Where a muscle point lies less than
+``gap`` beneath the skin, the landmark and its muscle point are moved inward along the
+skin normal until it does; the refit is a second Hardy RBF in head space carrying those
+pairs, with every other source (enhancement landmarks, anchors) held fixed, so the
+muscle map ends up just beneath the skin. The landmark's target becomes the moved point.
 """
 
 from __future__ import annotations
@@ -70,52 +70,57 @@ def cylindrical_projection(points: np.ndarray, axis_point: np.ndarray, muscle_me
 
 @dataclass
 class Refit:
-    """The refit's pairs: muscle points -> skin targets (head space)."""
+    """The refit of §7 for the n bone landmarks (head space).
 
-    covered: np.ndarray          # (n,) bool per skull landmark
-    muscle: np.ndarray           # (n,) int64
-    lift: np.ndarray             # (n,) muscle-top height above the bone landmark
-    sources: np.ndarray          # (n, 3) muscle point or the fitted landmark
-    targets: np.ndarray          # (n, 3)
-    skull_targets: np.ndarray    # (n, 3) final targets of the bone landmarks
+    covered (n,) bool, muscle (n,) int64 (-1: none), lift (n,) muscle point height above
+    the landmark, hits (n, 3) muscle points (NaN where uncovered), delta (n, 3) the move
+    that keeps each covered muscle point ``gap`` beneath the skin (0 elsewhere),
+    skull_targets (n, 3) = landmark + delta.
+    """
+
+    covered: np.ndarray
+    muscle: np.ndarray
+    lift: np.ndarray
+    hits: np.ndarray
+    delta: np.ndarray
+    skull_targets: np.ndarray
 
 
-def refit_pairs(landmarks_fitted: np.ndarray, skin_points: np.ndarray, skin_normals: np.ndarray,
-                depth: np.ndarray, axis_point: np.ndarray, muscle_meshes: list, gap: float,
+def refit_pairs(landmarks_fitted: np.ndarray, skin, axis_point: np.ndarray, muscle_meshes: list, gap: float,
                 reach: float, max_lift: float) -> Refit:
-    """Pairs for the second fit of §7.
-
-    landmarks_fitted (n, 3) bone landmarks after the first fit; skin_points, skin_normals
-    (n, 3) skin landmarks and unit normals; depth (n,) tissue depth; gap: least skin
-    tissue above a muscle (head units).
-
-    A covered landmark's muscle point goes to ``skin - max(depth - lift, gap) * normal``;
-    the bone landmark's own target becomes ``skin - max(depth, lift + gap) * normal``.
+    """Cylindrical projection of the fitted bone landmarks (n, 3) onto the muscles, and the
+    move each needs so that its muscle point lies at least ``gap`` beneath the skin
+    (depth by the closest skin point, :func:`faceforge.anatomy.fit.signed_skin_depth`).
     A hit more than ``max_lift`` above the landmark belongs to another part of the face
     (the ray grazed a muscle in front) and does not count as covering it.
     """
+    from faceforge.anatomy.fit import signed_skin_depth
+
     covered, hits, which, lift = cylindrical_projection(landmarks_fitted, axis_point, muscle_meshes, reach)
     covered &= lift <= max_lift
     which = np.where(covered, which, -1)
     lift = np.where(covered, lift, 0.0)
-    top_depth = np.maximum(depth - lift, gap)
-    src = np.where(covered[:, None], hits, landmarks_fitted)
-    dst = np.where(covered[:, None], skin_points - top_depth[:, None] * skin_normals, landmarks_fitted)
-    bone_depth = np.where(covered, np.maximum(depth, lift + gap), depth)
-    return Refit(covered, which, lift, src, dst, skin_points - bone_depth[:, None] * skin_normals)
+    delta = np.zeros_like(landmarks_fitted)
+    idx = np.flatnonzero(covered)
+    if len(idx):
+        depth, _, normal, _, _ = signed_skin_depth(hits[idx], skin)
+        delta[idx] = -np.maximum(gap - depth, 0.0)[:, None] * normal
+    return Refit(covered, which, lift, np.where(covered[:, None], hits, np.nan), delta,
+                 landmarks_fitted + delta)
 
 
-def refit_rbf(refit: Refit, fixed_points: np.ndarray):
-    """Second RBF (head space -> head space): muscle points to their targets, ``fixed_points``
-    (e, 3) (uncovered and enhancement sources, already at their targets) held in place.
-    Returns None when no landmark is covered."""
-    if not np.any(refit.covered):
+def refit_rbf(refit: Refit, landmarks_fitted: np.ndarray, fixed_points: np.ndarray, epsilon: float):
+    """Second Hardy RBF (head space -> head space) of §7.
+
+    Each bone landmark and its muscle point move by the landmark's ``delta``; ``fixed_points``
+    (e, 3) (enhancement landmarks, anchors) stay. Returns None when nothing needs to move.
+    """
+    moving = np.flatnonzero(np.linalg.norm(refit.delta, axis=1) > 0)
+    if len(moving) == 0:
         return None
-    src = np.vstack([refit.sources, fixed_points])
-    dst = np.vstack([refit.targets, fixed_points])
-    _, keep = np.unique(np.round(src, 12), axis=0, return_index=True)
-    keep = np.sort(keep)
-    return hardy_rbf(src[keep], dst[keep])
+    src = np.vstack([landmarks_fitted, refit.hits[moving], fixed_points])
+    dst = np.vstack([refit.skull_targets, refit.hits[moving] + refit.delta[moving], fixed_points])
+    return hardy_rbf(src, dst, epsilon=epsilon)
 
 
 def morph_spec(spec, warp):

@@ -57,8 +57,8 @@ def save_fit_png(path, skin_v, skin_f, layers: list, title: str = "fit") -> None
     """
     from faceforge.viz.render import Layer, render_meshes
 
-    drawn = [Layer(v, f, color=c, label=name) for name, v, f, c in layers]
-    drawn.append(Layer(skin_v, skin_f, color=(0.95, 0.78, 0.68), alpha=0.25, label="skin"))
+    drawn = [Layer(v, f, color=c) for name, v, f, c in layers]
+    drawn.append(Layer(skin_v, skin_f, color=(0.95, 0.78, 0.68), alpha=0.25))
     render_meshes(path, drawn, views=("front", "side"), title=title)
 
 
@@ -110,6 +110,7 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
             "skull_targets": list(result.fdps),
             "residuals_rel": residuals,
             "max_residual": max(residuals.values()) if residuals else 0.0,
+            "refit_shift_rel": landmark_residuals(result.fdps, result.targets, result.tissue_targets, diag),
             "enhancement_landmarks": result.info["enhancement_landmarks"],
             "enhancement_rounds": result.info["enhancement_rounds"],
             "covered_by_muscles": result.info["covered_landmarks"],

@@ -53,18 +53,16 @@ def run(ctx) -> None:
 
 
 class Template:
-    """The template skull and muscle map, with the muscles built once on the template skull.
+    """The template skull and muscle map, with the muscles built on the template skull.
 
     skull : :class:`faceforge.anatomy.skull.Skull`; specs : [MuscleSpec]; muscles :
-    [(name, rest positions, faces, hw, thickness fraction)]; layers : {name: layer}.
+    [(name, rest positions (2hw, 3), faces, hw, thickness fraction)]; layers : {name: layer}.
     """
 
-    def __init__(self, skull, specs, built):
+    def __init__(self, skull, specs, muscles):
         from faceforge.anatomy.fit import FitTemplate
 
-        self.skull, self.specs = skull, specs
-        self.muscles = [(m.name, m.rest_positions, m.faces, m.topology.h * m.topology.w, s.thickness)
-                        for m, s in zip(built, sorted(specs, key=lambda s: s.layer))]
+        self.skull, self.specs, self.muscles = skull, specs, muscles
         self.layers = {s.name: s.layer for s in specs}
         jaw = skull.jaw
         self.fit_template = FitTemplate(
@@ -84,26 +82,74 @@ class Template:
 
 
 _TEMPLATES: dict = {}
+#: bump when the way template muscles are built changes (invalidates the disk cache)
+TEMPLATE_CACHE_VERSION = "1"
+
+
+def template_cache_dir() -> Path:
+    """``$FACEFORGE_CACHE`` or ``$XDG_CACHE_HOME/faceforge`` (default ``~/.cache/faceforge``)."""
+    import os
+
+    if os.environ.get("FACEFORGE_CACHE"):
+        return Path(os.environ["FACEFORGE_CACHE"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "faceforge"
 
 
 def load_template(skull_dir, muscle_map) -> Template:
-    """Load (once per process and file version) the template named by ``template.*``."""
-    import os
+    """The template named by ``template.*``, with its muscles built on the template skull.
 
-    from faceforge.anatomy.fit_muscles import build_muscles_on
+    Building the 26 muscles takes seconds, so they are kept per process and on disk
+    (:func:`template_cache_dir`, an npz named by the SHA-256 of the template files and
+    :data:`TEMPLATE_CACHE_VERSION`); a changed template file gives a new key.
+    """
+    import hashlib
+
     from faceforge.anatomy.muscle_map import load_muscle_map
     from faceforge.anatomy.skull import load_skull
 
     skull_dir, muscle_map = _resolve(skull_dir), _resolve(muscle_map)
-    key = (str(skull_dir), str(muscle_map),
-           tuple(os.stat(p).st_mtime_ns for p in sorted(Path(skull_dir).glob("*")) + [Path(muscle_map)]))
+    digest = hashlib.sha256(TEMPLATE_CACHE_VERSION.encode())
+    for path in sorted(Path(skull_dir).glob("*")) + [Path(muscle_map)]:
+        if path.is_file():
+            digest.update(path.name.encode() + path.read_bytes())
+    key = digest.hexdigest()[:24]
     if key not in _TEMPLATES:
         skull = load_skull(skull_dir)
         specs = load_muscle_map(muscle_map, skull)
         _TEMPLATES.clear()
-        _TEMPLATES[key] = Template(skull, specs, build_muscles_on(specs, skull.cranium, skull.mandible,
-                                                                  skull.diagonal))
+        _TEMPLATES[key] = Template(skull, specs, _template_muscles(key, specs, skull))
     return _TEMPLATES[key]
+
+
+def _template_muscles(key: str, specs, skull) -> list:
+    """[(name, rest, faces, hw, fraction)] from the disk cache, or built and cached."""
+    import numpy as np
+
+    from faceforge.anatomy.fit_muscles import build_muscles_on
+    from faceforge.exceptions import StageError
+    from faceforge.io.stagefiles import load_npz, save_npz
+
+    path = template_cache_dir() / f"template-muscles-{key}.npz"
+    if path.exists():
+        try:
+            d = load_npz(path)
+            vs, fs = d["vertex_start"], d["face_start"]
+            return [(str(n), d["vertices"][vs[i]:vs[i + 1]], d["faces"][fs[i]:fs[i + 1]], int(d["hw"][i]),
+                     float(d["fraction"][i])) for i, n in enumerate(d["names"])]
+        except (StageError, KeyError, ValueError):
+            pass  # a damaged cache file is rebuilt
+    fraction = {s.name: s.thickness for s in specs}
+    built = [(m.name, m.rest_positions, m.faces, m.topology.h * m.topology.w, fraction[m.name])
+             for m in build_muscles_on(specs, skull.cranium, skull.mandible, skull.diagonal)]
+    try:
+        save_npz(path, names=np.array([b[0] for b in built], dtype=str),
+                 vertices=np.vstack([b[1] for b in built]), faces=np.vstack([b[2] for b in built]),
+                 vertex_start=np.cumsum([0] + [len(b[1]) for b in built]),
+                 face_start=np.cumsum([0] + [len(b[2]) for b in built]),
+                 hw=np.array([b[3] for b in built]), fraction=np.array([b[4] for b in built]))
+    except OSError:
+        pass  # a read-only cache only costs time
+    return built
 
 
 def _resolve(path) -> Path:
