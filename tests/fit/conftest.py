@@ -55,3 +55,32 @@ def face_landmarks_on(vertices, faces):
         loc, _, _ = mesh.ray.intersects_location([[0, 0, 0]], [d])
         out[k] = loc[np.argmax(loc @ d)]
     return out
+
+
+@pytest.fixture(scope="session")
+def template():
+    """The repository's template skull and muscle map (muscles from the disk cache)."""
+    from faceforge.pipeline.stages.fit import load_template
+
+    return load_template(ROOT / "templates/skull", ROOT / "templates/muscle_map.yaml")
+
+
+class _Fits:
+    """One fit per sample head for the whole session (fits are deterministic)."""
+
+    def __init__(self, template):
+        self.template, self.cache = template, {}
+
+    def __call__(self, name):
+        if name not in self.cache:
+            from faceforge.pipeline.stages.fit import fit_files
+
+            mesh = SAMPLES[name]
+            self.cache[name] = fit_files(mesh, mesh.with_name(mesh.stem + ".fdp.yaml"), self.template, {})
+        return self.cache[name]
+
+
+@pytest.fixture(scope="session")
+def fitted(template):
+    """``fitted(name) -> (FitResult, report, extra)`` for a sample head, computed once."""
+    return _Fits(template)

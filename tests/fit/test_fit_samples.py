@@ -1,0 +1,103 @@
+"""Scenario tests on the three sample heads: the acceptance criteria of issue 5.
+
+Each head is fitted once per session (``fitted`` fixture). The heads differ on purpose:
+decimetres and a closed head (MakeHuman), centimetres with open eyes and mouth (ICT), and
+a 468-vertex open face mask with 46 FDPs (MediaPipe).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from .conftest import SAMPLES
+
+HEADS = sorted(SAMPLES)
+
+
+@pytest.mark.parametrize("name", HEADS)
+def test_skull_landmarks_reach_their_targets(fitted, name):
+    result, report, _ = fitted(name)
+    assert report["landmarks"]["max_residual"] < 0.01
+    assert len(result.fdps) >= 10
+    # the refit may move a target inward, but only by a few millimetres
+    assert max(report["landmarks"]["refit_shift_rel"].values()) < 0.02
+
+
+@pytest.mark.parametrize("name", HEADS)
+def test_front_skull_inside_the_skin(fitted, name):
+    _, report, _ = fitted(name)
+    skull = report["skull"]
+    assert skull["count"] > 1000
+    assert skull["inside_fraction"] >= 0.98
+    # median bone depth is a plausible soft-tissue thickness (2-25 mm of an average adult)
+    assert 2.0 < report["tissue_thickness"]["median_mm"] < 25.0
+
+
+@pytest.mark.parametrize("name", HEADS)
+def test_muscles_inside_the_skin(fitted, name):
+    result, report, _ = fitted(name)
+    m = report["muscles"]
+    assert len(result.muscles) == 26 and m["count"] > 500
+    assert m["inside_fraction"] >= 0.98
+    assert m["max_outside_rel"] <= 0.01
+
+
+@pytest.mark.parametrize("name", HEADS)
+def test_fitted_skull_keeps_its_anatomy(fitted, name):
+    result, report, extra = fitted(name)
+    lm = result.landmarks
+    # left stays left, chin below the eyes, nose base in front of the ear line
+    for left, right in (("3.7", "3.12"), ("2.13", "2.14"), ("4.3", "4.4")):
+        assert lm[left][0] > lm[right][0]
+    assert lm["2.1"][1] < lm["3.7"][1]
+    # jaw axes: unit directions; the pitch axis still runs across the head (+X)
+    for name_, (point, direction) in result.jaw_axes.items():
+        assert np.isclose(np.linalg.norm(direction), 1.0)
+        assert np.all(np.isfinite(point))
+    assert abs(result.jaw_axes["pitch"][1][0]) > 0.95
+    # Eq. 5: muscle thickness scales with the fitted skull, not with the template
+    skull = np.vstack([result.cranium, result.mandible])
+    ratio = np.linalg.norm(np.ptp(skull, axis=0)) / extra["template"].skull.diagonal
+    assert np.isclose(report["similarity_scale"], ratio, rtol=0.35)
+
+
+def test_stage_files_are_what_bind_reads(fitted, tmp_path):
+    from faceforge.pipeline.stages.bind import load_fit
+    from faceforge.pipeline.stages.fit import write_outputs
+
+    result, report, extra = fitted("mediapipe")
+    write_outputs(tmp_path, result, report, extra)
+    assert (tmp_path / "fit.png").stat().st_size > 10_000
+    head = load_fit(tmp_path)
+    np.testing.assert_array_equal(head["vertices"], extra["checked"].vertices)
+    assert len(head["muscles"]) == 26
+    np.testing.assert_allclose(head["cranium"][0], result.cranium)
+    import json
+
+    rep = json.loads((tmp_path / "report.json").read_text())
+    assert rep["skull"]["inside_fraction"] == report["skull"]["inside_fraction"]
+
+
+def test_units_and_pose_do_not_matter(template, fitted, tmp_path):
+    """The MediaPipe head in millimetres, turned 8 degrees about Y and moved: the same fit."""
+    from faceforge.io.mesh import load_mesh, save_mesh
+    from faceforge.io.stagefiles import load_yaml, save_yaml
+    from faceforge.pipeline.stages.fit import fit_files
+
+    base, base_report, _ = fitted("mediapipe")
+    v, f, _ = load_mesh(SAMPLES["mediapipe"])
+    a = np.radians(8.0)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    move = lambda p: 10.0 * np.asarray(p) @ rot.T + [3.0, -20.0, 5.0]   # cm -> mm
+    save_mesh(tmp_path / "head.obj", move(v), f)
+    lm = load_yaml(SAMPLES["mediapipe"].with_name("face_model_with_iris.fdp.yaml"))
+    for entry in lm["landmarks"].values():
+        entry["position"] = move(entry["position"]).tolist()
+    save_yaml(tmp_path / "head.fdp.yaml", lm)
+    result, report, _ = fit_files(tmp_path / "head.obj", tmp_path / "head.fdp.yaml", template, {})
+    assert report["skull"]["inside_fraction"] >= 0.98 and report["landmarks"]["max_residual"] < 0.01
+    back = (np.vstack([result.cranium, result.mandible]) - [3.0, -20.0, 5.0]) @ rot / 10.0
+    ref = np.vstack([base.cranium, base.mandible])
+    err = np.linalg.norm(back - ref, axis=1) / base_report["diagonal"]
+    assert np.median(err) < 0.01
