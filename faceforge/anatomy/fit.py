@@ -68,8 +68,13 @@ class FitSettings:
 
     @classmethod
     def from_config(cls, cfg: dict | None) -> "FitSettings":
+        """From the config's ``fit`` section (validated against configs/default.yaml)."""
         cfg = dict(cfg or {})
-        cfg.pop("rbf_kernel", None)
+        kernel = cfg.pop("rbf_kernel", "multiquadric")
+        if kernel != "multiquadric":
+            from faceforge.exceptions import ConfigError
+
+            raise ConfigError(f"fit.rbf_kernel: only 'multiquadric' (Hardy, §4) is implemented, got {kernel!r}")
         known = {k: v for k, v in cfg.items() if k in cls.__dataclass_fields__}
         return cls(**known)
 
