@@ -7,7 +7,10 @@ Measures the per-frame time of skull + muscles + skin, broken down by layer, at 
   triangles vs the paper's Mesh_D 4,904 / 9,541) with a closed cranium and mandible, one
   active zygomaticus and 25 passive sheets (26 muscles, like the paper's map), bound by the
   real bind stage and simulated by the real layered system (``tests/animate/synthetic.py``);
-* ``--workdir DIR`` (optional): a real head already fitted and bound in DIR.
+* ``--workdir DIR`` (optional): a real head already fitted and bound in DIR;
+* ``--sweep`` (optional, slow): every ``samples/fap/*.fap`` on the three sample heads through
+  the CLI (fit, bind, animate -o .pc2): checks (NaN, inverted triangles, skin inside the
+  skull), ms/frame and the .pc2 round trip, per head and file.
 
 Writes ``benchmarks/results/animate.json``. The paper (Table I, one core of a 2.4 GHz Core2)
 reports 50 ms per frame for Mesh_D; the target here is <= 3 ms. Wall-clock per layer (best of the repeats) and the process's
@@ -104,10 +107,58 @@ def measure(head, mapping, frames: int, repeats: int) -> dict:
     }
 
 
+SAMPLE_HEADS = {"makehuman": "samples/makehuman/mh_head_default.obj",
+                "ict": "samples/ict/ict_face_headneck_neutral.obj",
+                "mediapipe": "samples/mediapipe/face_model_with_iris.obj"}
+
+
+def sweep(root: Path, heads, faps) -> dict:
+    """Every FAP file on every sample head through the CLI (fit, bind, animate -o .pc2);
+    per (head, file): frames, checks, ms/frame, and whether the .pc2 reads back equal."""
+    import json
+
+    from click.testing import CliRunner
+
+    from faceforge.cli import cli
+    from faceforge.io.export import read_pc2
+    from faceforge.io.stagefiles import load_npz
+
+    runner = CliRunner()
+    out = {}
+    for head in heads:
+        wd = root / head
+        t0 = time.perf_counter()
+        for args in (["fit", str(ROOT / SAMPLE_HEADS[head])], ["bind"]):
+            r = runner.invoke(cli, ["-q", "-w", str(wd), *args])
+            if r.exit_code != 0:
+                out[head] = {"error": r.output.strip()[-300:]}
+                break
+        else:
+            out[head] = {"fit_bind_s": round(time.perf_counter() - t0, 1), "files": {}}
+            for fap in faps:
+                pc2 = wd / f"{fap.stem}.pc2"
+                r = runner.invoke(cli, ["-q", "-w", str(wd), "animate", "--fap", str(fap), "-o", str(pc2)])
+                if r.exit_code != 0:
+                    out[head]["files"][fap.name] = {"error": r.output.strip()[-300:]}
+                    continue
+                rep = json.loads((wd / "animate" / "report.json").read_text())
+                frames = load_npz(wd / "animate" / "animation.npz")["frames"]
+                out[head]["files"][fap.name] = {
+                    "frames": rep["frames"], "checks": rep["checks"],
+                    "ms_per_frame": round(rep["per_frame_ms"]["total"], 2),
+                    "pc2_round_trip": bool(np.array_equal(read_pc2(pc2)[0], frames))}
+            print(head, json.dumps({k: (v["checks"]["ok"] if "checks" in v else v)
+                                    for k, v in out[head]["files"].items()}))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer frames and repeats")
     ap.add_argument("--workdir", type=Path, default=None, help="also time a real fitted+bound head")
+    ap.add_argument("--sweep", action="store_true",
+                    help="also play every samples/fap/*.fap on the three sample heads (slow)")
+    ap.add_argument("--sweep-dir", type=Path, default=None, help="keep the sweep's workdirs here")
     args = ap.parse_args(argv)
     frames, repeats = (30, 2) if args.quick else (108, 3)
     results = {"target_ms": TARGET_MS, "paper_mesh_d_ms": PAPER_MESH_D_MS, "heads": {}}
@@ -119,6 +170,13 @@ def main(argv=None):
     if args.workdir is not None:
         head, mapping = real_head(args.workdir)
         results["heads"][str(args.workdir)] = measure(head, mapping, frames, repeats)
+    if args.sweep:
+        faps = sorted((ROOT / "samples" / "fap").glob("*.fap"))
+        if args.sweep_dir is not None:
+            results["sweep"] = sweep(args.sweep_dir, list(SAMPLE_HEADS), faps)
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                results["sweep"] = sweep(Path(tmp), list(SAMPLE_HEADS), faps)
     rows = []
     for name, r in results["heads"].items():
         ms = r["ms_per_frame"]
