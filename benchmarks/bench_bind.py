@@ -6,10 +6,13 @@ model (:func:`faceforge.anatomy.skin.add_skin` + ``finalize``). Targets: < 5 s f
 ~5k vertices (the paper), < 60 s for ~50k.
 
 Heads: the MakeHuman sample (4,295 v) and the ICT sample subdivided once by
-trimesh (~45k v). Bodies: *proxy* bodies of the same kinds and of a realistic
-size (the fitted skull and muscles are not used yet) are built from the skin itself (cranium = skin offset inward by
-3% of the diagonal, mandible = its lower-face part offset 2.5%, 26 muscle sheets
-= front patches offset 1-2%), and ``bodies`` in the JSON says so.
+trimesh (~45k v). Bodies: the sample's skull fitted by the fit (skull only, as
+in tests/bind/test_samples.py) plus 26 *proxy* muscle sheets built from the
+skin (front patches offset inward by 1-2% of the diagonal), since the fitted
+muscles cannot be rebuilt yet; ``bodies`` in the JSON says so.
+
+Also measured (not timed in tests): the rest drift over 1,000 frames of the
+skull + skin layer on each sample head (target < 1e-4 of the diagonal).
 
 Run: ``python benchmarks/bench_bind.py`` -> ``benchmarks/results/bind.json``.
 """
@@ -65,8 +68,22 @@ def proxy_bodies(v, f, landmarks, n_muscles=26, seed=0):
     return cranium, mandible, muscles
 
 
-def run_case(name, v, f, landmarks, repeats=3):
-    cranium, mandible, muscles = proxy_bodies(v, f, landmarks)
+def fitted_skull(mesh: Path):
+    """Skull-only fit of a sample head (the tests' fixture path): fit.npz arrays as a dict."""
+    import tempfile
+
+    from faceforge.io.stagefiles import load_npz
+    from tests.bind.test_samples import _skull_only_fit
+
+    with tempfile.TemporaryDirectory() as tmp:
+        _skull_only_fit(mesh, Path(tmp))
+        return dict(load_npz(Path(tmp) / "fit.npz"))
+
+
+def run_case(name, v, f, landmarks, fit, repeats=3):
+    _, _, muscles = proxy_bodies(v, f, landmarks)
+    cranium = (fit["cranium_vertices"], fit["cranium_faces"])
+    mandible = (fit["mandible_vertices"], fit["mandible_faces"])
     times, layer_times = [], []
     for _ in range(repeats):
         t0 = time.perf_counter()
@@ -93,25 +110,61 @@ def run_case(name, v, f, landmarks, repeats=3):
     }
 
 
+def rest_drift(name, mesh: Path, fit, frames=1000):
+    """Max skin drift over ``frames`` rest frames (skull + skin layer), fraction of the diagonal."""
+    from faceforge.anatomy.binding import bind_head as bind
+    from faceforge.anatomy.layers import MusculoskeletalSystem
+    from faceforge.anatomy.skin import SkinSimulation
+
+    lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"])}
+    cranium = (fit["cranium_vertices"], fit["cranium_faces"])
+    mandible = (fit["mandible_vertices"], fit["mandible_faces"])
+    bound = bind(fit["skin_vertices"], fit["skin_faces"], lm, cranium, mandible, [], 0.15)
+    system = MusculoskeletalSystem.from_parts(cranium, mandible, [])
+    sim = SkinSimulation(bound.cut.vertices, bound.cut.faces, bound.binding, SkinStiffness())
+    system.add_layer(sim)
+    diag = float(np.linalg.norm(np.ptp(sim.rest, axis=0)))
+    drift = 0.0
+    t0 = time.perf_counter()
+    for _ in range(frames):
+        system.step()
+        drift = max(drift, float(np.abs(sim.simulated() - sim.rest).max()))
+    dt = time.perf_counter() - t0
+    return {"head": name, "frames": frames, "skin_vertices": int(len(sim.rest)),
+            "anchors": int(len(bound.binding.vertex_ids)), "max_drift_over_diagonal": drift / diag,
+            "ms_per_frame": 1e3 * dt / frames, "target": 1e-4}
+
+
 def main():
     import trimesh
 
-    out = {"benchmark": "bind", "bodies": "proxy (skin offset inward; see bench_bind.py)",
+    out = {"benchmark": "bind",
+           "bodies": "skull-only fit of the sample (templates/skull) + 26 proxy muscle sheets "
+                     "(skin offset inward, see bench_bind.py)",
            "embree": has_embree(), "python": platform.python_version(),
-           "machine": platform.machine(), "cases": []}
-    v, f, _ = load_mesh(SAMPLES / "makehuman" / "mh_head_default.obj")
+           "machine": platform.machine(), "cases": [], "rest_drift": []}
+    mh = SAMPLES / "makehuman" / "mh_head_default.obj"
+    fit = fitted_skull(mh)
+    v, f, _ = load_mesh(mh)
     lm = _landmarks(SAMPLES / "makehuman" / "mh_head_default.fdp.yaml")
-    run_case("makehuman", v, f, lm)  # warm-up: numba compilation, imports
-    case = run_case("makehuman", v, f, lm)
+    run_case("makehuman", v, f, lm, fit, repeats=1)  # warm-up: numba compilation, imports
+    case = run_case("makehuman", v, f, lm, fit)
     case["target_s"] = 5.0
     out["cases"].append(case)
 
-    v, f, _ = load_mesh(SAMPLES / "ict" / "ict_face_headneck_neutral.obj")
+    ict = SAMPLES / "ict" / "ict_face_headneck_neutral.obj"
+    fit_ict = fitted_skull(ict)
+    v, f, _ = load_mesh(ict)
     lm = _landmarks(SAMPLES / "ict" / "ict_face_headneck_neutral.fdp.yaml")
     v2, f2 = trimesh.remesh.subdivide(v, f)
-    case = run_case("ict subdivided once", np.asarray(v2), np.asarray(f2, np.int64), lm, repeats=2)
+    case = run_case("ict subdivided once", np.asarray(v2), np.asarray(f2, np.int64), lm, fit_ict, repeats=2)
     case["target_s"] = 60.0
     out["cases"].append(case)
+
+    mp = SAMPLES / "mediapipe" / "face_model_with_iris.obj"
+    for name, mesh, fitted in (("makehuman", mh, fit), ("ict", ict, fit_ict),
+                               ("mediapipe", mp, fitted_skull(mp))):
+        out["rest_drift"].append(rest_drift(name, mesh, fitted))
 
     path = ROOT / "benchmarks" / "results" / "bind.json"
     path.parent.mkdir(parents=True, exist_ok=True)
