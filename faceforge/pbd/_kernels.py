@@ -10,7 +10,7 @@ from __future__ import annotations
 import numba
 
 from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.constraints.area import _project_area
+from faceforge.pbd.constraints.area import _project_area, _project_area_batched
 from faceforge.pbd.constraints.attachment import _project_attachment
 from faceforge.pbd.constraints.bending import _project_bending, _project_bending_batched
 from faceforge.pbd.constraints.distance import _project_distance
@@ -21,15 +21,15 @@ from faceforge.pbd.constraints.volume import _project_volume
 @numba.njit(**NUMBA_OPTIONS)
 def _project(x, w, blocks, iterations, xpbd,
              d_idx, d_rest, d_k, d_c, d_lam,
-             b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_buf,
-             a_idx, a_rest, a_k, a_c, a_lam,
+             b_idx, b_rest, b_k, b_c, b_lam, b_runs,
+             a_idx, a_rest, a_k, a_c, a_lam, a_runs, buf,
              v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
              p_idx, p_target, p_k, p_c, p_lam,
              t_idx, t_tri, t_bary, t_k, t_c, t_lam):
     """``iterations`` Gauss-Seidel sweeps over ``blocks (nb, 3)`` rows (kind, start, stop).
 
-    ``b_runs`` (bending runs of independent constraints, empty unless colouring) selects
-    the vectorised bending sweep.
+    ``b_runs`` / ``a_runs`` (runs of independent bending / area constraints, empty unless
+    colouring) select the vectorised sweeps; ``buf`` is their scratch.
     """
     for _ in range(iterations):
         for b in range(blocks.shape[0]):
@@ -40,11 +40,14 @@ def _project(x, w, blocks, iterations, xpbd,
                 _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, xpbd, start, stop)
             elif kind == 1:
                 if b_runs.shape[0] > 1:  # coloured, PBD modes: vectorised batches
-                    _project_bending_batched(x, w, b_idx, b_rest, b_k, b_runs, b_buf, start, stop)
+                    _project_bending_batched(x, w, b_idx, b_rest, b_k, b_runs, buf, start, stop)
                 else:
                     _project_bending(x, w, b_idx, b_rest, b_k, b_c, b_lam, xpbd, start, stop)
             elif kind == 2:
-                _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, xpbd, start, stop)
+                if a_runs.shape[0] > 1:
+                    _project_area_batched(x, w, a_idx, a_rest, a_k, a_runs, buf, start, stop)
+                else:
+                    _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, xpbd, start, stop)
             elif kind == 3:
                 _project_volume(x, w, v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref,
                                 v_rest, v_k, v_c, v_lam, v_g, xpbd, start, stop)
@@ -85,8 +88,8 @@ def _velocities(x, v, prev, inv_h):
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
           substeps, iterations, xpbd, blocks, lams,
           d_idx, d_rest, d_k, d_c,
-          b_idx, b_rest, b_k, b_c, b_runs, b_buf,
-          a_idx, a_rest, a_k, a_c,
+          b_idx, b_rest, b_k, b_c, b_runs,
+          a_idx, a_rest, a_k, a_c, a_runs, buf,
           v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
           t_idx, t_tri, t_bary, t_k, t_c):
@@ -121,8 +124,8 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
         lams[:] = 0.0
         _project(x_out, w, blocks, iterations, xpbd,
                  d_idx, d_rest, d_k, d_c, lams[:o1],
-                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_buf,
-                 a_idx, a_rest, a_k, a_c, lams[o2:o3],
+                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs,
+                 a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, buf,
                  v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                  lams[o3:o4], v_g,
                  p_idx, p_target, p_k, p_c, lams[o4:o5],

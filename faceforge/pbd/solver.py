@@ -15,8 +15,7 @@ import numpy as np
 
 from faceforge.pbd._kernels import _step
 from faceforge.pbd.colouring import colour_order
-from faceforge.pbd.constraints.bending import BATCH as BENDING_BATCH
-from faceforge.pbd.constraints.bending import BATCH_ROWS as BENDING_BATCH_ROWS
+from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
@@ -63,7 +62,8 @@ class Solver:
             "bending": (m.bending_indices, rest_cos_sin(m.bending_rest_angle)),
             "area": (m.area_indices, m.area_rest_area),
         }
-        self._bend_runs = np.zeros(0, dtype=np.int64)  # no runs: the scalar sweep
+        # runs of independent constraints for the vectorised sweeps; empty: the scalar sweep
+        self._runs = {"bending": np.zeros(0, dtype=np.int64), "area": np.zeros(0, dtype=np.int64)}
         for code, kind in ((DISTANCE, "distance"), (BENDING, "bending"), (AREA, "area")):
             idx, rest = self._arrays[kind]
             kk, c = self._k[kind]
@@ -71,10 +71,10 @@ class Solver:
                 order, runs = colour_order(idx, m.particle_count,
                                            m.blocks[m.blocks[:, 0] == code, 1:])
                 idx, rest, kk, c = (np.ascontiguousarray(a[order]) for a in (idx, rest, kk, c))
-                if kind == "bending" and s.stiffness_mode != "xpbd":
-                    self._bend_runs = runs
+                if kind in self._runs and s.stiffness_mode != "xpbd":
+                    self._runs[kind] = runs
             self._arrays[kind] = (idx, rest, kk, c)
-        self._bend_buf = np.zeros(BENDING_BATCH_ROWS * BENDING_BATCH)
+        self._buf = np.zeros(BATCH_ROWS * BATCH)
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
@@ -107,8 +107,8 @@ class Solver:
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", m.blocks, self._lams,
-              *self._arrays["distance"], *self._arrays["bending"], self._bend_runs, self._bend_buf,
-              *self._arrays["area"],
+              *self._arrays["distance"], *self._arrays["bending"], self._runs["bending"],
+              *self._arrays["area"], self._runs["area"], self._buf,
               m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
               m.volume_local_triangles, m.volume_reference_start, m.volume_reference,
               m.volume_rest_volume, *k["volume"], self._vol_g,

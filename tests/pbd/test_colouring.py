@@ -53,10 +53,36 @@ def test_colour_order_keeps_blocks_in_place():
         assert len(members) == len(np.unique(members))
 
 
+@pytest.mark.parametrize("scale", [0.002, 0.2])
+def test_batched_area_matches_the_sequential_sweep(scale):
+    from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
+    from faceforge.pbd.constraints.area import _project_area, _project_area_batched, init_area
+    from tests.pbd import twins
+    v, f = sphere(3)
+    f = np.concatenate([f, [[0, 1, 1]]])  # a degenerate triangle too
+    order, runs = colour_order(f, len(v), np.array([[0, 300], [300, len(f)]]))
+    f = f[order]
+    rng = np.random.default_rng(8)
+    x0 = v + rng.normal(scale=scale, size=v.shape)
+    w = rng.uniform(0.0, 2.0, len(v))
+    rest = init_area(v, f) * 1.1
+    k = rng.uniform(0.1, 1.0, len(f))
+    got = x0.copy()
+    _project_area_batched(got, w, f, rest, k, runs, np.zeros(BATCH * BATCH_ROWS), 0, len(f))
+    scalar = x0.copy()
+    zeros = np.zeros(len(f))
+    _project_area(scalar, w, f, rest, k, zeros, zeros, False, 0, len(f))
+    want, _ = twins.area(x0, w, f, rest, k)
+    assert np.abs(got - x0).max() > 1e-4
+    np.testing.assert_allclose(got, scalar, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-13)
+
+
 @pytest.mark.parametrize("scale", [0.002, 0.2])  # small: Padé branch; large: atan2 fix-up
 def test_batched_bending_matches_the_sequential_sweep(scale):
+    from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
     from faceforge.pbd.constraints.bending import (
-        BATCH, BATCH_ROWS, _project_bending, _project_bending_batched, init_bending,
+        _project_bending, _project_bending_batched, init_bending,
         rest_cos_sin)
     from tests.pbd import twins
     v, f = sphere(3)

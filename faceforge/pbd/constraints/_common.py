@@ -33,3 +33,9 @@ def _multiplier(value, denom, k, c, lam, xpbd):
     if xpbd:
         return (-k * value - c * denom * lam) / (denom * (1.0 + c))
     return -k * value / denom
+
+
+#: constraints per batch of the vectorised sweeps (``_project_<kind>_batched``) and the
+#: rows of their flat scratch buffer, ``(BATCH_ROWS * BATCH,) float64``
+BATCH = 64
+BATCH_ROWS = 32

@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.constraints._common import DEGENERATE, _multiplier
+from faceforge.pbd.constraints._common import BATCH, DEGENERATE, _multiplier
 
 
 def init_area(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -97,6 +97,122 @@ def _project_area(x, w, idx, rest, k, c, lam, xpbd, start, stop):
     else:
         for j in range(start, stop):
             _solve_area(x, w, idx[j, 0], idx[j, 1], idx[j, 2], rest[j], k[j], 0.0, 0.0, False)
+
+
+# offsets of the scratch rows of the batched sweep (see bending._project_bending_batched)
+_U_X = 0 * BATCH
+_U_Y = 1 * BATCH
+_U_Z = 2 * BATCH
+_V_X = 3 * BATCH
+_V_Y = 4 * BATCH
+_V_Z = 5 * BATCH
+_W_0 = 6 * BATCH
+_W_1 = 7 * BATCH
+_W_2 = 8 * BATCH
+_R_A = 9 * BATCH
+_K_J = 10 * BATCH
+_D0X = 11 * BATCH
+_D0Y = 12 * BATCH
+_D0Z = 13 * BATCH
+_D1X = 14 * BATCH
+_D1Y = 15 * BATCH
+_D1Z = 16 * BATCH
+_D2X = 17 * BATCH
+_D2Y = 18 * BATCH
+_D2Z = 19 * BATCH
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _project_area_batched(x, w, idx, rest, k, runs, buf, start, stop):
+    """PBD sweep over ``start:stop`` in vectorised batches of independent constraints.
+
+    runs : (r,) int sorted boundaries of runs of constraints sharing no particle;
+    buf : (BATCH_ROWS * BATCH,) float scratch. Gather, branch-free math of
+    ``_solve_area``, scatter; equal to the sequential sweep in the same order.
+    """
+    for q in range(runs.shape[0] - 1):
+        lo = max(runs[q], start)
+        hi = min(runs[q + 1], stop)
+        for c0 in range(lo, hi, BATCH):
+            n = min(BATCH, hi - c0)
+            for t in range(n):  # gather
+                j = c0 + t
+                i0 = idx[j, 0]
+                i1 = idx[j, 1]
+                i2 = idx[j, 2]
+                buf[_U_X + t] = x[i1, 0] - x[i0, 0]
+                buf[_U_Y + t] = x[i1, 1] - x[i0, 1]
+                buf[_U_Z + t] = x[i1, 2] - x[i0, 2]
+                buf[_V_X + t] = x[i2, 0] - x[i0, 0]
+                buf[_V_Y + t] = x[i2, 1] - x[i0, 1]
+                buf[_V_Z + t] = x[i2, 2] - x[i0, 2]
+                buf[_W_0 + t] = w[i0]
+                buf[_W_1 + t] = w[i1]
+                buf[_W_2 + t] = w[i2]
+                buf[_R_A + t] = rest[j]
+                buf[_K_J + t] = k[j]
+            for t in range(n):  # branch-free math
+                ux = buf[_U_X + t]
+                uy = buf[_U_Y + t]
+                uz = buf[_U_Z + t]
+                vx = buf[_V_X + t]
+                vy = buf[_V_Y + t]
+                vz = buf[_V_Z + t]
+                w0 = buf[_W_0 + t]
+                w1 = buf[_W_1 + t]
+                w2 = buf[_W_2 + t]
+                nx = uy * vz - uz * vy
+                ny = uz * vx - ux * vz
+                nz = ux * vy - uy * vx
+                n2 = nx * nx + ny * ny + nz * nz
+                scale = ux * ux + uy * uy + uz * uz + vx * vx + vy * vy + vz * vz
+                ok = (n2 > DEGENERATE * scale * scale) & (n2 > 0.0)
+                nlen = math.sqrt(n2 if ok else 1.0)
+                h = 0.5 / nlen
+                ox = vx - ux
+                oy = vy - uy
+                oz = vz - uz
+                g0x = h * (ny * oz - nz * oy)
+                g0y = h * (nz * ox - nx * oz)
+                g0z = h * (nx * oy - ny * ox)
+                g1x = -h * (ny * vz - nz * vy)
+                g1y = -h * (nz * vx - nx * vz)
+                g1z = -h * (nx * vy - ny * vx)
+                g2x = h * (ny * uz - nz * uy)
+                g2y = h * (nz * ux - nx * uz)
+                g2z = h * (nx * uy - ny * ux)
+                denom = (w0 * (g0x * g0x + g0y * g0y + g0z * g0z)
+                         + w1 * (g1x * g1x + g1y * g1y + g1z * g1z)
+                         + w2 * (g2x * g2x + g2y * g2y + g2z * g2z))
+                good = ok & (denom > 0.0)
+                s = -buf[_K_J + t] * (0.5 * nlen - buf[_R_A + t]) / (denom if good else 1.0)
+                s = s if good else 0.0
+                f = s * w0
+                buf[_D0X + t] = f * g0x
+                buf[_D0Y + t] = f * g0y
+                buf[_D0Z + t] = f * g0z
+                f = s * w1
+                buf[_D1X + t] = f * g1x
+                buf[_D1Y + t] = f * g1y
+                buf[_D1Z + t] = f * g1z
+                f = s * w2
+                buf[_D2X + t] = f * g2x
+                buf[_D2Y + t] = f * g2y
+                buf[_D2Z + t] = f * g2z
+            for t in range(n):  # scatter
+                j = c0 + t
+                i0 = idx[j, 0]
+                i1 = idx[j, 1]
+                i2 = idx[j, 2]
+                x[i0, 0] += buf[_D0X + t]
+                x[i0, 1] += buf[_D0Y + t]
+                x[i0, 2] += buf[_D0Z + t]
+                x[i1, 0] += buf[_D1X + t]
+                x[i1, 1] += buf[_D1Y + t]
+                x[i1, 2] += buf[_D1Z + t]
+                x[i2, 0] += buf[_D2X + t]
+                x[i2, 1] += buf[_D2Y + t]
+                x[i2, 2] += buf[_D2Z + t]
 
 
 def solve_area(positions, inv_mass, triangles, rest_area, stiffness) -> np.ndarray:

@@ -29,7 +29,7 @@ import numba
 import numpy as np
 
 from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.constraints._common import DEGENERATE, _multiplier
+from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS, DEGENERATE, _multiplier  # noqa: F401
 
 
 def dihedral_angle(positions: np.ndarray, quads: np.ndarray) -> np.ndarray:
@@ -181,9 +181,6 @@ def _project_bending(x, w, idx, rest_cs, k, c, lam, xpbd, start, stop):
                            rest_cs[j, 0], rest_cs[j, 1], k[j], 0.0, 0.0, False)
 
 
-#: constraints per batch of the vectorised sweep, and its scratch rows
-BATCH = 64
-BATCH_ROWS = 32
 # offsets of the scratch rows in the flat buffer: one flat array with constant row offsets
 # lets LLVM prove the rows independent and vectorise the math loop (separate arrays do not)
 _E_X = 0 * BATCH
