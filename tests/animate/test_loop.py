@@ -157,3 +157,15 @@ def test_contact_sheet_writes_a_png_with_the_chosen_frames(tmp_path):
     img = mpimg.imread(png)
     assert img.shape[1] > img.shape[0] > 50          # two panels side by side
     assert img[..., :3].std() > 0.01                 # something was drawn
+
+
+def test_fdp_vertices_pick_the_lip_copy_of_their_side():
+    from faceforge.pipeline.stages.animate import _fdp_vertices, _lever
+
+    rest = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 1.0, 1.0], [0.0, -1.0, 1.0]])
+    sides = np.array([1, -1, 1, -1], dtype=np.int8)      # 0/1: a cut ring's upper/lower copies
+    lm = {"2.2": rest[0], "2.3": rest[0], "8.1": rest[2] + 0.01, "2.1": rest[3]}
+    got = _fdp_vertices(lm, rest, sides)
+    assert got == {"2.2": 0, "2.3": 1, "8.1": 2, "2.1": 3}
+    assert _fdp_vertices(lm, rest, None)["2.3"] == 0      # no lip sides: plain nearest
+    assert _lever(np.array([0.0, -3.0, 4.0]), np.zeros(3), np.array([2.0, 0.0, 0.0])) == pytest.approx(5.0)

@@ -166,17 +166,24 @@ def _lever(point, axis_point, axis_dir) -> float:
 
 
 def _fdp_vertices(landmarks: dict, rest, lip_sides) -> dict:
-    """FDP -> nearest working vertex; lower-lip FDPs only among lower-lip vertices (cut lips)."""
+    """FDP -> nearest working vertex.
+
+    Where the lip line was cut by duplicating a shared ring, an upper and a lower vertex sit
+    at the same place: lower-lip FDPs then take the lower copy (``lip_sides < 0``) and
+    upper-lip FDPs the upper one (``lip_sides > 0``), whenever such a vertex is as near as the
+    nearest vertex overall.
+    """
     import numpy as np
 
+    sides = np.zeros(len(rest), dtype=np.int8) if lip_sides is None else np.asarray(lip_sides)
     out = {}
-    sides = None if lip_sides is None else np.asarray(lip_sides)
     for fdp, p in landmarks.items():
         d = np.linalg.norm(rest - np.asarray(p, dtype=float), axis=1)
-        if sides is not None and fdp in LOWER_LIP_FDPS and np.any(sides < 0):
-            d = np.where(sides < 0, d, np.inf) if d[sides < 0].min() <= 1e-6 + d.min() * 2 else d
-        elif sides is not None and fdp in UPPER_LIP_FDPS and np.any(sides > 0):
-            d = np.where(sides >= 0, d, np.inf)
+        want = -1 if fdp in LOWER_LIP_FDPS else 1 if fdp in UPPER_LIP_FDPS else 0
+        if want and np.any(sides == want):
+            side = np.where(sides == want, d, np.inf)
+            if side.min() <= d.min() * (1.0 + 1e-9) + 1e-12:
+                d = side
         out[fdp] = int(np.argmin(d))
     return out
 
