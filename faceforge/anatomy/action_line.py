@@ -20,15 +20,17 @@ arc length ``k step'`` from the line's first point (the origin), so for
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from faceforge.constants import FLOAT
+from faceforge.constants import FLOAT, NUMBA_OPTIONS
 from faceforge.geometry.surface_points import SurfacePoints, project_to_surface
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
-__all__ = ["ActionLine", "sample_polyline", "polyline_parameters", "eval_polyline", "mean_edge_length",
+__all__ = ["ActionLine", "sample_polyline", "polyline_parameters", "eval_polyline", "sample_positions", "mean_edge_length",
            "project_outermost"]
 
 
@@ -82,6 +84,35 @@ def eval_polyline(points, normals, segment, t, closed: bool = False):
     return pos, np.divide(nrm, length_n, out=np.zeros_like(nrm), where=length_n > 0)
 
 
+@numba.njit(**NUMBA_OPTIONS)
+def _polyline_samples(p, n, closed, scale, out):
+    """Positions of :func:`sample_polyline` into ``out (n, 3)`` (no normals); compiled twin."""
+    m = p.shape[0]
+    segs = m if closed else m - 1
+    total = 0.0
+    for i in range(segs):
+        j = (i + 1) % m
+        total += math.sqrt((p[j, 0] - p[i, 0]) ** 2 + (p[j, 1] - p[i, 1]) ** 2 + (p[j, 2] - p[i, 2]) ** 2)
+    step = total / (n if closed else n - 1)
+    seg = 0
+    cum = 0.0
+    j = 1 % m
+    seglen = math.sqrt((p[j, 0] - p[0, 0]) ** 2 + (p[j, 1] - p[0, 1]) ** 2 + (p[j, 2] - p[0, 2]) ** 2)
+    for s in range(n):
+        arc = min(max(s * step * scale, 0.0), total)
+        while seg < segs - 1 and cum + seglen <= arc:
+            cum += seglen
+            seg += 1
+            j = (seg + 1) % m
+            seglen = math.sqrt((p[j, 0] - p[seg, 0]) ** 2 + (p[j, 1] - p[seg, 1]) ** 2
+                               + (p[j, 2] - p[seg, 2]) ** 2)
+        t = (arc - cum) / seglen if seglen > 0.0 else 0.0
+        t = min(max(t, 0.0), 1.0)
+        j = (seg + 1) % m
+        for d in range(3):
+            out[s, d] = (1.0 - t) * p[seg, d] + t * p[j, d]
+
+
 def sample_polyline(points, normals, n: int, closed: bool = False, step_scale: float = 1.0):
     """Samples at a regular arc-length step along a polyline (Eq. 3, Eq. 4).
 
@@ -108,6 +139,16 @@ def sample_polyline(points, normals, n: int, closed: bool = False, step_scale: f
     k, t, arc = polyline_parameters(points, n, closed, step_scale)
     pos, nrm = eval_polyline(points, normals, k, t, closed)
     return pos, nrm, arc
+
+
+def sample_positions(points, n: int, closed: bool = False, step_scale: float = 1.0) -> np.ndarray:
+    """Fast path of :func:`sample_polyline` for positions only, ``(n, 3)`` (compiled)."""
+    p = np.ascontiguousarray(points, dtype=FLOAT)
+    if len(p) < 2 or n < (3 if closed else 2):
+        return sample_polyline(p, None, n, closed, step_scale)[0]  # raises the ValueError
+    out = np.empty((n, 3))
+    _polyline_samples(p, int(n), bool(closed), float(step_scale), out)
+    return out
 
 
 def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePoints:

@@ -85,6 +85,25 @@ class _Layer:
     solver: object
     state: object
     control: object
+    vids: np.ndarray = None    # (k, 3) world vertex ids of every action-line surface point
+    bary: np.ndarray = None    # (k, 3)
+    pieces: list = None        # per muscle: {line key: slice into the k points}
+
+    def gather(self):
+        """Precompute one gather for all surface points of all lines of the layer."""
+        vids, bary, pieces, start = [], [], [], 0
+        for m in self.muscles:
+            own = {}
+            for key, line in m.lines.items():
+                n = len(line.points)
+                own[key] = slice(start, start + n)
+                vids.append(line.points.face_ids)
+                bary.append(line.points.bary)
+                start += n
+            pieces.append(own)
+        self.vids = np.concatenate(vids) if vids else np.zeros(0, INT)
+        self.bary = np.concatenate(bary) if bary else np.zeros((0, 3))
+        self.pieces = pieces
 
 
 class MusculoskeletalSystem:
@@ -165,7 +184,10 @@ class MusculoskeletalSystem:
             model = b.finalize()
             layers.append(_Layer(index, group, firsts, slots, model, Solver(model, settings),
                                  model.state(), model.control()))
+            layers[-1].gather()
         system = cls(bodies, layers, settings)
+        for layer in layers:  # face ids -> world vertex ids, once
+            layer.vids = system._world_f[layer.vids]
         for layer in layers:  # rest targets: the rest state is a fixed point
             system._set_targets(layer, {})
         return system
@@ -280,10 +302,12 @@ class MusculoskeletalSystem:
             extra.step(self, dt)
 
     def _set_targets(self, layer: _Layer, contractions) -> None:
-        v, f = self._world_v, self._world_f
-        for m, s in zip(layer.muscles, layer.slots):
+        # every surface point of every line of the layer in one gather
+        pts = np.einsum("ij,ijk->ik", layer.bary, self._world_v[layer.vids])
+        for m, s, own in zip(layer.muscles, layer.slots, layer.pieces):
             if len(s):
-                layer.control.position_targets[s] = m.sample_targets(contractions.get(m.name, 0.0), v, f)
+                lp = {key: pts[sl] for key, sl in own.items()}
+                layer.control.position_targets[s] = m.targets_from_line_points(contractions.get(m.name, 0.0), lp)
 
     def reset(self) -> None:
         """Back to the rest state (jaw closed, muscles at rest, zero velocities)."""

@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from faceforge.anatomy.action_line import ActionLine
+from faceforge.anatomy.action_line import ActionLine, eval_polyline, sample_positions
 from faceforge.anatomy.hexmesh import HexTopology, hex_topology, morph_hex
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
@@ -305,37 +305,50 @@ class Muscle:
         ``(vertices, faces)`` is the current concatenated mesh of :attr:`lies_on`.
         Passive muscles (``active=False``) always use c = 0.
         """
-        c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         v, f = check_mesh(vertices, faces)
-        grid = self._grid_targets(c, v, f)
-        g = self.topology.contour_grid()
+        return self.targets_from_line_points(c, {k: line.positions(v, f) for k, line in self.lines.items()})
+
+    def targets_from_line_points(self, c: float, points: dict) -> np.ndarray:
+        """:meth:`sample_targets` from the current positions of the lines' surface points.
+
+        ``points``: ``{line key: (p, 3)}`` as :meth:`ActionLine.positions` gives
+        them (a caller that evaluates many lines at once gathers them itself).
+        """
+        c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
+        grid = self._grid_targets(c, points)
+        g = self._contour_grid
         return grid[g[:, 0], g[:, 1]]
 
-    def _grid_targets(self, c, v, f) -> np.ndarray:
+    @property
+    def _contour_grid(self) -> np.ndarray:
+        g = self.__dict__.get("_cg")
+        if g is None:
+            g = self.__dict__["_cg"] = self.topology.contour_grid()
+        return g
+
+    def _grid_targets(self, c, P) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
-        grid = np.full((h, w, 3), np.nan)
-        L = self.lines
+        grid = np.empty((h, w, 3))
         if self.kind == "linear":
-            a0 = _pos(L["A0"], v, f, h, 1.0 - c * self.max_contraction)
-            a2 = _pos(L["A2"], v, f, h, 1.0 - c * self.max_contraction)
-            a3 = _pos(L["A3"], v, f, w, 1.0)
-            a1 = _pos(L["A1"], v, f, w, 1.0)
-            if c > 0:
-                r0 = _pos(L["A0"], v, f, h, 1.0)
-                r2 = _pos(L["A2"], v, f, h, 1.0)
+            scale = 1.0 - c * self.max_contraction
+            a0 = sample_positions(P["A0"], h, False, scale)
+            a2 = sample_positions(P["A2"], h, False, scale)
+            a3 = sample_positions(P["A3"], w, False, 1.0)
+            a1 = sample_positions(P["A1"], w, False, 1.0)
+            if c > 0:  # the insertion travels with the ends of the two fibres
                 t = np.linspace(0.0, 1.0, w)[:, None]
-                a1 = a1 + (1.0 - t) * (a0[-1] - r0[-1]) + t * (a2[-1] - r2[-1])
+                a1 = a1 + (1.0 - t) * (a0[-1] - P["A0"][-1]) + t * (a2[-1] - P["A2"][-1])
             grid[0, :] = a3
             grid[-1, :] = a1
             grid[:, 0] = a0
             grid[:, -1] = a2
         else:
             if self.rest_parameters:  # material sampling, see build_sphincter_muscle
-                s1 = L["A1"].sample_at(v, f, *self.rest_parameters["A1"])
-                s3 = L["A3"].sample_at(v, f, *self.rest_parameters["A3"])
+                s1 = eval_polyline(P["A1"], None, *self.rest_parameters["A1"], closed=True)[0]
+                s3 = eval_polyline(P["A3"], None, *self.rest_parameters["A3"], closed=True)[0]
             else:
-                s1 = _pos(L["A1"], v, f, h, 1.0)
-                s3 = _pos(L["A3"], v, f, h, 1.0)
+                s1 = sample_positions(P["A1"], h, True, 1.0)
+                s3 = sample_positions(P["A3"], h, True, 1.0)
             if c > 0:
                 d = sphincter_displacement(s1, s3, c * self.max_contraction)
                 s1, s3 = s1 + d, s3 + d
@@ -383,10 +396,6 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
         params = {key: lines[key].parameters(v, f, topo.h) for key in ("A1", "A3")}
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
                   proto.layer, proto.active, float(thickness), proto.max_contraction, params)
-
-
-def _pos(line: ActionLine, v, f, n, scale) -> np.ndarray:
-    return line.sample(v, f, n, scale, with_normals=False)[0]
 
 
 def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.action_line import ActionLine, polyline_parameters, sample_polyline
+from faceforge.anatomy.action_line import ActionLine, polyline_parameters, sample_polyline, sample_positions
 from faceforge.geometry.surface_points import SurfacePoints
 
 from conftest import icosphere, on_sphere
@@ -92,3 +92,38 @@ def test_rejects_degenerate_requests():
         sample_polyline(np.eye(3), None, 1)
     with pytest.raises(ValueError):
         ActionLine.from_points(on_sphere((0, 0), (0.1, 0)), v, f, project="sideways")
+
+
+def twin_sample_positions(points, n, closed, scale):
+    """Plain-Python twin of the compiled ``_polyline_samples``: walk the segments."""
+    pts = [np.asarray(p, float) for p in points]
+    if closed:
+        pts.append(pts[0])
+    lengths = [float(np.linalg.norm(b - a)) for a, b in zip(pts[:-1], pts[1:])]
+    total = sum(lengths)
+    step = total / (n if closed else n - 1)
+    out = []
+    for s in range(n):
+        arc = min(max(s * step * scale, 0.0), total)
+        cum = 0.0
+        for k, seg in enumerate(lengths):
+            if arc <= cum + seg or k == len(lengths) - 1:
+                break
+            cum += seg
+        t = 0.0 if seg == 0 else min(max((arc - cum) / seg, 0.0), 1.0)
+        out.append((1 - t) * pts[k] + t * pts[k + 1])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("closed", [False, True])
+@pytest.mark.parametrize("scale", [0.0, 0.35, 1.0])
+def test_compiled_sampling_matches_twin_and_reference(closed, scale):
+    rng = np.random.default_rng(11)
+    for trial in range(5):
+        pts = rng.normal(size=(rng.integers(2 if not closed else 3, 9), 3))
+        if trial == 0:
+            pts = np.vstack([pts[:1], pts[:1], pts[1:]])  # a zero-length segment
+        for n in (3, 7):
+            fast = sample_positions(pts, n, closed, scale)
+            np.testing.assert_allclose(fast, twin_sample_positions(pts, n, closed, scale), atol=1e-12)
+            np.testing.assert_allclose(fast, sample_polyline(pts, None, n, closed, scale)[0], atol=1e-12)
