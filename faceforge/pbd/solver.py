@@ -21,6 +21,15 @@ from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
 
+def _own(a: np.ndarray) -> np.ndarray:
+    return np.array(a, order="C", copy=True)
+
+
+def _writable(a) -> np.ndarray:
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    return a if a.flags.writeable else a.copy()
+
+
 def effective_stiffness(k: np.ndarray, settings: SolverSettings) -> tuple[np.ndarray, np.ndarray]:
     """Per-projection ``(k_eff, c)`` for the stiffness mode (see :mod:`faceforge.pbd.settings`).
 
@@ -46,8 +55,18 @@ class Solver:
         self.model = model
         self.settings = settings or SolverSettings()
         m, s = model, self.settings
-        self._w = np.ascontiguousarray(m.inv_mass, dtype=np.float64)
-        self._kin = np.ascontiguousarray(m.kinematic_indices)
+        # every array handed to the compiled step is a private writable copy, so that all
+        # models share one compiled signature (read-only arrays would type differently)
+        self._w = _own(m.inv_mass)
+        self._kin = _own(m.kinematic_indices)
+        self._blocks = _own(m.blocks)
+        self._volume = tuple(_own(a) for a in (
+            m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
+            m.volume_local_triangles, m.volume_reference_start, m.volume_reference,
+            m.volume_rest_volume))
+        self._position = _own(m.position_indices)
+        self._attachment = tuple(_own(a) for a in (
+            m.attachment_indices, m.attachment_triangles, m.attachment_bary))
         self._kin_start = np.zeros((len(self._kin), 3))
         self._prev = np.zeros((m.particle_count, 3))
         self._k = {}
@@ -58,9 +77,9 @@ class Solver:
         self._vol_g = np.zeros((int(counts.max()) if len(counts) else 1, 3))
         self._damp = (1.0 - s.damping) ** (1.0 / s.substeps)
         self._arrays = {  # per kind (indices, rest, k_eff, c), permuted when colouring
-            "distance": (m.distance_indices, m.distance_rest_length),
-            "bending": (m.bending_indices, rest_cos_sin(m.bending_rest_angle)),
-            "area": (m.area_indices, m.area_rest_area),
+            "distance": (_own(m.distance_indices), _own(m.distance_rest_length)),
+            "bending": (_own(m.bending_indices), rest_cos_sin(m.bending_rest_angle)),
+            "area": (_own(m.area_indices), _own(m.area_rest_area)),
         }
         # runs of independent constraints for the vectorised sweeps; empty: the scalar sweep
         self._runs = {"bending": np.zeros(0, dtype=np.int64), "area": np.zeros(0, dtype=np.int64)}
@@ -91,8 +110,8 @@ class Solver:
             if a.shape != (n, 3) or a.dtype != np.float64 or not a.flags.c_contiguous:
                 raise ValueError(f"{name} must be a C-contiguous float64 array of shape "
                                  f"({n}, 3), got {a.shape} {a.dtype}")
-        targets = np.ascontiguousarray(control.position_targets, dtype=np.float64)
-        kin = np.ascontiguousarray(control.kinematic_positions, dtype=np.float64)
+        targets = _writable(control.position_targets)
+        kin = _writable(control.kinematic_positions)
         if targets.shape != (m.position_count, 3):
             raise ValueError(f"control.position_targets must have shape ({m.position_count}, 3), "
                              f"got {targets.shape}")
@@ -106,12 +125,10 @@ class Solver:
         _step(state_in.positions, state_in.velocities, state_out.positions, state_out.velocities,
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
-              s.stiffness_mode == "xpbd", m.blocks, self._lams,
+              s.stiffness_mode == "xpbd", self._blocks, self._lams,
               *self._arrays["distance"], *self._arrays["bending"], self._runs["bending"],
               *self._arrays["area"], self._runs["area"], self._buf,
-              m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
-              m.volume_local_triangles, m.volume_reference_start, m.volume_reference,
-              m.volume_rest_volume, *k["volume"], self._vol_g,
-              m.position_indices, targets, *k["position"],
-              m.attachment_indices, m.attachment_triangles, m.attachment_bary,
+              *self._volume, *k["volume"], self._vol_g,
+              self._position, targets, *k["position"],
+              *self._attachment,
               *k["attachment"])
