@@ -54,7 +54,7 @@ def main() -> None:
 
         def fit():
             skin = SkinSurface.build(checked.vertices, checked.faces)
-            return skin, fit_head(template.fit_template, skin, lm.ids, lm.positions, lm.face_ids, lm.bary,
+            return skin, fit_head(template.fit_template, skin, lm.ids, lm.positions,
                                   FitSettings(), template.build_muscles)
 
         skin, result = fit()

@@ -124,6 +124,13 @@ class SkinSurface:
         c, d, t = trimesh.proximity.closest_point(self._mesh, np.asarray(points, dtype=np.float64).reshape(-1, 3))
         return np.asarray(c, dtype=np.float64), np.asarray(d, dtype=np.float64), np.asarray(t, dtype=np.int64)
 
+    def normal_near(self, points: np.ndarray) -> np.ndarray:
+        """Unit smooth skin normals (k, 3) at the closest skin points of ``points`` (k, 3)."""
+        from faceforge.geometry.triangles import barycentric
+
+        closest, _, tri = self.closest(points)
+        return self.normals_at(tri, barycentric(closest, self.vertices, self.faces, tri))
+
     def normals_at(self, face_ids, bary) -> np.ndarray:
         """Unit smooth normals (k, 3) at surface points given by face ids and barycentrics."""
         n = np.einsum("ki,kij->kj", bary, self.normals[self.faces[face_ids]])
@@ -322,8 +329,8 @@ class SkullTargets:
         return self.skin - self.depth[:, None] * self.normal
 
 
-def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_points, skin_face_ids,
-                  skin_bary, scale_mm: float, use_depth: bool) -> SkullTargets:
+def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_points,
+                  scale_mm: float, use_depth: bool) -> SkullTargets:
     """Pair the template skull landmarks with the skin landmarks they fit to.
 
     Only FDPs on both sides with bone beneath (``fit_tissue.FDP_TISSUE_CODE``) are used,
@@ -344,7 +351,7 @@ def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_point
     far = np.min(np.linalg.norm(rest[:, None] - source[None], axis=2), axis=1) > ANCHOR_DISTANCE * skull_diag \
         if len(rest) else np.zeros(0, bool)
     return SkullTargets(fdps, source, np.asarray(skin_points, dtype=np.float64)[rows],
-                        skin.normals_at(np.asarray(skin_face_ids)[rows], np.asarray(skin_bary)[rows]), depth,
+                        skin.normal_near(np.asarray(skin_points, dtype=np.float64)[rows]), depth,
                         rest[far])
 
 
@@ -447,12 +454,12 @@ class FitResult:
     tissue_targets: np.ndarray = None   # (n, 3) targets before the refit (skin - depth * normal)
 
 
-def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, skin_face_ids, skin_bary,
+def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
              settings: FitSettings = FitSettings(), build_muscles: Callable | None = None) -> FitResult:
     """Fit the skull and muscle map into the skin (steps 1-5 of the module docstring).
 
-    skin_ids (n,) FDP ids, skin_points (n, 3), skin_face_ids (n,), skin_bary (n, 3): the
-    validated skin landmarks (:class:`faceforge.io.landmarks.Landmarks`).
+    skin_ids (n,) FDP ids, skin_points (n, 3): the validated skin landmarks
+    (:class:`faceforge.io.landmarks.Landmarks`); normals are taken where each lies on ``skin``.
     ``build_muscles(cranium (v, f), mandible (v, f), warp) -> [(name, vertices, faces)]``
     builds the muscles on the fitted skull (Eq. 5 thickness); without it the muscle map
     points are morphed only and there is no refit.
@@ -461,7 +468,7 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points, sk
 
     skin_lm = {f: np.asarray(p, dtype=np.float64) for f, p in zip(skin_ids, skin_points)}
     scale_mm = fit_tissue.units_per_mm(skin_lm)
-    pairs = skull_targets(template.landmarks, skin, skin_ids, skin_points, skin_face_ids, skin_bary,
+    pairs = skull_targets(template.landmarks, skin, skin_ids, skin_points,
                           scale_mm, settings.tissue_depth)
     (cv, cf), (mv, mf) = template.cranium, template.mandible
     skull_v = np.vstack([cv, mv])

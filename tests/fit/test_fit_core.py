@@ -11,7 +11,6 @@ from faceforge.anatomy.fit import (FitSettings, FitTemplate, SkinSurface, Warp, 
                                    front_mask, map_directions, orient_outward, signed_skin_depth, similarity_transform,
                                    worst_first_sample)
 from faceforge.anatomy.fit_muscles import cylindrical_projection, eq5_thickness
-from faceforge.geometry.triangles import barycentric
 from faceforge.io.mesh_check import fill_holes
 
 from .conftest import ellipsoid_head, face_landmarks_on
@@ -133,13 +132,13 @@ def synthetic_case(scale=1.0):
     ids = tuple(lm)
     pts = np.array([lm[k] for k in ids])
     closest, _, tri = trimesh.proximity.closest_point(trimesh.Trimesh(sv, sf, process=False), pts)
-    return sv, sf, template, ids, closest, tri, barycentric(closest, sv, sf, tri)
+    return sv, sf, template, ids, closest
 
 
 def test_synthetic_fit_meets_the_acceptance_checks():
-    sv, sf, template, ids, pts, tri, bary = synthetic_case()
+    sv, sf, template, ids, pts = synthetic_case()
     skin = SkinSurface.build(sv, sf)
-    res = fit_head(template, skin, ids, pts, tri, bary, FitSettings())
+    res = fit_head(template, skin, ids, pts, FitSettings())
     assert np.linalg.norm(res.reached - res.targets, axis=1).max() < 1e-8 * skin.diagonal
     depth, _, _, covered, _ = signed_skin_depth(res.cranium, skin)
     front = front_mask(res.cranium, dict(zip(ids, pts)), 0.75)

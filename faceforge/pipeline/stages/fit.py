@@ -185,8 +185,12 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)
     skin = SkinSurface.build(checked.vertices, checked.faces)
-    result = fit_head(template.fit_template, skin, lm.ids, lm.positions, lm.face_ids, lm.bary, settings,
-                      template.build_muscles)
+    try:
+        result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles)
+    except ValueError as exc:   # too few usable landmark pairs, degenerate configuration
+        from faceforge.exceptions import LandmarkError
+
+        raise LandmarkError(f"cannot fit the template: {exc}", lm_path) from None
     t_fit = time.perf_counter() - t
     t = time.perf_counter()
     mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
