@@ -158,8 +158,9 @@ def bench_frames(repeat):
 
 
 def bench_kinds(repeat):
-    """ns per constraint-iteration: a model holding one kind, stepped at 10 iterations,
-    minus the same model with 0 constraints' worth of step overhead (predict/velocities)."""
+    """ns per constraint-iteration: a model holding one kind on a Mesh_D-sized skin, stepped
+    at 10 iterations, minus the step overhead (predict, velocities) of a model without
+    constraints, divided by iterations x constraints."""
     v, f = sphere_skin(4904, 9541)
     e, q = edges_of(f), quads_of(f)
     rng = np.random.default_rng(2)
@@ -183,23 +184,24 @@ def bench_kinds(repeat):
     for kind, add in kinds.items():
         b = ModelBuilder()
         b.add_particles(x0, 1.0)
-        if kind == "attachment":
+        if kind == "attachment":  # pulled to the face centres of a kinematic deeper copy
             deep = b.add_particles(v * 0.9, 0.0)
-            pick = np.arange(0, len(f))
-            b.add_attachment(f[pick, 0], f[pick] * 0 + deep + f[pick], np.full((len(pick), 3), 1 / 3), 0.5)
-            # the attached particles are pulled to points of a kinematic deeper copy
+            b.add_attachment(f[:, 0], f + deep, np.full((len(f), 3), 1.0 / 3.0), 0.5)
         else:
             add(b)
         model = b.finalize()
-        solver = Solver(model, SolverSettings(iterations=iters))
-        state, control = model.state(), model.control()
-        state.positions[: len(v)] = x0
-        t = timeit(lambda: solver.step(state, state, control, DT), repeat=repeat, number=20)["best"]
         m = model.constraint_count
-        per = ((t - overhead) / (iters * m)) * 1e9
-        unit = "per body (9,541 triangles)" if kind == "volume" else ""
-        rows.append({"kind": kind, "constraints": m, "ns_per_constraint_iteration": per,
-                     "note": unit})
+        row = {"kind": kind, "constraints": m}
+        for colouring in (False, True):
+            solver = Solver(model, SolverSettings(iterations=iters, colouring=colouring))
+            state, control = model.state(), model.control()
+            state.positions[: len(v)] = x0
+            t = timeit(lambda: solver.step(state, state, control, DT), repeat=repeat, number=20)
+            key = "ns_coloured" if colouring else "ns_builder_order"
+            row[key] = (t["best"] - overhead) / (iters * m) * 1e9
+        row["note"] = "per body (9,541 triangles)" if kind == "volume" else (
+            "vectorised batches when coloured" if kind in ("bending", "area") else "")
+        rows.append(row)
     return rows
 
 
@@ -323,7 +325,7 @@ def main():
     compile_ = bench_compile()
     print_table([compile_], title="compile (seconds; fresh NUMBA_CACHE_DIR, then cached)")
     kinds = bench_kinds(repeat)
-    print_table(kinds, ["kind", "constraints", "ns_per_constraint_iteration", "note"],
+    print_table(kinds, ["kind", "constraints", "ns_builder_order", "ns_coloured", "note"],
                 title="ns per constraint-iteration (Mesh_D-sized skin)")
     frames = bench_frames(repeat)
     print_table(frames, ["mesh", "vertices", "faces", "constraints", "paper_constraints",

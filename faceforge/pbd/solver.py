@@ -60,10 +60,13 @@ class Solver:
         self._w = _own(m.inv_mass)
         self._kin = _own(m.kinematic_indices)
         self._blocks = _own(m.blocks)
+        ref_global = np.concatenate([  # reference particles of each body, in global ids
+            m.volume_particles[m.volume_particle_start[j]:][
+                m.volume_reference[m.volume_reference_start[j]:m.volume_reference_start[j + 1]]]
+            for j in range(m.volume_count)]) if m.volume_count else np.zeros(0, dtype=np.int64)
         self._volume = tuple(_own(a) for a in (
             m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
-            m.volume_local_triangles, m.volume_reference_start, m.volume_reference,
-            m.volume_rest_volume))
+            m.volume_triangles, m.volume_reference_start, ref_global, m.volume_rest_volume))
         self._position = _own(m.position_indices)
         self._attachment = tuple(_own(a) for a in (
             m.attachment_indices, m.attachment_triangles, m.attachment_bary))
@@ -73,8 +76,7 @@ class Solver:
         for kind in ("distance", "bending", "area", "volume", "position", "attachment"):
             self._k[kind] = effective_stiffness(getattr(m, f"{kind}_stiffness"), s)
         self._lams = np.zeros(m.constraint_count)
-        counts = np.diff(m.volume_particle_start)
-        self._vol_g = np.zeros((int(counts.max()) if len(counts) else 1, 3))
+        self._vol_g = np.zeros((m.particle_count, 3))
         self._damp = (1.0 - s.damping) ** (1.0 / s.substeps)
         self._arrays = {  # per kind (indices, rest, k_eff, c), permuted when colouring
             "distance": (_own(m.distance_indices), _own(m.distance_rest_length)),

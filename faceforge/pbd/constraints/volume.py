@@ -13,8 +13,8 @@ translation and rotation of the body, and the chain-rule term ``dV/dr`` (spread
 evenly over the reference particles) makes the gradient sum to zero, so the
 projection conserves linear momentum.
 
-Per body the solver stores a CSR block: the body's particles (global ids), its
-triangles in local ids and its reference particles in local ids.
+Per body the model stores a CSR block: the body's particles, its triangles and
+its reference particles (the solver passes all three in global ids).
 """
 
 from __future__ import annotations
@@ -63,9 +63,9 @@ def residual_volume(positions, triangles, rest_volume) -> float:
 def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     """Project one volume constraint in place on ``x (n, 3)``.
 
-    particles : (p,) int global ids of the body; tris : (f, 3) int local ids;
-    ref : (r,) int local ids of the reference particles; g : (>= p, 3) float scratch.
-    Returns the multiplier increment.
+    particles : (p,) int global ids of the body; tris : (f, 3) int global ids;
+    ref : (r,) int global ids of the reference particles; g : (n, 3) float scratch
+    indexed by particle (only the body's rows are used). Returns the multiplier increment.
     """
     npart = particles.shape[0]
     nref = ref.shape[0]
@@ -75,7 +75,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     ry = 0.0
     rz = 0.0
     for q in range(nref):
-        i = particles[ref[q]]
+        i = ref[q]
         rx += x[i, 0]
         ry += x[i, 1]
         rz += x[i, 2]
@@ -83,17 +83,15 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     ry /= nref
     rz /= nref
     for q in range(npart):
-        g[q, 0] = 0.0
-        g[q, 1] = 0.0
-        g[q, 2] = 0.0
+        i = particles[q]
+        g[i, 0] = 0.0
+        g[i, 1] = 0.0
+        g[i, 2] = 0.0
     vol = 0.0
     for f in range(tris.shape[0]):
-        la = tris[f, 0]
-        lb = tris[f, 1]
-        lc = tris[f, 2]
-        ia = particles[la]
-        ib = particles[lb]
-        ic = particles[lc]
+        ia = tris[f, 0]
+        ib = tris[f, 1]
+        ic = tris[f, 2]
         ax = x[ia, 0] - rx
         ay = x[ia, 1] - ry
         az = x[ia, 2] - rz
@@ -108,33 +106,36 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
         py = bz * cx - bx * cz
         pz = bx * cy - by * cx
         vol += ax * px + ay * py + az * pz
-        g[la, 0] += px
-        g[la, 1] += py
-        g[la, 2] += pz
-        g[lb, 0] += cy * az - cz * ay
-        g[lb, 1] += cz * ax - cx * az
-        g[lb, 2] += cx * ay - cy * ax
-        g[lc, 0] += ay * bz - az * by
-        g[lc, 1] += az * bx - ax * bz
-        g[lc, 2] += ax * by - ay * bx
+        g[ia, 0] += px
+        g[ia, 1] += py
+        g[ia, 2] += pz
+        g[ib, 0] += cy * az - cz * ay
+        g[ib, 1] += cz * ax - cx * az
+        g[ib, 2] += cx * ay - cy * ax
+        g[ic, 0] += ay * bz - az * by
+        g[ic, 1] += az * bx - ax * bz
+        g[ic, 2] += ax * by - ay * bx
     # dV/dr = -sum of the gradients, shared by the reference particles
     sx = 0.0
     sy = 0.0
     sz = 0.0
     for q in range(npart):
-        sx += g[q, 0]
-        sy += g[q, 1]
-        sz += g[q, 2]
+        i = particles[q]
+        sx += g[i, 0]
+        sy += g[i, 1]
+        sz += g[i, 2]
     sx /= nref
     sy /= nref
     sz /= nref
     for q in range(nref):
-        g[ref[q], 0] -= sx
-        g[ref[q], 1] -= sy
-        g[ref[q], 2] -= sz
+        i = ref[q]
+        g[i, 0] -= sx
+        g[i, 1] -= sy
+        g[i, 2] -= sz
     denom = 0.0
     for q in range(npart):
-        denom += w[particles[q]] * (g[q, 0] * g[q, 0] + g[q, 1] * g[q, 1] + g[q, 2] * g[q, 2])
+        i = particles[q]
+        denom += w[i] * (g[i, 0] * g[i, 0] + g[i, 1] * g[i, 1] + g[i, 2] * g[i, 2])
     denom /= 36.0
     if denom <= 0.0:
         return 0.0
@@ -143,16 +144,17 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     for q in range(npart):
         i = particles[q]
         f = f6 * w[i]
-        x[i, 0] += f * g[q, 0]
-        x[i, 1] += f * g[q, 1]
-        x[i, 2] += f * g[q, 2]
+        x[i, 0] += f * g[i, 0]
+        x[i, 1] += f * g[i, 1]
+        x[i, 2] += f * g[i, 2]
     return s
 
 
 @numba.njit(**NUMBA_OPTIONS)
 def _project_volume(x, w, pstart, particles, tstart, tris, rstart, ref, rest, k, c, lam,
                     g, xpbd, start, stop):
-    """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``tstart``, ``rstart``)."""
+    """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``tstart``, ``rstart``;
+    all ids global)."""
     for j in range(start, stop):
         lam[j] += _solve_volume(x, w, particles[pstart[j]:pstart[j + 1]],
                                 tris[tstart[j]:tstart[j + 1]], ref[rstart[j]:rstart[j + 1]],
@@ -175,11 +177,11 @@ def localize(triangles: np.ndarray):
 def solve_volume(positions, inv_mass, triangles, rest_volume, stiffness) -> np.ndarray:
     """One PBD projection of one body's volume constraint; returns new ``(n, 3)`` positions."""
     x = np.array(positions, dtype=np.float64, order="C")
-    particles, local, ref = localize(triangles)
+    tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    particles, _, ref = localize(tris)
     one = np.ones(1, dtype=np.float64)
     _project_volume(x, np.ascontiguousarray(inv_mass, dtype=np.float64),
-                    np.array([0, len(particles)]), particles, np.array([0, len(local)]), local,
-                    np.array([0, len(ref)]), ref, np.array([float(rest_volume)]),
-                    one * float(stiffness), one * 0.0, one * 0.0,
-                    np.zeros((len(particles), 3)), False, 0, 1)
+                    np.array([0, len(particles)]), particles, np.array([0, len(tris)]), tris,
+                    np.array([0, len(ref)]), particles[ref], np.array([float(rest_volume)]),
+                    one * float(stiffness), one * 0.0, one * 0.0, np.zeros_like(x), False, 0, 1)
     return x
