@@ -13,10 +13,10 @@ Functions on arrays. The construction, in order:
    aligned skull landmarks to the targets; exact at the landmarks.
 4. **Enhancement landmarks** (red dots of Fig. 8). Candidate points are the outer-surface
    vertices (one per ``enhancement_cell`` grid cell) of the morphed skull in front of the
-   ears (a vertex is *outer* when a ray
-   along its normal leaves the skull without hitting it again) that face the skin (their
-   normal within ~70 degrees of the skin normal at their closest skin point: this leaves
-   out the back of the teeth and the inside of the jaw). The signed depth ``D`` beneath
+   ears (a vertex is *outer* when a ray along its normal leaves the skull without hitting
+   it again) that face the skin (their normal within ~70 degrees of the skin normal at
+   their closest skin point: this leaves out the back of the teeth and the inside of the
+   jaw). The signed depth ``D`` beneath
    the closest skin point (:func:`signed_skin_depth`; negative when the bone pokes
    through) is compared with the expected depth ``t*`` (Shepard interpolation of the
    landmark depths); where ``D < enhancement_min_ratio * t*`` the vertex is *bad*.
@@ -26,12 +26,15 @@ Functions on arrays. The construction, in order:
    the skin inward to the bone (the red dots of Fig. 8), and the RBF is rebuilt with the
    landmarks' shape parameter; ``enhancement_rounds`` rounds or until nothing is bad.
    Points in pockets (teeth in a modelled mouth) and points no skin covers (beyond a
-   mask's rim, the back of the head) are left alone: the back need not fit (§7). Points whose line
-   misses the skin (the back of an open head, beyond a face mask) are left alone: the
-   back of the skull need not fit (§7).
-5. **Muscles** (:mod:`faceforge.anatomy.fit_muscles`): the muscle map is morphed by the
-   same map, thickness rescaled by Eq. 5; skull landmarks covered by muscles are brought
-   onto the muscle surface by cylindrical projection and the fit is run again (the refit).
+   mask's rim, below the neck) are left alone: the back need not fit (§7). Template
+   landmarks the skin cannot place and that lie far from every target (a face mask has
+   no skull top, back or jaw angles) are *anchors*: held where the similarity puts them,
+   so the RBF does not extrapolate the back of the skull.
+5. **Muscles** (:mod:`faceforge.anatomy.fit_muscles`): the muscles (built on the template
+   skull) are morphed by the same map, thickness rescaled by Eq. 5; skull landmarks
+   covered by muscles are brought onto the muscle surface by cylindrical projection and
+   the fit is run again (the refit), so the muscles lie at least ``muscle_gap_mm``
+   beneath the skin there.
 
 The map is kept as a composition of callables (similarity then RBF then refit RBF) and
 is applied to every template point: cranium, mandible, landmarks, jaw axes (points by
