@@ -455,6 +455,7 @@ class FitResult:
     cranium_faces: np.ndarray = None    # (m, 3) template faces
     mandible_faces: np.ndarray = None
     tissue_targets: np.ndarray = None   # (n, 3) targets before the refit (skin - depth * normal)
+    enhancement_targets: np.ndarray = None  # (e, 3) where the enhancement landmarks went
 
 
 def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
@@ -510,7 +511,10 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         point = np.asarray(point, dtype=np.float64)[None]
         jaw[name] = (warp(point)[0], map_directions(warp, point, np.asarray(direction, dtype=np.float64)[None], step)[0])
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
+    enhancement = sk.targets[sk.n_landmarks + len(pairs.anchors):]
+    if len(warp.rbfs) > 1:
+        enhancement = warp.rbfs[-1](enhancement)
     reached = np.array([fitted_lm[f] for f in pairs.fdps])
     return FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
                      {n: warp(p) for n, p in template.muscle_points.items()}, muscles, warp, info,
-                     np.asarray(cf), np.asarray(mf), pairs.target)
+                     np.asarray(cf), np.asarray(mf), pairs.target, enhancement)

@@ -50,8 +50,9 @@ def landmark_residuals(fdps, reached: np.ndarray, targets: np.ndarray, diagonal:
     return {f: float(x) for f, x in zip(fdps, r)}
 
 
-def save_fit_png(path, skin_v, skin_f, layers: list, title: str = "fit") -> None:
-    """Front and side pictures: ``layers`` [(vertices, faces, rgb)] inside the translucent skin.
+def save_fit_png(path, skin_v, skin_f, layers: list, title: str = "fit", points=None) -> None:
+    """Front and side pictures: ``layers`` [(name, vertices, faces, rgb)] inside the translucent
+    skin, with optional ``points`` (k, 3) (the landmark targets, as in Fig. 8).
 
     Uses :func:`faceforge.viz.render.render_meshes` (painter's algorithm, Agg).
     """
@@ -59,7 +60,7 @@ def save_fit_png(path, skin_v, skin_f, layers: list, title: str = "fit") -> None
 
     drawn = [Layer(v, f, color=c) for name, v, f, c in layers]
     drawn.append(Layer(skin_v, skin_f, color=(0.95, 0.78, 0.68), alpha=0.25))
-    render_meshes(path, drawn, views=("front", "side"), title=title)
+    render_meshes(path, drawn, views=("front", "side"), title=title, points=points)
 
 
 def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_es0: float = 0.75) -> dict:

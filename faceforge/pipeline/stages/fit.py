@@ -213,8 +213,12 @@ def write_outputs(out_dir, result, report, extra) -> None:
     layers = [("cranium", result.cranium, result.cranium_faces, (0.93, 0.91, 0.84)),
               ("mandible", result.mandible, result.mandible_faces, (0.88, 0.86, 0.78))]
     layers += [(n, v, f, (0.78, 0.25, 0.22)) for n, v, f in result.muscles]
-    save_fit_png(out_dir / "fit.png", checked.vertices, checked.faces, layers,
-                 title=f"fit: {Path(report['mesh']['path']).name}")
+    import numpy as np
+
+    targets = np.vstack([result.targets, result.enhancement_targets])
+    save_fit_png(out_dir / "fit.png", checked.vertices, checked.faces, layers, points=targets,
+                 title=f"fit: {Path(report['mesh']['path']).name} ({len(result.targets)} landmark and "
+                       f"{len(result.enhancement_targets)} enhancement targets)")
 
 
 STAGE = register_stage(Stage(
