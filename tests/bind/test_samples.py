@@ -5,19 +5,14 @@ the fit stage's functions write ``fit/fit.npz`` in a temporary workdir, the bind
 stage's ``run`` writes ``bind/``, and the animate stage's :class:`BoundHead`
 assembles the skull, muscles and skin exactly as ``faceforge animate`` does.
 
-Until the fit's template loader (``faceforge.anatomy.fit_template``) is
-importable, the fixture fits the skull alone with :func:`faceforge.anatomy.fit.fit_head`
-on ``templates/skull`` and writes the same ``fit.npz`` keys without muscles.
-
-The rest test runs 1,000 frames on the MediaPipe head and 50 frames with a
-100 times tighter bound on the two larger heads (a fixed point does not move
-at all: the drift measured is ~1e-14 of the diagonal); ``benchmarks/bench_bind.py``
-runs the full 1,000 frames on all three.
+The rest test runs 50 frames with a bound 100 times tighter than the
+acceptance's 1e-4 of the diagonal over 1,000 frames (a fixed point does not
+move at all: the drift measured is ~1e-14 of the diagonal);
+``benchmarks/bench_bind.py`` runs the full 1,000 frames on all three heads.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -40,87 +35,49 @@ def config():
     return load_config()
 
 
-@pytest.fixture(scope="session")
-def template(config):
-    """The fit stage's template, or None when its loader has not landed (skull-only fit)."""
-    try:
-        import faceforge.anatomy.fit_template  # noqa: F401
-    except ImportError:
-        return None
-    from faceforge.pipeline.stages.fit import load_template
-
-    return load_template(config)
-
-
-def _skull_only_fit(mesh, fit_dir):
-    """fit.npz of a skull-only fit (no muscles) with the keys the bind and animate stages read."""
-    import yaml
-
-    from faceforge.anatomy.fit import FitSettings, FitTemplate, SkinSurface, fit_head
-    from faceforge.io.landmarks import default_landmark_path, load_landmarks
-    from faceforge.io.mesh import load_mesh
-    from faceforge.io.mesh_check import check_mesh
-    from faceforge.io.stagefiles import save_npz
-
-    skull = ROOT / "templates" / "skull"
-    bone = {k: load_mesh(skull / f"{k}.obj")[:2] for k in ("cranium", "mandible")}
-    lm = yaml.safe_load((skull / "landmarks.yaml").read_text())["landmarks"]
-    jaw = yaml.safe_load((skull / "jaw.yaml").read_text())
-    pivot = np.asarray(jaw["pitch_axis"]["point"], float)
-    axes = {"pitch": (pivot, jaw["pitch_axis"]["direction"]),
-            "yaw": (jaw["yaw_axis"]["point"], jaw["yaw_axis"]["direction"]),
-            "protrusion": (pivot, jaw["protrusion"]["direction"])}
-    tpl = FitTemplate(bone["cranium"], bone["mandible"],
-                      {k: np.asarray(x["position"], float) for k, x in lm.items()}, axes)
-    v, f, _ = load_mesh(mesh)
-    checked = check_mesh(v, f, str(mesh))
-    marks = load_landmarks(default_landmark_path(mesh), checked.vertices, checked.faces,
-                           user_to_internal=checked.user_to_internal)
-    skin = SkinSurface.build(checked.vertices, checked.faces)
-    r = fit_head(tpl, skin, marks.ids, marks.positions, marks.face_ids, marks.bary, FitSettings())
-    arrays = dict(skin_vertices=skin.vertices, skin_faces=skin.faces,
-                  skin_user_to_internal=checked.user_to_internal,
-                  cranium_vertices=r.cranium, cranium_faces=bone["cranium"][1],
-                  mandible_vertices=r.mandible, mandible_faces=bone["mandible"][1],
-                  skin_landmark_ids=np.asarray(marks.ids), skin_landmark_positions=marks.positions)
-    for name, (point, direction) in r.jaw_axes.items():
-        arrays[f"jaw_{name}_point"], arrays[f"jaw_{name}_direction"] = point, direction
-    save_npz(fit_dir / "fit.npz", **arrays)
-
-
 _HEADS: dict = {}
 
 
+def fit_and_bind(mesh: Path, work: Path, config):
+    """The fit and bind stages' work into ``work/fit/fit.npz`` and ``work/bind/bind.npz``.
+
+    Calls the stages' library functions, skipping their pictures (the stages
+    themselves are tested in tests/fit and tests/bind/test_stage.py). Returns the
+    bind report.
+    """
+    from faceforge.anatomy.binding import bind_head
+    from faceforge.anatomy.fit_report import npz_arrays
+    from faceforge.io.landmarks import default_landmark_path
+    from faceforge.io.stagefiles import load_npz, save_npz
+    from faceforge.pipeline.stages.bind import head_from_fit_arrays
+    from faceforge.pipeline.stages.fit import fit_files, load_template
+
+    template = load_template(config.get("template.skull"), config.get("template.muscle_map"))
+    result, _, extra = fit_files(str(mesh), str(default_landmark_path(mesh)), template,
+                                 dict(config.get("fit") or {}))
+    checked = extra["checked"]
+    for name in ("fit", "bind"):
+        (work / name).mkdir()
+    save_npz(work / "fit" / "fit.npz", **npz_arrays(result, checked.vertices, checked.faces,
+                                                    checked.user_to_internal, extra["landmarks"],
+                                                    template.layers))
+    head = head_from_fit_arrays(load_npz(work / "fit" / "fit.npz"))
+    bound = bind_head(head["vertices"], head["faces"], head["landmarks"], head["cranium"], head["mandible"],
+                      head["muscles"], float(config.get("bind.max_ray_distance")))
+    save_npz(work / "bind" / "bind.npz", **bound.as_arrays())
+    return bound.report
+
+
 @pytest.fixture(scope="session", params=sorted(SAMPLES))
-def bound(request, config, template, tmp_path_factory):
+def bound(request, config, tmp_path_factory):
     """(name, workdir, report dict, BoundHead) of one fitted + bound sample head."""
     name = request.param
-    if name in _HEADS:
-        return _HEADS[name]
-    from faceforge.io.landmarks import default_landmark_path
-    from faceforge.io.stagefiles import save_npz
-    from faceforge.pipeline import StageContext
-    from faceforge.pipeline.stages.animate import BoundHead
-    from faceforge.pipeline.stages.bind import run
+    if name not in _HEADS:
+        from faceforge.pipeline.stages.animate import BoundHead
 
-    work = tmp_path_factory.mktemp(name)
-    mesh = SAMPLES[name]
-    (work / "fit").mkdir()
-    if template is None:
-        _skull_only_fit(mesh, work / "fit")
-    else:
-        from faceforge.anatomy.fit_template import npz_arrays
-        from faceforge.pipeline.stages.fit import fit_files
-
-        result, _ = fit_files(str(mesh), str(default_landmark_path(mesh)), template,
-                              dict(config.get("fit") or {}))
-        save_npz(work / "fit" / "fit.npz", **npz_arrays(result))
-    (work / "bind").mkdir()
-    run(StageContext(name="bind", config=config, params={}, out_dir=work / "bind", workdir=work,
-                     deps=("fit",)))
-    report = json.loads((work / "bind" / "report.json").read_text())
-    head = BoundHead(work / "fit", work / "bind", config)
-    _HEADS[name] = (name, work, report, head)
+        work = tmp_path_factory.mktemp(name)
+        report = fit_and_bind(SAMPLES[name], work, config)
+        _HEADS[name] = (name, work, report, BoundHead(work / "fit", work / "bind", config))
     return _HEADS[name]
 
 
@@ -151,7 +108,7 @@ def test_face_front_is_fully_bound(bound):
 def test_rest_is_a_fixed_point(bound):
     name, _, _, head = bound
     head.rig.reset()
-    frames, bound_ = (1000, 1e-4) if len(head.rest) < 2000 else (50, 1e-6)
+    frames, bound_ = 50, 1e-6
     for _ in range(frames):
         head.system.step()
         head.skin.step(head.system, 1.0 / 25.0)
