@@ -106,11 +106,12 @@ def test_batched_bending_matches_the_sequential_sweep(scale):
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
 
 
-def test_coloured_solver_rest_fixed_point_momentum_and_convergence():
+@pytest.mark.parametrize("mode", ["paper", "xpbd"])  # batched sweeps / scalar coloured sweeps
+def test_coloured_solver_rest_fixed_point_momentum_and_convergence(mode):
     v, f = sphere(2)
     b, _ = skin_builder(v, f)
     model = b.finalize()
-    solver = Solver(model, SolverSettings(colouring=True))
+    solver = Solver(model, SolverSettings(colouring=True, stiffness_mode=mode))
     state = model.state()
     for _ in range(200):
         solver.step(state, state, model.control(), 0.04)
@@ -124,7 +125,7 @@ def test_coloured_solver_rest_fixed_point_momentum_and_convergence():
     state.velocities[:] = rng.normal(size=state.positions.shape)
     p0 = state.velocities.sum(axis=0)
     before = max_abs_residuals(model, state.positions)
-    solver = Solver(model, SolverSettings(colouring=True, damping=0.0))
+    solver = Solver(model, SolverSettings(colouring=True, damping=0.0, stiffness_mode=mode))
     out = model.state()
     solver.step(state, out, model.control(), 0.04)
     np.testing.assert_allclose(out.velocities.sum(axis=0), p0, atol=1e-9 * len(v))
