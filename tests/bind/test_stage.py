@@ -96,3 +96,16 @@ def test_report_fractions_add_up():
     assert r["missed_rays"] == 1
     assert r["anchors_per_body"] == {"m": 2, "cranium": 1}
     assert abs(sum(r["regions"]["all"]["fraction"][k] for k in ("muscle", "cranium", "mandible", "none")) - 1) < 1e-12
+
+
+def test_cli_bind_without_fit_is_a_one_line_error(invoke, tmp_path):
+    result = invoke("--workdir", tmp_path, "bind")
+    assert result.exit_code == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert lines and lines[-1].startswith("faceforge: error:")
+    assert "Traceback" not in result.stderr
+
+
+def test_cli_lists_the_bind_command(invoke):
+    result = invoke("--help")
+    assert result.exit_code == 0 and "bind" in result.output
