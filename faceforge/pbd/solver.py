@@ -3,10 +3,18 @@
 ``step(state_in, state_out, control, dt)``: for each of ``substeps`` substeps of
 length ``h = dt / substeps``: damp velocities (``damping`` per step, spread evenly
 over the substeps), predict ``p = x + h v`` for dynamic particles, move kinematic
-particles linearly toward ``control.kinematic_positions`` (reached at the last
-substep), project all constraints ``iterations`` times in builder order
+particles linearly toward ``control.kinematic_positions`` (reached exactly at the
+last substep), project all constraints ``iterations`` times in builder order
 (sequential Gauss-Seidel), set ``v = (p - x) / h``. Deterministic: sequential, no
 fastmath, no allocation inside the compiled step.
+
+With ``SolverSettings(colouring=True)`` the distance, bending and area constraints of
+each builder block are visited colour by colour (blocks keep their order, so deeper
+layers are still projected first), and in the PBD modes bending and area run in
+vectorised batches of independent constraints (see :mod:`faceforge.pbd.colouring`).
+
+Note: numba's on-disk cache does not track the constraint modules that ``_step``
+inlines; after editing one, delete ``faceforge/pbd/**/__pycache__/*.nb[ic]``.
 """
 
 from __future__ import annotations
