@@ -76,10 +76,13 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
     diag = skin.diagonal
     mm = result.info["units_per_mm"]
     skin_lm = skin_landmarks.as_dict()
+    from faceforge.anatomy.fit import signed_skin_depth
+
     skull = np.vstack([result.cranium, result.mandible])
-    depth, covered = depth_below_skin(skull, skin)
+    depth, _, _, covered, pocket = signed_skin_depth(skull, skin)
     front = front_mask(skull, skin_lm, front_offset_es0)
     skull_stats = inside_stats(depth, covered & front, diag)
+    beneath = inside_stats(depth, covered & front & ~pocket, diag)   # thickness: pockets left out
     residuals = landmark_residuals(result.fdps, result.reached, result.targets, diag)
     muscles, per_muscle = [], {}
     all_depth, all_cov = [], []
@@ -119,8 +122,10 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
         },
         "skull": skull_stats,
         "muscles": muscle_stats,
-        "tissue_thickness": {"min": skull_stats["min_depth"], "median": skull_stats["median_depth"],
-                             "min_mm": skull_stats["min_depth_mm"], "median_mm": skull_stats["median_depth_mm"]},
+        "tissue_thickness": {"min": beneath["min_depth"], "median": beneath["median_depth"],
+                             "min_mm": None if beneath["min_depth"] is None else beneath["min_depth"] / mm,
+                             "median_mm": None if beneath["median_depth"] is None else beneath["median_depth"] / mm,
+                             "in_pockets": int((covered & front & pocket).sum())},
     }
 
 

@@ -13,6 +13,7 @@ duplicate vertices     merged internally (``user_to_internal`` keeps the map bac
 degenerate triangles   dropped internally (repeated index or zero area)
 duplicate triangles    dropped internally (same three vertices)
 non-manifold edges     rejected: an edge shared by more than two triangles
+inconsistent winding   triangles turned to agree with their neighbours (per piece)
 holes                  reported as boundary loops (open heads are normal)
 several components     kept and reported (e.g. iris points, eyeballs)
 unused vertices        kept and reported
@@ -209,6 +210,9 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>") ->
         a, b = internal_to_user[nm[0]]
         raise MeshError(f"{len(nm)} non-manifold edges (shared by more than two triangles), "
                         f"e.g. between vertices {a} and {b}; fix the mesh in a modeller", path)
+    flipped = _fix_winding(f)
+    if flipped:
+        report.warnings.append(f"turned {flipped} triangles to agree with their neighbours' winding")
     loops = boundary_loops(f)
     report.boundary_loops = [int(len(x)) for x in loops]
     labels = face_components(f, len(iv))
@@ -220,6 +224,51 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>") ->
     used[f.ravel()] = True
     report.unused_vertices = int((~used).sum())
     return CheckedMesh(iv, f, user_to_internal, internal_to_user, report)
+
+
+def _fix_winding(faces: np.ndarray) -> int:
+    """Make the winding of each piece consistent, in place; returns how many faces were turned.
+
+    A breadth-first walk over faces sharing an edge: a neighbour that runs the shared edge
+    in the same direction is turned. The first face of each piece keeps its winding (the fit
+    orients the whole skin outward afterwards). Requires a manifold mesh.
+    """
+    m = len(faces)
+    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    if len(np.unique(directed, axis=0)) == len(directed):
+        return 0   # every shared edge is run once each way: already consistent
+    und = np.sort(directed, axis=1)
+    _, inv = np.unique(und, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    order = np.argsort(inv, kind="stable")   # half-edges of one edge become neighbours
+    same = inv[order[1:]] == inv[order[:-1]]
+    a, b = order[:-1][same], order[1:][same]          # half-edge ids sharing an edge
+    adj = [[] for _ in range(m)]
+    for ha, hb in zip(a.tolist(), b.tolist()):
+        adj[ha // 3].append((hb // 3, ha, hb))
+        adj[hb // 3].append((ha // 3, hb, ha))
+    turned = np.zeros(m, bool)
+    seen = np.zeros(m, bool)
+    count = 0
+    for start in range(m):
+        if seen[start]:
+            continue
+        seen[start] = True
+        stack = [start]
+        while stack:
+            f = stack.pop()
+            for g, hf, hg in adj[f]:
+                if seen[g]:
+                    continue
+                # directions of the shared edge as the faces will be wound
+                df = directed[hf] if not turned[f] else directed[hf][::-1]
+                dg = directed[hg]
+                turned[g] = bool(np.all(df == dg))
+                count += int(turned[g])
+                seen[g] = True
+                stack.append(g)
+    faces[turned] = faces[turned][:, ::-1]
+    return count
 
 
 def largest_component(faces: np.ndarray, n_vertices: int) -> np.ndarray:

@@ -97,3 +97,18 @@ def test_ellipsoid_helper_is_watertight():
     v, f = ellipsoid_head(8, 12)
     m = trimesh.Trimesh(v, f, process=False)
     assert m.is_watertight and m.volume > 0
+
+
+def test_inconsistent_winding_is_repaired(ellipsoid):
+    import trimesh
+
+    v, f = ellipsoid
+    bad = f.copy()
+    idx = np.random.default_rng(0).choice(len(f), 40, replace=False)
+    bad[idx] = bad[idx][:, ::-1]
+    c = check_mesh(v, bad, "w.obj")
+    assert any("winding" in w for w in c.report.warnings)
+    mesh = trimesh.Trimesh(c.vertices, c.faces, process=False)
+    assert mesh.is_winding_consistent and abs(mesh.volume) > 0
+    # the same triangles, only turned: each face keeps its vertex set
+    np.testing.assert_array_equal(np.sort(c.faces, axis=1), np.sort(f, axis=1))

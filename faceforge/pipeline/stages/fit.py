@@ -169,7 +169,7 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     """
     import time
 
-    from faceforge.anatomy.fit import FitSettings, SkinSurface, fit_head
+    from faceforge.anatomy.fit import FitSettings, SkinSurface, fit_head, orient_outward
     from faceforge.anatomy.fit_report import build_report
     from faceforge.io.landmarks import load_landmarks
     from faceforge.io.mesh import load_mesh
@@ -178,6 +178,7 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     t = time.perf_counter()
     v, f, _ = load_mesh(mesh_path)
     checked = check_mesh(v, f, str(mesh_path))
+    checked.faces = orient_outward(checked.vertices, checked.faces)   # stage files: outward winding
     for w in checked.report.warnings:
         log(f"{mesh_path}: {w}")
     lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal)
