@@ -183,18 +183,6 @@ def import_plugins(plugins: Iterable[str]) -> None:
                 raise StageError(f"cannot import plugin {plugin!r}: {exc}") from None
 
 
-def check_targets(targets: Sequence[str]) -> None:
-    """``StageError`` unless every target stage (and its upstream) is registered."""
-    from faceforge.pipeline.stage import stage_order
-
-    stage_order(targets)
-
-
-def head_name(mesh: str | Path) -> str:
-    """Default workdir name of a head: its mesh's stem."""
-    return Path(mesh).stem
-
-
 def check_unique(jobs: Sequence[HeadJob], source: str) -> None:
     """Two heads must not share a workdir; the error names both meshes."""
     seen: dict[str, HeadJob] = {}
@@ -248,7 +236,7 @@ def make_job(mesh: str | Path, out: str | Path, shared: SharedOptions, name: str
              landmarks: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
              base: str | Path = ".") -> HeadJob:
     """A :class:`HeadJob` for ``mesh`` in ``<out>/<name>/`` (paths made absolute)."""
-    name = name or head_name(mesh)
+    name = name or Path(mesh).stem
     workdir = Path(out).absolute() / name
     return HeadJob(name=name, mesh=str(Path(mesh).absolute()), workdir=str(workdir),
                    landmarks=None if landmarks is None else str(Path(landmarks).absolute()),
@@ -297,9 +285,8 @@ def _yaml_lines(text: str, source: str) -> tuple[Any, dict]:
         lines[path] = node.start_mark.line + 1
         if isinstance(node, yaml.MappingNode):
             for k, v in node.value:
-                lines[path + (str(k.value),)] = k.start_mark.line + 1
                 walk(v, path + (str(k.value),))
-                lines[path + (str(k.value),)] = k.start_mark.line + 1
+                lines[path + (str(k.value),)] = k.start_mark.line + 1   # the key's line
         elif isinstance(node, yaml.SequenceNode):
             for i, v in enumerate(node.value):
                 walk(v, path + (i,))
@@ -362,17 +349,14 @@ def load_manifest(path: str | Path, out: str | Path, cli: SharedOptions,
 
     given = set(cli_given)
     picked = {k: getattr(cli, k) for k in ("fap", "expression", "intensity", "seconds", "output")}
-    for key in picked:
-        if key in data and key not in given:
-            value = data[key]
-            if key == "fap":
-                value = resolve(value, ("fap",))
-            elif key in ("intensity", "seconds"):
-                if isinstance(value, bool) or not isinstance(value, (int, float)) or value <= (0 if key == "seconds" else -1e-12):
-                    raise StageError(f"{key}: expected a positive number, got {value!r}", source, lines.get((key,)))
-            elif not isinstance(value, str):
-                raise StageError(f"{key}: expected a string, got {value!r}", source, lines.get((key,)))
-            picked[key] = value
+    for key in [k for k in picked if k in data and k not in given]:
+        value = data[key]
+        number = key in ("intensity", "seconds")
+        if number and (isinstance(value, bool) or not isinstance(value, (int, float)) or value < 0):
+            raise StageError(f"{key}: expected a positive number, got {value!r}", source, lines.get((key,)))
+        if not number and not isinstance(value, str):
+            raise StageError(f"{key}: expected a string, got {value!r}", source, lines.get((key,)))
+        picked[key] = resolve(value, ("fap",)) if key == "fap" else value
     if "fap" in given or "expression" in given:   # the command line picks the animation source
         picked["fap"], picked["expression"] = cli.fap, cli.expression
     shared_set = _overrides(data.get("set"), ("set",), source, lines, base)

@@ -25,6 +25,15 @@ def _done_lines(out):
     return found
 
 
+def _running(pid: int) -> bool:
+    """True while ``pid`` exists and is not a zombie waiting to be reaped."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
 def test_kill_then_rerun_completes_only_the_remainder(tmp_path, heads_dir, short_fap, subprocess_env):
     from .conftest import PLUGIN, ROOT
 
@@ -64,3 +73,33 @@ def test_kill_then_rerun_completes_only_the_remainder(tmp_path, heads_dir, short
     assert sorted(done) == sorted((h, s) for h in HEADS for s in batch.DEFAULT_TARGETS)
     assert not [p for p in out.rglob(".tmp-*")]
     assert os.listdir(out / HEADS[0] / "animate")
+
+
+def test_killing_the_batch_takes_its_worker_processes_along(tmp_path, heads_dir, short_fap, subprocess_env):
+    """A SIGKILLed batch leaves no orphan worker writing into the workdirs (PR_SET_PDEATHSIG)."""
+    from .conftest import PLUGIN, ROOT
+
+    out = tmp_path / "out"
+    args = [sys.executable, "-m", "faceforge.cli", "--no-progress", "batch",
+            *[heads_dir / f"{h}.obj" for h in HEADS], "--fap", short_fap, "--plugin", PLUGIN,
+            "--out", out, "--jobs", "2"]
+    env = {**subprocess_env, "FACEFORGE_FAKE_DELAY": "5"}
+    proc = subprocess.Popen([str(a) for a in args], cwd=ROOT, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    logs = [out / h / batch.HEAD_LOG for h in HEADS[:2]]
+    deadline = time.monotonic() + 60
+    while not all(p.exists() and "fit: running" in p.read_text() for p in logs) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    workers = {int(re.search(r"pid (\d+)", p.read_text()).group(1)) for p in logs}
+    assert len(workers) == 2 and proc.pid not in workers
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    deadline = time.monotonic() + 10
+    alive = set(workers)
+    while alive and time.monotonic() < deadline:
+        for pid in list(alive):
+            if not _running(pid):
+                alive.discard(pid)
+        time.sleep(0.05)
+    assert not alive, f"worker processes {alive} outlived the killed batch"
+    assert not any((out / h / "fit" / "stage.json").exists() for h in HEADS)

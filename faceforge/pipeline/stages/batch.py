@@ -52,6 +52,7 @@ def command(ctx, inputs, fap, expression, intensity, seconds, out, output, jobs,
     from faceforge.io.config import parse_sets
     from faceforge.io.stagefiles import save_json
     from faceforge.pipeline import batch
+    from faceforge.pipeline.stage import stage_order
 
     app = ctx.obj
     root = ctx.find_root().params
@@ -62,7 +63,7 @@ def command(ctx, inputs, fap, expression, intensity, seconds, out, output, jobs,
                                  output=output, overrides=overrides, config_file=config_file,
                                  plugins=tuple(os.path.abspath(p) if p.endswith(".py") else p for p in plugins))
     batch.import_plugins(shared.plugins)
-    batch.check_targets(shared.targets)
+    stage_order(shared.targets)          # every stage registered (plugins included), before any work
     manifests = [p for p in inputs if batch.is_manifest(p)]
     if manifests and len(inputs) > 1:
         raise StageError("give either one manifest or head meshes, not both", manifests[0])
