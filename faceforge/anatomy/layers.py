@@ -270,6 +270,10 @@ class MusculoskeletalSystem:
         T = np.asarray(jaw_matrix, dtype=FLOAT)
         if T.shape != (4, 4):
             raise ValueError(f"jaw_matrix must be (4, 4), got {T.shape}")
+        R = T[:3, :3]
+        if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0
+                and np.allclose(T[3], [0, 0, 0, 1])):
+            raise ValueError("jaw_matrix must be a rigid transform (rotation + translation)")
         sl = self._vslice["mandible"]
         self._world_v[sl] = self._rest[sl] @ T[:3, :3].T + T[:3, 3]
         self._jaw = T.copy()

@@ -20,11 +20,23 @@ position            bottom contour particles to their contour samples
 =================  ==============================================================
 
 Linear contraction (§5.2.1, Eq. 4): the fibre lines A0, A2 are sampled with
-``step' = step (1 - c)`` so their samples slide toward the origin (sample 0
+``step' = step (1 - kappa c)`` so their samples slide toward the origin (sample 0
 stays on the origin). The origin line A3 is sampled normally (the fixed site).
 The interior insertion samples (A1, ``0 < j < w-1``) have no fibre of their
 own: each is moved by the linear blend (in ``j``) of the displacements of the
 two insertion corners, so the whole insertion edge travels with the fibres.
+``kappa`` (``max_contraction``, default :data:`LINEAR_MAX_CONTRACTION` = 0.5) is
+the fibre shortening at c = 1. The paper's literal kappa = 1 collapses every
+fibre sample onto the origin at c = 1; on the synthetic head the muscle then
+folds over itself (its bottom sheet turns over from c ~ 0.9 at rest and
+under smooth random driving). A fibre cannot shorten to nothing anyway
+(skeletal muscle shortens by roughly half at most), so c = 1 here means
+"half the rest fibre length"; pass ``max_contraction=1.0`` for the literal
+Eq. 4. The FAP -> contraction calibration absorbs the scale.
+
+Regular sampling is recomputed on the current layer every frame, as Eq. 3
+says, except for the sphincter's loops (see :func:`build_sphincter_muscle`,
+``material_sampling``).
 
 Sphincter contraction (§5.2.2). The paper's
 ``delta = (o - s1) (1 - c) cos(pi/2 (1 - sqrt(y^2 b^2 + x^2 a^2) / (ab)))``
@@ -32,10 +44,11 @@ moves every sample to the centre at c = 0, contradicting "c = 0 is rest". We
 read ``(1 - c)`` as the *remaining* fraction of the orifice and use
 ``delta = c kappa (o - s1) cos(pi/2 (1 - r))``: c = 0 is the rest state and c = 1
 the maximal contraction, which moves each inner sample the fraction ``kappa``
-(``max_contraction``, default :data:`SPHINCTER_MAX_CONTRACTION` = 0.5) of the way to the
-centre, times the fall-off. kappa = 1 (a fully closed orifice) collapses the
-inner loop to a point; its wall triangles degenerate and the dihedral bending
-projection diverges, so the default stops half way (a puckered mouth). ``r`` is the ellipse
+(``max_contraction``, default :data:`SPHINCTER_MAX_CONTRACTION` = 0.5) of the
+way to the centre, times the fall-off. kappa = 1 (a fully closed orifice)
+collapses the inner loop to a point; its wall triangles degenerate and the
+dihedral bending projection diverges (observed from kappa c ~ 0.6 on the
+synthetic mouth), so the default stops half way (a puckered mouth). ``r`` is the ellipse
 radius of the outer sample ``s3 = o + x dir_a + y dir_b``, written correctly as
 ``r = sqrt(x^2 / a^2 + y^2 / b^2) = sqrt(x^2 b^2 + y^2 a^2) / (ab)`` (the paper
 swaps a and b, which would give r != 1 on the ellipse itself), clipped so that

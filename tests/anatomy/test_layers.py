@@ -160,6 +160,8 @@ def test_invalid_assemblies_are_template_errors(head):
     system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles)
     with pytest.raises(KeyError, match="frontalis"):
         system.step({"frontalus": 0.5})
+    with pytest.raises(ValueError, match="rigid"):
+        system.step({}, np.diag([1.0, 2.0, 1.0, 1.0]))
 
 
 def test_split_skull_parts_are_disjoint():
