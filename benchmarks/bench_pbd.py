@@ -278,11 +278,16 @@ def bench_cloth(repeat, steps=100, n=70):
     out["speedup_faceforge_coloured_over_pypbd"] = (out["pypbd_ms_per_step"]
                                                     / out["faceforge_coloured_ms_per_step"])
     out["pypbd_step_extras"] = (
-        "pypbd's TimeStepController.step also clears accelerations and applies gravity "
-        "through per-particle accessors, loops over (empty) rigid bodies/joints, runs its "
-        "constraints through virtual calls in colour groups (OpenMP, here 1 thread), "
-        "advances the TimeManager and updates the triangle model's normals; velocity "
-        "constraint iterations set to 0, no collision detection.")
+        "Same mesh, constraint kinds (PBD distance k=1, dihedral k=0.5), 10 iterations, 1 "
+        "substep, gravity, no damping, 100 steps; both end at the same sag. pypbd's "
+        "TimeStepController::step (read from its source) additionally: clears accelerations "
+        "and re-applies gravity per particle, keeps last/old positions, loops over (empty) "
+        "rigid bodies/orientations, calls initConstraintBeforeProjection on every constraint "
+        "each step, projects through two virtual calls per constraint (updateConstraint + "
+        "solvePositionConstraint) in its own colour groups (OpenMP, 1 thread here), calls "
+        "updateConstraint once more per constraint before the (0) velocity iterations, scans "
+        "all constraints for motor joints and advances the TimeManager. faceforge's step "
+        "additionally applies velocity damping (0 here) and writes kinematic particles.")
     return out
 
 
