@@ -30,7 +30,8 @@ from faceforge.constants import FLOAT, NUMBA_OPTIONS
 from faceforge.geometry.surface_points import SurfacePoints, project_to_surface
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
-__all__ = ["ActionLine", "sample_polyline", "polyline_parameters", "eval_polyline", "sample_positions", "mean_edge_length",
+__all__ = ["ActionLine", "sample_polyline", "polyline_parameters", "eval_polyline", "sample_positions",
+           "mean_edge_length",
            "project_outermost"]
 
 

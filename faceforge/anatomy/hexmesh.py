@@ -171,7 +171,8 @@ def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float, surf
     s = np.asarray(samples, dtype=FLOAT)
     sn = np.asarray(sample_normals, dtype=FLOAT)
     if s.shape != (len(topo.contour), 3) or sn.shape != s.shape:
-        raise ValueError(f"expected {len(topo.contour)} contour samples and normals, got {s.shape}, {sn.shape}")
+        raise ValueError(f"expected {len(topo.contour)} contour samples and normals, "
+                         f"got {s.shape}, {sn.shape}")
     if not thickness > 0:
         raise ValueError(f"muscle thickness must be positive, got {thickness}")
     hw = topo.h * topo.w

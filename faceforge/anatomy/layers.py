@@ -117,9 +117,9 @@ class MusculoskeletalSystem:
         self._names = [b[0] for b in bodies]
         self._faces = {name: f for name, _, f in bodies}
         offsets = np.cumsum([0] + [len(v) for _, v, _ in bodies])
-        self._vslice = {name: slice(int(offsets[i]), int(offsets[i + 1])) for i, name in enumerate(self._names)}
+        self._vslice = {n: slice(int(offsets[i]), int(offsets[i + 1])) for i, n in enumerate(self._names)}
         foffsets = np.cumsum([0] + [len(f) for _, _, f in bodies])
-        self._fslice = {name: slice(int(foffsets[i]), int(foffsets[i + 1])) for i, name in enumerate(self._names)}
+        self._fslice = {n: slice(int(foffsets[i]), int(foffsets[i + 1])) for i, n in enumerate(self._names)}
         self._rest = np.concatenate([v for _, v, _ in bodies]).astype(FLOAT)
         self._world_f = np.concatenate(
             [f + offsets[i] for i, (_, _, f) in enumerate(bodies)]).astype(INT)
@@ -311,7 +311,8 @@ class MusculoskeletalSystem:
         for m, s, own in zip(layer.muscles, layer.slots, layer.pieces):
             if len(s):
                 lp = {key: pts[sl] for key, sl in own.items()}
-                layer.control.position_targets[s] = m.targets_from_line_points(contractions.get(m.name, 0.0), lp)
+                c = contractions.get(m.name, 0.0)
+                layer.control.position_targets[s] = m.targets_from_line_points(c, lp)
 
     def reset(self) -> None:
         """Back to the rest state (jaw closed, muscles at rest, zero velocities)."""

@@ -66,7 +66,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from faceforge.anatomy.action_line import ActionLine, eval_polyline, sample_positions
+from faceforge.anatomy.action_line import eval_polyline, sample_positions
 from faceforge.anatomy.hexmesh import HexTopology, hex_topology, morph_hex
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
