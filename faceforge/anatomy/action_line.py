@@ -154,12 +154,13 @@ def sample_positions(points, n: int, closed: bool = False, step_scale: float = 1
 
 def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePoints:
     """Surface points seen from outside along the local normal (see ActionLine.from_points)."""
-    from faceforge.geometry.rays import RayCaster
+    from faceforge.geometry.surface_points import projector
     from faceforge.geometry.triangles import barycentric
 
     v, f = check_mesh(vertices, faces)
     p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
-    near = project_to_surface(p, v, f)
+    proj = projector(v, f)
+    near = proj.project(p)
     n = near.normals(v, f)
     # "outside" is away from the layer's centre: a deeper muscle's bottom sheet
     # touches the skull with the opposite normal, so orient n radially outward
@@ -167,7 +168,7 @@ def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePo
     flip = np.einsum("ij,ij->i", n, near.positions(v, f) - centre) < 0
     n[flip] *= -1.0
     r = reach * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
-    face, hit, _ = RayCaster(v, f).first_hit(p + r * n, -n)
+    face, hit, _ = proj.caster.first_hit(p + r * n, -n)
     ok = face >= 0
     if not ok.any():
         return near

@@ -7,6 +7,8 @@ deformation or rigid motion of the mesh it lies on.
 
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -19,7 +21,7 @@ from faceforge.geometry.triangles import (
     vertex_normals,
 )
 
-__all__ = ["SurfacePoints", "project_to_surface", "closest_points"]
+__all__ = ["SurfacePoints", "SurfaceProjector", "projector", "project_to_surface", "closest_points"]
 
 
 @dataclass(frozen=True)
@@ -81,24 +83,84 @@ class SurfacePoints:
         return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
+class SurfaceProjector:
+    """Closest-point queries (and rays) on one mesh, with the search trees kept.
+
+    ``trimesh.proximity.closest_point`` builds an r-tree of the triangles'
+    boxes on every call on a fresh mesh (tens of milliseconds for a skull);
+    this object builds it once. The one-shot twins are :func:`closest_points`
+    and :func:`project_to_surface`, which reuse a projector from a small cache
+    keyed by the mesh's *content* (so equal arrays share one, edited arrays
+    never see a stale tree).
+    """
+
+    def __init__(self, vertices, faces):
+        import trimesh
+
+        v, f = check_mesh(vertices, faces)
+        if len(f) == 0:
+            raise ValueError("cannot project onto a mesh without faces")
+        self.vertices, self.faces = v, f
+        self.mesh = trimesh.Trimesh(v, f, process=False, validate=False)
+        self._caster = None
+
+    @property
+    def caster(self):
+        """A :class:`~faceforge.geometry.rays.RayCaster` on the same mesh (built on first use)."""
+        if self._caster is None:
+            from faceforge.geometry.rays import RayCaster
+
+            self._caster = RayCaster(self.vertices, self.faces)
+        return self._caster
+
+    def closest(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(closest (k, 3), distance (k,), face_ids (k,))`` for ``points (k, 3)``."""
+        import trimesh
+
+        p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+        if len(p) == 0:
+            return np.zeros((0, 3)), np.zeros(0), np.zeros(0, INT)
+        closest, dist, tri = trimesh.proximity.closest_point(self.mesh, p)
+        return np.asarray(closest, FLOAT), np.asarray(dist, FLOAT), np.asarray(tri, INT)
+
+    def project(self, points) -> SurfacePoints:
+        """Surface points at the closest points (see :func:`project_to_surface`)."""
+        closest, _, tri = self.closest(points)
+        w = barycentric(closest, self.vertices, self.faces, tri)
+        w = np.clip(w, 0.0, None)
+        s = w.sum(axis=1, keepdims=True)
+        w = np.divide(w, s, out=np.full_like(w, 1.0 / 3.0), where=s > 0)
+        return SurfacePoints(tri, w)
+
+
+_CACHE: "OrderedDict[tuple, SurfaceProjector]" = OrderedDict()
+_CACHE_SIZE = 8
+
+
+def projector(vertices, faces) -> SurfaceProjector:
+    """A :class:`SurfaceProjector` for this mesh, shared while the content is unchanged."""
+    v, f = check_mesh(vertices, faces)
+    digest = hashlib.blake2b(np.ascontiguousarray(v).tobytes(), digest_size=16)
+    digest.update(np.ascontiguousarray(f).tobytes())
+    key = (v.shape, f.shape, digest.hexdigest())
+    hit = _CACHE.get(key)
+    if hit is None:
+        hit = _CACHE[key] = SurfaceProjector(v, f)
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    else:
+        _CACHE.move_to_end(key)
+    return hit
+
+
 def closest_points(points, vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest point of the mesh to each query point.
 
     Uses ``trimesh.proximity.closest_point`` (an r-tree of triangle boxes plus
-    the exact point-triangle distance). Returns ``(closest (k, 3), distance (k,),
-    face_ids (k,))``.
+    the exact point-triangle distance), through :func:`projector`. Returns
+    ``(closest (k, 3), distance (k,), face_ids (k,))``.
     """
-    import trimesh
-
-    v, f = check_mesh(vertices, faces)
-    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
-    if len(f) == 0:
-        raise ValueError("cannot project onto a mesh without faces")
-    if len(p) == 0:
-        return np.zeros((0, 3)), np.zeros(0), np.zeros(0, INT)
-    mesh = trimesh.Trimesh(v, f, process=False, validate=False)
-    closest, dist, tri = trimesh.proximity.closest_point(mesh, p)
-    return np.asarray(closest, FLOAT), np.asarray(dist, FLOAT), np.asarray(tri, INT)
+    return projector(vertices, faces).closest(points)
 
 
 def project_to_surface(points, vertices, faces) -> SurfacePoints:
@@ -108,10 +170,4 @@ def project_to_surface(points, vertices, faces) -> SurfacePoints:
     triangle (tiny negative values from round-off) and renormalized, so the
     result lies exactly on the surface.
     """
-    v, f = check_mesh(vertices, faces)
-    closest, _, tri = closest_points(points, v, f)
-    w = barycentric(closest, v, f, tri)
-    w = np.clip(w, 0.0, None)
-    s = w.sum(axis=1, keepdims=True)
-    w = np.divide(w, s, out=np.full_like(w, 1.0 / 3.0), where=s > 0)
-    return SurfacePoints(tri, w)
+    return projector(vertices, faces).project(points)

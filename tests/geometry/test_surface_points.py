@@ -53,3 +53,18 @@ def test_project_to_surface_is_closest_point_and_on_surface():
     again = project_to_surface(p, v, f).positions(v, f)
     np.testing.assert_allclose(again, p, atol=1e-9)
     np.testing.assert_allclose(points_from_barycentric(v, f, sp.face_ids, sp.bary), p)
+
+
+def test_projector_cache_follows_content():
+    from faceforge.geometry.surface_points import SurfaceProjector, projector
+
+    m = trimesh.creation.icosphere(2)
+    v, f = np.asarray(m.vertices).copy(), np.asarray(m.faces, np.int64)
+    a = projector(v, f)
+    assert projector(v.copy(), f.copy()) is a  # same content, same trees
+    v2 = v * 2.0
+    b = projector(v2, f)
+    assert b is not a
+    q = np.array([[0.0, 0.0, 5.0]])
+    np.testing.assert_allclose(b.closest(q)[0], SurfaceProjector(v2, f).closest(q)[0])
+    np.testing.assert_allclose(np.linalg.norm(project_to_surface(q, v2, f).positions(v2, f)), 2.0, atol=0.05)
