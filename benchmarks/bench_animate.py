@@ -55,8 +55,12 @@ def synthetic_head(tmp: Path, count, extra: int):
     (tmp / "bind").mkdir()
     run_bind(StageContext(name="bind", config=load_config(), params={}, out_dir=tmp / "bind",
                           workdir=tmp, deps=("fit",)))
+    real = stage._muscle_system
     stage._muscle_system = functools.partial(S.muscle_system, extra=extra)
-    head = stage.BoundHead(tmp / "fit", tmp / "bind", load_config())
+    try:
+        head = stage.BoundHead(tmp / "fit", tmp / "bind", load_config())
+    finally:
+        stage._muscle_system = real
     (tmp / "mapping.yaml").write_text(yaml.safe_dump(S.MAPPING))
     return head, mapping_from_dict(S.MAPPING)
 
@@ -139,7 +143,7 @@ def sweep(root: Path, heads, faps) -> dict:
                 pc2 = wd / f"{fap.stem}.pc2"
                 r = runner.invoke(cli, ["-q", "-w", str(wd), "animate", "--fap", str(fap), "-o", str(pc2)])
                 if r.exit_code != 0:
-                    out[head]["files"][fap.name] = {"error": r.output.strip()[-300:]}
+                    out[head]["files"][fap.name] = {"error": (r.output.strip() or repr(r.exception))[-300:]}
                     continue
                 rep = json.loads((wd / "animate" / "report.json").read_text())
                 frames = load_npz(wd / "animate" / "animation.npz")["frames"]

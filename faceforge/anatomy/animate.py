@@ -237,3 +237,76 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     return FrameReport(frames=len(frames), non_finite=int(np.count_nonzero(~finite)),
                        inverted_triangles=int(inv.sum()), skin_inside_skull=inside_total,
                        max_displacement=float(disp.max()) if len(disp) else 0.0, worst_frame=worst)
+
+
+# --------------------------------------------------------------------------- skin vs skull
+
+class SkullGuard:
+    """Keeps skin that lies close to the bone from being pulled through it.
+
+    Where the soft tissue is thin (nose bridge, upper lip over the maxilla, chin), a muscle
+    pull or the jaw can drag a skin vertex through the skull. At rest each skin vertex
+    within ``reach`` of a bone gets its nearest bone point (triangle + barycentric
+    coordinates) and its rest depth ``d0`` along that triangle's normal; every frame the
+    vertex is pushed back along the current normal so that its depth stays at least
+    ``keep * d0`` (the tissue may thin, not vanish). Vertices inside the bone at rest (mouth
+    folds around the teeth) are left alone.
+
+    Parameters
+    ----------
+    rest : (n, 3) float, skin at rest
+    bodies : dict name -> (vertices (v, 3), faces (f, 3)), the bones at rest
+    reach : float, skin units
+    keep : float in [0, 1)
+    """
+
+    def __init__(self, rest: np.ndarray, bodies: dict, reach: float, keep: float = 0.5):
+        import trimesh
+
+        self.names = list(bodies)
+        verts = [np.asarray(bodies[n][0], dtype=float) for n in self.names]
+        faces = [np.asarray(bodies[n][1], dtype=np.int64) for n in self.names]
+        offs = np.cumsum([0] + [len(v) for v in verts])
+        foffs = np.cumsum([0] + [len(f) for f in faces])
+        mesh = trimesh.Trimesh(np.vstack(verts), np.vstack([f + o for f, o in zip(faces, offs)]), process=False)
+        points, dist, tri = trimesh.proximity.closest_point(mesh, np.asarray(rest, dtype=float))
+        body = np.searchsorted(foffs, tri, side="right") - 1
+        local = tri - foffs[body]
+        t = mesh.triangles[tri]
+        n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        depth = np.einsum("ij,ij->i", np.asarray(rest, dtype=float) - points, n)
+        inside = np.zeros(len(rest), dtype=bool)
+        if len(rest):
+            inside = mesh.contains(np.asarray(rest, dtype=float)) if mesh.is_watertight else depth < 0
+        sel = (dist < reach) & (depth > 0.0) & ~inside
+        self.vertex = np.flatnonzero(sel)
+        self.body = body[sel]
+        self.face = local[sel]
+        self.bary = trimesh.triangles.points_to_barycentric(t[sel], points[sel])
+        self.floor = keep * depth[sel]
+        self.faces = faces
+
+    def apply(self, positions: np.ndarray, bodies_now: dict) -> int:
+        """Push guarded vertices of ``positions`` (n, 3, modified in place) out to their floor.
+
+        bodies_now : dict name -> (v, 3) current bone vertices. Returns how many moved.
+        """
+        if not len(self.vertex):
+            return 0
+        s = np.empty((len(self.vertex), 3))
+        nrm = np.empty((len(self.vertex), 3))
+        for b, name in enumerate(self.names):
+            sel = self.body == b
+            if not sel.any():
+                continue
+            tri = np.asarray(bodies_now[name], dtype=float)[self.faces[b][self.face[sel]]]
+            s[sel] = np.einsum("ij,ijk->ik", self.bary[sel], tri)
+            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            nrm[sel] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        p = positions[self.vertex]
+        depth = np.einsum("ij,ij->i", p - s, nrm)
+        low = depth < self.floor
+        if low.any():
+            positions[self.vertex[low]] = p[low] + (self.floor[low] - depth[low])[:, None] * nrm[low]
+        return int(np.count_nonzero(low))

@@ -169,3 +169,23 @@ def test_fdp_vertices_pick_the_lip_copy_of_their_side():
     assert got == {"2.2": 0, "2.3": 1, "8.1": 2, "2.1": 3}
     assert _fdp_vertices(lm, rest, None)["2.3"] == 0      # no lip sides: plain nearest
     assert _lever(np.array([0.0, -3.0, 4.0]), np.zeros(3), np.array([2.0, 0.0, 0.0])) == pytest.approx(5.0)
+
+
+def test_skull_guard_keeps_skin_outside_a_moving_bone():
+    from faceforge.anatomy.animate import SkullGuard
+
+    bv, bf = box()                                          # unit cube at the origin
+    rest = np.array([[0.0, 0.0, 0.6], [0.2, 0.1, 0.7], [0.0, 0.0, 3.0], [0.0, 0.0, 0.0]])
+    guard = SkullGuard(rest, {"bone": (bv, bf)}, reach=0.5, keep=0.5)
+    assert guard.vertex.tolist() == [0, 1]                  # near and outside; far and inside skipped
+    pos = rest + np.array([0.0, 0.0, -0.3])                 # pulled toward (and into) the bone
+    moved = guard.apply(pos, {"bone": bv})
+    assert moved == 2
+    assert np.allclose(pos[:2, 2], [0.55, 0.6])             # at half their rest depth (0.1, 0.2)
+    assert np.allclose(pos[2:], rest[2:] - [0, 0, 0.3])     # unguarded vertices untouched
+    # the bone moves forward: the floor moves with it; a vertex above its floor stays put
+    pos = rest.copy()
+    assert guard.apply(pos, {"bone": bv + [0.0, 0.0, 0.15]}) == 2
+    assert np.allclose(pos[:2, 2], [0.7, 0.75])
+    pos = rest.copy()
+    assert guard.apply(pos, {"bone": bv}) == 0 and np.array_equal(pos, rest)

@@ -77,7 +77,7 @@ class BoundHead:
 
         from dataclasses import replace
 
-        from faceforge.anatomy.animate import Rig
+        from faceforge.anatomy.animate import Rig, SkullGuard
         from faceforge.anatomy.binding import Binding
         from faceforge.anatomy.fap_mapping import JawLevers
         from faceforge.anatomy.skin import SkinSimulation, SkinStiffness
@@ -134,8 +134,17 @@ class BoundHead:
         def muscles(c, _bones, dt):
             system.step(dict(zip(self.muscle_names, c)), None, dt)
 
+        diag = float(np.linalg.norm(np.ptp(self.rest, axis=0)))
+        self.guard = guard = SkullGuard(
+            self.rest, {"cranium": self.cranium, "mandible": self.mandible},
+            reach=float(config.get("animate.skull_guard.reach")) * diag,
+            keep=float(config.get("animate.skull_guard.keep")))
+
         def skin_step(_bones, _muscles, dt):
             skin.step(system, dt)
+            if len(guard.vertex):
+                guard.apply(skin.layer.skin_positions(skin.state.positions),
+                            {n: system.positions(n) for n in ("cranium", "mandible")})
             return skin.simulated()
 
         def reset():
