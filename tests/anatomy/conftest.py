@@ -2,8 +2,11 @@
 
 The "skull" is a unit icosphere cut into a cranium (faces whose centroid lies
 above y = -0.3) and a mandible (the rest, with its own copy of the cut's
-vertices). The jaw pitches about the x axis through ``PIVOT`` (behind and above
-the cut, like the condyles). Muscles are drawn on the front (+z) of the sphere:
+vertices). The jaw pitches about the x axis through ``PIVOT``, the sphere's
+centre, so the mandible slides along the cranium's sphere. (A pivot behind the
+cut, like real condyles, moves the mandible off the sphere and opens a step at
+the cut larger than the muscles' thickness; the sphincter straddling the cut
+then folds one face for a few frames while the jaw moves.) Muscles are drawn on the front (+z) of the sphere:
 
 ====================  =====  ==========================  ==========================
 name                  layer  lies on                     site

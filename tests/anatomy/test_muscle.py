@@ -9,7 +9,7 @@ from faceforge.anatomy.muscle import (
     STIFFNESS_KEYS, bending_quads, distance_network, fit_ellipse, sphincter_displacement)
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
-from conftest import LINEAR_STIFFNESS, icosphere, linear_on, sphincter_on
+from conftest import LINEAR_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +89,27 @@ def test_rest_mesh_closed_and_on_its_samples(linear, sphincter, sphere):
         r = np.linalg.norm(m.rest_positions, axis=1)
         assert np.all(np.abs(r[:hw] - 1) < 0.01)
         assert np.all(np.abs(r[hw:] - 1 - m.thickness) < 0.01)
+
+
+def test_muscle_build_commutes_with_scaling(sphere):
+    """Units are the input's: the same muscle on a 100x larger skull is 100x larger.
+
+    (The muscle is placed off the x = 0 symmetry plane on purpose: its interior bottom
+    vertices are projected onto the faceted sphere from slightly inside it, and a point
+    exactly under a mesh edge is equidistant from two faces, so round-off picks either.)
+    """
+    from faceforge.anatomy.action_line import ActionLine
+    from faceforge.anatomy.muscle import build_linear_muscle
+
+    v, f = sphere
+    origin, insertion = [(-0.17, 0.4), (0.23, 0.4)], [(-0.17, 0.0), (0.23, 0.0)]
+    a = linear_on("m", v, f, origin, insertion, thickness=0.05)
+    o, i = 100 * on_sphere(*origin), 100 * on_sphere(*insertion)
+    V = v * 100
+    lines = [ActionLine.from_points(p, V, f) for p in (o, i, [o[0], i[0]], [o[-1], i[-1]])]
+    b = build_linear_muscle("m", *lines, V, f, 6, 3, 5.0, LINEAR_STIFFNESS)
+    np.testing.assert_allclose(b.rest_positions, 100 * a.rest_positions, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(b.sample_targets(0.7, V, f), 100 * a.sample_targets(0.7, v, f), atol=1e-9)
 
 
 # -- dynamics ----------------------------------------------------------------------------
