@@ -136,3 +136,51 @@ def attachment(x, w, particles, tris, bary, k):
         if w[i] > 0:
             x[i] = x[i] + k[j] * (t - x[i])
     return x
+
+
+def step(model, x_in, v_in, control, dt, iterations, substeps, damping, gravity=0.0):
+    """Plain-Python twin of ``Solver.step`` (PBD 'paper' mode, builder order)."""
+    from faceforge.pbd.constraints.volume import reference_vertices
+
+    m = model
+    w = m.inv_mass
+    x = x_in.copy()
+    v = v_in.copy()
+    kin = m.kinematic_indices
+    start = x[kin].copy()
+    h = dt / substeps
+    damp = (1.0 - damping) ** (1.0 / substeps)
+    for s in range(substeps):
+        prev = x.copy()
+        for i in range(len(x)):
+            if w[i] > 0:
+                v[i] = v[i] * damp + h * np.array([0.0, -gravity, 0.0])
+                x[i] = prev[i] + h * v[i]
+        alpha = (s + 1.0) / substeps
+        x[kin] = control.kinematic_positions if s == substeps - 1 else \
+            start + alpha * (control.kinematic_positions - start)
+        for _ in range(iterations):
+            for kind, a, b in m.blocks:
+                sl = slice(a, b)
+                if kind == 0:
+                    x, _ = distance(x, w, m.distance_indices[sl], m.distance_rest_length[sl],
+                                    m.distance_stiffness[sl])
+                elif kind == 1:
+                    x, _ = bending(x, w, m.bending_indices[sl], m.bending_rest_angle[sl],
+                                   m.bending_stiffness[sl])
+                elif kind == 2:
+                    x, _ = area(x, w, m.area_indices[sl], m.area_rest_area[sl], m.area_stiffness[sl])
+                elif kind == 3:
+                    ts = m.volume_triangle_start
+                    for j in range(a, b):
+                        tris = m.volume_triangles[ts[j]:ts[j + 1]]
+                        x = volume(x, w, tris, m.volume_rest_volume[j], m.volume_stiffness[j],
+                                   reference_vertices(tris))
+                elif kind == 4:
+                    x = position(x, w, m.position_indices[sl], control.position_targets[sl],
+                                 m.position_stiffness[sl])
+                else:
+                    x = attachment(x, w, m.attachment_indices[sl], m.attachment_triangles[sl],
+                                   m.attachment_bary[sl], m.attachment_stiffness[sl])
+        v = (x - prev) / h
+    return x, v
