@@ -19,7 +19,7 @@ Manifest (YAML; relative paths resolve against the manifest's folder)::
       - mesh: heads/anna.obj
         landmarks: heads/anna.fdp.yaml   # optional [default: <mesh stem>.fdp.yaml]
         name: anna                       # optional [default: the mesh stem]; the workdir name
-        set: {fit.iterations: 3}         # optional per-head overrides
+        set: {fit.refit: false}          # optional per-head overrides
 
 Besides the stages' own files, each head's workdir holds ``batch.log`` (the runner's
 lines, appended by every run, tracebacks of unexpected errors) and the batch writes
