@@ -97,6 +97,7 @@ class HeadResult:
 
     name: str
     workdir: str
+    mesh: str = ""
     status: str = "failed"
     error: str | None = None
     stages: dict = field(default_factory=dict)
@@ -517,7 +518,7 @@ def run_head(job: HeadJob) -> HeadResult:
     root = Path(job.workdir)
     root.mkdir(parents=True, exist_ok=True)
     log_path = root / HEAD_LOG
-    result = HeadResult(job.name, str(root))
+    result = HeadResult(job.name, str(root), job.mesh)
     _append_log(log_path, f"batch: head {job.name} ({job.mesh}) pid {os.getpid()}")
     current = None
     try:
@@ -574,7 +575,7 @@ def _limit_threads(threads: int) -> None:
 
 
 def _failed(job: HeadJob, message: str) -> HeadResult:
-    return HeadResult(job.name, job.workdir, status="failed", error=message)
+    return HeadResult(job.name, job.workdir, job.mesh, status="failed", error=message)
 
 
 def _pool(workers: int):
@@ -600,11 +601,14 @@ def run_local(jobs: Sequence[HeadJob], n_jobs: int,
             results.append(run_head(job))
             on_result(results[-1])
         return results
+    import multiprocessing
     from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
 
     done: dict[int, HeadResult] = {}
-    with _pool(min(n_jobs, len(jobs))) as pool:
+    others = set(multiprocessing.active_children())
+    pool = _pool(min(n_jobs, len(jobs)))
+    try:
         futures = {pool.submit(run_head, job): i for i, job in enumerate(jobs)}
         for future in as_completed(futures):
             try:
@@ -612,6 +616,12 @@ def run_local(jobs: Sequence[HeadJob], n_jobs: int,
             except BrokenProcessPool:
                 continue
             on_result(done[futures[future]])
+    except BaseException:   # Ctrl-C: stop now; the killed heads' temp folders go on the next run
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in set(multiprocessing.active_children()) - others:
+            process.kill()
+        raise
+    pool.shutdown()
     for i in [i for i in range(len(jobs)) if i not in done]:   # after a worker died: isolate
         with _pool(1) as pool:
             try:
@@ -638,6 +648,7 @@ def run_dask(jobs: Sequence[HeadJob], scheduler: str,
     except (OSError, TimeoutError, ValueError) as exc:
         raise StageError(f"cannot reach the Dask scheduler: {exc}".splitlines()[0], scheduler) from None
     done: dict[int, HeadResult] = {}
+    futures = []
     try:
         futures = client.map(run_head, list(jobs), pure=False)
         index = {f.key: i for i, f in enumerate(futures)}
@@ -648,6 +659,9 @@ def run_dask(jobs: Sequence[HeadJob], scheduler: str,
             except Exception as exc:  # worker lost, unpicklable result: this head fails alone
                 done[i] = _failed(jobs[i], f"dask task failed: {type(exc).__name__}: {exc}".splitlines()[0])
             on_result(done[i])
+    except BaseException:   # Ctrl-C: cancel what has not finished
+        client.cancel(futures, force=True)
+        raise
     finally:
         client.close()
     return [done[i] for i in range(len(jobs))]
@@ -667,8 +681,9 @@ def batch_report(results: Sequence[HeadResult], out_dir: str | Path, seconds: fl
                  executor: str) -> dict:
     """The JSON report: counts, wall time, heads per minute and one entry per head."""
     ok = sum(r.ok for r in results)
+    stopped = sum(r.status == "interrupted" for r in results)
     return {"out": str(Path(out_dir).absolute()), "executor": executor, "heads": len(results), "ok": ok,
-            "failed": len(results) - ok, "seconds": round(seconds, 3),
+            "failed": len(results) - ok - stopped, "interrupted": stopped, "seconds": round(seconds, 3),
             "heads_per_minute": round(60.0 * len(results) / seconds, 3) if seconds > 0 else None,
             "results": [r.as_dict() for r in results]}
 
@@ -698,7 +713,8 @@ def format_summary(results: Sequence[HeadResult]) -> str:
     widths = [max(len(str(row[i])) for row in [header] + rows) for i in range(len(header))]
     lines = ["  ".join(str(c).ljust(w) for c, w in zip(row, widths)).rstrip() for row in [header] + rows]
     lines.insert(1, "  ".join("-" * w for w in widths))
-    errors = [f"{r.name}: {r.error}" for r in results if r.error]
-    ok = sum(r.ok for r in results)
-    tail = [f"{ok} of {len(results)} heads ok" + (f", {len(results) - ok} failed:" if errors else "")]
-    return "\n".join(lines + [""] + tail + [f"  {e}" for e in errors])
+    errors = [f"{r.name}: {r.error}" for r in results if r.status == "failed"]
+    counts = {s: sum(r.status == s for r in results) for s in ("ok", "failed", "interrupted")}
+    tail = f"{counts['ok']} of {len(results)} heads ok" + "".join(
+        f", {counts[s]} {s}" for s in ("failed", "interrupted") if counts[s]) + (":" if errors else "")
+    return "\n".join(lines + ["", tail] + [f"  {e}" for e in errors])

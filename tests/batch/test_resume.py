@@ -103,3 +103,31 @@ def test_killing_the_batch_takes_its_worker_processes_along(tmp_path, heads_dir,
         time.sleep(0.05)
     assert not alive, f"worker processes {alive} outlived the killed batch"
     assert not any((out / h / "fit" / "stage.json").exists() for h in HEADS)
+
+
+def test_ctrl_c_stops_at_once_with_status_130_and_a_partial_report(tmp_path, heads_dir, short_fap, subprocess_env):
+    """SIGINT to the batch's process group (a terminal's Ctrl-C): exit 130 within seconds, the
+    report marks unfinished heads "interrupted", and the same command resumes them."""
+    from .conftest import PLUGIN, ROOT
+
+    out = tmp_path / "out"
+    args = [str(a) for a in [sys.executable, "-m", "faceforge.cli", "--no-progress", "batch",
+                             *[heads_dir / f"{h}.obj" for h in HEADS], "--fap", short_fap,
+                             "--plugin", PLUGIN, "--out", out, "--jobs", "2"]]
+    proc = subprocess.Popen(args, cwd=ROOT, env={**subprocess_env, "FACEFORGE_FAKE_DELAY": "5"},
+                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    logs = [out / h / batch.HEAD_LOG for h in HEADS[:2]]
+    deadline = time.monotonic() + 60
+    while not all(p.exists() and "fit: running" in p.read_text() for p in logs) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    t0 = time.monotonic()
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, err
+    assert time.monotonic() - t0 < 4.0                      # did not wait for the 5 s stages
+    assert "run the same command again to resume" in err
+    report = json.loads((out / batch.REPORT_NAME).read_text())
+    assert (report["ok"], report["failed"], report["interrupted"]) == (0, 0, 3)
+    rerun = subprocess.run(args, cwd=ROOT, env=subprocess_env, capture_output=True, text=True, timeout=120)
+    assert rerun.returncode == 0, rerun.stderr
+    assert not list(out.rglob(".tmp-*"))                    # the killed stages' temp folders were cleaned

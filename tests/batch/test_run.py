@@ -41,6 +41,7 @@ def test_a_broken_head_fails_alone_and_reruns_hit_the_cache(batch_cli, tmp_path,
     assert (report["heads"], report["ok"], report["failed"]) == (4, 3, 1)
     bad = by_name["broken"]
     assert bad["status"] == "failed" and "\n" not in bad["error"]
+    assert bad["mesh"] == str(heads_dir / "broken.obj")
     assert bad["error"].startswith(str(heads_dir / "broken.obj")) and "OBJ" in bad["error"]
     assert bad["stages"]["fit"]["state"] == "failed"
     assert bad["stages"]["bind"]["state"] == bad["stages"]["animate"]["state"] == "not run"

@@ -74,22 +74,31 @@ def command(ctx, inputs, fap, expression, intensity, seconds, out, output, jobs,
     else:
         heads = batch.jobs_from_meshes(list(inputs), out, shared)
 
-    executor = f"dask {scheduler}" if scheduler else f"processes x{min(jobs or os.cpu_count() or 1, len(heads))}"
+    n = min(jobs or os.cpu_count() or 1, len(heads))
+    executor = f"dask {scheduler}" if scheduler else (f"processes x{n}" if n > 1 else "in-process")
     app.log(f"batch: {len(heads)} heads -> {Path(out).absolute()} ({executor})")
     from tqdm import tqdm
 
     bar = tqdm(total=len(heads), desc="heads", unit="head", file=sys.stderr, disable=not app.progress,
                dynamic_ncols=True)
 
+    finished = {}
+
     def on_result(result):
+        finished[result.workdir] = result
         line = f"{result.name}: {result.status} in {result.seconds:.1f} s" + (f": {result.error}" if result.error else "")
         if app.verbosity >= 0 or result.error:
             bar.write(line, file=sys.stderr)
         bar.update(1)
 
     start = time.perf_counter()
+    interrupted = False
     try:
         results = batch.run_batch(heads, n_jobs=jobs, scheduler=scheduler, on_result=on_result)
+    except KeyboardInterrupt:
+        interrupted = True
+        results = [finished.get(h.workdir) or batch.HeadResult(h.name, h.workdir, h.mesh, status="interrupted",
+                                                               error="interrupted") for h in heads]
     finally:
         bar.close()
     report = batch.batch_report(results, out, time.perf_counter() - start, executor)
@@ -98,6 +107,9 @@ def command(ctx, inputs, fap, expression, intensity, seconds, out, output, jobs,
     if app.verbosity >= 0:
         click.echo(batch.format_summary(results))
         click.echo(f"report: {path}")
+    if interrupted:
+        click.echo("faceforge: batch interrupted; run the same command again to resume", err=True)
+        ctx.exit(130)
     if report["failed"]:
         ctx.exit(1)
 
