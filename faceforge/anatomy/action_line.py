@@ -155,7 +155,7 @@ def sample_positions(points, n: int, closed: bool = False, step_scale: float = 1
 def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePoints:
     """Surface points seen from outside along the local normal (see ActionLine.from_points)."""
     from faceforge.geometry.surface_points import projector
-    from faceforge.geometry.triangles import barycentric
+    from faceforge.geometry.triangles import barycentric, face_normals
 
     v, f = check_mesh(vertices, faces)
     p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
@@ -167,8 +167,22 @@ def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePo
     centre = v[np.unique(f)].mean(axis=0)
     flip = np.einsum("ij,ij->i", n, near.positions(v, f) - centre) < 0
     n[flip] *= -1.0
+    # the points of one line are seen from one side: a point whose normal still
+    # disagrees with the line's mean (the back of a thin bone) is turned around
+    mean = n.sum(axis=0)
+    if np.linalg.norm(mean) > 0:
+        n[n @ mean < 0] *= -1.0
     r = reach * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
-    face, hit, _ = proj.caster.first_hit(p + r * n, -n)
+    ray, tri, loc, dist = proj.caster.all_hits(p + r * n, -n)
+    # keep the first hit on a face turned toward the ray's origin: when the origin is
+    # still inside a thin bone (the zygomatic arch), its back side is not a surface to lie on
+    fn = face_normals(v, f)[tri]
+    front = (np.einsum("ij,ij->i", fn, n[ray]) > 0) & (dist >= 0)
+    ray, tri, loc = ray[front], tri[front], loc[front]
+    first = np.r_[True, ray[1:] != ray[:-1]] if len(ray) else np.zeros(0, bool)
+    face = np.full(len(p), -1, dtype=np.int64)
+    hit = np.full((len(p), 3), np.nan)
+    face[ray[first]], hit[ray[first]] = tri[first], loc[first]
     ok = face >= 0
     if not ok.any():
         return near
@@ -215,10 +229,12 @@ class ActionLine:
         (for layers stacked on each other, e.g. a muscle over the skull, whose
         surfaces nearly touch) finds the closest point's normal ``n``, turned
         to point away from the layer's centre (mean of its vertices: "outside"
-        for a head), casts a ray from ``p + r n`` along ``-n`` (``r`` = 5 % of
-        the layer's bounding-box diagonal) and keeps the first hit, i.e. what an
-        artist clicking on the layer from outside would pick; points whose ray
-        misses fall back to the closest point.
+        for a head) and then to agree with the mean of the line's normals (one
+        line is seen from one side), casts a ray from ``p + r n`` along ``-n`` (``r`` = 5 % of
+        the layer's bounding-box diagonal) and keeps the first hit on a face
+        turned toward the ray (a back face means the ray started inside a thin
+        bone), i.e. what an artist clicking on the layer from outside would
+        pick; points whose ray finds no such face fall back to the closest point.
         """
         v, f = check_mesh(vertices, faces)
         p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)

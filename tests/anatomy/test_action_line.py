@@ -127,3 +127,26 @@ def test_compiled_sampling_matches_twin_and_reference(closed, scale):
             fast = sample_positions(pts, n, closed, scale)
             np.testing.assert_allclose(fast, twin_sample_positions(pts, n, closed, scale), atol=1e-12)
             np.testing.assert_allclose(fast, sample_polyline(pts, None, n, closed, scale)[0], atol=1e-12)
+
+
+def test_outermost_projection_lands_on_the_top_of_a_deeper_muscle():
+    """A point drawn on the skull under a deeper muscle: "closest" may pick the skull or the
+    muscle's bottom (they touch); "outermost" picks the muscle's top sheet, normal outward."""
+    from faceforge.anatomy.layers import underlying_mesh
+
+    from conftest import linear_on, split_skull
+
+    cranium, mandible = split_skull(3)
+    from faceforge.geometry.triangles import concatenate_meshes
+
+    sv, sf, _ = concatenate_meshes([cranium, mandible])
+    deep = linear_on("deep", sv, sf, [(-0.3, 0.6), (0.3, 0.6)], [(-0.3, 0.1), (0.3, 0.1)], thickness=0.08)
+    v, f = underlying_mesh(("skull", "deep"), cranium, mandible, [deep])
+    pts = on_sphere((-0.1, 0.45), (0.0, 0.35), (0.1, 0.25))
+    top = ActionLine.from_points(pts, v, f, project="outermost")
+    p, n = top.positions(v, f), top.normals(v, f)
+    r = np.linalg.norm(p, axis=1)
+    assert np.all(r > 1.06) and np.all(r < 1.081)  # the top sheet (chords of the coarse grid sag)
+    assert np.all(np.einsum("ij,ij->i", n, p / r[:, None]) > 0.9)
+    low = ActionLine.from_points(pts, v, f, project="closest").positions(v, f)
+    assert np.all(np.abs(np.linalg.norm(low, axis=1) - 1.0) < 0.01)
