@@ -150,3 +150,15 @@ def test_opening_the_jaw_separates_the_lips(bound):
     assert gap > gap0 + 0.01 * _diag(head.rest), f"{name}: lip gap {gap0:.4g} -> {gap:.4g} ({report['mouth']})"
     assert p[lo, 1] < head.rest[lo, 1]
     head.rig.reset()
+
+
+def test_upper_lip_binds_above_lower_lip_to_the_jaw_side(bound):
+    from faceforge.anatomy.binding import CRANIUM, MANDIBLE
+    from faceforge.io.stagefiles import load_npz
+
+    name, work, report, _ = bound
+    d = load_npz(work / "bind" / "bind.npz")
+    upper, lower, status = d["lip_upper"][1:-1], d["lip_lower"][1:-1], d["status"]
+    assert len(upper) and len(lower), f"{name}: no lip contours ({report['mouth']})"
+    assert not np.any(status[upper] == MANDIBLE) and not np.any(status[lower] == CRANIUM)
+    assert np.all(d["lip_sides"][upper] == 1) and np.all(d["lip_sides"][lower] == -1)
