@@ -130,8 +130,10 @@ class SkinStiffness:
     def from_config(cls, config) -> "SkinStiffness":
         """Read ``skin.stiffness.*`` from a validated config (``config.get(dotted)``)."""
         kw = {}
-        for key in ("stretching", "bending", "area", "anchor", "volume"):
-            kw[key] = float(config.get(f"skin.stiffness.{key}"))
+        for key in ("stretching", "bending", "area", "anchor", "volume", "position"):
+            value = config.get(f"skin.stiffness.{key}")
+            if value is not None:  # position is optional (older configs)
+                kw[key] = float(value)
         return cls(**kw)
 
 
