@@ -504,6 +504,14 @@ def _export(job: HeadJob, root: Path) -> str:
     return str(export_animation(job.output, d["frames"], faces, float(d["fps"])))
 
 
+def _stage_logger(path: Path, name: str) -> Callable[[str], None]:
+    """Runner lines into the head's log, without the repeated "<upstream>: up to date"."""
+    def log(message: str) -> None:
+        if not (message.endswith(": up to date") and not message.startswith(f"{name}:")):
+            _append_log(path, message)
+    return log
+
+
 def run_head(job: HeadJob) -> HeadResult:
     """Bring one head's stages up to date in its workdir; never raises for the head's own errors.
 
@@ -531,8 +539,7 @@ def run_head(job: HeadJob) -> HeadResult:
         _remember(workspace, layers, params)
         for name in order:
             current, t0 = name, time.perf_counter()
-            statuses = runner.run(workspace, config, params, [name],
-                                  log=lambda msg: _append_log(log_path, msg))
+            statuses = runner.run(workspace, config, params, [name], log=_stage_logger(log_path, name))
             status = next(s for s in statuses if s.stage.name == name)
             result.stages[name] = {"state": "ran" if status.ran else "cached",
                                    "seconds": round(status.seconds if status.ran else 0.0, 3)}
@@ -637,7 +644,8 @@ def run_dask(jobs: Sequence[HeadJob], scheduler: str,
     """Run the heads on the Dask distributed scheduler at ``scheduler`` (``tcp://host:port``).
 
     Workers must be able to import faceforge and read the heads' paths (a shared
-    filesystem); each head is one task, never retried.
+    filesystem). Each head is one task: one that raises is not retried; one whose worker
+    dies is rescheduled by Dask (``distributed.scheduler.allowed-failures``), then fails alone.
     """
     try:
         from distributed import Client, as_completed
