@@ -181,6 +181,14 @@ def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -
     return inside
 
 
+def _depth_below(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(k,) distance from each point (inside the mesh) to the mesh surface."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces, np.int64), process=False)
+    return trimesh.proximity.closest_point(mesh, np.asarray(points, float))[1]
+
+
 @dataclass
 class FrameReport:
     """Named physical checks over an animation (all counts are totals over frames)."""
@@ -206,15 +214,19 @@ class FrameReport:
 
 
 def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
-                    skull: Sequence | None = None, sample: int = 8) -> FrameReport:
+                    skull: Sequence | None = None, sample: int = 8,
+                    tolerance: float | None = None) -> FrameReport:
     """NaN, inverted skin triangles, skin inside the skull over an animation.
 
     rest (n, 3), frames (F, n, 3), faces (m, 3) of the skin; ``skull`` optionally a list of
     closed meshes (vertices, faces) **per checked frame** is expensive, so it is a callable
     ``frame_index -> list of (vertices, faces)``; ``sample`` frames (evenly spaced, always the
     one with the largest displacement) are checked against it. Vertices already inside at
-    rest (e.g. teeth-adjacent folds) are not counted.
+    rest (e.g. teeth-adjacent folds) are not counted, nor vertices less than ``tolerance``
+    (skin units; default 1e-3 of the skin's bounding-box diagonal) below the bone surface.
     """
+    if tolerance is None:
+        tolerance = 1e-3 * float(np.linalg.norm(np.ptp(np.asarray(rest, dtype=float), axis=0)))
     frames = np.asarray(frames, dtype=float)
     finite = np.isfinite(frames).all(axis=(1, 2))
     disp = np.linalg.norm(np.nan_to_num(frames) - rest, axis=2).max(axis=1)
@@ -232,7 +244,10 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
                     base |= points_inside(rest, v, f)
             now = np.zeros(len(rest), dtype=bool)
             for v, f in bodies:
-                now |= points_inside(frames[i], v, f)
+                inside = points_inside(frames[i], v, f)
+                if inside.any() and tolerance > 0:
+                    inside[inside] = _depth_below(frames[i][inside], v, f) > tolerance
+                now |= inside
             inside_total += int(np.count_nonzero(now & ~base))
     return FrameReport(frames=len(frames), non_finite=int(np.count_nonzero(~finite)),
                        inverted_triangles=int(inv.sum()), skin_inside_skull=inside_total,

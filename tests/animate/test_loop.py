@@ -189,3 +189,15 @@ def test_skull_guard_keeps_skin_outside_a_moving_bone():
     assert np.allclose(pos[:2, 2], [0.7, 0.75])
     pos = rest.copy()
     assert guard.apply(pos, {"bone": bv}) == 0 and np.array_equal(pos, rest)
+
+
+def test_inside_check_tolerance_ignores_grazing_contact():
+    bv, bf = box()
+    rest, faces = grid(4)
+    rest = 0.8 * rest + np.array([-0.4, -0.4, 0.8])
+    grazing = np.stack([rest, rest - [0, 0, 0.3 + 0.0005]])      # 0.5e-3 below the top face
+    deep = np.stack([rest, rest - [0, 0, 0.35]])
+    skull = lambda i: [(bv, bf)]                                     # noqa: E731
+    assert check_animation(rest, grazing, faces, skull=skull, tolerance=1e-3).skin_inside_skull == 0
+    assert check_animation(rest, grazing, faces, skull=skull, tolerance=0.0).skin_inside_skull == len(rest)
+    assert check_animation(rest, deep, faces, skull=skull, tolerance=1e-3).skin_inside_skull == len(rest)
