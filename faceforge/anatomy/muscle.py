@@ -220,6 +220,15 @@ class Muscle:
     layer : int
     active : bool
         Passive support tissue ignores its contraction.
+    thickness : float
+        Mesh units (distance from the bottom to the top sheet at rest).
+    max_contraction : float
+        ``kappa``: what c = 1 means (module docstring); set by the builders.
+    rest_parameters : dict
+        Sphincter material sampling: ``{"A1"|"A3": (segment (h,), t (h,))}``;
+        empty for arc-length sampling every frame.
+    constraints : dict
+        Derived: ``{kind: indices}`` of the created constraints (muscle-local).
     """
 
     name: str
