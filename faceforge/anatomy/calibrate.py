@@ -173,7 +173,8 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         signs = np.unique(np.sign(req))
         drives = np.concatenate([s * top * np.asarray(sample_scale, dtype=float) for s in signs])
         sampled = measure(rest, simulate(identity, _frames(entry.faps, drives)), probe)
-        before = measure(rest, simulate(identity, _frames(entry.faps, req)), probe)
+        before_skin = simulate(identity, _frames(entry.faps, req))
+        before = measure(rest, before_skin, probe)
         # 2. invert it, 3. refine each requested value by secant steps on its own samples
         drive = invert_monotone(drives, sampled, req)
         ok = np.isfinite(drive)
@@ -198,12 +199,13 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
             knots = _monotone_knots(knots)
         calibrated = with_entry(calibrated, idx, response=knots)
         # 4. verify with the calibrated response, every FAP of the entry on its own probe
+        #    (all FAPs of an entry get the same values: one simulation serves every probe)
+        final_skin = simulate(calibrated, _frames(entry.faps, req))
         for fap in entry.faps:
             if fap not in probes:
                 continue
-            final = measure(rest, simulate(calibrated, _frames(entry.faps, req)), probes[fap])
-            first = before if fap == lead else measure(
-                rest, simulate(identity, _frames(entry.faps, req)), probes[fap])
+            final = measure(rest, final_skin, probes[fap])
+            first = measure(rest, before_skin, probes[fap])
             for j, r in enumerate(req):
                 rows.append(CalibrationRow(fap, entry.name, fap_group(fap), float(r), float(first[j]),
                                            float(final[j]), float(drive[j]) if ok[j] else float("nan")))
