@@ -44,7 +44,9 @@ def mapping_template_path(config) -> Path:
     from faceforge.exceptions import ConfigError
 
     raw = Path(str(config.get("animate.fap_mapping")))
-    candidates = [raw] if raw.is_absolute() else [Path.cwd() / raw, Path(__file__).resolve().parents[3] / raw]
+    here = Path(__file__).resolve()
+    # a checkout (repo/templates) or an installed wheel (faceforge/templates)
+    candidates = [raw] if raw.is_absolute() else [Path.cwd() / raw, here.parents[3] / raw, here.parents[2] / raw]
     for c in candidates:
         if c.exists():
             return c.resolve()
