@@ -211,7 +211,7 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
         ray, tri, loc, t, b = ray[ok], tri[ok], loc[ok], t[ok], b[ok]
     if len(ray) == 0:
         return body, face, pts, dist
-    order = np.lexsort((t, rank[b], ray))
+    order = np.lexsort((tri, t, rank[b], ray))  # face id breaks ties: deterministic
     ray, tri, loc, t, b = ray[order], tri[order], loc[order], t[order], b[order]
     first = np.r_[True, ray[1:] != ray[:-1]]
     r = ray[first]

@@ -66,3 +66,13 @@ def test_opening_the_jaw_parts_the_lips_and_keeps_the_skin_outside_the_skull(hea
         bone = trimesh.Trimesh(*system.surface(name), process=False)
         closed = trimesh.convex.convex_hull(bone)  # the sphere parts are convex
         assert not closed.contains(p).any()
+
+
+def test_binding_is_deterministic(head):
+    h, bound = head
+    v, f = h["skin"]
+    again = bind_head(v, f, h["landmarks"], h["cranium"], h["mandible"], [], max_ray_fraction=0.15)
+    a, b = bound.as_arrays(), again.as_arrays()
+    assert sorted(a) == sorted(b)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
