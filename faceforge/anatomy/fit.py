@@ -420,6 +420,10 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
 # ----------------------------------------------------------------------------- the whole fit
 
 
+#: the two points mapped to carry a jaw axis direction lie this fraction of the skin diagonal apart
+JAW_AXIS_BASELINE = 0.2
+
+
 @dataclass
 class FitTemplate:
     """Template inputs of :func:`fit_head`, all in template (skull) space.
@@ -504,8 +508,10 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
                 targets = rf.skull_targets
                 info["refit"] = True
                 info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
-    # axes: points by the map, directions by mapping two points 1 % of the skin diagonal apart
-    step = 0.01 * skin.diagonal / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
+    # axes: points by the map, directions by mapping two points on the axis a fifth of the
+    # skin diagonal apart (about the condyle distance): a rigid DOF's axis follows the map
+    # over the whole joint, not the map's local wiggles at one point
+    step = JAW_AXIS_BASELINE * skin.diagonal / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
     jaw = {}
     for name, (point, direction) in template.jaw_axes.items():
         point = np.asarray(point, dtype=np.float64)[None]
