@@ -122,6 +122,12 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
         },
         "skull": skull_stats,
         "muscles": muscle_stats,
+        "checks": {   # the acceptance criteria of issue 5
+            "landmarks_within_1pct": bool(max(residuals.values(), default=0.0) < 0.01),
+            "skull_inside_98pct": bool((skull_stats["inside_fraction"] or 0.0) >= 0.98),
+            "muscles_inside_98pct": bool(muscle_stats["count"] == 0 or muscle_stats["inside_fraction"] >= 0.98),
+            "muscles_poke_below_1pct": bool(muscle_stats["max_outside_rel"] <= 0.01),
+        },
         "tissue_thickness": {"min": beneath["min_depth"], "median": beneath["median_depth"],
                              "min_mm": None if beneath["min_depth"] is None else beneath["min_depth"] / mm,
                              "median_mm": None if beneath["median_depth"] is None else beneath["median_depth"] / mm,

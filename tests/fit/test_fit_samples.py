@@ -101,3 +101,18 @@ def test_units_and_pose_do_not_matter(template, fitted, tmp_path):
     ref = np.vstack([base.cranium, base.mandible])
     err = np.linalg.norm(back - ref, axis=1) / base_report["diagonal"]
     assert np.median(err) < 0.01
+
+
+def test_same_inputs_same_fit(fitted, template):
+    """Deterministic: a second fit of the same head gives identical arrays."""
+    from faceforge.pipeline.stages.fit import fit_files
+
+    first, report, _ = fitted("mediapipe")
+    mesh = SAMPLES["mediapipe"]
+    again, report2, _ = fit_files(mesh, mesh.with_name(mesh.stem + ".fdp.yaml"), template, {})
+    np.testing.assert_array_equal(first.cranium, again.cranium)
+    np.testing.assert_array_equal(first.mandible, again.mandible)
+    for (n1, v1, _), (n2, v2, _) in zip(first.muscles, again.muscles):
+        assert n1 == n2
+        np.testing.assert_array_equal(v1, v2)
+    assert all(report["checks"].values()) and report2["checks"] == report["checks"]
