@@ -86,16 +86,21 @@ def _diag(v):
 
 
 def _inside(points, vertices, faces):
-    """Parity of ray crossings along two directions (inside only if both say so)."""
+    """Inside a closed surface by the parity of ray crossings: majority of three
+    directions, hits at the same distance along a ray (an edge or a vertex) counted once."""
     from faceforge.geometry.rays import RayCaster
 
     rc = RayCaster(vertices, faces)
-    inside = np.ones(len(points), bool)
-    for d in ((0.31, 0.93, 0.17), (-0.57, 0.12, 0.81)):
+    eps = 1e-9 * _diag(vertices)
+    votes = np.zeros(len(points), int)
+    for d in ((0.31, 0.93, 0.17), (-0.57, 0.12, 0.81), (0.45, -0.62, -0.64)):
         ray, _, _, t = rc.all_hits(points, np.tile(d, (len(points), 1)))
-        count = np.bincount(ray[t > 0], minlength=len(points))
-        inside &= count % 2 == 1
-    return inside
+        keep = t > 0
+        ray, t = ray[keep], t[keep]
+        new = np.r_[True, (ray[1:] != ray[:-1]) | (np.diff(t) > eps)] if len(ray) else np.zeros(0, bool)
+        count = np.bincount(ray[new], minlength=len(points))
+        votes += count % 2
+    return votes >= 2
 
 
 def test_face_front_is_fully_bound(bound):
@@ -116,8 +121,9 @@ def test_rest_is_a_fixed_point(bound):
     assert drift < bound_ * _diag(head.rest), f"{name}: drift {drift:.3g} after {frames} frames"
 
 
-@pytest.mark.xfail(strict=False, reason="fit: a few cavity vertices (MakeHuman closed eye sockets ~30 v, "
-                   "ICT nostrils ~6 v) lie inside the fitted cranium at rest; binding cannot move bone")
+@pytest.mark.xfail(strict=False, reason="fit: cavity skin (MakeHuman closed eye sockets, ICT nostrils) lies "
+                   "inside the fitted cranium at rest (3 to 360 vertices as the fit changed today); "
+                   "binding cannot move bone")
 def test_no_skin_vertex_inside_the_skull_at_rest(bound):
     name, _, _, head = bound
     n = len(head.rest)
