@@ -169,3 +169,19 @@ def test_sample_landmark_files_load(name):
     given = read_landmarks(default_landmark_path(SAMPLES[name]))
     has_v = given.vertex >= 0
     np.testing.assert_array_equal(lm.positions[has_v], mesh.vertices[given.vertex[has_v]])
+
+
+def test_vertex_ids_refer_to_the_users_mesh_after_merging(tmp_path, head):
+    from faceforge.io.mesh_check import check_mesh
+
+    v, f, pts = head
+    soup_v, soup_f = v[f.ravel()], np.arange(3 * len(f)).reshape(-1, 3)   # unwelded: every corner its own vertex
+    checked = check_mesh(soup_v, soup_f, "soup.obj")
+    ids = {}
+    for k, p in pts.items():
+        ids[k] = int(np.argmin(np.linalg.norm(soup_v - p, axis=1)))
+    y = write_yaml(tmp_path / "a.yaml", {k: soup_v[i] for k, i in ids.items()}, ids)
+    lm = load_landmarks(y, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal)
+    for k, i in ids.items():
+        np.testing.assert_array_equal(lm.positions[lm.index(k)], soup_v[i])
+        assert lm.vertex[lm.index(k)] == checked.user_to_internal[i] < len(checked.vertices)
