@@ -130,6 +130,8 @@ def main() -> None:
                        **{f"{k}_s": v for k, v in stage_means(res["report"]).items()}}
                 row["cpu_s"] = res["cpu_s"]
                 row["cpu_s_per_head"] = res["cpu_s"] / args.heads
+                workers = 1 if name == "one process" else min(2, os.cpu_count() or 1)
+                row["cpu_bound_heads_per_min"] = 60.0 * workers / row["cpu_s_per_head"]
                 rows.append(row)
                 print(f"{name}: {row['heads_per_min']:.2f} heads/min", file=sys.stderr)
         finally:
@@ -141,7 +143,7 @@ def main() -> None:
     for row in rows:
         row["speedup"] = row["heads_per_min"] / base
     columns = ["mode", "heads", "wall_s", "heads_per_min", "speedup", "fit_s", "bind_s", "animate_s",
-               "cpu_s_per_head"]
+               "cpu_s_per_head", "cpu_bound_heads_per_min"]
     print_table(rows, columns, title=f"faceforge batch: {sample_name} head, fit + bind + {args.seconds:g} s of "
                                      f"animation (load average before {load_before[0]:.1f})")
     path = write_results("batch", {
@@ -150,7 +152,9 @@ def main() -> None:
         "load_average_before": load_before, "load_average_after": os.getloadavg(),
         "notes": "wall time of the CLI as a subprocess, fresh output folders; stage seconds are per head "
                  "as measured inside its worker (wall); cpu_s is the CPU time of the batch process and its "
-                 "workers (Dask workers measured with Client.run): on a loaded machine it is the honest cost",
+                 "workers (Dask workers measured with Client.run): on a loaded machine it is the honest cost; "
+                 "cpu_bound_heads_per_min = 60 * workers / cpu_s_per_head is what an idle machine would "
+                 "give if the work were purely CPU-bound (an estimate, not a measurement)",
         **modes, "rows": rows})
     print(f"wrote {path}")
 
