@@ -103,7 +103,7 @@ def run(ctx):
 
 
 STAGE = register_stage(Stage(
-    name="bind", deps=("fit",), config_keys=("skin.stiffness", "bind"),
+    name="bind", deps=("fit",), config_keys=("bind",),
     outputs=("bind.npz", "report.json", "influence.png"), version="1", run=run,
     description="bind the skin to muscles and bone, influence map (§8)"))
 
