@@ -157,3 +157,15 @@ def test_a_head_that_kills_its_worker_fails_alone(fake_stages, tmp_path, heads_d
     assert [r.status for r in results] == ["ok", "failed", "ok", "failed"]
     assert results[1].error.startswith("worker process died")
     assert "OBJ" in results[3].error
+
+
+def test_progress_bar_over_heads_and_quiet(invoke, fake_stages, tmp_path, heads_dir, short_fap):
+    heads = [heads_dir / "anna.obj", heads_dir / "broken.obj"]
+    common = ("--fap", short_fap, "--plugin", fake_stages, "--jobs", 1)
+    bar = invoke("--progress", "batch", *heads, "--out", tmp_path / "a", *common)
+    assert bar.exit_code == 1 and "heads: 100%" in bar.stderr and "2/2" in bar.stderr
+    quiet = invoke("-q", "batch", *heads, "--out", tmp_path / "b", *common)
+    assert quiet.exit_code == 1 and quiet.stdout == ""
+    (line,) = quiet.stderr.strip().splitlines()                   # only the failed head's error
+    assert line.startswith("broken: failed in") and str(heads_dir / "broken.obj") in line
+    assert "anna" not in quiet.stderr and "%" not in quiet.stderr
