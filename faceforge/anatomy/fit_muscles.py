@@ -197,3 +197,27 @@ def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float) -> list:
         up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-300)
         out.append((name, np.vstack([bottom, bottom + eq5_thickness(fraction, skull_diagonal) * up]), faces))
     return out
+
+
+def fitted_muscle_map(specs, warp) -> dict:
+    """The muscle map carried into the head, in the muscle-map YAML structure.
+
+    Every point of every :class:`~faceforge.anatomy.muscle_map.MuscleSpec` is mapped by
+    ``warp``; mirrored muscles are written out in full. Thickness stays a fraction of the
+    skull diagonal (Eq. 5 then applies with the fitted skull). Loadable with
+    ``load_muscle_map(path, fitted_skull)`` (its ``units: template`` means "the skull it
+    is loaded with").
+    """
+    fields_linear = ("origin", "insertion", "fibre_a", "fibre_b")
+    fields_sphincter = ("inner", "outer")
+    muscles = []
+    for spec in specs:
+        m = morph_spec(spec, warp)
+        entry = {"name": m.name, "type": m.type, "layer": int(m.layer), "lies_on": list(m.lies_on),
+                 "active": bool(m.active), "h": int(m.h), "w": int(m.w), "thickness": float(m.thickness)}
+        for key in (fields_linear if m.type == "linear" else fields_sphincter):
+            pts = np.asarray(getattr(m, key))
+            if len(pts):
+                entry[key] = [[round(float(c), 9) for c in p] for p in pts]
+        muscles.append(entry)
+    return {"units": "template", "muscles": muscles}

@@ -13,7 +13,7 @@ def test_fit_command_writes_the_stage_and_reuses_it(invoke, tmp_path, template):
     work = tmp_path / "w"
     first = invoke("-w", work, "--no-progress", "fit", mesh)
     assert first.exit_code == 0, (first.stderr, first.exception)
-    for name in ("fit.npz", "report.json", "fit.png", "stage.json"):
+    for name in ("fit.npz", "report.json", "fit.png", "muscle_map.yaml", "stage.json"):
         assert (work / "fit" / name).is_file()
     report = json.loads((work / "fit" / "report.json").read_text())
     assert report["mesh"]["n_vertices"] == 478 and report["landmarks"]["count"] == 46

@@ -14,6 +14,9 @@ fit.npz (no pickle; head space, mesh units)
     ``muscle_faces (sum,3)`` (muscle-local ids), ``muscle_face_start (q+1,)``, ``muscle_thickness (q,)``;
     ``muscle_map_names (r,)``, ``muscle_map_points (sum,3)``, ``muscle_map_start (r+1,)``:
     every point of the morphed muscle map; ``similarity (4,4)``: the initial alignment.
+muscle_map.yaml
+    the muscle map in head space (same format as templates/muscle_map.yaml; every muscle
+    written out, mirrors included), loadable with the fitted skull.
 report.json
     mesh check, landmark residuals (fraction of the skin diagonal), inside fractions of
     front skull and muscle vertices, tissue thickness, muscles poking through, timings.
@@ -29,7 +32,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "1"
+VERSION = "2"
 
 
 def run(ctx) -> None:
@@ -83,7 +86,7 @@ class Template:
 
 _TEMPLATES: dict = {}
 #: bump when the way template muscles are built changes (invalidates the disk cache)
-TEMPLATE_CACHE_VERSION = "1"
+TEMPLATE_CACHE_VERSION = "2"
 
 
 def template_cache_dir() -> Path:
@@ -211,6 +214,12 @@ def write_outputs(out_dir, result, report, extra) -> None:
     save_npz(out_dir / "fit.npz", **npz_arrays(result, checked.vertices, checked.faces, checked.user_to_internal,
                                                lm, extra["template"].layers))
     save_json(out_dir / "report.json", report)
+    from faceforge.anatomy.fit_muscles import fitted_muscle_map
+    from faceforge.io.stagefiles import save_yaml
+
+    save_yaml(out_dir / "muscle_map.yaml", fitted_muscle_map(extra["template"].specs, result.warp),
+              header="the template muscle map carried into this head by the fit (points in head units);\n"
+                     "load with faceforge.anatomy.muscle_map.load_muscle_map(path, fitted skull)")
     layers = [("cranium", result.cranium, result.cranium_faces, (0.93, 0.91, 0.84)),
               ("mandible", result.mandible, result.mandible_faces, (0.88, 0.86, 0.78))]
     layers += [(n, v, f, (0.78, 0.25, 0.22)) for n, v, f in result.muscles]
@@ -225,7 +234,7 @@ def write_outputs(out_dir, result, report, extra) -> None:
 STAGE = register_stage(Stage(
     name="fit", deps=(), config_keys=("fit", "template"),
     inputs=("mesh", "landmarks?", "template.skull", "template.muscle_map"),
-    outputs=("fit.npz", "report.json", "fit.png"), version=VERSION, run=run,
+    outputs=("fit.npz", "report.json", "fit.png", "muscle_map.yaml"), version=VERSION, run=run,
     description="fit the skull and muscle map into the skin (§7)"))
 
 
