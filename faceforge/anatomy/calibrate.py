@@ -120,9 +120,13 @@ class CalibrationRow:
         return abs(self.achieved - self.requested) / abs(self.requested)
 
     def as_dict(self) -> dict:
+        def num(x):
+            return float(x) if np.isfinite(x) else None       # JSON has no NaN: unreachable = null
+
         return {"fap": self.fap, "name": self.name, "group": self.group,
-                "requested": self.requested, "achieved_uncalibrated": self.achieved_before,
-                "achieved": self.achieved, "drive": self.drive, "relative_error": self.error}
+                "requested": self.requested, "achieved_uncalibrated": num(self.achieved_before),
+                "achieved": num(self.achieved), "drive": num(self.drive),
+                "relative_error": num(self.error)}
 
 
 def _frames(entry_faps, values: np.ndarray) -> np.ndarray:

@@ -107,6 +107,12 @@ def test_calibration_makes_requested_equal_achieved():
     # requested values the mapping can never reach (saturating tanh) stay honest
     m2, rows2 = calibrate_mapping(m, synthetic_head, rest, PROBES, {31: [2000.0]})
     assert rows2[0].achieved < 2000.0 * 0.9
+    # an FDP the mapping cannot move at all: drive NaN, reported as null (JSON-safe)
+    import json
+
+    m3, rows3 = calibrate_mapping(m, synthetic_head, rest, {31: Probe(31, 3, -1, UP, FAPU["ENS"])},
+                                  {31: [50.0]})
+    assert np.isnan(rows3[0].drive) and json.dumps(rows3[0].as_dict(), allow_nan=False)
 
 
 def test_coupling_is_measured_from_open_jaw():
