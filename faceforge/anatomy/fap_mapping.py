@@ -19,8 +19,11 @@ entry, so a file that gives both does not count them twice). The entry's value `
    ``gain * drive`` FAPU of displacement at the jaw's lever arm (converted to radians
    for pitch and yaw, to skin length units for protrusion).
 
-Contractions of all entries add and are clipped to [0, 1]; jaw DOFs add and are
-clipped to the mapping's limits. FAP 2 (expression) is expanded into low-level FAPs
+A muscle asked for by several entries takes the **largest** request, clipped to [0, 1]:
+several FAPs usually describe one action at several points of the same tissue (the three
+upper-lip FAPs 51, 55, 56 and the one orbicularis oris), and each entry is calibrated alone,
+so adding them would over-drive the shared muscle. Jaw DOFs add (each has its own FAP) and
+are clipped to the mapping's limits. FAP 2 (expression) is expanded into low-level FAPs
 with the ``expressions`` table before all this (:func:`expression_faps`).
 
 This module imports nothing of ``faceforge.mpeg4`` (anatomy stays below mpeg4 in the
@@ -391,7 +394,7 @@ def fap_controls(mapping: FapMapping, faps: np.ndarray, muscle_names, fapu: dict
 
     Returns
     -------
-    contractions : (n, m) float in [0, 1]
+    contractions : (n, m) float in [0, 1], per muscle the largest request of any entry
     jaw : (n, 3) float, (pitch rad, yaw rad, protrusion skin units), within the limits
     """
     names = list(muscle_names)
@@ -405,9 +408,9 @@ def fap_controls(mapping: FapMapping, faps: np.ndarray, muscle_names, fapu: dict
         d = drive[:, j]
         pos, neg = np.maximum(d, 0.0), np.maximum(-d, 0.0)
         for m, g in e.positive.items():
-            c[:, col[m]] += g * pos
+            c[:, col[m]] = np.maximum(c[:, col[m]], g * pos)
         for m, g in e.negative.items():
-            c[:, col[m]] += g * neg
+            c[:, col[m]] = np.maximum(c[:, col[m]], g * neg)
         if e.jaw is not None:
             dof, gain = e.jaw
             length = gain * d * float(fapu[e.fapu])

@@ -159,3 +159,14 @@ def test_invalid_yaml_names_line(tmp_path):
     p.write_text("entries:\n  - {fap: 3\n")
     with pytest.raises(TemplateError, match=r"m\.yaml:\d+: invalid YAML"):
         load_fap_mapping(p)
+
+
+def test_a_muscle_shared_by_several_faps_takes_the_largest_request(mapping):
+    names = mapping.muscles
+    oo = names.index("orbicularis_oris")
+    one, _ = fap_controls(mapping, frames(f51=100, f4=100), names, FAPU, LEVERS)
+    three, _ = fap_controls(mapping, frames(f51=100, f4=100, f55=100, f8=100, f56=100, f9=100),
+                            names, FAPU, LEVERS)
+    assert one[0, oo] > 0 and three[0, oo] == pytest.approx(one[0, oo])
+    bigger, _ = fap_controls(mapping, frames(f51=100, f4=100, f55=150, f8=150), names, FAPU, LEVERS)
+    assert bigger[0, oo] > one[0, oo]
