@@ -26,7 +26,11 @@ Functions on arrays. The construction, in order:
    the skin inward to the bone (the red dots of Fig. 8), and the RBF is rebuilt with the
    landmarks' shape parameter; ``enhancement_rounds`` rounds or until nothing is bad.
    Points in pockets (teeth in a modelled mouth) and points no skin covers (beyond a
-   mask's rim, below the neck) are left alone: the back need not fit (§7). Template
+   mask's rim, below the neck) are left alone: the back need not fit (§7). The other way
+   round, skin of the face that the bone swallows (a deep modelled eye socket, a nostril
+   reaching into the nasal aperture) adds pairs that push the nearest bone vertex along
+   its normal until the skin is ``skin_clearance_mm`` outside
+   (:func:`skin_inside_bone_pairs`). Template
    landmarks the skin cannot place and that lie far from every target (a face mask has
    no skull top, back or jaw angles) are *anchors*: held where the similarity puts them,
    so the RBF does not extrapolate the back of the skull.
@@ -37,8 +41,9 @@ Functions on arrays. The construction, in order:
    beneath the skin there.
 
 The map is kept as a composition of callables (similarity then RBF then refit RBF) and
-is applied to every template point: cranium, mandible, landmarks, jaw axes (points by
-the map, directions by mapping two points), muscle-map points.
+is applied to every template point: cranium, mandible, landmarks, muscle-map points and
+the jaw axes' points; the axes' directions turn with the best rotation of the whole
+mandible (the jaw is one rigid body).
 """
 
 from __future__ import annotations
@@ -66,6 +71,8 @@ class FitSettings:
     enhancement_spacing: float = 0.035  # min distance between RBF sources, fraction of skin diagonal
     enhancement_min_ratio: float = 0.7  # add a pair where thickness < ratio * expected depth
     enhancement_cell: float = 0.015    # candidates: one skull vertex per cell of this size (x skin diagonal)
+    skin_clearance_mm: float = 1.0     # skin found inside the bone is cleared by this much (mm); 0: off
+    skin_clearance_samples: int = 16   # bone pairs per round for skin inside the bone
     front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0
     muscle_gap_mm: float = 1.5         # skin tissue kept above the muscle top at landmarks (mm)
 
@@ -96,6 +103,7 @@ class SkinSurface:
     diagonal: float
     caster: RayCaster
     boundary_vertices: np.ndarray
+    n_real: int = -1                 # vertices [0, n_real) are the skin's own; the rest are fan centres
 
     @classmethod
     def build(cls, vertices, faces, close_holes: bool = True) -> "SkinSurface":
@@ -109,13 +117,15 @@ class SkinSurface:
         from faceforge.io.mesh_check import largest_component
 
         v = np.asarray(vertices, dtype=np.float64)
+        n_real = len(v)
         f = largest_component(np.asarray(faces, dtype=np.int64), len(v))
         if close_holes:
             v, f, _ = fill_holes(v, f, keep_open=1)
         f = orient_outward(v, f)
         edges, counts = edge_face_counts(f)
         bnd = np.unique(edges[counts == 1])
-        return cls(v, f, vertex_normals(v, f), float(np.linalg.norm(np.ptp(v, axis=0))), RayCaster(v, f), bnd)
+        return cls(v, f, vertex_normals(v, f), float(np.linalg.norm(np.ptp(v, axis=0))), RayCaster(v, f), bnd,
+                   n_real)
 
     def closest(self, points: np.ndarray):
         """Closest skin points ``(closest (q, 3), distance (q,), face_ids (q,))`` (exact;
@@ -375,9 +385,54 @@ class SkullFit:
     epsilon: float = 1.0
 
 
+def inside_closed(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Bool (k,): points inside the closed mesh by ray parity along two fixed directions
+    (both must agree, so a ray grazing an edge cannot flip a point). Deterministic."""
+    caster = RayCaster(vertices, faces)
+    inside = np.ones(len(points), bool)
+    for d in ([0.3129, 0.6214, 0.7183], [-0.5773, 0.2151, -0.7877]):
+        ray, _, _, dist = caster.all_hits(points, np.asarray(d, dtype=np.float64)[None])
+        counts = np.bincount(ray[dist > 0], minlength=len(points))
+        inside &= counts % 2 == 1
+    return inside
+
+
+def skin_inside_bone_pairs(moved: np.ndarray, skull_faces: np.ndarray, aligned: np.ndarray, skin: SkinSurface,
+                           taken: np.ndarray, spacing: float, clearance: float, k: int, region=None):
+    """Enhancement pairs that push the bone off skin it swallowed (a deep eye socket, a nostril).
+
+    Skin vertices (the skin's own, within ``region(points) -> bool``) inside the morphed
+    skull ``(moved (n, 3), skull_faces)`` (:func:`inside_closed`) are taken deepest first,
+    at least ``spacing`` from the ``taken`` (a, 3) sources and each other (template-aligned
+    space); for each, the skull vertex nearest to its closest bone point moves along the
+    bone normal until the skin lies ``clearance`` outside. Returns ``(sources (k, 3)
+    aligned, targets (k, 3) head space)``.
+    """
+    import trimesh
+
+    used = np.unique(skin.faces)
+    sv = skin.vertices[used[used < skin.n_real]] if skin.n_real >= 0 else skin.vertices[used]
+    if region is not None:
+        sv = sv[region(sv)]
+    inside = inside_closed(moved, skull_faces, sv)
+    if not inside.any() or k <= 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    s = sv[inside]
+    bone = trimesh.Trimesh(moved, skull_faces, process=False, validate=False)
+    b, d, tri = trimesh.proximity.closest_point(bone, s)
+    corner = skull_faces[tri]
+    j = corner[np.arange(len(s)), np.argmin(np.linalg.norm(moved[corner] - b[:, None], axis=2), axis=1)]
+    n = vertex_normals(moved, skull_faces)[j]
+    pick = worst_first_sample(aligned[j], d, k, taken, spacing)
+    j, n, s, b = j[pick], n[pick], s[pick], b[pick]
+    push = np.einsum("ij,ij->i", s - b, n) - clearance        # negative: move the bone inward
+    return aligned[j], moved[j] + np.minimum(push, 0.0)[:, None] * n
+
+
 def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.ndarray, skin: SkinSurface,
-              skin_landmarks: dict, settings: FitSettings) -> SkullFit:
-    """Steps 2-4 of the module docstring on the skull ``(vertices (n,3), faces (m,3))`` (template space)."""
+              skin_landmarks: dict, settings: FitSettings, scale_mm: float = 1.0) -> SkullFit:
+    """Steps 2-4 of the module docstring on the skull ``(vertices (n,3), faces (m,3))`` (template
+    space); ``scale_mm``: head units per millimetre."""
     sim = similarity_transform(pairs.source, pairs.target)
     src = apply_affine(sim, pairs.source)
     dst = pairs.target.copy()
@@ -407,21 +462,24 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
                              & (depth < settings.enhancement_min_ratio * expected + 1e-9 * skin.diagonal))
         badness = (settings.enhancement_min_ratio * expected[bad] - depth[bad]) / np.maximum(expected[bad], 1e-300)
         pick = bad[worst_first_sample(aligned[cand[bad]], badness, settings.enhancement_samples, src, spacing)]
-        if len(pick) == 0:
+        new_src = aligned[cand[pick]]
+        new_dst = closest[pick] - expected[pick, None] * normal[pick]
+        if settings.skin_clearance_mm > 0:
+            s_src, s_dst = skin_inside_bone_pairs(
+                moved, skull_faces, aligned, skin, np.vstack([src, new_src]), 0.5 * spacing,
+                settings.skin_clearance_mm * scale_mm, settings.skin_clearance_samples,
+                lambda p: front_mask(p, skin_landmarks, settings.front_offset_es0))
+            new_src, new_dst = np.vstack([new_src, s_src]), np.vstack([new_dst, s_dst])
+        if len(new_src) == 0:
             rounds.append(0)
             break
-        src = np.vstack([src, aligned[cand[pick]]])
-        dst = np.vstack([dst, closest[pick] - expected[pick, None] * normal[pick]])
+        src, dst = np.vstack([src, new_src]), np.vstack([dst, new_dst])
         warp = Warp(sim, [hardy_rbf(src, dst, epsilon=eps)])
-        rounds.append(int(len(pick)))
+        rounds.append(int(len(new_src)))
     return SkullFit(warp, src, dst, len(pairs.fdps), rounds, eps)
 
 
 # ----------------------------------------------------------------------------- the whole fit
-
-
-#: the two points mapped to carry a jaw axis direction lie this fraction of the skin diagonal apart
-JAW_AXIS_BASELINE = 0.2
 
 
 @dataclass
@@ -481,7 +539,7 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     (cv, cf), (mv, mf) = template.cranium, template.mandible
     skull_v = np.vstack([cv, mv])
     skull_f = np.vstack([cf, mf + len(cv)])
-    sk = fit_skull(pairs, skull_v, skull_f, skin, skin_lm, settings)
+    sk = fit_skull(pairs, skull_v, skull_f, skin, skin_lm, settings, scale_mm)
     warp = sk.warp
     skull_fit = warp(skull_v)
     muscles = []
@@ -508,14 +566,18 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
                 targets = rf.skull_targets
                 info["refit"] = True
                 info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
-    # axes: points by the map, directions by mapping two points on the axis a fifth of the
-    # skin diagonal apart (about the condyle distance): a rigid DOF's axis follows the map
-    # over the whole joint, not the map's local wiggles at one point
-    step = JAW_AXIS_BASELINE * skin.diagonal / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
+    # axes: points by the map; directions turned by the rotation that best carries the template
+    # mandible onto the fitted one (least squares over all its vertices): the jaw is one rigid
+    # body, so its axes follow the mandible as a whole rather than the map's local Jacobian
     jaw = {}
+    if len(mv) >= 3:
+        m = similarity_transform(np.asarray(mv, dtype=np.float64), skull_fit[len(cv):])
+        rot = m[:3, :3] / np.cbrt(abs(np.linalg.det(m[:3, :3])))
+    else:
+        rot = warp.similarity[:3, :3] / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
     for name, (point, direction) in template.jaw_axes.items():
-        point = np.asarray(point, dtype=np.float64)[None]
-        jaw[name] = (warp(point)[0], map_directions(warp, point, np.asarray(direction, dtype=np.float64)[None], step)[0])
+        d = rot @ np.asarray(direction, dtype=np.float64)
+        jaw[name] = (warp(np.asarray(point, dtype=np.float64)[None])[0], d / np.linalg.norm(d))
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
     enhancement = sk.targets[sk.n_landmarks + len(pairs.anchors):]
     if len(warp.rbfs) > 1:

@@ -101,6 +101,13 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
     for st in (skull_stats, muscle_stats):
         for key in ("min_depth", "median_depth"):
             st[key + "_mm"] = None if st[key] is None else st[key] / mm
+    from faceforge.anatomy.fit import inside_closed
+
+    own = skin.vertices[:skin.n_real] if skin.n_real >= 0 else skin.vertices
+    swallowed = np.zeros(len(own), bool)
+    for v, f in ((result.cranium, result.cranium_faces), (result.mandible, result.mandible_faces)):
+        if f is not None and len(f):
+            swallowed |= inside_closed(v, f, own)
     sim = result.warp.similarity[:3, :3]
     return {
         "mesh": mesh_report,
@@ -122,6 +129,7 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
         },
         "skull": skull_stats,
         "muscles": muscle_stats,
+        "skin_inside_bone": {"count": int(swallowed.sum()), "fraction": float(swallowed.mean())},
         "checks": {   # the acceptance criteria of issue 5
             "landmarks_within_1pct": bool(max(residuals.values(), default=0.0) < 0.01),
             "skull_inside_98pct": bool((skull_stats["inside_fraction"] or 0.0) >= 0.98),

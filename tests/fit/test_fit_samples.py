@@ -35,6 +35,13 @@ def test_front_skull_inside_the_skin(fitted, name):
 
 
 @pytest.mark.parametrize("name", HEADS)
+def test_bone_does_not_swallow_the_skin(fitted, name):
+    """Deep eye sockets and nostrils must not end up inside the bone (bind needs skin outside)."""
+    _, report, _ = fitted(name)
+    assert report["skin_inside_bone"]["fraction"] < 0.01
+
+
+@pytest.mark.parametrize("name", HEADS)
 def test_muscles_inside_the_skin(fitted, name):
     result, report, _ = fitted(name)
     m = report["muscles"]
