@@ -22,8 +22,10 @@ Manifest (YAML; relative paths resolve against the manifest's folder)::
         set: {fit.refit: false}          # optional per-head overrides
 
 Besides the stages' own files, each head's workdir holds ``batch.log`` (the runner's
-lines, appended by every run, tracebacks of unexpected errors) and the batch writes
-``<out>/batch_report.json`` (:func:`batch_report`).
+lines, appended by every run, tracebacks of unexpected errors) and the remembered inputs
+and overrides (``faceforge.yaml``, ``config.yaml``, rewritten by every batch run), so
+``faceforge -w <out>/<name> status`` or ``animate`` work on a batch head as on any
+workdir. The batch writes ``<out>/batch_report.json`` (:func:`batch_report`).
 """
 
 from __future__ import annotations
