@@ -152,8 +152,28 @@ def sample_positions(points, n: int, closed: bool = False, step_scale: float = 1
     return out
 
 
-def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePoints:
-    """Surface points seen from outside along the local normal (see ActionLine.from_points)."""
+def _smooth_along(n: np.ndarray, half: int, closed: bool) -> np.ndarray:
+    """Moving average of the rows of ``n (p, 3)`` over ``2 half + 1`` neighbours, unit length."""
+    if half <= 0 or len(n) < 3:
+        return n
+    k = np.arange(-half, half + 1)
+    idx = np.arange(len(n))[:, None] + k[None, :]
+    idx = idx % len(n) if closed else np.clip(idx, 0, len(n) - 1)
+    s = n[idx].sum(axis=1)
+    norm = np.linalg.norm(s, axis=1, keepdims=True)
+    return np.where(norm > 0, s / np.maximum(norm, 1e-300), n)
+
+
+def project_outermost(points, vertices, faces, reach: float = 0.05, closed: bool = False,
+                      smooth: int = 2) -> SurfacePoints:
+    """Surface points seen from outside along the local normal (see ActionLine.from_points).
+
+    ``points (p, 3)`` are the consecutive points of one line (``closed`` for a loop);
+    the ray directions are the closest points' oriented normals averaged over
+    ``2 smooth + 1`` consecutive points, and a hit counts only within ``2 reach``
+    (as a fraction of the layer's diagonal) of where the ray started, i.e. no farther
+    than ``reach`` behind the point itself.
+    """
     from faceforge.geometry.surface_points import projector
     from faceforge.geometry.triangles import barycentric, face_normals
 
@@ -172,12 +192,17 @@ def project_outermost(points, vertices, faces, reach: float = 0.05) -> SurfacePo
     mean = n.sum(axis=0)
     if np.linalg.norm(mean) > 0:
         n[n @ mean < 0] *= -1.0
+    # one line is seen from one side by rays that turn smoothly along it: a single
+    # point's normal on a sharp edge (the border of a deeper muscle, the lower edge of
+    # a bone) would otherwise send its ray across to another surface (a zigzag)
+    n = _smooth_along(n, int(smooth), closed)
     r = reach * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
     ray, tri, loc, dist = proj.caster.all_hits(p + r * n, -n)
     # keep the first hit on a face turned toward the ray's origin: when the origin is
-    # still inside a thin bone (the zygomatic arch), its back side is not a surface to lie on
+    # still inside a thin bone (the zygomatic arch), its back side is not a surface to lie on;
+    # a hit more than ``reach`` beyond the point is another part of the head, not this point
     fn = face_normals(v, f)[tri]
-    front = (np.einsum("ij,ij->i", fn, n[ray]) > 0) & (dist >= 0)
+    front = (np.einsum("ij,ij->i", fn, n[ray]) > 0) & (dist >= 0) & (dist <= 2.0 * r)
     ray, tri, loc = ray[front], tri[front], loc[front]
     first = np.r_[True, ray[1:] != ray[:-1]] if len(ray) else np.zeros(0, bool)
     face = np.full(len(p), -1, dtype=np.int64)
@@ -254,7 +279,7 @@ class ActionLine:
         if project == "closest":
             sp = project_to_surface(dense, v, f)
         elif project == "outermost":
-            sp = project_outermost(dense, v, f)
+            sp = project_outermost(dense, v, f, closed=closed)
         else:
             raise ValueError(f"project must be 'closest' or 'outermost', got {project!r}")
         pos = sp.positions(v, f)
