@@ -124,6 +124,12 @@ class BoundHead:
         if missing:
             raise StageError(f"bind.npz binds the skin to {missing}, which the fitted head lacks; "
                              "rerun `faceforge bind`", bind_dir / "bind.npz")
+        for b, name in enumerate(binding.body_names):
+            ids = binding.face_ids[binding.body == b]
+            if len(ids) and ids.max() >= len(system.faces(name)):
+                raise StageError(f"bind.npz binds the skin to faces of {name!r} that the fitted head does "
+                                 "not have (the muscle map changed?); rerun `faceforge bind`",
+                                 bind_dir / "bind.npz")
         # anchors on the system's own rest bodies (the rebuilt muscles may differ from the meshes
         # bind saw by a projection): then the rest pose is an exact fixed point
         binding = replace(binding, points=binding.targets([system.surface(n) for n in binding.body_names]))
