@@ -1,0 +1,207 @@
+"""The real template's muscle map builds and simulates cleanly (templates/skull + templates/muscle_map.yaml).
+
+One layered system (§6) is built once for the module on the template skull with the
+paper's stiffness (configs: ``muscle.*.stiffness``) and shared by every test; each
+simulation test starts from :meth:`MusculoskeletalSystem.reset`. "Inverted" is
+:meth:`Muscle.inverted_faces` (a sheet face turned against the layer below it);
+"degenerate" is a face whose area is below 1e-3 of its longest edge squared.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from faceforge.anatomy.fit_muscles import build_muscles_on
+from faceforge.anatomy.layers import MusculoskeletalSystem, underlying_mesh
+from faceforge.anatomy.muscle_map import load_muscle_map, mirrored_name
+from faceforge.anatomy.skull import load_skull
+from faceforge.geometry.triangles import vertex_normals
+
+ROOT = Path(__file__).resolve().parents[2]
+FRAMES = 60
+#: projected action line / straight polyline through the map's points (no zigzags)
+MAX_LINE_RATIO = 1.3
+#: largest distance between a right muscle and its mirrored left twin, fraction of the skull
+#: diagonal (the template skull is symmetric to ~1.5 mm at the 99th percentile, 5 mm at worst)
+MIRROR_TOL = 0.02
+#: muscles still folding on the real template (a few sheet faces at the mouth corners, at rest and
+#: more with the jaw open); every other muscle must stay clean, and the xfail tests below assert the
+#: full goal so that fixing these two shows up as an XPASS (strict) to be removed here
+KNOWN_FOLDED = {"orbicularis_oris", "risorius_R"}
+NOT_YET = pytest.mark.xfail(strict=True, reason="orbicularis_oris folds 3 faces at its mouth corners at rest "
+                            "(7 with the jaw open) and risorius_R 2 near its insertion")
+
+
+@pytest.fixture(scope="module")
+def template():
+    skull = load_skull(ROOT / "templates" / "skull")
+    specs = load_muscle_map(ROOT / "templates" / "muscle_map.yaml", skull)
+    cfg = yaml.safe_load((ROOT / "configs" / "default.yaml").read_text())["muscle"]
+    stiffness = {kind: cfg[kind]["stiffness"] for kind in ("linear", "sphincter")}
+    muscles = build_muscles_on(specs, skull.cranium, skull.mandible, skull.diagonal, stiffness)
+    system = MusculoskeletalSystem.from_parts(skull.cranium, skull.mandible, muscles)
+    return skull, specs, muscles, system
+
+
+def unexpected(folded: dict) -> dict:
+    """The entries of ``folded`` not in :data:`KNOWN_FOLDED`."""
+    return {k: v for k, v in folded.items() if k not in KNOWN_FOLDED}
+
+
+def inverted_now(system) -> dict[str, int]:
+    """Muscle name -> number of sheet faces turned over in the current frame (only > 0)."""
+    v, f = system.world()
+    vn = vertex_normals(v, f)
+    out = {}
+    for name, m in system.muscles.items():
+        k = int(m.inverted_faces(system.positions(name), v, f, vn).sum())
+        if k:
+            out[name] = k
+    return out
+
+
+def run(system, frames, contractions=None, jaw=None):
+    system.reset()
+    for _ in range(frames):
+        system.step(contractions or {}, jaw)
+    v, _ = system.world()
+    return v
+
+
+def test_the_map_keeps_its_muscles_and_layers(template):
+    _, specs, muscles, system = template
+    kinds = [s.type for s in specs]
+    assert kinds.count("linear") == 25 and kinds.count("sphincter") == 1
+    assert tuple(system.layer_indices) == (0, 1, 2, 3)
+    assert len(muscles) == 26
+
+
+def test_rest_meshes_have_no_inverted_or_degenerate_face(template):
+    _, _, _, system = template
+    v, f = system.world(rest=True)
+    vn = vertex_normals(v, f)
+    inverted, degenerate = {}, {}
+    for name, m in system.muscles.items():
+        p = system.rest_positions(name)
+        k = int(m.inverted_faces(p, v, f, vn).sum())
+        if k:
+            inverted[name] = k
+        tri = p[m.faces]
+        area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        edge = np.linalg.norm(tri[:, [1, 2, 0]] - tri, axis=2).max(axis=1)
+        k = int((area < 1e-3 * edge ** 2).sum())
+        if k:
+            degenerate[name] = k
+    assert unexpected(inverted) == {}
+    assert degenerate == {}
+
+
+@NOT_YET
+def test_no_muscle_at_all_is_folded_at_rest_or_with_the_jaw_open(template):
+    skull, _, _, system = template
+    system.reset()
+    folded = dict(inverted_now(system))
+    run(system, FRAMES, None, skull.jaw_transform(skull.jaw.limits["pitch"][1]))
+    folded.update(inverted_now(system))
+    assert folded == {}
+
+
+def test_action_lines_follow_their_contour_without_zigzags(template):
+    skull, specs, muscles, _ = template
+    by_name = {m.name: m for m in muscles}
+    too_long = {}
+    for spec in specs:
+        m = by_name[spec.name]
+        deeper = [by_name[n] for n in m.lies_on if n in by_name]
+        v, f = underlying_mesh(m.lies_on, skull.cranium, skull.mandible, deeper)
+        given = spec.action_lines()
+        if spec.type == "sphincter":
+            given = {"A1": np.vstack([spec.inner, spec.inner[:1]]), "A3": np.vstack([spec.outer, spec.outer[:1]])}
+        for key, line in m.lines.items():
+            straight = np.linalg.norm(np.diff(given[key], axis=0), axis=1).sum()
+            ratio = line.length(v, f) / straight
+            assert ratio > 0.7, f"{spec.name} {key}: projected line shorter than its contour ({ratio:.2f})"
+            if ratio > MAX_LINE_RATIO:
+                too_long[f"{spec.name}.{key}"] = round(float(ratio), 2)
+    assert too_long == {}
+
+
+def test_left_and_right_muscles_mirror_each_other(template):
+    skull, specs, _, system = template
+    names = set(system.muscles)
+    pairs = [(n, mirrored_name(n)) for n in names if n.endswith("_L")]
+    assert len(pairs) == 12 and all(r in names for _, r in pairs)
+    flip = np.array([-1.0, 1.0, 1.0])
+    for left, right in pairs:
+        pl, pr = system.rest_positions(left), system.rest_positions(right)
+        assert pl.shape == pr.shape
+        gap = np.linalg.norm(pl * flip - pr, axis=1).max() / skull.diagonal
+        assert gap < MIRROR_TOL, f"{right} is {gap:.3f} diagonals away from the mirrored {left}"
+    for name in names - {n for p in pairs for n in p}:  # midline muscles are their own mirror
+        p = system.rest_positions(name)
+        centre = p.mean(axis=0)
+        assert abs(centre[0]) < MIRROR_TOL * skull.diagonal
+
+
+def test_rest_is_a_fixed_point_for_200_frames(template):
+    skull, _, _, system = template
+    system.reset()
+    rest, _ = system.world(rest=True)
+    v = run(system, 200)
+    assert np.abs(v - rest).max() <= 1e-9 * skull.diagonal
+
+
+def _active(template):
+    return [s.name for s in template[1] if s.active]
+
+
+def test_each_active_muscle_contracted_alone_stays_clean(template):
+    _, specs, _, system = template
+    bad = {}
+    for name in _active(template):
+        v = run(system, FRAMES, {name: 1.0})
+        assert np.isfinite(v).all(), f"{name} at c = 1 produced NaN"
+        inv = unexpected(inverted_now(system))
+        if inv:
+            bad[name] = inv
+    assert bad == {}
+
+
+def test_contracting_every_muscle_together_stays_clean(template):
+    _, _, _, system = template
+    v = run(system, FRAMES, {name: 1.0 for name in _active(template)})
+    assert np.isfinite(v).all()
+    assert unexpected(inverted_now(system)) == {}
+
+
+def test_contraction_shortens_the_fibres(template):
+    """Named physical check: an active linear muscle at c = 1 is shorter along its fibres."""
+    _, specs, _, system = template
+    name = "zygomaticus_major_L"
+    m = system.muscles[name]
+    rest = m.fibre_lengths(system.rest_positions(name)).mean()
+    run(system, FRAMES, {name: 1.0})
+    assert m.fibre_lengths(system.positions(name)).mean() < 0.8 * rest
+
+
+@pytest.mark.parametrize("pose", ["open", "open+yaw"])
+def test_jaw_opened_to_its_limit_stays_clean(template, pose):
+    skull, _, _, system = template
+    pitch = skull.jaw.limits["pitch"][1]
+    yaw = skull.jaw.limits["yaw"][1] if pose == "open+yaw" else 0.0
+    system.reset()
+    ramp = FRAMES // 2
+    for i in range(FRAMES):
+        s = min(1.0, (i + 1) / ramp)
+        system.step({}, skull.jaw_transform(s * pitch, s * yaw))
+    v, _ = system.world()
+    assert np.isfinite(v).all()
+    assert unexpected(inverted_now(system)) == {}
+    # the mandible really moved: the chin (FDP 2.1) dropped
+    chin = skull.landmarks["2.1"]
+    T = skull.jaw_transform(pitch, yaw)
+    assert (T[:3, :3] @ chin + T[:3, 3])[1] < chin[1] - 0.05 * skull.diagonal
