@@ -31,7 +31,7 @@ def pick_frames(n_frames: int, count: int = 6, spec: str | None = None) -> list[
 
 def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: float,
                   view: str = "front", cols: int | None = None, title: str | None = None,
-                  panel: float = 2.6, dpi: int = 110) -> Path:
+                  panel: float = 2.6, dpi: int = 110, focus: bool = False) -> Path:
     """Write a grid of shaded renders of ``frames[indices]``.
 
     Parameters
@@ -45,7 +45,8 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     cols : panels per row (default: up to 6)
 
     All panels share one scale (the union of the drawn frames' extents), so motion between
-    panels is visible as motion.
+    panels is visible as motion. ``focus`` zooms on the vertices that move (>= 35 % of the
+    largest displacement between the first drawn frame and the others), padded by 30 %.
     """
     import matplotlib
 
@@ -61,9 +62,16 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     fig, axes = plt.subplots(rows, cols, figsize=(panel * cols, panel * 1.15 * rows), dpi=dpi,
                              squeeze=False)
     r = view_matrix(view)
-    proj = np.concatenate([frames[i] for i in indices]) @ r.T
+    shown = frames[indices]
+    keep = np.ones(shown.shape[1], dtype=bool)
+    if focus:
+        # frame the part that moves: vertices displaced by >= 35 % of the largest displacement
+        disp = np.linalg.norm(shown - shown[:1], axis=2).max(axis=0)
+        if disp.max() > 0:
+            keep = disp >= 0.35 * disp.max()
+    proj = shown[:, keep].reshape(-1, 3) @ r.T
     lo, hi = proj[:, :2].min(axis=0), proj[:, :2].max(axis=0)
-    pad = 0.04 * (hi - lo).max()
+    pad = (0.3 if focus else 0.04) * (hi - lo).max()
     for ax in axes.ravel():
         ax.axis("off")
     for ax, i in zip(axes.ravel(), indices):

@@ -201,3 +201,20 @@ def test_inside_check_tolerance_ignores_grazing_contact():
     assert check_animation(rest, grazing, faces, skull=skull, tolerance=1e-3).skin_inside_skull == 0
     assert check_animation(rest, grazing, faces, skull=skull, tolerance=0.0).skin_inside_skull == len(rest)
     assert check_animation(rest, deep, faces, skull=skull, tolerance=1e-3).skin_inside_skull == len(rest)
+
+
+def test_contact_sheet_focus_zooms_on_what_moves(tmp_path):
+    import matplotlib.image as mpimg
+
+    from faceforge.viz.contact_sheet import contact_sheet
+
+    rest, faces = grid(8)
+    moved = rest.copy()
+    moved[[27, 28, 35, 36], 2] += 0.05                     # only a patch in the middle moves
+    frames = np.stack([rest, moved])
+    whole = mpimg.imread(contact_sheet(tmp_path / "a.png", frames, faces, [0, 1], fps=25))
+    zoom = mpimg.imread(contact_sheet(tmp_path / "b.png", frames, faces, [0, 1], fps=25, focus=True))
+    assert whole.shape == zoom.shape
+    # zoomed in, the sheet's triangles cover more of the panel (fewer background pixels)
+    bg = lambda img: np.mean(np.all(img[..., :3] > 0.99, axis=-1))   # noqa: E731
+    assert bg(zoom) < bg(whole)

@@ -494,7 +494,7 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
             idx = pick_frames(len(frames), int(app.config.get("animate.preview_frames")), preview_frames)
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
-        contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name)
+        contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name, focus=True)
         app.log(f"animate: wrote {preview}")
 
 
