@@ -102,8 +102,9 @@ def load_template(skull_dir, muscle_map) -> Template:
     """The template named by ``template.*``, with its muscles built on the template skull.
 
     Building the 26 muscles takes seconds, so they are kept per process and on disk
-    (:func:`template_cache_dir`, an npz named by the SHA-256 of the template files and
-    :data:`TEMPLATE_CACHE_VERSION`); a changed template file gives a new key.
+    (:func:`template_cache_dir`, an npz named by the SHA-256 of the template files, the
+    muscle-building source files and :data:`TEMPLATE_CACHE_VERSION`); a changed template
+    file or muscle-model edit gives a new key.
     """
     import hashlib
 
@@ -112,7 +113,7 @@ def load_template(skull_dir, muscle_map) -> Template:
 
     skull_dir, muscle_map = _resolve(skull_dir), _resolve(muscle_map)
     digest = hashlib.sha256(TEMPLATE_CACHE_VERSION.encode())
-    for path in sorted(Path(skull_dir).glob("*")) + [Path(muscle_map)]:
+    for path in sorted(Path(skull_dir).glob("*")) + [Path(muscle_map)] + _muscle_code_files():
         if path.is_file():
             digest.update(path.name.encode() + path.read_bytes())
     key = digest.hexdigest()[:24]
@@ -122,6 +123,20 @@ def load_template(skull_dir, muscle_map) -> Template:
         _TEMPLATES.clear()
         _TEMPLATES[key] = Template(skull, specs, _template_muscles(key, specs, skull))
     return _TEMPLATES[key]
+
+
+def _muscle_code_files() -> list[Path]:
+    """Source files whose code decides the built muscles: they enter the cache key, so an
+    edit to the muscle model can never be masked by muscles cached by older code."""
+    import faceforge.anatomy.action_line as a
+    import faceforge.anatomy.fit_muscles as b
+    import faceforge.anatomy.hexmesh as c
+    import faceforge.anatomy.muscle as d
+    import faceforge.anatomy.muscle_map as e
+    import faceforge.geometry.rbf as f
+    import faceforge.geometry.surface_points as g
+
+    return [Path(m.__file__) for m in (a, b, c, d, e, f, g)]
 
 
 def _template_muscles(key: str, specs, skull) -> list:
