@@ -39,6 +39,9 @@ Functions on arrays. The construction, in order:
    covered by muscles are brought onto the muscle surface by cylindrical projection and
    the fit is run again (the refit), so the muscles lie at least ``muscle_gap_mm``
    beneath the skin there.
+6. **Clearance** (:mod:`faceforge.anatomy.fit_clearance`): where the bone still swallows
+   skin, it gives way locally (compact bumps of ``clearance_radius``) until every skin
+   vertex is ``skin_clearance_mm`` outside; the muscles, landmarks and axes move with it.
 
 The map is kept as a composition of callables (similarity then RBF then refit RBF) and
 is applied to every template point: cranium, mandible, landmarks, muscle-map points and
@@ -75,6 +78,8 @@ class FitSettings:
     skin_clearance_samples: int = 16   # bone pairs per round for skin inside the bone
     front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0
     muscle_gap_mm: float = 1.5         # skin tissue kept above the muscle top at landmarks (mm)
+    clearance_radius: float = 0.03     # bone bends around skin it swallowed within this (x skin diagonal)
+    clearance_rounds: int = 4          # at most this many bump fields (fit_clearance)
 
     @classmethod
     def from_config(cls, cfg: dict | None) -> "FitSettings":
@@ -566,6 +571,23 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
                 targets = rf.skull_targets
                 info["refit"] = True
                 info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
+    # 6. bone that still swallows skin gives way locally (fit_clearance); the same fields move
+    # the muscles, landmarks and axes, so everything lying on the bone stays on it
+    if settings.skin_clearance_mm > 0 and settings.clearance_rounds > 0:
+        from faceforge.anatomy.fit_clearance import clearance_fields
+
+        used = np.unique(skin.faces)
+        own = skin.vertices[used[used < skin.n_real]] if skin.n_real >= 0 else skin.vertices[used]
+        fields = clearance_fields([(skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf)], own,
+                                  settings.skin_clearance_mm * scale_mm,
+                                  settings.clearance_radius * skin.diagonal, settings.clearance_rounds)
+        for g in fields:
+            skull_fit = g(skull_fit)
+            muscles = [(n, g(v), f) for n, v, f in muscles]
+            targets = g(targets)
+        warp = Warp(warp.similarity, warp.rbfs + fields)
+        info["clearance_fields"] = len(fields)
+        info["clearance_points"] = int(sum(len(g.centres) for g in fields))
     # axes: points by the map; directions turned by the rotation that best carries the template
     # mandible onto the fitted one (least squares over all its vertices): the jaw is one rigid
     # body, so its axes follow the mandible as a whole rather than the map's local Jacobian
@@ -580,8 +602,8 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         jaw[name] = (warp(np.asarray(point, dtype=np.float64)[None])[0], d / np.linalg.norm(d))
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
     enhancement = sk.targets[sk.n_landmarks + len(pairs.anchors):]
-    if len(warp.rbfs) > 1:
-        enhancement = warp.rbfs[-1](enhancement)
+    for g in warp.rbfs[1:]:  # the refit and clearance maps carry them on
+        enhancement = g(enhancement)
     reached = np.array([fitted_lm[f] for f in pairs.fdps])
     return FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
                      {n: warp(p) for n, p in template.muscle_points.items()}, muscles, warp, info,
