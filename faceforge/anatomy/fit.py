@@ -40,8 +40,9 @@ Functions on arrays. The construction, in order:
    the fit is run again (the refit), so the muscles lie at least ``muscle_gap_mm``
    beneath the skin there.
 6. **Clearance** (:mod:`faceforge.anatomy.fit_clearance`): where the bone still swallows
-   skin, it gives way locally (compact bumps of ``clearance_radius``) until every skin
-   vertex is ``skin_clearance_mm`` outside; the muscles, landmarks and axes move with it.
+   skin, it gives way locally (compact bumps of ``clearance_radius``, each pushing the
+   closest bone point to ``skin_clearance_mm`` beneath the skin vertex) until no skin vertex
+   is inside or ``clearance_rounds`` is reached; the muscles, landmarks and axes move with it.
 
 The map is kept as a composition of callables (similarity then RBF then refit RBF) and
 is applied to every template point: cranium, mandible, landmarks, muscle-map points and
