@@ -32,7 +32,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "2"
+VERSION = "3"
 
 
 def run(ctx) -> None:
