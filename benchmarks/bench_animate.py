@@ -10,7 +10,9 @@ Measures the per-frame time of skull + muscles + skin, broken down by layer, at 
 * ``--workdir DIR`` (optional): a real head already fitted and bound in DIR;
 * ``--sweep`` (optional, slow): every ``samples/fap/*.fap`` on the three sample heads through
   the CLI (fit, bind, animate -o .pc2): checks (NaN, inverted triangles, skin inside the
-  skull), ms/frame and the .pc2 round trip, per head and file.
+  skull), ms/frame and the .pc2 round trip, per head and file;
+* ``--calibrated DIR`` (optional, repeatable): the summary and per-FAP rows of a
+  ``faceforge calibrate`` run in DIR.
 
 Writes ``benchmarks/results/animate.json``. The paper (Table I, one core of a 2.4 GHz Core2)
 reports 50 ms per frame for Mesh_D; the target here is <= 3 ms. Wall-clock per layer (best of the repeats) and the process's
@@ -163,6 +165,8 @@ def main(argv=None):
     ap.add_argument("--sweep", action="store_true",
                     help="also play every samples/fap/*.fap on the three sample heads (slow)")
     ap.add_argument("--sweep-dir", type=Path, default=None, help="keep the sweep's workdirs here")
+    ap.add_argument("--calibrated", type=Path, action="append", default=[],
+                    help="a workdir where `faceforge calibrate` ran: its summary goes into the results")
     args = ap.parse_args(argv)
     frames, repeats = (30, 2) if args.quick else (108, 3)
     results = {"target_ms": TARGET_MS, "paper_mesh_d_ms": PAPER_MESH_D_MS, "heads": {}}
@@ -181,6 +185,16 @@ def main(argv=None):
         else:
             with tempfile.TemporaryDirectory() as tmp:
                 results["sweep"] = sweep(Path(tmp), list(SAMPLE_HEADS), faps)
+    if args.calibrated:
+        import json
+
+        results["calibration"] = {}
+        for wd in args.calibrated:
+            rep = json.loads((wd / "calibrate" / "report.json").read_text())
+            results["calibration"][str(wd)] = {
+                "summary": rep["summary"], "open_jaw_lip_separation": rep["open_jaw_lip_separation"],
+                "rows": [{k: r[k] for k in ("fap", "name", "requested", "achieved_uncalibrated", "achieved",
+                                            "relative_error")} for r in rep["rows"]]}
     rows = []
     for name, r in results["heads"].items():
         ms = r["ms_per_frame"]
