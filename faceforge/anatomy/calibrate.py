@@ -217,17 +217,27 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
 
 
 def _monotone_knots(knots: np.ndarray) -> np.ndarray:
-    """Sort knots by requested value and force drives monotone (non-decreasing in value)."""
+    """Sort knots by requested value and make the whole curve monotone through (0, 0).
+
+    The curve's sense ``s`` is that of the positive side's drives (else the opposite of the
+    negative side's). Positive requests get ``s * drive >= 0`` growing with the request,
+    negative ones ``s * drive <= 0`` growing in size outward; a side whose drives went the
+    wrong way (that request could not be met) is clamped to zero drive.
+    """
     k = knots[np.argsort(knots[:, 0], kind="stable")].copy()
     neg, pos = k[:, 0] < 0.0, k[:, 0] > 0.0
-    # on each side the drive keeps the sign it had and grows with |requested|
+    s = 0.0
     if np.any(pos):
-        s = np.sign(np.median(k[pos, 1])) or 1.0
+        s = np.sign(np.median(k[pos, 1]))
+    if s == 0.0 and np.any(neg):
+        s = -np.sign(np.median(k[neg, 1]))
+    s = s or 1.0
+    if np.any(pos):
         k[pos, 1] = s * np.maximum.accumulate(np.maximum(s * k[pos, 1], 0.0))
     if np.any(neg):
-        s = np.sign(np.median(k[neg, 1])) or -1.0
-        mag = np.maximum(s * k[neg, 1][::-1], 0.0)
-        k[neg, 1] = (s * np.maximum.accumulate(mag))[::-1]
+        mag = np.maximum(-s * k[neg, 1][::-1], 0.0)
+        k[neg, 1] = (-s * np.maximum.accumulate(mag))[::-1]
+    k[k[:, 0] == 0.0, 1] = 0.0
     return k
 
 

@@ -121,3 +121,19 @@ def test_coupling_is_measured_from_open_jaw():
     ratio = m2.entry_of(52).coupling[3]
     expected = -0.8 * np.sin(np.arctan2(200 * FAPU["MNS"], 1.0)) / (200 * FAPU["MNS"])
     assert ratio == pytest.approx(expected, rel=1e-9)
+
+
+def test_calibrated_knots_are_always_a_loadable_monotone_curve():
+    from faceforge.anatomy.calibrate import _monotone_knots
+    from faceforge.anatomy.fap_mapping import mapping_from_dict, mapping_to_dict, with_entry
+
+    rng = np.random.default_rng(3)
+    m = mapping_from_dict(MAPPING)
+    for _ in range(200):
+        req = np.array([-100.0, -50.0, 50.0, 100.0])
+        knots = _monotone_knots(np.column_stack([req, rng.normal(0, 80, 4)]))
+        d = knots[:, 1]
+        assert np.all(np.diff(d) >= 0) or np.all(np.diff(d) <= 0)
+        assert np.all(np.sign(d[knots[:, 0] > 0]) * np.sign(d[knots[:, 0] < 0]) <= 0)
+        back = mapping_from_dict(mapping_to_dict(with_entry(m, 1, response=knots)))   # loader accepts it
+        assert np.allclose(back.entries[1].response, knots)
