@@ -68,7 +68,8 @@ def measure(rest: np.ndarray, moved: np.ndarray, probe: Probe) -> np.ndarray:
     return (d @ np.asarray(probe.direction, dtype=float)) / probe.unit
 
 
-def invert_monotone(drives: np.ndarray, achieved: np.ndarray, requested: np.ndarray) -> np.ndarray:
+def invert_monotone(drives: np.ndarray, achieved: np.ndarray, requested: np.ndarray,
+                    knee: float = 0.25) -> np.ndarray:
     """Drives that achieve ``requested`` on the sampled curve ``achieved(drives)``.
 
     drives : (k,) float, all of one sign, sampled drives (FAPU)
@@ -77,8 +78,10 @@ def invert_monotone(drives: np.ndarray, achieved: np.ndarray, requested: np.ndar
 
     The curve gets (0, 0) prepended and is made monotone (running max of |achieved|
     along |drive|), then inverted by linear interpolation; beyond the last sample the
-    last secant slope extrapolates. Returns (r,) float drives; NaN where the curve never
-    moves the FDP in the requested sense (the FAP is unreachable with this mapping).
+    last secant slope extrapolates unless the curve has flattened (last slope < ``knee`` x
+    the first: saturation), in which case the drive is held at the last sample. Returns
+    (r,) float drives; NaN where the curve never moves the FDP in the requested sense (the
+    FAP is unreachable with this mapping).
     """
     drives, achieved, requested = (np.asarray(a, dtype=float) for a in (drives, achieved, requested))
     order = np.argsort(np.abs(drives))
@@ -97,9 +100,16 @@ def invert_monotone(drives: np.ndarray, achieved: np.ndarray, requested: np.ndar
         g, dd = gain[keep], d[keep]
         r = np.abs(requested[sel])
         res = np.interp(r, g, dd)
-        if len(g) >= 2:
-            slope = (dd[-1] - dd[-2]) / (g[-1] - g[-2])
-            res = np.where(r > g[-1], dd[-1] + (r - g[-1]) * slope, res)
+        if len(g) >= 3:
+            # extrapolate with the last secant only while the curve has not flattened: past a
+            # knee (last response slope < ``knee`` x the first) more drive buys little motion
+            # and only drives the muscles into full contraction, so the drive is held there
+            first = (g[1] - g[0]) / (dd[1] - dd[0])
+            last = (g[-1] - g[-2]) / (dd[-1] - dd[-2])
+            if abs(last) >= knee * abs(first):
+                res = np.where(r > g[-1], dd[-1] + (r - g[-1]) / last, res)
+        elif len(g) == 2:
+            res = np.where(r > g[-1], dd[-1] * r / g[-1], res)
         out[sel] = res
     return out
 

@@ -137,3 +137,11 @@ def test_calibrated_knots_are_always_a_loadable_monotone_curve():
         assert np.all(np.sign(d[knots[:, 0] > 0]) * np.sign(d[knots[:, 0] < 0]) <= 0)
         back = mapping_from_dict(mapping_to_dict(with_entry(m, 1, response=knots)))   # loader accepts it
         assert np.allclose(back.entries[1].response, knots)
+
+
+def test_inversion_holds_at_a_saturation_knee():
+    drives = np.array([50.0, 100.0, 150.0])
+    linear = invert_monotone(drives, 0.5 * drives, np.array([150.0]))
+    assert linear[0] == pytest.approx(300.0)                 # straight line: extrapolated
+    flat = invert_monotone(drives, np.array([40.0, 44.0, 45.0]), np.array([150.0]))
+    assert flat[0] == pytest.approx(150.0)                   # saturated: held at the last sample
