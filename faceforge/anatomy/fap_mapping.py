@@ -19,7 +19,8 @@ entry, so a file that gives both does not count them twice). The entry's value `
    ``gain * drive`` FAPU of displacement at the jaw's lever arm (converted to radians
    for pitch and yaw, to skin length units for protrusion).
 
-A muscle asked for by several entries takes the **largest** request, clipped to [0, 1]:
+A muscle asked for by several entries takes the **largest** request, clipped to
+[0, ``max_contraction``] (Eq. 4 at c = 1 collapses a muscle onto its origin):
 several FAPs usually describe one action at several points of the same tissue (the three
 upper-lip FAPs 51, 55, 56 and the one orbicularis oris), and each entry is calibrated alone,
 so adding them would over-drive the shared muscle. Jaw DOFs add (each has its own FAP) and
@@ -84,6 +85,7 @@ class FapMapping:
     jaw_limits: dict                                  # dof -> (lo, hi); rad, rad, lever fraction
     expressions: dict                                 # name -> (68,) float FAP values
     source: str = "<memory>"
+    max_contraction: float = 1.0                      # contractions are clipped to [0, this]
 
     @property
     def muscles(self) -> tuple[str, ...]:
@@ -249,7 +251,11 @@ def mapping_from_dict(data: dict, source: str = "<memory>") -> FapMapping:
             row[_fap_number(k, source, f"expressions.{name}.faps") - 1] = _as_float(
                 v, source, f"expressions.{name}.faps.{k}")
         expressions[name] = row
-    return FapMapping(entries=entries, jaw_limits=limits, expressions=expressions, source=str(source))
+    cmax = _as_float(data.get("max_contraction", 1.0), source, "max_contraction")
+    if not 0.0 < cmax <= 1.0:
+        raise _err(source, f"max_contraction: expected a number in (0, 1], got {cmax}")
+    return FapMapping(entries=entries, jaw_limits=limits, expressions=expressions, source=str(source),
+                      max_contraction=cmax)
 
 
 def load_fap_mapping(path) -> FapMapping:
@@ -293,7 +299,7 @@ def mapping_to_dict(mapping: FapMapping) -> dict:
     exprs = {name: {"id": EXPRESSION_IDS[name],
                     "faps": {int(k + 1): float(row[k]) for k in np.flatnonzero(row)}}
              for name, row in mapping.expressions.items()}
-    return {"entries": entries,
+    return {"max_contraction": float(mapping.max_contraction), "entries": entries,
             "jaw_limits": {k: [float(v[0]), float(v[1])] for k, v in mapping.jaw_limits.items()},
             "expressions": exprs}
 
@@ -394,7 +400,7 @@ def fap_controls(mapping: FapMapping, faps: np.ndarray, muscle_names, fapu: dict
 
     Returns
     -------
-    contractions : (n, m) float in [0, 1], per muscle the largest request of any entry
+    contractions : (n, m) float in [0, max_contraction], per muscle the largest request of any entry
     jaw : (n, 3) float, (pitch rad, yaw rad, protrusion skin units), within the limits
     """
     names = list(muscle_names)
@@ -424,4 +430,4 @@ def fap_controls(mapping: FapMapping, faps: np.ndarray, muscle_names, fapu: dict
         lo, hi = mapping.jaw_limits[dof]
         scale = levers.pitch if dof == "protrusion" else 1.0
         jaw[:, k] = np.clip(jaw[:, k], lo * scale, hi * scale)
-    return np.clip(c, 0.0, 1.0), jaw
+    return np.clip(c, 0.0, mapping.max_contraction), jaw

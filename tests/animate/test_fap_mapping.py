@@ -45,7 +45,7 @@ def test_rest_is_zero(mapping):
 def test_contractions_clipped_and_jaw_limited(mapping):
     f = np.full((1, N_FAPS), 1e6)
     c, jaw = fap_controls(mapping, f, mapping.muscles, FAPU, LEVERS)
-    assert c.max() == 1.0 and c.min() >= 0.0
+    assert c.max() == mapping.max_contraction and c.min() >= 0.0
     assert jaw[0, 0] == pytest.approx(mapping.jaw_limits["pitch"][1])
     assert jaw[0, 2] == pytest.approx(mapping.jaw_limits["protrusion"][1] * LEVERS.pitch)
     c, jaw = fap_controls(mapping, -f, mapping.muscles, FAPU, LEVERS)
@@ -170,3 +170,10 @@ def test_a_muscle_shared_by_several_faps_takes_the_largest_request(mapping):
     assert one[0, oo] > 0 and three[0, oo] == pytest.approx(one[0, oo])
     bigger, _ = fap_controls(mapping, frames(f51=100, f4=100, f55=150, f8=150), names, FAPU, LEVERS)
     assert bigger[0, oo] > one[0, oo]
+
+
+def test_max_contraction_is_validated(mapping):
+    d = mapping_to_dict(mapping)
+    d["max_contraction"] = 1.5
+    with pytest.raises(TemplateError, match="max_contraction"):
+        mapping_from_dict(d, source="m.yaml")
