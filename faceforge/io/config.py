@@ -392,15 +392,21 @@ def parse_sets(items: Iterable[str], base: Path | None = None) -> Layer:
             value = yaml.safe_load(raw) if raw.strip() else ""
         except yaml.YAMLError:
             raise ConfigError(f"{key}: value {raw!r} is not valid YAML", "--set") from None
-        node = tree
-        parts = key.split(".")
-        for part in parts[:-1]:
-            child = node.get(part)
-            if not isinstance(child, dict):
-                child = node[part] = {}
-            node = child
-        node[parts[-1]] = value
+        set_dotted(tree, key, value)
     return validate_tree(tree, "--set", {}, base or Path.cwd())
+
+
+def set_dotted(tree: dict, key: str, value) -> None:
+    """Set ``tree["a"]["b"] = value`` for ``key = "a.b"``, creating (or replacing non-dict)
+    intermediate mappings."""
+    node = tree
+    parts = str(key).split(".")
+    for part in parts[:-1]:
+        child = node.get(part)
+        if not isinstance(child, dict):
+            child = node[part] = {}
+        node = child
+    node[parts[-1]] = value
 
 
 # ---------------------------------------------------------------------------

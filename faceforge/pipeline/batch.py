@@ -119,16 +119,11 @@ class HeadResult:
 
 def nest(overrides: Mapping[str, Any]) -> dict:
     """``{"a.b": 1, "a.c": 2}`` -> ``{"a": {"b": 1, "c": 2}}`` (later keys win)."""
+    from faceforge.io.config import set_dotted
+
     tree: dict = {}
     for key, value in overrides.items():
-        node = tree
-        parts = str(key).split(".")
-        for part in parts[:-1]:
-            child = node.get(part)
-            if not isinstance(child, dict):
-                child = node[part] = {}
-            node = child
-        node[parts[-1]] = value
+        set_dotted(tree, key, value)
     return tree
 
 
