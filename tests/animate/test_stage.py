@@ -18,7 +18,7 @@ JOY = ROOT / "samples" / "fap" / "joy.fap"
 SETS = ("animate.calibrate.settle_frames=15", "animate.calibrate.refine=1")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def workdir(tmp_path_factory):
     """A workdir with fit/ and bind/ of the synthetic head and the synthetic mapping."""
     from faceforge.io.config import load_config
@@ -34,9 +34,12 @@ def workdir(tmp_path_factory):
     return root
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def patched():
-    """The fit stage does not yet rebuild muscles from fit.npz: use the synthetic builder."""
+    """The synthetic head has no template muscles: build its muscles with the synthetic builder.
+
+    Module-scoped: the patch must not leak into later test modules (the sample-head tests
+    rebuild the real muscles)."""
     import faceforge.pipeline.stages.animate as stage
 
     mp = pytest.MonkeyPatch()
@@ -60,12 +63,12 @@ def run_stage(stage_name, workdir, params, sets=SETS):
     return out
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def calibrated(workdir, patched):
     return run_stage("calibrate", workdir, {"fap_mapping_template": str(workdir / "mapping.yaml")})
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def joy(workdir, patched):
     return run_stage("animate", workdir, {"fap": str(JOY), "animate_mapping": str(workdir / "mapping.yaml")})
 
