@@ -113,10 +113,7 @@ class BoundHead:
         self.levers = JawLevers(_lever(chin, axes.pitch_point, axes.pitch_dir),
                                 _lever(chin, axes.yaw_point, axes.yaw_dir))
 
-        settings = SolverSettings(iterations=int(config.get("solver.iterations")),
-                                  substeps=int(config.get("solver.substeps")),
-                                  damping=float(config.get("solver.damping")),
-                                  stiffness_mode=str(config.get("solver.stiffness_mode")))
+        settings = SolverSettings.from_config(config.get("solver"))
         self.system = system = _muscle_system(fit, self.cranium, self.mandible, settings, config, log)
         self.muscle_names = tuple(system.muscles)
         binding = Binding.from_arrays(bind)
