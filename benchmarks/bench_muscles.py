@@ -108,20 +108,6 @@ def template_scene():
                                                            skull.diagonal, stiffness)
 
 
-def folded_at_rest(system) -> dict:
-    """Muscles with sheet faces turned over at rest (see Muscle.inverted_faces): name -> count."""
-    from faceforge.geometry.triangles import vertex_normals
-
-    v, f = system.world(rest=True)
-    vn = vertex_normals(v, f)
-    out = {}
-    for name, m in system.muscles.items():
-        k = int(m.inverted_faces(system.rest_positions(name), v, f, vn).sum())
-        if k:
-            out[name] = k
-    return out
-
-
 def main():
     from faceforge.anatomy.layers import MusculoskeletalSystem
 
@@ -138,7 +124,7 @@ def main():
             "vertices": int(len(v)), "faces": int(len(f)), "muscle_particles": system.particle_count(),
             "muscle_faces": n_muscle_faces, "constraints": system.constraint_count(),
             "muscles": len(muscles), "layers": len(system.layer_indices)}
-    folded = folded_at_rest(system)
+    folded = system.folded_faces(rest=True)
     names = list(system.muscles)
     frame = {"k": 0}
 

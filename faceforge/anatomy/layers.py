@@ -324,6 +324,21 @@ class MusculoskeletalSystem:
             layer.state.velocities[:] = fresh.velocities
             self._set_targets(layer, {})
 
+    def folded_faces(self, rest: bool = False) -> dict[str, int]:
+        """Muscle name -> number of sheet faces turned over (:meth:`Muscle.inverted_faces`)
+        in the current frame (or at rest); only muscles with at least one."""
+        from faceforge.geometry.triangles import vertex_normals
+
+        v, f = self.world(rest=rest)
+        vn = vertex_normals(v, f)
+        out = {}
+        for name, m in self._muscles.items():
+            p = self.rest_positions(name) if rest else self.positions(name)
+            k = int(m.inverted_faces(p, v, f, vn).sum())
+            if k:
+                out[name] = k
+        return out
+
     def constraint_count(self) -> int:
         """Constraints in all layer models."""
         return sum(m.constraint_count() for m in self._muscles.values())
