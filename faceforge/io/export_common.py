@@ -7,8 +7,6 @@ point is :mod:`faceforge.io.export`.
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -166,19 +164,12 @@ def atomic_write_bytes(path: str | Path, chunks: Sequence[bytes] | bytes) -> Pat
     path = Path(path)
     if path.is_dir():
         raise ExportError("is a folder, expected a file path", path)
+    from faceforge.io.stagefiles import atomic_write_bytes as write
+
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        return write(path, chunks, make_parents=False)
     except OSError as exc:
         raise ExportError(f"cannot write here: {exc.strerror or exc}", path) from None
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            for chunk in [chunks] if isinstance(chunks, (bytes, bytearray, memoryview)) else chunks:
-                handle.write(chunk)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
 
 
 def read_bytes(path: str | Path, what: str) -> bytes:

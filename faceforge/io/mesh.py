@@ -249,21 +249,21 @@ def check_arrays(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>") 
 
 
 def _write_obj(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
-    from faceforge.io.stagefiles import _atomic_write_bytes
+    from faceforge.io.stagefiles import atomic_write_bytes
 
     lines = ["# written by faceforge"]
     lines += [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in faces.tolist()]
-    _atomic_write_bytes(path, ("\n".join(lines) + "\n").encode("ascii"))
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode("ascii"))
 
 
 def _write_off(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
-    from faceforge.io.stagefiles import _atomic_write_bytes
+    from faceforge.io.stagefiles import atomic_write_bytes
 
     lines = ["OFF", f"{len(vertices)} {len(faces)} 0"]
     lines += [f"{x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
     lines += [f"3 {a} {b} {c}" for a, b, c in faces.tolist()]
-    _atomic_write_bytes(path, ("\n".join(lines) + "\n").encode("ascii"))
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode("ascii"))
 
 
 def _write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray) -> None:
@@ -299,10 +299,10 @@ def save_mesh(path: str | Path, vertices: np.ndarray, faces: np.ndarray) -> Path
     elif suffix in (".stl", ".glb"):
         import trimesh
 
-        from faceforge.io.stagefiles import _atomic_write_bytes
+        from faceforge.io.stagefiles import atomic_write_bytes
 
         data = trimesh.Trimesh(vertices, faces, process=False).export(file_type=suffix[1:])
-        _atomic_write_bytes(path, data if isinstance(data, bytes) else data.encode("utf-8"))
+        atomic_write_bytes(path, data if isinstance(data, bytes) else data.encode("utf-8"))
     else:
         raise MeshError(f"cannot write format '{suffix}' (writable: .glb, .obj, .off, .ply, .stl)", path)
     return path

@@ -24,15 +24,19 @@ def _file_mode() -> int:
     return 0o666 & ~mask
 
 
-def _atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file and ``os.replace``."""
+def atomic_write_bytes(path: str | Path, data, make_parents: bool = True) -> Path:
+    """Write ``data`` (bytes, or an iterable of byte chunks) to ``path`` through a temporary
+    file next to it and ``os.replace``, with the usual file mode (umask), fsynced: a reader
+    never sees half a file. ``make_parents``: create missing folders (else ``OSError``)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if make_parents:
+        path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     try:
         os.fchmod(fd, _file_mode())
         with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+            for chunk in [data] if isinstance(data, (bytes, bytearray, memoryview)) else data:
+                fh.write(chunk)
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, path)
@@ -61,7 +65,7 @@ def _plain(value: Any) -> Any:
 def save_json(path: str | Path, data: Any) -> Path:
     """Write ``data`` as indented, key-sorted UTF-8 JSON (numpy values converted)."""
     text = json.dumps(_plain(data), indent=2, sort_keys=True, allow_nan=False) + "\n"
-    return _atomic_write_bytes(path, text.encode("utf-8"))
+    return atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def load_json(path: str | Path) -> Any:
@@ -84,7 +88,7 @@ def save_yaml(path: str | Path, data: Any, header: str = "") -> Path:
     text = yaml.safe_dump(_plain(data), sort_keys=False, default_flow_style=False, allow_unicode=True)
     if header:
         text = "".join(f"# {line}\n" for line in header.splitlines()) + text
-    return _atomic_write_bytes(path, text.encode("utf-8"))
+    return atomic_write_bytes(path, text.encode("utf-8"))
 
 
 def load_yaml(path: str | Path) -> Any:
@@ -127,7 +131,7 @@ def save_npz(path: str | Path, **arrays: Any) -> Path:
         converted[name] = array
     buffer = io.BytesIO()
     np.savez(buffer, **converted)
-    return _atomic_write_bytes(path, buffer.getvalue())
+    return atomic_write_bytes(path, buffer.getvalue())
 
 
 def load_npz(path: str | Path) -> dict:
