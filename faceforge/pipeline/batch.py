@@ -109,7 +109,7 @@ def _remember(workspace, layers, params: Mapping) -> None:
 
 
 #: FAP-mapping inputs of the animate/calibrate stages (names as their modules declare them)
-_MAPPING_INPUTS = {"fap_mapping", "fap_mapping_template", "animate_mapping", "calibration"}
+_MAPPING_INPUTS = {"fap_mapping", "animate_mapping", "calibration"}
 
 
 def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> dict:
@@ -127,8 +127,7 @@ def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> di
 
         template, calibrated = str(mapping_template_path(config)), calibrated_mapping_path(root)
         calibrated = str(calibrated) if calibrated.exists() else ""
-        known = {"fap_mapping": template, "fap_mapping_template": template,
-                 "animate_mapping": calibrated or template, "calibration": calibrated}
+        known = {"fap_mapping": template, "animate_mapping": calibrated or template, "calibration": calibrated}
         params.update({k: v for k, v in known.items() if k in needed})
     return params
 

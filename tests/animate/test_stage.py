@@ -65,7 +65,7 @@ def run_stage(stage_name, workdir, params, sets=SETS):
 
 @pytest.fixture(scope="module")
 def calibrated(workdir, patched):
-    return run_stage("calibrate", workdir, {"fap_mapping_template": str(workdir / "mapping.yaml")})
+    return run_stage("calibrate", workdir, {}, sets=(*SETS, f"animate.fap_mapping={workdir / 'mapping.yaml'}"))
 
 
 @pytest.fixture(scope="module")

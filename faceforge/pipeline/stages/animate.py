@@ -40,17 +40,13 @@ UPPER_LIP_FDPS = ("2.2", "2.6", "2.7", "8.1", "8.5", "8.6")
 # --------------------------------------------------------------------------- paths
 
 def mapping_template_path(config) -> Path:
-    """``animate.fap_mapping`` as an existing path (cwd first, then the repository)."""
+    """``animate.fap_mapping`` (made absolute by the config against the file that set it)."""
     from faceforge.exceptions import ConfigError
 
-    raw = Path(str(config.get("animate.fap_mapping")))
-    here = Path(__file__).resolve()
-    # a checkout (repo/templates) or an installed wheel (faceforge/templates)
-    candidates = [raw] if raw.is_absolute() else [Path.cwd() / raw, here.parents[3] / raw, here.parents[2] / raw]
-    for c in candidates:
-        if c.exists():
-            return c.resolve()
-    raise ConfigError(f"animate.fap_mapping: {raw} not found")
+    path = Path(str(config.get("animate.fap_mapping")))
+    if not path.is_file():
+        raise ConfigError(f"animate.fap_mapping: {path} not found")
+    return path
 
 
 def calibrated_mapping_path(workdir) -> Path:
@@ -387,7 +383,8 @@ def run_calibrate(ctx):
     from faceforge.io.stagefiles import save_json
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
-    template = load_fap_mapping(ctx.param("fap_mapping_template"))
+    template_path = mapping_template_path(ctx.config)
+    template = load_fap_mapping(template_path)
     fps = float(ctx.config.get("animate.fps"))
     settle = int(ctx.config.get("animate.calibrate.settle_frames"))
 
@@ -409,7 +406,7 @@ def run_calibrate(ctx):
     summary = summarize(rows)
     lips = _lip_opening(calibrated, simulate, head, float(ctx.config.get("animate.calibrate.jaw_magnitude")))
     save_fap_mapping(calibrated, ctx.out_dir / "fap_mapping.yaml",
-                     header=f"calibrated by `faceforge calibrate` from {ctx.param('fap_mapping_template')}\n"
+                     header=f"calibrated by `faceforge calibrate` from {template_path}\n"
                             f"median relative error {summary['all']['median_relative_error']}")
     save_json(ctx.out_dir / "report.json", {
         "summary": summary, "open_jaw_lip_separation": lips,
@@ -443,7 +440,7 @@ def _lip_opening(mapping, simulate, head, value):
 
 CALIBRATE = register_stage(Stage(
     name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
-    inputs=("fap_mapping_template",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
+    inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="1", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
@@ -529,8 +526,7 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
 @click.option("--force", is_flag=True, help="Rerun even if up to date.")
 @click.pass_obj
 def calibrate_command(app, force):
-    app.run_stage("calibrate", params={"fap_mapping_template": str(mapping_template_path(app.config))},
-                  force=force)
+    app.run_stage("calibrate", force=force)
     out = app.workspace.stage_dir("calibrate")
     app.log((out / "report.txt").read_text())
     app.log(f"calibrate: wrote {out / 'fap_mapping.yaml'} (used by `faceforge animate`)")
