@@ -26,8 +26,9 @@ animate stage's ``animation.npz``, or an ``.npy`` of shape (n_frames, n_verts, 3
 each output read back with faceforge's own reader (``faceforge.io.export``).
 
 Writes one JSON document (stdout, or ``--json``): per output and frame the largest vertex
-error (model units), the vertex where it occurs and the tolerance, which is ``--ulps`` float32
-ulps of the frame's largest coordinate. Exit status 0 if every frame matches, 1 if any does
+error in world space (model units), the vertex where it occurs, the tolerance (``--ulps``
+float32 ulps of the frame's largest coordinate), and ``max_error_data``, the error with the
+object's float32 quarter-turn made exact (what the file and importer did to the vertices). Exit status 0 if every frame matches, 1 if any does
 not (or a vertex count differs), 2 for bad arguments.
 """
 
@@ -164,8 +165,16 @@ def _import_glb(path: Path):
     return made[0]
 
 
-def _evaluated_yup(obj) -> np.ndarray:
-    """(n_verts, 3) float64: the evaluated mesh's vertices in world space, as faceforge's Y-up."""
+def _evaluated_yup(obj) -> tuple[np.ndarray, np.ndarray]:
+    """The evaluated mesh's vertices in world space as faceforge's Y-up, (n_verts, 3) float64 each.
+
+    Returns
+    -------
+    world : through the object's matrix as Blender stores it (float32: a 90 deg rotation
+        carries cos = -4.4e-8, i.e. errors up to 4.4e-8 x the largest coordinate)
+    data : through the same matrix snapped to whole numbers when it is a pure axis swap within
+        1e-6, which isolates what the file and the importer did to the vertex data
+    """
     import bpy
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -176,9 +185,13 @@ def _evaluated_yup(obj) -> np.ndarray:
         mesh.vertices.foreach_get("co", co)
     finally:
         evaluated.to_mesh_clear()
+    co = co.reshape(-1, 3).astype(np.float64)
     matrix = np.array(evaluated.matrix_world, dtype=np.float64)
-    world = co.reshape(-1, 3).astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
-    return world @ BLENDER_TO_YUP.T
+    snapped = np.round(matrix)
+    if not np.allclose(matrix, snapped, atol=1e-6):
+        snapped = matrix
+    world, data = (co @ m[:3, :3].T + m[:3, 3] for m in (matrix, snapped))
+    return world @ BLENDER_TO_YUP.T, data @ BLENDER_TO_YUP.T
 
 
 def _goto(scene, frame: int, fps: float, fmt: str) -> float:
@@ -196,24 +209,28 @@ def _goto(scene, frame: int, fps: float, fmt: str) -> float:
     return target
 
 
-def compare(blender: np.ndarray, expected: np.ndarray, ulps: float) -> dict:
+def compare(blender: np.ndarray, data: np.ndarray, expected: np.ndarray, ulps: float) -> dict:
     """Vertex-by-vertex comparison in the user's order.
 
     Parameters
     ----------
-    blender, expected : (n_verts, 3) float
-        Model units, Y up.
+    blender, data : (n_verts, 3) float
+        Blender's vertices in world space and with the object's axis swap made exact (see
+        :func:`_evaluated_yup`), model units, Y up.
+    expected : (n_verts, 3) float
     ulps : float
-        Tolerance in float32 ulps of the largest coordinate of ``expected``.
+        Tolerance in float32 ulps of the largest coordinate of ``expected``; applies to ``blender``.
     """
     if blender.shape != expected.shape:
         return {"ok": False, "error": f"Blender has {blender.shape[0]} vertices, expected {expected.shape[0]}"}
-    error = np.abs(blender - expected.astype(np.float64)).max(axis=1)
+    expected = expected.astype(np.float64)
+    error = np.abs(blender - expected).max(axis=1)
     worst = int(np.argmax(error))
     tolerance = ulps * float(np.spacing(np.float32(np.abs(expected).max())))
     return {
         "max_error": float(error[worst]),
         "worst_vertex": worst,
+        "max_error_data": float(np.abs(data - expected).max()),
         "tolerance": tolerance,
         "ok": bool(error[worst] <= tolerance),
     }
@@ -234,7 +251,7 @@ def check_output(mesh: Path, output: Path, fmt: str, expected: np.ndarray, fps: 
                     "mesh_cache": {k: getattr(modifier, k) for k in
                                    ("forward_axis", "up_axis", "time_mode", "frame_start", "frame_scale",
                                     "interpolation", "deform_mode")}}
-        settings["mesh_cache"]["flip_axis"] = sorted(modifier.flip_axis)
+        settings["mesh_cache"]["flip_axis"] = [bool(a) for a in modifier.flip_axis]
     elif fmt == "glb":
         obj = _import_glb(output)
         settings = {"gltf_import": "defaults (+Y up converted to +Z up)"}
@@ -248,7 +265,7 @@ def check_output(mesh: Path, output: Path, fmt: str, expected: np.ndarray, fps: 
             obj = _import_obj(sequence_file(output, k))
         blender_frame = _goto(scene, k, fps, fmt)
         record = {"frame": k, "blender_frame": blender_frame}
-        record.update(compare(_evaluated_yup(obj), expected[k], ulps))
+        record.update(compare(*_evaluated_yup(obj), expected[k], ulps))
         records.append(record)
     return {"output": str(output), "format": fmt, "settings": settings, "frames": records,
             "ok": all(r["ok"] for r in records)}
@@ -281,6 +298,7 @@ def run(args: argparse.Namespace) -> dict:
         results.append(record)
     return {
         "blender": bpy.app.version_string,
+        "command": "blender_check.py " + " ".join(_script_argv(sys.argv)),
         "mesh": str(args.mesh),
         "reference": str(args.reference) if args.reference else "each output read by faceforge.io.export",
         "ulps": args.ulps,
