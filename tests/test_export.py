@@ -291,3 +291,19 @@ def test_readers_reject_broken_caches(tmp_path, reader, payload):
     path.write_bytes(payload)
     with pytest.raises(ExportError, match="broken"):
         reader(path)
+
+
+def test_obj_sequence_folder_and_files_get_the_umask_mode(tmp_path):
+    """mkdtemp's staging folder was renamed into place as 0o700: nobody else could open the frames."""
+    import os
+
+    frames, faces = animation(n_frames=2)
+    old = os.umask(0o022)
+    try:
+        folder = write_obj_sequence(tmp_path / "take", frames, faces, 25.0)
+        made = tmp_path / "plain"
+        made.mkdir()
+    finally:
+        os.umask(old)
+    assert folder.stat().st_mode & 0o777 == made.stat().st_mode & 0o777 == 0o755
+    assert {p.stat().st_mode & 0o777 for p in folder.iterdir()} == {0o644}
