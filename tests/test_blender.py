@@ -90,7 +90,9 @@ def test_every_format_opens_in_blender_with_the_users_vertex_order(tmp_path, hea
     reference, outputs = export_all(HEADS[head], tmp_path)
     status, result = run_check(HEADS[head], outputs, reference, tmp_path, "--frames", "0,1,3,6")
     assert status == 0, json.dumps(result, indent=1)
-    assert [r["format"] for r in result["results"]] == ["pc2", "mdd", "glb", "objseq"]
+    assert [(r["format"], r["variant"]) for r in result["results"]] == [
+        ("pc2", "obj-import"), ("pc2", "blender-object"), ("mdd", "obj-import"), ("mdd", "blender-object"),
+        ("glb", "gltf-import"), ("objseq", "obj-import")]
     n_verts = len(load_mesh(HEADS[head])[0])
     for record in result["results"]:
         assert record["n_frames"] == 7
@@ -98,6 +100,8 @@ def test_every_format_opens_in_blender_with_the_users_vertex_order(tmp_path, hea
         for frame in record["frames"]:
             assert frame["ok"] and 0 <= frame["worst_vertex"] < n_verts
             assert frame["max_error"] <= frame["tolerance"] < 1e-5 * np.abs(np.load(reference)["frames"]).max()
+            # the vertex data themselves are exact but for float32 rounding in the shape-key mix
+            assert frame["max_error_data"] <= (frame["tolerance"] / 4 if record["format"] == "glb" else 0.0)
     assert result["blender"].split(".")[0].isdigit()
 
 
@@ -136,3 +140,41 @@ def test_bad_arguments_exit_2_with_a_one_line_reason(tmp_path):
     assert done.returncode == 2
     assert "missing.pc2: no such output" in done.stderr
 
+
+
+def test_the_old_readme_axes_turn_a_baked_head(tmp_path):
+    """Mesh Cache Forward -Z, Up +Y (what the README said for a Z-up object) lays the head on
+    its back; Forward +Z, Up -Y is what Blender needs (checked in the test above)."""
+    mesh = HEADS["makehuman"]
+    reference, outputs = export_all(mesh, tmp_path)
+    status, result = run_check(mesh, outputs[:1], reference, tmp_path, "--frames", "3", "--object-axes", "NEG_Z,POS_Y")
+    assert status == 1
+    by_variant = {r["variant"]: r for r in result["results"]}
+    assert by_variant["obj-import"]["ok"] and not by_variant["blender-object"]["ok"]
+    size = float(np.ptp(np.load(reference)["frames"][3], axis=0).max())
+    assert by_variant["blender-object"]["frames"][0]["max_error"] > 0.1 * size
+
+
+def test_loose_vertices_are_dropped_by_blender_as_the_export_notes_say(tmp_path):
+    """A vertex no face uses: faceforge keeps it, Blender's importers do not (a known limit,
+    reported by faceforge.io.export.blender_notes at export time)."""
+    from faceforge.io.export import blender_notes
+
+    vertices, triangles, info = load_mesh(HEADS["mediapipe"])
+    polygons = polygons_from_fan(triangles, info.face_source)
+    mesh = tmp_path / "loose.obj"
+    loose = np.array([[0.0, 0.0, 0.0]])
+    with_loose = np.concatenate([vertices, loose])
+    mesh.write_text("".join("v %.9g %.9g %.9g\n" % tuple(v) for v in with_loose)
+                    + "".join("f " + " ".join(str(i + 1) for i in p) + "\n" for p in polygons))
+    frames = synthetic_animation(with_loose, n_frames=3)
+    reference = tmp_path / "reference.npz"
+    np.savez(reference, frames=frames, fps=np.float64(FPS))
+    outputs = [export_animation(tmp_path / name, frames, polygons, FPS) for name in ("a.pc2", "a.glb", "a_frames")]
+    assert all(blender_notes(p, polygons, len(with_loose)) for p in outputs)
+    status, result = run_check(mesh, outputs, reference, tmp_path, "--frames", "1")
+    assert status == 1
+    for record in result["results"]:
+        error = record["frames"][0]["error"]
+        assert f"Blender has {len(vertices)} vertices, expected {len(with_loose)}" in error, record
+        assert "no face uses" in error

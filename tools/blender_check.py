@@ -9,9 +9,11 @@ separate Python 3.11 venv), or inside Blender itself::
 
 For every output it builds a fresh scene the way the README tells users to:
 
-* ``.pc2`` / ``.mdd``: ``MESH.obj`` imported with ``bpy.ops.wm.obj_import`` at its defaults
-  (Forward -Z, Up Y, which Blender puts on the object as Rotation X = 90 deg), a Mesh Cache
-  modifier at its defaults (Forward +Y, Up +Z, no flip, Frame Start 0, time mode Frame);
+* ``.pc2`` / ``.mdd``, twice: ``MESH.obj`` imported with ``bpy.ops.wm.obj_import`` at its
+  defaults (Forward -Z, Up Y, which Blender puts on the object as Rotation X = 90 deg) with a
+  Mesh Cache modifier at its defaults (Forward +Y, Up +Z, no flip, Frame Start 0, time mode
+  Frame); and the same object with its rotation applied (a Z-up Blender object, like the one
+  the OBJ was exported from) with the modifier's Forward +Z, Up -Y;
 * ``.glb``: ``bpy.ops.import_scene.gltf`` at its defaults (+Y up converted to +Z up);
 * an OBJ-sequence folder: the frame's file imported like ``MESH.obj``;
 
@@ -66,6 +68,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--fps", type=float, help="frames per second [default: the reference's, else the output's]")
     parser.add_argument("--frames", help="faceforge frames to compare, 0-based, e.g. 0,37,75 [default: first, middle, last]")
     parser.add_argument("--ulps", type=float, default=4.0, help="tolerance in float32 ulps of the largest coordinate")
+    parser.add_argument("--object-axes", default="POS_Z,NEG_Y",
+                        help="Mesh Cache Forward,Up axes on the Z-up object (the variant 'blender-object')")
     parser.add_argument("--json", type=Path, help="write the result here instead of stdout")
     return parser.parse_args(argv)
 
@@ -222,7 +226,8 @@ def compare(blender: np.ndarray, data: np.ndarray, expected: np.ndarray, ulps: f
         Tolerance in float32 ulps of the largest coordinate of ``expected``; applies to ``blender``.
     """
     if blender.shape != expected.shape:
-        return {"ok": False, "error": f"Blender has {blender.shape[0]} vertices, expected {expected.shape[0]}"}
+        return {"ok": False, "error": f"Blender has {blender.shape[0]} vertices, expected {expected.shape[0]} "
+                "(Blender's OBJ and glTF importers drop vertices that no face uses)"}
     expected = expected.astype(np.float64)
     error = np.abs(blender - expected).max(axis=1)
     worst = int(np.argmax(error))
@@ -236,21 +241,49 @@ def compare(blender: np.ndarray, data: np.ndarray, expected: np.ndarray, ulps: f
     }
 
 
-def check_output(mesh: Path, output: Path, fmt: str, expected: np.ndarray, fps: float, frames: list[int],
-                 ulps: float) -> dict:
+#: How each format is opened. A point cache is tried on two objects: the OBJ as Blender's
+#: importer brings it in (Y-up vertices, the quarter turn on the object: Mesh Cache defaults),
+#: and a Z-up Blender object such as the one the OBJ was exported from (here: the import with
+#: its rotation applied to the vertices), where the modifier must turn the Y-up cache: Forward
+#: +Z, Up -Y.
+VARIANTS = {
+    "pc2": ("obj-import", "blender-object"),
+    "mdd": ("obj-import", "blender-object"),
+    "glb": ("gltf-import",),
+    "objseq": ("obj-import",),
+}
+
+
+def _z_up_object(obj) -> None:
+    """Bake the object's rotation into its vertices (a Z-up mesh with an identity transform)."""
+    import bpy
+
+    bpy.ops.object.select_all(action="DESELECT")
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.transform_apply(location=False, rotation=True, scale=False)
+
+
+def check_output(mesh: Path, output: Path, fmt: str, variant: str, expected: np.ndarray, fps: float,
+                 frames: list[int], ulps: float, object_axes: tuple[str, str] = ("POS_Z", "NEG_Y")) -> dict:
     """Open one output in a fresh Blender scene and compare the chosen frames; the JSON record."""
     scene = _new_scene(fps)
     settings: dict = {}
     obj = None
     if fmt in ("pc2", "mdd"):
         obj = _import_obj(mesh)
+        settings["obj_import"] = "defaults (forward -Z, up Y)"
+        if variant == "blender-object":
+            _z_up_object(obj)
+            settings["object"] = "rotation applied (Z-up vertices, like the object the OBJ was exported from)"
         modifier = obj.modifiers.new("faceforge", "MESH_CACHE")
         modifier.cache_format = fmt.upper()
         modifier.filepath = str(output)
-        settings = {"obj_import": "defaults (forward -Z, up Y)",
-                    "mesh_cache": {k: getattr(modifier, k) for k in
-                                   ("forward_axis", "up_axis", "time_mode", "frame_start", "frame_scale",
-                                    "interpolation", "deform_mode")}}
+        if variant == "blender-object":
+            modifier.forward_axis, modifier.up_axis = object_axes
+        settings["mesh_cache"] = {k: getattr(modifier, k) for k in
+                                  ("forward_axis", "up_axis", "time_mode", "frame_start", "frame_scale",
+                                   "interpolation", "deform_mode")}
         settings["mesh_cache"]["flip_axis"] = [bool(a) for a in modifier.flip_axis]
     elif fmt == "glb":
         obj = _import_glb(output)
@@ -267,7 +300,7 @@ def check_output(mesh: Path, output: Path, fmt: str, expected: np.ndarray, fps: 
         record = {"frame": k, "blender_frame": blender_frame}
         record.update(compare(*_evaluated_yup(obj), expected[k], ulps))
         records.append(record)
-    return {"output": str(output), "format": fmt, "settings": settings, "frames": records,
+    return {"output": str(output), "format": fmt, "variant": variant, "settings": settings, "frames": records,
             "ok": all(r["ok"] for r in records)}
 
 
@@ -282,6 +315,9 @@ def run(args: argparse.Namespace) -> dict:
     if missing:
         raise CheckError(f"{missing[0]}: no such output")
     reference, ref_fps = load_reference(args.reference) if args.reference else (None, None)
+    axes = tuple(args.object_axes.split(","))
+    if len(axes) != 2 or not all(re.fullmatch("(POS|NEG)_[XYZ]", a) for a in axes) or axes[0][-1] == axes[1][-1]:
+        raise CheckError(f"--object-axes {args.object_axes!r}: expected two different axes like POS_Z,NEG_Y")
     results = []
     for output, fmt in zip(args.outputs, formats):
         stored, out_fps = read_output(output, fmt)
@@ -290,12 +326,13 @@ def run(args: argparse.Namespace) -> dict:
         if fps is None:
             raise CheckError(f"{output}: the file does not say its frame rate; pass --fps or --reference .npz")
         frames = pick_frames(args.frames, expected.shape[0])
-        record = check_output(args.mesh, output, fmt, expected, fps, frames, args.ulps)
-        record["n_frames"] = int(stored.shape[0])
-        if stored.shape[0] != expected.shape[0]:
-            record["ok"] = False
-            record["error"] = f"the file holds {stored.shape[0]} frames, the reference {expected.shape[0]}"
-        results.append(record)
+        for variant in VARIANTS[fmt]:
+            record = check_output(args.mesh, output, fmt, variant, expected, fps, frames, args.ulps, axes)
+            record["n_frames"] = int(stored.shape[0])
+            if stored.shape[0] != expected.shape[0]:
+                record["ok"] = False
+                record["error"] = f"the file holds {stored.shape[0]} frames, the reference {expected.shape[0]}"
+            results.append(record)
     return {
         "blender": bpy.app.version_string,
         "command": "blender_check.py " + " ".join(_script_argv(sys.argv)),
