@@ -291,3 +291,35 @@ def test_readers_reject_broken_caches(tmp_path, reader, payload):
     path.write_bytes(payload)
     with pytest.raises(ExportError, match="broken"):
         reader(path)
+
+
+def test_obj_sequence_folder_and_files_get_the_umask_mode(tmp_path):
+    """mkdtemp's staging folder was renamed into place as 0o700: nobody else could open the frames."""
+    import os
+
+    frames, faces = animation(n_frames=2)
+    old = os.umask(0o022)
+    try:
+        folder = write_obj_sequence(tmp_path / "take", frames, faces, 25.0)
+        made = tmp_path / "plain"
+        made.mkdir()
+    finally:
+        os.umask(old)
+    assert folder.stat().st_mode & 0o777 == made.stat().st_mode & 0o777 == 0o755
+    assert {p.stat().st_mode & 0o777 for p in folder.iterdir()} == {0o644}
+
+
+def test_unused_vertices_and_the_blender_notes_name_them(tmp_path):
+    """Blender 4.5's OBJ and glTF importers drop vertices no face uses (tests/test_blender.py);
+    the export notes say so, per format, and stay silent for a mesh without such vertices."""
+    from faceforge.io.export import blender_notes
+    from faceforge.io.export_common import unused_vertices
+
+    frames, faces = animation(n_frames=2)
+    assert unused_vertices(faces, 12).size == 0
+    assert blender_notes("a.pc2", faces, 12) == [] and blender_notes("a.glb", np.array(faces[:2]), 12) != []
+    np.testing.assert_array_equal(unused_vertices([(0, 1, 5, 4), (2, 3, 7)], 12), [6, 8, 9, 10, 11])
+    cache, = blender_notes(tmp_path / "a.MDD", [(0, 2, 3)], 4)
+    assert cache.startswith("1 vertex (first: index 1) used by no face") and "Vertex count mismatch" in cache
+    mesh, = blender_notes(tmp_path / "take", [(0, 1, 2)], 6)
+    assert mesh.startswith("3 vertices (first: index 3)") and "after index 3" in mesh

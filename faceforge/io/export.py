@@ -18,28 +18,32 @@ module fills with one line); :func:`export_animation` dispatches through it.
 
 Opening the results in Blender
 ------------------------------
-faceforge works in the MPEG-4 frame: +Y up, the face looks along +Z (glTF's convention too).
-Blender is Z-up.
+Measured in Blender 4.5.15 by ``tools/blender_check.py`` (``benchmarks/results/blender_check.json``):
+every format below shows faceforge's frames in the user's vertex order, the vertex data exact
+(glTF: within float32 rounding of the shape-key mix). faceforge works in the MPEG-4 frame: +Y
+up, the face looks along +Z (glTF's convention too); Blender is Z-up. Faceforge frame ``k``
+(0-based, time ``k / fps``) is Blender frame ``k`` for the caches and glTF (and the file
+``NAME_{k+1:04d}.obj`` of a sequence): set the scene's frame
+rate to ``fps`` (before a glTF import), Start to 0 and End to ``n_frames - 1``.
 
-* ``.glb``: File > Import > glTF 2.0. The importer converts +Y up to Z-up itself; the
-  animation is one shape key per frame with animated values. Nothing to set.
-* ``.pc2`` / ``.mdd``: import the *same mesh* that was animated (same vertex order) with
-  File > Import > Wavefront OBJ, keeping its defaults (Forward -Z, Up Y), then add a
-  Mesh Cache modifier and pick the file. The caches hold raw +Y-up coordinates, so the
-  modifier's axes must undo what the importer did:
-
-  - Blender 3.0+ (the C++ OBJ importer) puts the Y-up to Z-up conversion on the *object*
-    (Rotation X = 90 deg) and leaves the vertices raw: keep the Mesh Cache defaults
-    (Forward Axis +Y, Up Axis +Z, i.e. no conversion).
-  - If the conversion was baked into the vertices (the legacy Python importer, or after
-    Object > Apply > Rotation), set the modifier's Forward Axis to -Z and Up Axis to +Y,
-    the same pair as the OBJ importer.
-
-  In the modifier's default "Frame" time mode, cache sample ``i`` is shown at scene frame
-  ``Frame Start + i`` (the header's start frame and MDD times are ignored), so set the
-  modifier's Frame Start to the scene's first frame and the scene's frame rate to ``fps``.
-* OBJ sequence: every file imports as its own object (same axes as above); Blender has no
+* ``.glb``: File > Import > glTF 2.0 at its defaults. The importer turns +Y up into Z-up
+  itself; the animation is one shape key per frame (``frame_0002`` ...) with animated values.
+* ``.pc2`` / ``.mdd`` on the OBJ imported with File > Import > Wavefront OBJ at its defaults
+  (Forward -Z, Up Y; Blender 4.x puts the turn on the object, Rotation X = 90 deg, and keeps
+  the vertices as in the file): add a Mesh Cache modifier, pick the file, keep its defaults
+  (Forward +Y, Up +Z, no flip, Frame Start 0, time mode Frame).
+* ``.pc2`` / ``.mdd`` on a Z-up Blender object (the one the OBJ was exported from with
+  Blender's defaults, or an import after Object > Apply > Rotation): set the modifier's
+  Forward Axis to **+Z** and Up Axis to **-Y**. (Forward -Z / Up +Y, the OBJ exporter's
+  pair, lays the head on its back.)
+* Mesh Cache time mode: keep "Frame". "Time" is right for MDD (its times are ``k / fps``)
+  but not for PC2: Blender 4.5 then shows sample ``frame / fps**2`` (it divides by the
+  frame rate twice), i.e. the head barely moves. The PC2 header (start 0, 1 frame per
+  sample) follows the format's definition; "Frame" mode ignores it.
+* OBJ sequence: every file imports as its own object like the OBJ above; Blender has no
   built-in sequence importer, but the folder is what sequence add-ons and other tools read.
+* Vertices that no face uses are dropped by Blender's OBJ and glTF importers (faceforge
+  keeps them): :func:`blender_notes` says so when an export has any.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ from pathlib import Path
 
 from . import export_cache, export_gltf, export_obj  # noqa: F401  (each registers its suffixes)
 from .export_cache import read_mdd, read_pc2, write_mdd, write_pc2
-from .export_common import EXPORTERS, ExportError, polygons_from_fan, register_exporter
+from .export_common import EXPORTERS, ExportError, polygons_from_fan, register_exporter, unused_vertices
 from .export_gltf import parse_glb, read_glb, write_glb
 from .export_obj import read_obj_sequence, write_obj_sequence
 
@@ -73,6 +77,41 @@ def exporter_for(path: str | Path):
         return EXPORTERS[suffix]
     except KeyError:
         raise ExportError(f"unknown output format {suffix!r}; valid: {valid_suffixes()}", path) from None
+
+
+def blender_notes(path: str | Path, faces, n_verts: int) -> list[str]:
+    """What of an export will not survive Blender's importers, as lines for the user's log.
+
+    Blender 4.5's OBJ and glTF importers drop vertices that no face uses (measured with
+    ``tools/blender_check.py``). faceforge keeps them, in the user's order, so:
+
+    * ``.pc2`` / ``.mdd`` on a re-imported OBJ: the Mesh Cache modifier finds fewer vertices
+      than the cache and does nothing ("Vertex count mismatch");
+    * ``.glb`` / OBJ sequence: every vertex after the first loose one has a smaller index in
+      Blender than in the user's mesh.
+
+    Parameters
+    ----------
+    path : the output path (its suffix picks the message)
+    faces : (m, k) int array or sequence of int sequences, 0-based
+    n_verts : int
+
+    Returns
+    -------
+    list of str
+        Empty when every vertex is used by a face.
+    """
+    loose = unused_vertices(faces, n_verts)
+    if loose.size == 0:
+        return []
+    count = "1 vertex" if loose.size == 1 else f"{loose.size} vertices"
+    which = f"{count} (first: index {loose[0]}) used by no face"
+    if Path(path).suffix.lower() in (".pc2", ".mdd"):
+        return [f"{which}; Blender's OBJ importer drops them, so a Mesh Cache on the re-imported mesh "
+                "reports 'Vertex count mismatch': apply the cache to the object the mesh was exported "
+                "from, or delete loose vertices before `faceforge fit`"]
+    return [f"{which}; Blender's importers drop them, so the vertices after index {loose[0]} "
+            "have smaller numbers in Blender than in your mesh"]
 
 
 def export_animation(path: str | Path, frames, faces, fps: float) -> Path:
@@ -100,6 +139,7 @@ def export_animation(path: str | Path, frames, faces, fps: float) -> Path:
 __all__ = [
     "EXPORTERS",
     "ExportError",
+    "blender_notes",
     "export_animation",
     "exporter_for",
     "parse_glb",

@@ -96,6 +96,25 @@ def faces_to_csr(faces: object, n_verts: int) -> tuple[np.ndarray, np.ndarray]:
     return indices, starts
 
 
+def unused_vertices(faces: object, n_verts: int) -> np.ndarray:
+    """Vertices that no face uses ("loose" vertices).
+
+    Parameters
+    ----------
+    faces : (m, k) int array-like, or a sequence of int sequences
+        0-based.
+    n_verts : int
+
+    Returns
+    -------
+    (u,) int64, ascending
+    """
+    indices, _ = faces_to_csr(faces, n_verts)
+    used = np.zeros(n_verts, dtype=bool)
+    used[indices] = True
+    return np.flatnonzero(~used)
+
+
 def triangulate(indices: np.ndarray, starts: np.ndarray) -> np.ndarray:
     """Fan-triangulate CSR polygons: ``(v0, vi, vi+1)``.
 

@@ -5,13 +5,15 @@ they are, 1-based ``f`` lines without texture or normal indices); coordinates ar
 with 9 significant digits, which round-trips float32 exactly. Frame numbers start at 1
 and have at least 4 digits (more when there are more than 9999 frames).
 
-The whole folder is written under a temporary name and renamed into place. An existing
+The whole folder is written under a temporary name and renamed into place; it gets the
+mode ``mkdir`` would give it (the umask), not ``mkdtemp``'s owner-only 0o700. An existing
 ``NAME/`` is replaced only if it holds nothing but an earlier sequence (``NAME_<digits>.obj``
 files); anything else there raises :class:`ExportError` rather than deleting user files.
 """
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import tempfile
@@ -24,6 +26,13 @@ from .export_common import ExportError, faces_to_csr, register_exporter, validat
 
 def _sequence_pattern(name: str) -> re.Pattern[str]:
     return re.compile(re.escape(name) + r"_\d+\.obj")
+
+
+def _folder_mode() -> int:
+    """0o777 minus the process umask, the mode ``mkdir`` would give."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o777 & ~mask
 
 
 def _face_text(indices: np.ndarray, starts: np.ndarray) -> str:
@@ -80,6 +89,7 @@ def write_obj_sequence(path: str | Path, frames: object, faces: object, fps: flo
     face_text = _face_text(indices, starts)
     staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".tmp", dir=folder.parent))
     try:
+        staging.chmod(_folder_mode())  # mkdtemp makes it 0o700; a plain mkdir would honour the umask
         for k, positions in enumerate(data):
             header = f"# faceforge OBJ sequence: frame {k + 1} of {data.shape[0]} at {float(fps):g} fps\n"
             text = header + f"o {name}\n" + _vertex_text(positions) + face_text

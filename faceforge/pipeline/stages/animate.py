@@ -478,12 +478,14 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
         raise StageError(f"{mesh} has {len(v)} vertices but the animation {frames.shape[1]}; "
                          "rerun `faceforge fit`", mesh)
     if output:
-        from faceforge.io.export import export_animation
+        from faceforge.io.export import blender_notes, export_animation
         from faceforge.io.export_common import polygons_from_fan
 
         polygons = polygons_from_fan(faces, info.face_source)      # the input's quads / n-gons
         written = export_animation(output, frames, polygons, fps)
         app.log(f"animate: wrote {written} ({len(frames)} frames, {frames.shape[1]} vertices, {fps:g} fps)")
+        for note in blender_notes(output, polygons, frames.shape[1]):
+            app.log(f"animate: note: {note}")
     if preview:
         from faceforge.viz.contact_sheet import contact_sheet, pick_frames
 
