@@ -199,15 +199,17 @@ def _evaluated_yup(obj) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _goto(scene, frame: int, fps: float, fmt: str) -> float:
-    """Set the scene to where faceforge frame ``frame`` is shown; returns that Blender frame.
+    """Set the scene to where faceforge frame ``frame`` must be shown; returns that Blender frame.
 
     Mesh Cache in "Frame" time mode shows sample ``scene frame - Frame Start`` (Frame Start 0),
-    an OBJ sequence has no timing: both frame ``frame``. The glTF importer keys time ``t`` at
-    Blender frame ``t * render.fps * render.fps_base``: frame ``frame`` for an integer rate.
+    an OBJ sequence has no timing: both frame ``frame``. A glTF key at time ``t`` belongs at
+    Blender frame ``t * render.fps / render.fps_base``: frame ``frame`` when the scene runs at
+    ``fps``. (Blender 4.5's glTF importer keys it at ``t * render.fps * render.fps_base``, the
+    same for integer rates, 0.2 % late for 29.97 fps: a fractional rate fails this check.)
     """
     target = float(frame)
     if fmt == "glb":
-        target = frame / fps * scene.render.fps * scene.render.fps_base
+        target = frame / fps * scene.render.fps / scene.render.fps_base
     whole = int(np.floor(target))
     scene.frame_set(whole, subframe=target - whole)
     return target

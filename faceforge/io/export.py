@@ -28,6 +28,8 @@ rate to ``fps`` (before a glTF import), Start to 0 and End to ``n_frames - 1``.
 
 * ``.glb``: File > Import > glTF 2.0 at its defaults. The importer turns +Y up into Z-up
   itself; the animation is one shape key per frame (``frame_0002`` ...) with animated values.
+  At a fractional scene rate (29.97) Blender 4.5 keys time ``t`` at ``t * fps * fps_base``
+  instead of ``t * fps / fps_base``, 0.2 % late: prefer integer rates.
 * ``.pc2`` / ``.mdd`` on the OBJ imported with File > Import > Wavefront OBJ at its defaults
   (Forward -Z, Up Y; Blender 4.x puts the turn on the object, Rotation X = 90 deg, and keeps
   the vertices as in the file): add a Mesh Cache modifier, pick the file, keep its defaults
