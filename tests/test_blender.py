@@ -178,3 +178,25 @@ def test_loose_vertices_are_dropped_by_blender_as_the_export_notes_say(tmp_path)
         error = record["frames"][0]["error"]
         assert f"Blender has {len(vertices)} vertices, expected {len(with_loose)}" in error, record
         assert "no face uses" in error
+
+
+def test_an_obj_in_several_objects_needs_split_by_object_off(tmp_path):
+    """Blender splits an OBJ at each `o` line by default (each part renumbered, so no cache
+    fits); with Split by Object off it is one object in the file's vertex order, shared
+    vertices between the parts included."""
+    vertices, triangles, info = load_mesh(HEADS["makehuman"])
+    polygons = polygons_from_fan(triangles, info.face_source)
+    half = len(polygons) // 2
+    mesh = tmp_path / "parts.obj"
+    faces_text = ["f " + " ".join(str(i + 1) for i in p) + "\n" for p in polygons]
+    mesh.write_text("o front\n" + "".join("v %.9g %.9g %.9g\n" % tuple(v) for v in vertices)
+                    + "".join(faces_text[:half]) + "o back\n" + "".join(faces_text[half:]))
+    frames = synthetic_animation(vertices, n_frames=3)
+    reference = tmp_path / "reference.npz"
+    np.savez(reference, frames=frames, fps=np.float64(FPS))
+    cache = export_animation(tmp_path / "a.pc2", frames, polygons, FPS)
+    done = subprocess.run([*COMMAND, str(mesh), str(cache), "--reference", str(reference)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2 and "made 2 mesh objects" in done.stderr and "--no-split" in done.stderr
+    status, result = run_check(mesh, [cache], reference, tmp_path, "--no-split", "--frames", "0,2")
+    assert status == 0 and len(result["results"]) == 2, json.dumps(result, indent=1)

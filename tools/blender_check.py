@@ -68,6 +68,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--fps", type=float, help="frames per second [default: the reference's, else the output's]")
     parser.add_argument("--frames", help="faceforge frames to compare, 0-based, e.g. 0,37,75 [default: first, middle, last]")
     parser.add_argument("--ulps", type=float, default=4.0, help="tolerance in float32 ulps of the largest coordinate")
+    parser.add_argument("--no-split", action="store_true",
+                        help="import MESH with Split by Object / Group off (an OBJ with several `o` sections)")
     parser.add_argument("--object-axes", default="POS_Z,NEG_Y",
                         help="Mesh Cache Forward,Up axes on the Z-up object (the variant 'blender-object')")
     parser.add_argument("--json", type=Path, help="write the result here instead of stdout")
@@ -146,15 +148,18 @@ def _new_scene(fps: float):
     return scene
 
 
-def _import_obj(path: Path):
-    """Import an OBJ at the importer's defaults; returns the one mesh object it made."""
+def _import_obj(path: Path, split: bool = True):
+    """Import an OBJ at the importer's defaults (``split=False``: Split by Object / Group off);
+    returns the one mesh object it made."""
     import bpy
 
     before = set(bpy.data.objects)
-    bpy.ops.wm.obj_import(filepath=str(path))
+    options = {} if split else {"use_split_objects": False, "use_split_groups": False}
+    bpy.ops.wm.obj_import(filepath=str(path), **options)
     made = [ob for ob in bpy.data.objects if ob not in before and ob.type == "MESH"]
     if len(made) != 1:
-        raise CheckError(f"{path}: Blender's OBJ importer made {len(made)} mesh objects, expected 1")
+        hint = "; an OBJ with several `o` sections needs Split by Object off (--no-split)" if split else ""
+        raise CheckError(f"{path}: Blender's OBJ importer made {len(made)} mesh objects, expected 1{hint}")
     return made[0]
 
 
@@ -267,14 +272,15 @@ def _z_up_object(obj) -> None:
 
 
 def check_output(mesh: Path, output: Path, fmt: str, variant: str, expected: np.ndarray, fps: float,
-                 frames: list[int], ulps: float, object_axes: tuple[str, str] = ("POS_Z", "NEG_Y")) -> dict:
+                 frames: list[int], ulps: float, object_axes: tuple[str, str] = ("POS_Z", "NEG_Y"),
+                 split: bool = True) -> dict:
     """Open one output in a fresh Blender scene and compare the chosen frames; the JSON record."""
     scene = _new_scene(fps)
     settings: dict = {}
     obj = None
     if fmt in ("pc2", "mdd"):
-        obj = _import_obj(mesh)
-        settings["obj_import"] = "defaults (forward -Z, up Y)"
+        obj = _import_obj(mesh, split)
+        settings["obj_import"] = "defaults (forward -Z, up Y)" + ("" if split else ", Split by Object/Group off")
         if variant == "blender-object":
             _z_up_object(obj)
             settings["object"] = "rotation applied (Z-up vertices, like the object the OBJ was exported from)"
@@ -329,7 +335,8 @@ def run(args: argparse.Namespace) -> dict:
             raise CheckError(f"{output}: the file does not say its frame rate; pass --fps or --reference .npz")
         frames = pick_frames(args.frames, expected.shape[0])
         for variant in VARIANTS[fmt]:
-            record = check_output(args.mesh, output, fmt, variant, expected, fps, frames, args.ulps, axes)
+            record = check_output(args.mesh, output, fmt, variant, expected, fps, frames, args.ulps, axes,
+                                  not args.no_split)
             record["n_frames"] = int(stored.shape[0])
             if stored.shape[0] != expected.shape[0]:
                 record["ok"] = False

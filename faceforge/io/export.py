@@ -33,7 +33,8 @@ rate to ``fps`` (before a glTF import), Start to 0 and End to ``n_frames - 1``.
 * ``.pc2`` / ``.mdd`` on the OBJ imported with File > Import > Wavefront OBJ at its defaults
   (Forward -Z, Up Y; Blender 4.x puts the turn on the object, Rotation X = 90 deg, and keeps
   the vertices as in the file): add a Mesh Cache modifier, pick the file, keep its defaults
-  (Forward +Y, Up +Z, no flip, Frame Start 0, time mode Frame).
+  (Forward +Y, Up +Z, no flip, Frame Start 0, time mode Frame). An OBJ with several ``o``
+  sections must be imported with Split by Object off, or each part is renumbered.
 * ``.pc2`` / ``.mdd`` on a Z-up Blender object (the one the OBJ was exported from with
   Blender's defaults, or an import after Object > Apply > Rotation): set the modifier's
   Forward Axis to **+Z** and Up Axis to **-Y**. (Forward -Z / Up +Y, the OBJ exporter's
