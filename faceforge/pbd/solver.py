@@ -25,6 +25,7 @@ from faceforge.pbd._kernels import _step
 from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
+from faceforge.pbd.constraints.distance import pbd_coefficients
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
@@ -103,6 +104,13 @@ class Solver:
                 if kind in self._runs and s.stiffness_mode != "xpbd":
                     self._runs[kind] = runs
             self._arrays[kind] = (idx, rest, kk, c)
+        # per-constraint data of the PBD sweeps (inverse masses are frozen in the Model)
+        d_idx, d_rest, d_k, _ = self._arrays["distance"]
+        self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass)
+        b_idx, b_rest, _, _ = self._arrays["bending"]
+        self._b_w = np.ascontiguousarray(m.inv_mass[b_idx].T)
+        self._b_rest_t = np.ascontiguousarray(b_rest.T)
+        self._a_w = np.ascontiguousarray(m.inv_mass[self._arrays["area"][0]].T)
         self._buf = np.zeros(BATCH_ROWS * BATCH)
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
@@ -136,8 +144,9 @@ class Solver:
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", self._blocks, self._lams,
-              *self._arrays["distance"], *self._arrays["bending"], self._runs["bending"],
-              *self._arrays["area"], self._runs["area"], self._buf,
+              *self._arrays["distance"], self._d_coef,
+              *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
+              *self._arrays["area"], self._runs["area"], self._a_w, self._buf,
               *self._volume, *k["volume"], self._vol_g,
               self._position, targets, *k["position"],
               *self._attachment,
