@@ -16,13 +16,17 @@ from faceforge.pbd.constraints.attachment import _project_attachment
 from faceforge.pbd.constraints.bending import _project_bending, _project_bending_batched
 from faceforge.pbd.constraints.distance import _project_distance, _project_distance_pbd
 from faceforge.pbd.constraints.position import _project_position
+from faceforge.pbd.constraints.quad import _project_quads_batched
 from faceforge.pbd.constraints.volume import _project_volume
+
+#: solver-only block kind: a bending block fused with its quads' stretches (PBD, coloured)
+QUAD = 6
 
 
 @numba.njit(**PBD_NUMBA)
 def _project(x, w, blocks, iterations, xpbd,
              d_idx, d_rest, d_k, d_c, d_lam, d_coef,
-             b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t,
+             b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch,
              a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, buf,
              v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
              p_idx, p_target, p_k, p_c, p_lam,
@@ -33,7 +37,8 @@ def _project(x, w, blocks, iterations, xpbd,
     colouring) select the vectorised sweeps; ``buf`` is their scratch, ``b_w (4, m)`` /
     ``a_w (3, m)`` their per-constraint inverse masses and ``b_rest_t (2, m)`` the rest
     cosines and sines. ``d_coef (m, 3)``: the PBD distance data (see
-    ``distance.pbd_coefficients``).
+    ``distance.pbd_coefficients``); ``q_stretch (6, m_bending)``: the stretches fused into
+    the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``).
     """
     for _ in range(iterations):
         for b in range(blocks.shape[0]):
@@ -60,8 +65,11 @@ def _project(x, w, blocks, iterations, xpbd,
                                 v_rest, v_k, v_c, v_lam, v_g, xpbd, start, stop)
             elif kind == 4:
                 _project_position(x, w, p_idx, p_target, p_k, p_c, p_lam, xpbd, start, stop)
-            else:
+            elif kind == 5:
                 _project_attachment(x, w, t_idx, t_tri, t_bary, t_k, t_c, t_lam, xpbd, start, stop)
+            else:  # QUAD: bending fused with its quads' stretches
+                _project_quads_batched(x, b_idx, b_w, b_rest_t, b_k, q_stretch, b_runs, buf,
+                                       start, stop)
 
 
 @numba.njit(**PBD_NUMBA)
@@ -95,7 +103,7 @@ def _velocities(x, v, prev, inv_h):
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
           substeps, iterations, xpbd, blocks, lams,
           d_idx, d_rest, d_k, d_c, d_coef,
-          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t,
+          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch,
           a_idx, a_rest, a_k, a_c, a_runs, a_w, buf,
           v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
@@ -131,7 +139,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
         lams[:] = 0.0
         _project(x_out, w, blocks, iterations, xpbd,
                  d_idx, d_rest, d_k, d_c, lams[:o1], d_coef,
-                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t,
+                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
                  a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, buf,
                  v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                  lams[o3:o4], v_g,

@@ -45,4 +45,4 @@ def _multiplier(value, denom, k, c, lam, xpbd):
 #: constraints per batch of the vectorised sweeps (``_project_<kind>_batched``) and the
 #: rows of their flat scratch buffer, ``(BATCH_ROWS * BATCH,) float64``
 BATCH = 64
-BATCH_ROWS = 32
+BATCH_ROWS = 40
