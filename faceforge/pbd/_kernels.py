@@ -9,27 +9,36 @@ from __future__ import annotations
 
 import numba
 
-from faceforge.constants import NUMBA_OPTIONS
+from faceforge.pbd.constraints._common import PBD_NUMBA
+
 from faceforge.pbd.constraints.area import _project_area, _project_area_batched
 from faceforge.pbd.constraints.attachment import _project_attachment
 from faceforge.pbd.constraints.bending import _project_bending, _project_bending_batched
-from faceforge.pbd.constraints.distance import _project_distance
+from faceforge.pbd.constraints.distance import _project_distance, _project_distance_pbd
 from faceforge.pbd.constraints.position import _project_position
+from faceforge.pbd.constraints.quad import _project_quads_batched
 from faceforge.pbd.constraints.volume import _project_volume
 
+#: solver-only block kind: a bending block fused with its quads' stretches (PBD, coloured)
+QUAD = 6
 
-@numba.njit(**NUMBA_OPTIONS)
+
+@numba.njit(**PBD_NUMBA)
 def _project(x, w, blocks, iterations, xpbd,
-             d_idx, d_rest, d_k, d_c, d_lam,
-             b_idx, b_rest, b_k, b_c, b_lam, b_runs,
-             a_idx, a_rest, a_k, a_c, a_lam, a_runs, buf,
+             d_idx, d_rest, d_k, d_c, d_lam, d_coef,
+             b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch,
+             a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, buf,
              v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
              p_idx, p_target, p_k, p_c, p_lam,
              t_idx, t_tri, t_bary, t_k, t_c, t_lam):
     """``iterations`` Gauss-Seidel sweeps over ``blocks (nb, 3)`` rows (kind, start, stop).
 
     ``b_runs`` / ``a_runs`` (runs of independent bending / area constraints, empty unless
-    colouring) select the vectorised sweeps; ``buf`` is their scratch.
+    colouring) select the vectorised sweeps; ``buf`` is their scratch, ``b_w (4, m)`` /
+    ``a_w (3, m)`` their per-constraint inverse masses and ``b_rest_t (2, m)`` the rest
+    cosines and sines. ``d_coef (m, 3)``: the PBD distance data (see
+    ``distance.pbd_coefficients``); ``q_stretch (6, m_bending)``: the stretches fused into
+    the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``).
     """
     for _ in range(iterations):
         for b in range(blocks.shape[0]):
@@ -37,15 +46,18 @@ def _project(x, w, blocks, iterations, xpbd,
             start = blocks[b, 1]
             stop = blocks[b, 2]
             if kind == 0:
-                _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, xpbd, start, stop)
+                if xpbd:
+                    _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, True, start, stop)
+                else:
+                    _project_distance_pbd(x, d_idx, d_coef, start, stop)
             elif kind == 1:
                 if b_runs.shape[0] > 1:  # coloured, PBD modes: vectorised batches
-                    _project_bending_batched(x, w, b_idx, b_rest, b_k, b_runs, buf, start, stop)
+                    _project_bending_batched(x, b_idx, b_w, b_rest_t, b_k, b_runs, buf, start, stop)
                 else:
                     _project_bending(x, w, b_idx, b_rest, b_k, b_c, b_lam, xpbd, start, stop)
             elif kind == 2:
                 if a_runs.shape[0] > 1:
-                    _project_area_batched(x, w, a_idx, a_rest, a_k, a_runs, buf, start, stop)
+                    _project_area_batched(x, a_idx, a_w, a_rest, a_k, a_runs, buf, start, stop)
                 else:
                     _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, xpbd, start, stop)
             elif kind == 3:
@@ -53,11 +65,14 @@ def _project(x, w, blocks, iterations, xpbd,
                                 v_rest, v_k, v_c, v_lam, v_g, xpbd, start, stop)
             elif kind == 4:
                 _project_position(x, w, p_idx, p_target, p_k, p_c, p_lam, xpbd, start, stop)
-            else:
+            elif kind == 5:
                 _project_attachment(x, w, t_idx, t_tri, t_bary, t_k, t_c, t_lam, xpbd, start, stop)
+            else:  # QUAD: bending fused with its quads' stretches
+                _project_quads_batched(x, b_idx, b_w, b_rest_t, b_k, q_stretch, b_runs, buf,
+                                       start, stop)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _predict(x, v, prev, w, damp, h, gravity):
     """Store ``prev = x``; damp and integrate dynamic particles: ``x += h v``."""
     for i in range(x.shape[0]):
@@ -76,7 +91,7 @@ def _predict(x, v, prev, w, damp, h, gravity):
             x[i, 2] = pz + h * vz
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _velocities(x, v, prev, inv_h):
     for i in range(x.shape[0]):
         v[i, 0] = (x[i, 0] - prev[i, 0]) * inv_h
@@ -84,12 +99,12 @@ def _velocities(x, v, prev, inv_h):
         v[i, 2] = (x[i, 2] - prev[i, 2]) * inv_h
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
           substeps, iterations, xpbd, blocks, lams,
-          d_idx, d_rest, d_k, d_c,
-          b_idx, b_rest, b_k, b_c, b_runs,
-          a_idx, a_rest, a_k, a_c, a_runs, buf,
+          d_idx, d_rest, d_k, d_c, d_coef,
+          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch,
+          a_idx, a_rest, a_k, a_c, a_runs, a_w, buf,
           v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
           t_idx, t_tri, t_bary, t_k, t_c):
@@ -123,9 +138,9 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
                     x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
         lams[:] = 0.0
         _project(x_out, w, blocks, iterations, xpbd,
-                 d_idx, d_rest, d_k, d_c, lams[:o1],
-                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs,
-                 a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, buf,
+                 d_idx, d_rest, d_k, d_c, lams[:o1], d_coef,
+                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
+                 a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, buf,
                  v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                  lams[o3:o4], v_g,
                  p_idx, p_target, p_k, p_c, lams[o4:o5],

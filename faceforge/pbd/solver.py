@@ -11,7 +11,10 @@ fastmath, no allocation inside the compiled step.
 With ``SolverSettings(colouring=True)`` the distance, bending and area constraints of
 each builder block are visited colour by colour (blocks keep their order, so deeper
 layers are still projected first), and in the PBD modes bending and area run in
-vectorised batches of independent constraints (see :mod:`faceforge.pbd.colouring`).
+vectorised batches of independent constraints (see :mod:`faceforge.pbd.colouring`);
+there, a bending block right after a distance block also takes over the stretches on
+its quads' edges and cross pairs, projected quad by quad in one fused pass (see
+:mod:`faceforge.pbd.constraints.quad`).
 
 Note: numba's on-disk cache does not track the constraint modules that ``_step``
 inlines; after editing one, delete ``faceforge/pbd/**/__pycache__/*.nb[ic]``.
@@ -21,10 +24,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.pbd._kernels import _step
+from faceforge.pbd._kernels import QUAD, _step
 from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
+from faceforge.pbd.constraints.distance import pbd_coefficients
+from faceforge.pbd.constraints.quad import match_quad_stretches, stretch_table
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
@@ -103,7 +108,57 @@ class Solver:
                 if kind in self._runs and s.stiffness_mode != "xpbd":
                     self._runs[kind] = runs
             self._arrays[kind] = (idx, rest, kk, c)
+        # per-constraint data of the PBD sweeps (inverse masses are frozen in the Model)
+        d_idx, d_rest, d_k, _ = self._arrays["distance"]
+        self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass)
+        self._q_stretch = np.zeros((6, m.bending_count))  # transposed: rows are vectors
+        if s.colouring and s.stiffness_mode != "xpbd":
+            self._fuse_quad_stretches()
+        b_idx, b_rest, _, _ = self._arrays["bending"]
+        self._b_w = np.ascontiguousarray(m.inv_mass[b_idx].T)
+        self._b_rest_t = np.ascontiguousarray(b_rest.T)
+        self._a_w = np.ascontiguousarray(m.inv_mass[self._arrays["area"][0]].T)
         self._buf = np.zeros(BATCH_ROWS * BATCH)
+
+    def _fuse_quad_stretches(self) -> None:
+        """Fold the stretches of each bending quad into a fused sweep (kind ``QUAD``).
+
+        For every bending block that directly follows a distance block, the distance
+        constraints on a quad's edge or cross pair move from the distance block into the
+        quad's column of ``_q_stretch`` and the block becomes a fused block (see
+        :mod:`faceforge.pbd.constraints.quad`); the other distance constraints keep their
+        block and order.
+        """
+        blocks = self._blocks
+        d_idx = self._arrays["distance"][0]
+        b_idx = self._arrays["bending"][0]
+        drop = np.zeros(len(d_idx), dtype=bool)
+        for r in range(1, len(blocks)):
+            if blocks[r, 0] != BENDING or blocks[r - 1, 0] != DISTANCE:
+                continue
+            (ds, de), (bs, be) = blocks[r - 1, 1:], blocks[r, 1:]
+            match = match_quad_stretches(d_idx[ds:de], b_idx[bs:be])
+            if not (match >= 0).any():
+                continue
+            self._q_stretch[:, bs:be] = stretch_table(d_idx[ds:de], b_idx[bs:be], match,
+                                                      self._d_coef[ds:de]).T
+            drop[ds + match[match >= 0]] = True
+            blocks[r, 0] = QUAD
+        if not drop.any():
+            return
+        keep = ~drop
+        new_index = np.concatenate([[0], np.cumsum(keep)])
+        rows = []
+        for kind, start, stop in blocks:
+            if kind == DISTANCE:
+                start, stop = new_index[start], new_index[stop]
+                if start == stop:
+                    continue
+            rows.append((kind, start, stop))
+        self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        self._arrays["distance"] = tuple(np.ascontiguousarray(a[keep])
+                                         for a in self._arrays["distance"])
+        self._d_coef = np.ascontiguousarray(self._d_coef[keep])
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
@@ -136,8 +191,10 @@ class Solver:
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", self._blocks, self._lams,
-              *self._arrays["distance"], *self._arrays["bending"], self._runs["bending"],
-              *self._arrays["area"], self._runs["area"], self._buf,
+              *self._arrays["distance"], self._d_coef,
+              *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
+              self._q_stretch,
+              *self._arrays["area"], self._runs["area"], self._a_w, self._buf,
               *self._volume, *k["volume"], self._vol_g,
               self._position, targets, *k["position"],
               *self._attachment,

@@ -68,7 +68,8 @@ def test_batched_area_matches_the_sequential_sweep(scale):
     rest = init_area(v, f) * 1.1
     k = rng.uniform(0.1, 1.0, len(f))
     got = x0.copy()
-    _project_area_batched(got, w, f, rest, k, runs, np.zeros(BATCH * BATCH_ROWS), 0, len(f))
+    _project_area_batched(got, f, np.ascontiguousarray(w[f].T), rest, k, runs,
+                          np.zeros(BATCH * BATCH_ROWS), 0, len(f))
     scalar = x0.copy()
     zeros = np.zeros(len(f))
     _project_area(scalar, w, f, rest, k, zeros, zeros, False, 0, len(f))
@@ -95,8 +96,9 @@ def test_batched_bending_matches_the_sequential_sweep(scale):
     rest = init_bending(v, q)
     k = rng.uniform(0.1, 1.0, len(q))
     got = x0.copy()
-    _project_bending_batched(got, w, q, rest_cos_sin(rest), k, runs, np.zeros(BATCH * BATCH_ROWS),
-                             0, len(q))
+    _project_bending_batched(got, q, np.ascontiguousarray(w[q].T),
+                             np.ascontiguousarray(rest_cos_sin(rest).T), k, runs,
+                             np.zeros(BATCH * BATCH_ROWS), 0, len(q))
     scalar = x0.copy()
     zeros = np.zeros(len(q))
     _project_bending(scalar, w, q, rest_cos_sin(rest), k, zeros, zeros, False, 0, len(q))

@@ -10,7 +10,8 @@ from faceforge.pbd.constraints import (
     solve_volume)
 from faceforge.pbd.constraints.area import _project_area
 from faceforge.pbd.constraints.bending import _project_bending, dihedral_angle, rest_cos_sin
-from faceforge.pbd.constraints.distance import _project_distance
+from faceforge.pbd.constraints.distance import (
+    _project_distance, _project_distance_pbd, pbd_coefficients)
 from faceforge.pbd.constraints.volume import reference_vertices
 from tests.pbd import twins
 from tests.pbd.meshes import adjacent_quads, edges, sphere
@@ -43,6 +44,26 @@ def test_distance_matches_twin(mesh, xpbd):
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
     if xpbd:
         np.testing.assert_allclose(lam, want_lam, rtol=1e-10, atol=1e-13)
+
+
+def test_pbd_distance_sweep_matches_twin_and_the_general_kernel(mesh):
+    """The PBD sweep with precomputed weight shares (used by the solver in the PBD modes)."""
+    rest, x, w, f = mesh
+    e = edges(f)
+    w = w.copy()
+    w[e[5]] = 0.0  # one constraint with both ends kinematic
+    e = np.concatenate([e, [[3, 3]]])  # and a coincident pair
+    r = init_distance(rest, e) * 1.05
+    m = len(e)
+    k = np.random.default_rng(6).uniform(0.1, 1.0, m)
+    want, _ = twins.distance(x, w, e, r, k)
+    got = x.copy()
+    _project_distance_pbd(got, e, pbd_coefficients(e, r, k, w), 0, m)
+    assert np.abs(got - x).max() > 1e-3
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
+    general = x.copy()
+    _project_distance(general, w, e, r, k, np.zeros(m), np.zeros(m), False, 0, m)
+    np.testing.assert_allclose(got, general, rtol=1e-13, atol=1e-14)
 
 
 @pytest.mark.parametrize("xpbd", [False, True])

@@ -21,8 +21,15 @@ from faceforge.constants import NUMBA_OPTIONS
 #: degenerate: the constraint gradient is undefined and the projection is skipped
 DEGENERATE = 1e-24
 
+#: numba options of the solver kernels: the project's (on-disk cache, numpy error model)
+#: plus reciprocal multiplication and signed-zero freedom (no FMA contraction: it would
+#: round a rest length differently from numpy, and the rest state must stay an exact fixed point).
+#: These change rounding (one compiled kernel gives the same bytes run to run), never the
+#: handling of NaN/inf, so the degenerate-input guards stay exact.
+PBD_NUMBA = {**NUMBA_OPTIONS, "fastmath": {"arcp", "nsz"}, "boundscheck": False}
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+
+@numba.njit(inline="always", **PBD_NUMBA)
 def _multiplier(value, denom, k, c, lam, xpbd):
     """Scaled multiplier ``s`` of one projection (float, units of C / |grad C|^2).
 
@@ -38,4 +45,4 @@ def _multiplier(value, denom, k, c, lam, xpbd):
 #: constraints per batch of the vectorised sweeps (``_project_<kind>_batched``) and the
 #: rows of their flat scratch buffer, ``(BATCH_ROWS * BATCH,) float64``
 BATCH = 64
-BATCH_ROWS = 32
+BATCH_ROWS = 40

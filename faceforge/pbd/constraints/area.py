@@ -13,8 +13,7 @@ import math
 import numba
 import numpy as np
 
-from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.constraints._common import BATCH, DEGENERATE, _multiplier
+from faceforge.pbd.constraints._common import BATCH, DEGENERATE, _multiplier, PBD_NUMBA
 
 
 def init_area(positions: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -30,7 +29,7 @@ def residual_area(positions, triangles, rest_area) -> np.ndarray:
     return init_area(positions, triangles) - np.asarray(rest_area, dtype=np.float64)
 
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+@numba.njit(inline="always", **PBD_NUMBA)
 def _solve_area(x, w, i0, i1, i2, rest, k, c, lam, xpbd):
     """Project one area constraint in place on ``x (n, 3)``; return the multiplier increment."""
     w0 = w[i0]
@@ -87,7 +86,7 @@ def _solve_area(x, w, i0, i1, i2, rest, k, c, lam, xpbd):
     return s
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _project_area(x, w, idx, rest, k, c, lam, xpbd, start, stop):
     """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
     if xpbd:
@@ -100,32 +99,16 @@ def _project_area(x, w, idx, rest, k, c, lam, xpbd, start, stop):
 
 
 # offsets of the scratch rows of the batched sweep (see bending._project_bending_batched)
-_U_X = 0 * BATCH
-_U_Y = 1 * BATCH
-_U_Z = 2 * BATCH
-_V_X = 3 * BATCH
-_V_Y = 4 * BATCH
-_V_Z = 5 * BATCH
-_W_0 = 6 * BATCH
-_W_1 = 7 * BATCH
-_W_2 = 8 * BATCH
-_R_A = 9 * BATCH
-_K_J = 10 * BATCH
-_D0X = 11 * BATCH
-_D0Y = 12 * BATCH
-_D0Z = 13 * BATCH
-_D1X = 14 * BATCH
-_D1Y = 15 * BATCH
-_D1Z = 16 * BATCH
-_D2X = 17 * BATCH
-_D2Y = 18 * BATCH
-_D2Z = 19 * BATCH
+_U_X, _U_Y, _U_Z, _V_X, _V_Y, _V_Z = (r * BATCH for r in range(6))
+_D0X, _D0Y, _D0Z, _D1X, _D1Y, _D1Z, _D2X, _D2Y, _D2Z = (r * BATCH for r in range(6, 15))
 
 
-@numba.njit(**NUMBA_OPTIONS)
-def _project_area_batched(x, w, idx, rest, k, runs, buf, start, stop):
+@numba.njit(**PBD_NUMBA)
+def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
     """PBD sweep over ``start:stop`` in vectorised batches of independent constraints.
 
+    inv_mass : (3, m) float, the inverse masses of each triangle's particles (constant for
+    a frozen Model, read as vectors by the math loop); rest, k : (m,) float;
     runs : (r,) int sorted boundaries of runs of constraints sharing no particle;
     buf : (BATCH_ROWS * BATCH,) float scratch. Gather, branch-free math of
     ``_solve_area``, scatter; equal to the sequential sweep in the same order.
@@ -146,21 +129,17 @@ def _project_area_batched(x, w, idx, rest, k, runs, buf, start, stop):
                 buf[_V_X + t] = x[i2, 0] - x[i0, 0]
                 buf[_V_Y + t] = x[i2, 1] - x[i0, 1]
                 buf[_V_Z + t] = x[i2, 2] - x[i0, 2]
-                buf[_W_0 + t] = w[i0]
-                buf[_W_1 + t] = w[i1]
-                buf[_W_2 + t] = w[i2]
-                buf[_R_A + t] = rest[j]
-                buf[_K_J + t] = k[j]
             for t in range(n):  # branch-free math
+                j = c0 + t
                 ux = buf[_U_X + t]
                 uy = buf[_U_Y + t]
                 uz = buf[_U_Z + t]
                 vx = buf[_V_X + t]
                 vy = buf[_V_Y + t]
                 vz = buf[_V_Z + t]
-                w0 = buf[_W_0 + t]
-                w1 = buf[_W_1 + t]
-                w2 = buf[_W_2 + t]
+                w0 = inv_mass[0, j]
+                w1 = inv_mass[1, j]
+                w2 = inv_mass[2, j]
                 nx = uy * vz - uz * vy
                 ny = uz * vx - ux * vz
                 nz = ux * vy - uy * vx
@@ -185,7 +164,7 @@ def _project_area_batched(x, w, idx, rest, k, runs, buf, start, stop):
                          + w1 * (g1x * g1x + g1y * g1y + g1z * g1z)
                          + w2 * (g2x * g2x + g2y * g2y + g2z * g2z))
                 good = ok & (denom > 0.0)
-                s = -buf[_K_J + t] * (0.5 * nlen - buf[_R_A + t]) / (denom if good else 1.0)
+                s = -k[j] * (0.5 * nlen - rest[j]) / (denom if good else 1.0)
                 s = s if good else 0.0
                 f = s * w0
                 buf[_D0X + t] = f * g0x

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from faceforge.constants import NUMBA_OPTIONS
+from faceforge.pbd.constraints._common import PBD_NUMBA
+
 from faceforge.pbd.constraints.position import _pull
 
 
@@ -34,7 +35,7 @@ def residual_attachment(positions, particles, triangles, bary) -> np.ndarray:
     return np.linalg.norm(p - attachment_targets(positions, triangles, bary), axis=1)
 
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+@numba.njit(inline="always", **PBD_NUMBA)
 def _solve_attachment(x, w, i, t0, t1, t2, b0, b1, b2, k, c, lam, xpbd):
     """Project one attachment in place (moves ``x[i]`` only); return the multiplier increment."""
     tx = b0 * x[t0, 0] + b1 * x[t1, 0] + b2 * x[t2, 0]
@@ -43,7 +44,7 @@ def _solve_attachment(x, w, i, t0, t1, t2, b0, b1, b2, k, c, lam, xpbd):
     return _pull(x, w, i, tx, ty, tz, k, c, lam, xpbd)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _project_attachment(x, w, idx, tri, bary, k, c, lam, xpbd, start, stop):
     """Sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
     for j in range(start, stop):

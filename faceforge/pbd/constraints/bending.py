@@ -28,8 +28,7 @@ import math
 import numba
 import numpy as np
 
-from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS, DEGENERATE, _multiplier  # noqa: F401
+from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS, DEGENERATE, _multiplier, PBD_NUMBA  # noqa: F401
 
 
 def dihedral_angle(positions: np.ndarray, quads: np.ndarray) -> np.ndarray:
@@ -63,7 +62,7 @@ def residual_bending(positions, quads, rest_angle) -> np.ndarray:
 SMALL_TAN = 0.25
 
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+@numba.njit(inline="always", **PBD_NUMBA)
 def _deviation(y, x):
     """``atan2(y, x)`` for the angle deviation: libm for large angles, and for
     ``x > 0, |y| <= SMALL_TAN x`` (within 14 degrees) the [5/4] Padé approximant of atan,
@@ -78,7 +77,7 @@ def _deviation(y, x):
     return math.atan2(y, x)
 
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+@numba.njit(inline="always", **PBD_NUMBA)
 def _solve_bending(x, w, i0, i1, i2, i3, rest_cos, rest_sin, k, c, lam, xpbd):
     """Project one dihedral constraint in place on ``x (n, 3)``; return the multiplier increment.
 
@@ -165,7 +164,7 @@ def _solve_bending(x, w, i0, i1, i2, i3, rest_cos, rest_sin, k, c, lam, xpbd):
     return s
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _project_bending(x, w, idx, rest_cs, k, c, lam, xpbd, start, stop):
     """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``).
 
@@ -183,50 +182,26 @@ def _project_bending(x, w, idx, rest_cs, k, c, lam, xpbd, start, stop):
 
 # offsets of the scratch rows in the flat buffer: one flat array with constant row offsets
 # lets LLVM prove the rows independent and vectorise the math loop (separate arrays do not)
-_E_X = 0 * BATCH
-_E_Y = 1 * BATCH
-_E_Z = 2 * BATCH
-_U_X = 3 * BATCH
-_U_Y = 4 * BATCH
-_U_Z = 5 * BATCH
-_V_X = 6 * BATCH
-_V_Y = 7 * BATCH
-_V_Z = 8 * BATCH
-_W_0 = 9 * BATCH
-_W_1 = 10 * BATCH
-_W_2 = 11 * BATCH
-_W_3 = 12 * BATCH
-_R_C = 13 * BATCH
-_R_S = 14 * BATCH
-_K_J = 15 * BATCH
-_A_X = 16 * BATCH
-_A_Y = 17 * BATCH
-_A_Z = 18 * BATCH
-_B_X = 19 * BATCH
-_B_Y = 20 * BATCH
-_B_Z = 21 * BATCH
-_F0A = 22 * BATCH
-_F0B = 23 * BATCH
-_F1A = 24 * BATCH
-_F1B = 25 * BATCH
-_F2A = 26 * BATCH
-_F3B = 27 * BATCH
-_VAL = 28 * BATCH
-_DEV_Y = 29 * BATCH
-_DEV_X = 30 * BATCH
-_GAIN = 31 * BATCH
+_E_X, _E_Y, _E_Z, _U_X, _U_Y, _U_Z, _V_X, _V_Y, _V_Z = (r * BATCH for r in range(9))
+_STEP, _GAIN, _DEV_Y, _DEV_X = (r * BATCH for r in range(9, 13))
+_D0X, _D0Y, _D0Z, _D1X, _D1Y, _D1Z, _D2X, _D2Y, _D2Z, _D3X, _D3Y, _D3Z = (
+    r * BATCH for r in range(13, 25))
 
 
-@numba.njit(**NUMBA_OPTIONS)
-def _project_bending_batched(x, w, idx, rest_cs, k, seg, buf, start, stop):
+@numba.njit(**PBD_NUMBA)
+def _project_bending_batched(x, idx, inv_mass, rest_cs, k, seg, buf, start, stop):
     """PBD sweep over ``start:stop`` whose constraints are grouped in independent runs.
 
+    inv_mass : (4, m) float, the inverse masses of each quad's particles (constant for a
+    frozen Model; contiguous per row so the math loop reads them as vectors);
+    rest_cs : (2, m) float, cosine and sine of the rest angles; k : (m,) PBD stiffness;
     seg : (s,) int sorted boundaries of runs of constraints sharing no particle (one
-    colour of a block); buf : (BATCH_ROWS * BATCH,) float scratch (one row per quantity). Each batch is gathered,
-    computed in a branch-free loop that the compiler vectorises (the math of
-    ``_solve_bending``, Padé branch), fixed up with libm atan2 where the deviation is
-    large, then scattered. Constraints of a batch share no particle, so the result is
-    that of the sequential sweep in the same order.
+    colour of a block); buf : (BATCH_ROWS * BATCH,) float scratch (one row per quantity).
+    Each batch is gathered (edge and opposite-vertex vectors only), computed in a
+    branch-free loop that the compiler vectorises (the math of ``_solve_bending``, Padé
+    branch, giving per-particle displacements per unit multiplier), fixed up with libm
+    atan2 where the deviation is large, then scattered. Constraints of a batch share no
+    particle, so the result is that of the sequential sweep in the same order.
     """
     for q in range(seg.shape[0] - 1):
         lo = max(seg[q], start)
@@ -239,23 +214,23 @@ def _project_bending_batched(x, w, idx, rest_cs, k, seg, buf, start, stop):
                 i1 = idx[j, 1]
                 i2 = idx[j, 2]
                 i3 = idx[j, 3]
-                buf[_E_X + t] = x[i1, 0] - x[i0, 0]
-                buf[_E_Y + t] = x[i1, 1] - x[i0, 1]
-                buf[_E_Z + t] = x[i1, 2] - x[i0, 2]
-                buf[_U_X + t] = x[i2, 0] - x[i0, 0]
-                buf[_U_Y + t] = x[i2, 1] - x[i0, 1]
-                buf[_U_Z + t] = x[i2, 2] - x[i0, 2]
-                buf[_V_X + t] = x[i3, 0] - x[i1, 0]
-                buf[_V_Y + t] = x[i3, 1] - x[i1, 1]
-                buf[_V_Z + t] = x[i3, 2] - x[i1, 2]
-                buf[_W_0 + t] = w[i0]
-                buf[_W_1 + t] = w[i1]
-                buf[_W_2 + t] = w[i2]
-                buf[_W_3 + t] = w[i3]
-                buf[_R_C + t] = rest_cs[j, 0]
-                buf[_R_S + t] = rest_cs[j, 1]
-                buf[_K_J + t] = k[j]
+                p0x = x[i0, 0]
+                p0y = x[i0, 1]
+                p0z = x[i0, 2]
+                p1x = x[i1, 0]
+                p1y = x[i1, 1]
+                p1z = x[i1, 2]
+                buf[_E_X + t] = p1x - p0x
+                buf[_E_Y + t] = p1y - p0y
+                buf[_E_Z + t] = p1z - p0z
+                buf[_U_X + t] = x[i2, 0] - p0x
+                buf[_U_Y + t] = x[i2, 1] - p0y
+                buf[_U_Z + t] = x[i2, 2] - p0z
+                buf[_V_X + t] = x[i3, 0] - p1x
+                buf[_V_Y + t] = x[i3, 1] - p1y
+                buf[_V_Z + t] = x[i3, 2] - p1z
             for t in range(n):  # branch-free math of _solve_bending
+                j = c0 + t
                 ex = buf[_E_X + t]
                 ey = buf[_E_Y + t]
                 ez = buf[_E_Z + t]
@@ -265,6 +240,10 @@ def _project_bending_batched(x, w, idx, rest_cs, k, seg, buf, start, stop):
                 vx = buf[_V_X + t]
                 vy = buf[_V_Y + t]
                 vz = buf[_V_Z + t]
+                w0 = inv_mass[0, j]
+                w1 = inv_mass[1, j]
+                w2 = inv_mass[2, j]
+                w3 = inv_mass[3, j]
                 ax = ey * uz - ez * uy
                 ay = ez * ux - ex * uz
                 az = ex * uy - ey * ux
@@ -281,14 +260,14 @@ def _project_bending_batched(x, w, idx, rest_cs, k, seg, buf, start, stop):
                 elen = math.sqrt(ee1)
                 sin = -(ux * bx + uy * by + uz * bz) * elen
                 cos = ax * bx + ay * by + az * bz
-                yy = sin * buf[_R_C + t] - cos * buf[_R_S + t]
-                xx = cos * buf[_R_C + t] + sin * buf[_R_S + t]
+                rc = rest_cs[0, j]
+                rs = rest_cs[1, j]
+                yy = sin * rc - cos * rs
+                xx = cos * rc + sin * rs
                 small = (xx > 0.0) & (abs(yy) <= SMALL_TAN * xx)
                 z = yy / (xx if small else 1.0)
                 z2 = z * z
-                buf[_VAL + t] = z * (945.0 + z2 * (735.0 + 64.0 * z2)) / (945.0 + z2 * (1050.0 + 225.0 * z2))
-                buf[_DEV_Y + t] = yy
-                buf[_DEV_X + t] = xx
+                value = z * (945.0 + z2 * (735.0 + 64.0 * z2)) / (945.0 + z2 * (1050.0 + 225.0 * z2))
                 prod = na1 * nb1
                 inv = 1.0 / (prod * elen)
                 ia = nb1 * elen * inv
@@ -301,51 +280,55 @@ def _project_bending_batched(x, w, idx, rest_cs, k, seg, buf, start, stop):
                 a1 = ue
                 b1 = ve + elen
                 cab = 2.0 * cos * ia * ib
-                denom = (buf[_W_0 + t] * (a0 * a0 * ia + a0 * b0 * cab + b0 * b0 * ib)
-                         + buf[_W_1 + t] * (a1 * a1 * ia + a1 * b1 * cab + b1 * b1 * ib)
-                         + (buf[_W_2 + t] * ia + buf[_W_3 + t] * ib) * ee1)
+                denom = (w0 * (a0 * a0 * ia + a0 * b0 * cab + b0 * b0 * ib)
+                         + w1 * (a1 * a1 * ia + a1 * b1 * cab + b1 * b1 * ib)
+                         + (w2 * ia + w3 * ib) * ee1)
                 good = ok & (denom > 0.0)
-                buf[_GAIN + t] = -buf[_K_J + t] / (denom if good else 1.0) if good else 0.0
-                buf[_A_X + t] = ax
-                buf[_A_Y + t] = ay
-                buf[_A_Z + t] = az
-                buf[_B_X + t] = bx
-                buf[_B_Y + t] = by
-                buf[_B_Z + t] = bz
-                buf[_F0A + t] = buf[_W_0 + t] * a0 * ia
-                buf[_F0B + t] = buf[_W_0 + t] * b0 * ib
-                buf[_F1A + t] = buf[_W_1 + t] * a1 * ia
-                buf[_F1B + t] = buf[_W_1 + t] * b1 * ib
-                buf[_F2A + t] = -buf[_W_2 + t] * elen * ia
-                buf[_F3B + t] = -buf[_W_3 + t] * elen * ib
-            for t in range(n):  # scatter (libm atan2 for the large deviations)
+                gain = -k[j] / (denom if good else 1.0) if good else 0.0
+                buf[_STEP + t] = gain * value if small else 0.0  # the multiplier s
+                buf[_GAIN + t] = 0.0 if small else gain  # nonzero: s needs libm atan2
+                buf[_DEV_Y + t] = yy
+                buf[_DEV_X + t] = xx
+                fa = w0 * a0 * ia
+                fb = w0 * b0 * ib
+                buf[_D0X + t] = fa * ax + fb * bx
+                buf[_D0Y + t] = fa * ay + fb * by
+                buf[_D0Z + t] = fa * az + fb * bz
+                fa = w1 * a1 * ia
+                fb = w1 * b1 * ib
+                buf[_D1X + t] = fa * ax + fb * bx
+                buf[_D1Y + t] = fa * ay + fb * by
+                buf[_D1Z + t] = fa * az + fb * bz
+                fa = -w2 * elen * ia
+                buf[_D2X + t] = fa * ax
+                buf[_D2Y + t] = fa * ay
+                buf[_D2Z + t] = fa * az
+                fb = -w3 * elen * ib
+                buf[_D3X + t] = fb * bx
+                buf[_D3Y + t] = fb * by
+                buf[_D3Z + t] = fb * bz
+            for t in range(n):  # scatter dp_i = s w_i grad_i C
                 j = c0 + t
-                value = buf[_VAL + t]
-                if not (buf[_DEV_X + t] > 0.0 and abs(buf[_DEV_Y + t]) <= SMALL_TAN * buf[_DEV_X + t]):
-                    value = math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
-                s = buf[_GAIN + t] * value
+                s = buf[_STEP + t]
+                gain = buf[_GAIN + t]
+                if gain != 0.0:  # large deviation: libm atan2
+                    s = gain * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
                 i0 = idx[j, 0]
                 i1 = idx[j, 1]
                 i2 = idx[j, 2]
                 i3 = idx[j, 3]
-                fa = s * buf[_F0A + t]
-                fb = s * buf[_F0B + t]
-                x[i0, 0] += fa * buf[_A_X + t] + fb * buf[_B_X + t]
-                x[i0, 1] += fa * buf[_A_Y + t] + fb * buf[_B_Y + t]
-                x[i0, 2] += fa * buf[_A_Z + t] + fb * buf[_B_Z + t]
-                fa = s * buf[_F1A + t]
-                fb = s * buf[_F1B + t]
-                x[i1, 0] += fa * buf[_A_X + t] + fb * buf[_B_X + t]
-                x[i1, 1] += fa * buf[_A_Y + t] + fb * buf[_B_Y + t]
-                x[i1, 2] += fa * buf[_A_Z + t] + fb * buf[_B_Z + t]
-                fa = s * buf[_F2A + t]
-                x[i2, 0] += fa * buf[_A_X + t]
-                x[i2, 1] += fa * buf[_A_Y + t]
-                x[i2, 2] += fa * buf[_A_Z + t]
-                fb = s * buf[_F3B + t]
-                x[i3, 0] += fb * buf[_B_X + t]
-                x[i3, 1] += fb * buf[_B_Y + t]
-                x[i3, 2] += fb * buf[_B_Z + t]
+                x[i0, 0] += s * buf[_D0X + t]
+                x[i0, 1] += s * buf[_D0Y + t]
+                x[i0, 2] += s * buf[_D0Z + t]
+                x[i1, 0] += s * buf[_D1X + t]
+                x[i1, 1] += s * buf[_D1Y + t]
+                x[i1, 2] += s * buf[_D1Z + t]
+                x[i2, 0] += s * buf[_D2X + t]
+                x[i2, 1] += s * buf[_D2Y + t]
+                x[i2, 2] += s * buf[_D2Z + t]
+                x[i3, 0] += s * buf[_D3X + t]
+                x[i3, 1] += s * buf[_D3Y + t]
+                x[i3, 2] += s * buf[_D3Z + t]
 
 
 def rest_cos_sin(rest_angle) -> np.ndarray:

@@ -14,8 +14,7 @@ import math
 import numba
 import numpy as np
 
-from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.constraints._common import _multiplier
+from faceforge.pbd.constraints._common import _multiplier, PBD_NUMBA
 
 
 def init_position(positions: np.ndarray, particles: np.ndarray) -> np.ndarray:
@@ -29,7 +28,7 @@ def residual_position(positions, particles, targets) -> np.ndarray:
     return np.linalg.norm(p - np.asarray(targets, dtype=np.float64), axis=1)
 
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+@numba.njit(inline="always", **PBD_NUMBA)
 def _pull(x, w, i, tx, ty, tz, k, c, lam, xpbd):
     """Move particle ``i`` toward ``t`` (one-sided); return the multiplier increment."""
     wi = w[i]
@@ -49,13 +48,13 @@ def _pull(x, w, i, tx, ty, tz, k, c, lam, xpbd):
     return s
 
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+@numba.njit(inline="always", **PBD_NUMBA)
 def _solve_position(x, w, i, target, slot, k, c, lam, xpbd):
     """Project one position constraint (target row ``slot`` of ``target (m, 3)``)."""
     return _pull(x, w, i, target[slot, 0], target[slot, 1], target[slot, 2], k, c, lam, xpbd)
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _project_position(x, w, idx, target, k, c, lam, xpbd, start, stop):
     """Sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
     for j in range(start, stop):

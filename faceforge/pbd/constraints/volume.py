@@ -22,8 +22,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.constraints._common import _multiplier
+from faceforge.pbd.constraints._common import _multiplier, PBD_NUMBA
 
 
 def boundary_vertices(triangles: np.ndarray) -> np.ndarray:
@@ -59,7 +58,7 @@ def residual_volume(positions, triangles, rest_volume) -> float:
     return signed_volume(positions, triangles) - float(rest_volume)
 
 
-@numba.njit(inline="always", **NUMBA_OPTIONS)
+@numba.njit(inline="always", **PBD_NUMBA)
 def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     """Project one volume constraint in place on ``x (n, 3)``.
 
@@ -150,7 +149,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     return s
 
 
-@numba.njit(**NUMBA_OPTIONS)
+@numba.njit(**PBD_NUMBA)
 def _project_volume(x, w, pstart, particles, tstart, tris, rstart, ref, rest, k, c, lam,
                     g, xpbd, start, stop):
     """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``tstart``, ``rstart``;

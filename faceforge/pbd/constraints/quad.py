@@ -1,0 +1,276 @@
+"""Fused sweep: the two stretch constraints of a bending quad, then its dihedral constraint.
+
+The §8 skin (and every muscle) adds a distance block (stretch on every edge and across
+every pair of adjacent triangles) immediately followed by the bending block on the same
+quads ``(p0, p1, p2, p3)``. Each interior edge ``(p0, p1)`` and each cross pair
+``(p2, p3)`` is then the stretch constraint of exactly one quad. With colouring on, the
+solver may project, quad by quad, "stretch (p0, p1), stretch (p2, p3), bending" instead
+of "all stretches, then all bendings": still a sequential Gauss-Seidel sweep over the
+same constraints, each projected once per iteration with the same update, in another
+order (like colouring itself). The four particles are read and written once for three
+projections, and the stretch math runs in the vectorised loop. Stretches that belong to
+no quad (boundary edges, anchors) stay in their distance block, projected before.
+
+Only used in the PBD modes (XPBD keeps separate sweeps and multipliers).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from faceforge.pbd.constraints._common import BATCH, DEGENERATE, PBD_NUMBA
+from faceforge.pbd.constraints.bending import SMALL_TAN
+
+
+def match_quad_stretches(pairs: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """For each quad, the distance constraint on its edge and on its cross pair.
+
+    pairs : (d, 2) int particle ids of candidate distance constraints; quads : (m, 4) int.
+    Returns ``(m, 2) int64``: rows ``(edge, cross)`` indexing ``pairs`` (unordered match of
+    ``(p0, p1)`` and ``(p2, p3)``), -1 where none. Each distance constraint is matched to
+    at most one quad (the first one, in quad order); duplicates of a pair stay unmatched.
+    """
+    p = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+    q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    first = {}
+    for j, (a, b) in enumerate(p.tolist()):
+        first.setdefault((a, b), j)
+    out = np.full((len(q), 2), -1, dtype=np.int64)
+    for j, (p0, p1, p2, p3) in enumerate(q.tolist()):
+        for col, (a, b) in enumerate(((p0, p1), (p2, p3))):
+            key = (a, b) if a < b else (b, a)
+            hit = first.pop(key, -1)  # pop: one quad per distance constraint
+            out[j, col] = hit
+    return out
+
+
+def stretch_table(pairs: np.ndarray, quads: np.ndarray, match: np.ndarray,
+                  coef: np.ndarray) -> np.ndarray:
+    """``(m, 6) float64`` per quad: ``(l0, share_p0, share_p1)`` of its edge stretch and
+    ``(l0, share_p2, share_p3)`` of its cross stretch.
+
+    pairs : (d, 2) int and coef : (d, 3) float, the distance constraints and their PBD
+    data (``distance.pbd_coefficients``); quads : (m, 4) int; match : (m, 2) int from
+    :func:`match_quad_stretches`. Shares are swapped where a pair is stored the other
+    way round. Unmatched: rest 1, shares 0 (the projection moves nothing).
+    """
+    out = np.zeros((len(match), 6))
+    out[:, 0] = out[:, 3] = 1.0
+    for col, first in ((0, 0), (1, 2)):
+        hit = np.flatnonzero(match[:, col] >= 0)
+        c = coef[match[hit, col]]
+        same = pairs[match[hit, col], 0] == quads[hit, first]
+        out[hit, 3 * col] = c[:, 0]
+        out[hit, 3 * col + 1] = np.where(same, c[:, 1], c[:, 2])
+        out[hit, 3 * col + 2] = np.where(same, c[:, 2], c[:, 1])
+    return out
+
+
+# scratch rows: positions (gathered, then updated by the stretches), multiplier, atan2
+# fix-up, bending displacement per unit multiplier
+_P0X, _P0Y, _P0Z, _P1X, _P1Y, _P1Z, _P2X, _P2Y, _P2Z, _P3X, _P3Y, _P3Z = (
+    r * BATCH for r in range(12))
+_STEP, _GAIN, _DEV_Y, _DEV_X = (r * BATCH for r in range(12, 16))
+_D0X, _D0Y, _D0Z, _D1X, _D1Y, _D1Z, _D2X, _D2Y, _D2Z, _D3X, _D3Y, _D3Z = (
+    r * BATCH for r in range(16, 28))
+_Q0X, _Q0Y, _Q0Z, _Q1X, _Q1Y, _Q1Z, _Q2X, _Q2Y, _Q2Z, _Q3X, _Q3Y, _Q3Z = (
+    r * BATCH for r in range(28, 40))
+
+
+@numba.njit(inline="always", **PBD_NUMBA)
+def _stretch_factor(d2, rest):
+    """``(d - l0) / d`` of a distance constraint with ``d^2 = d2``; 0 when degenerate."""
+    ok = (d2 > DEGENERATE * rest * rest) & (d2 > 0.0)
+    d = math.sqrt(d2 if ok else 1.0)
+    return (d - rest) / d if ok else 0.0
+
+
+@numba.njit(**PBD_NUMBA)
+def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, seg, buf, start, stop):
+    """PBD sweep over quads ``start:stop``: per quad, stretch (p0, p1), stretch (p2, p3),
+    then the dihedral constraint (see the module docstring).
+
+    idx : (m, 4) int quads; inv_mass : (4, m) float; rest_cs : (2, m) float rest cosines
+    and sines; k : (m,) bending stiffness; stretch : (6, m) float, the
+    transpose of :func:`stretch_table` (rows read as vectors); seg : (s,) int sorted boundaries of runs of quads sharing no
+    particle; buf : (BATCH_ROWS * BATCH,) float scratch. The math per quad is that of
+    ``distance._project_distance_pbd`` twice, then ``bending._solve_bending`` (PBD), on
+    the updated positions.
+    """
+    for q in range(seg.shape[0] - 1):
+        lo = max(seg[q], start)
+        hi = min(seg[q + 1], stop)
+        for c0 in range(lo, hi, BATCH):
+            n = min(BATCH, hi - c0)
+            for t in range(n):  # gather
+                j = c0 + t
+                i0 = idx[j, 0]
+                i1 = idx[j, 1]
+                i2 = idx[j, 2]
+                i3 = idx[j, 3]
+                buf[_P0X + t] = x[i0, 0]
+                buf[_P0Y + t] = x[i0, 1]
+                buf[_P0Z + t] = x[i0, 2]
+                buf[_P1X + t] = x[i1, 0]
+                buf[_P1Y + t] = x[i1, 1]
+                buf[_P1Z + t] = x[i1, 2]
+                buf[_P2X + t] = x[i2, 0]
+                buf[_P2Y + t] = x[i2, 1]
+                buf[_P2Z + t] = x[i2, 2]
+                buf[_P3X + t] = x[i3, 0]
+                buf[_P3Y + t] = x[i3, 1]
+                buf[_P3Z + t] = x[i3, 2]
+            for t in range(n):  # branch-free math
+                j = c0 + t
+                p0x = buf[_P0X + t]
+                p0y = buf[_P0Y + t]
+                p0z = buf[_P0Z + t]
+                p1x = buf[_P1X + t]
+                p1y = buf[_P1Y + t]
+                p1z = buf[_P1Z + t]
+                p2x = buf[_P2X + t]
+                p2y = buf[_P2Y + t]
+                p2z = buf[_P2Z + t]
+                p3x = buf[_P3X + t]
+                p3y = buf[_P3Y + t]
+                p3z = buf[_P3Z + t]
+                # stretch of the shared edge (p0, p1)
+                dx = p0x - p1x
+                dy = p0y - p1y
+                dz = p0z - p1z
+                g = _stretch_factor(dx * dx + dy * dy + dz * dz, stretch[0, j])
+                a = g * stretch[1, j]
+                b = g * stretch[2, j]
+                p0x = p0x - a * dx
+                p0y = p0y - a * dy
+                p0z = p0z - a * dz
+                p1x = p1x + b * dx
+                p1y = p1y + b * dy
+                p1z = p1z + b * dz
+                # stretch across the two triangles (p2, p3)
+                dx = p2x - p3x
+                dy = p2y - p3y
+                dz = p2z - p3z
+                g = _stretch_factor(dx * dx + dy * dy + dz * dz, stretch[3, j])
+                a = g * stretch[4, j]
+                b = g * stretch[5, j]
+                p2x = p2x - a * dx
+                p2y = p2y - a * dy
+                p2z = p2z - a * dz
+                p3x = p3x + b * dx
+                p3y = p3y + b * dy
+                p3z = p3z + b * dz
+                buf[_Q0X + t] = p0x
+                buf[_Q0Y + t] = p0y
+                buf[_Q0Z + t] = p0z
+                buf[_Q1X + t] = p1x
+                buf[_Q1Y + t] = p1y
+                buf[_Q1Z + t] = p1z
+                buf[_Q2X + t] = p2x
+                buf[_Q2Y + t] = p2y
+                buf[_Q2Z + t] = p2z
+                buf[_Q3X + t] = p3x
+                buf[_Q3Y + t] = p3y
+                buf[_Q3Z + t] = p3z
+                # bending (the math of bending._project_bending_batched)
+                ex = p1x - p0x
+                ey = p1y - p0y
+                ez = p1z - p0z
+                ux = p2x - p0x
+                uy = p2y - p0y
+                uz = p2z - p0z
+                vx = p3x - p1x
+                vy = p3y - p1y
+                vz = p3z - p1z
+                w0 = inv_mass[0, j]
+                w1 = inv_mass[1, j]
+                w2 = inv_mass[2, j]
+                w3 = inv_mass[3, j]
+                ax = ey * uz - ez * uy
+                ay = ez * ux - ex * uz
+                az = ex * uy - ey * ux
+                bx = vy * ez - vz * ey
+                by = vz * ex - vx * ez
+                bz = vx * ey - vy * ex
+                ee = ex * ex + ey * ey + ez * ez
+                na2 = ax * ax + ay * ay + az * az
+                nb2 = bx * bx + by * by + bz * bz
+                ok = (na2 > DEGENERATE * ee * ee) & (nb2 > DEGENERATE * ee * ee)
+                ee1 = ee if ok else 1.0
+                na1 = na2 if ok else 1.0
+                nb1 = nb2 if ok else 1.0
+                elen = math.sqrt(ee1)
+                sin = -(ux * bx + uy * by + uz * bz) * elen
+                cos = ax * bx + ay * by + az * bz
+                rc = rest_cs[0, j]
+                rs = rest_cs[1, j]
+                yy = sin * rc - cos * rs
+                xx = cos * rc + sin * rs
+                small = (xx > 0.0) & (abs(yy) <= SMALL_TAN * xx)
+                z = yy / (xx if small else 1.0)
+                z2 = z * z
+                value = z * (945.0 + z2 * (735.0 + 64.0 * z2)) / (945.0 + z2 * (1050.0 + 225.0 * z2))
+                prod = na1 * nb1
+                inv = 1.0 / (prod * elen)
+                ia = nb1 * elen * inv
+                ib = na1 * elen * inv
+                ie = prod * inv
+                ue = (ux * ex + uy * ey + uz * ez) * ie
+                ve = (vx * ex + vy * ey + vz * ez) * ie
+                a0 = elen - ue
+                b0 = -ve
+                a1 = ue
+                b1 = ve + elen
+                cab = 2.0 * cos * ia * ib
+                denom = (w0 * (a0 * a0 * ia + a0 * b0 * cab + b0 * b0 * ib)
+                         + w1 * (a1 * a1 * ia + a1 * b1 * cab + b1 * b1 * ib)
+                         + (w2 * ia + w3 * ib) * ee1)
+                good = ok & (denom > 0.0)
+                gain = -k[j] / (denom if good else 1.0) if good else 0.0
+                buf[_STEP + t] = gain * value if small else 0.0
+                buf[_GAIN + t] = 0.0 if small else gain
+                buf[_DEV_Y + t] = yy
+                buf[_DEV_X + t] = xx
+                fa = w0 * a0 * ia
+                fb = w0 * b0 * ib
+                buf[_D0X + t] = fa * ax + fb * bx
+                buf[_D0Y + t] = fa * ay + fb * by
+                buf[_D0Z + t] = fa * az + fb * bz
+                fa = w1 * a1 * ia
+                fb = w1 * b1 * ib
+                buf[_D1X + t] = fa * ax + fb * bx
+                buf[_D1Y + t] = fa * ay + fb * by
+                buf[_D1Z + t] = fa * az + fb * bz
+                fa = -w2 * elen * ia
+                buf[_D2X + t] = fa * ax
+                buf[_D2Y + t] = fa * ay
+                buf[_D2Z + t] = fa * az
+                fb = -w3 * elen * ib
+                buf[_D3X + t] = fb * bx
+                buf[_D3Y + t] = fb * by
+                buf[_D3Z + t] = fb * bz
+            for t in range(n):  # scatter: stretched positions + s * bending displacement
+                j = c0 + t
+                s = buf[_STEP + t]
+                gain = buf[_GAIN + t]
+                if gain != 0.0:  # large deviation: libm atan2
+                    s = gain * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
+                i0 = idx[j, 0]
+                i1 = idx[j, 1]
+                i2 = idx[j, 2]
+                i3 = idx[j, 3]
+                x[i0, 0] = buf[_Q0X + t] + s * buf[_D0X + t]
+                x[i0, 1] = buf[_Q0Y + t] + s * buf[_D0Y + t]
+                x[i0, 2] = buf[_Q0Z + t] + s * buf[_D0Z + t]
+                x[i1, 0] = buf[_Q1X + t] + s * buf[_D1X + t]
+                x[i1, 1] = buf[_Q1Y + t] + s * buf[_D1Y + t]
+                x[i1, 2] = buf[_Q1Z + t] + s * buf[_D1Z + t]
+                x[i2, 0] = buf[_Q2X + t] + s * buf[_D2X + t]
+                x[i2, 1] = buf[_Q2Y + t] + s * buf[_D2Y + t]
+                x[i2, 2] = buf[_Q2Z + t] + s * buf[_D2Z + t]
+                x[i3, 0] = buf[_Q3X + t] + s * buf[_D3X + t]
+                x[i3, 1] = buf[_Q3Y + t] + s * buf[_D3Y + t]
+                x[i3, 2] = buf[_Q3Z + t] + s * buf[_D3Z + t]

@@ -1,0 +1,96 @@
+"""The fused stretch + bending sweep (coloured PBD solver) against the separate sweeps."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from faceforge.pbd import Solver, SolverSettings
+from faceforge.pbd.colouring import colour_order
+from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
+from faceforge.pbd.constraints.bending import init_bending, rest_cos_sin
+from faceforge.pbd.constraints.distance import init_distance, pbd_coefficients
+from faceforge.pbd.constraints.quad import (
+    _project_quads_batched, match_quad_stretches, stretch_table)
+from tests.pbd import twins
+from tests.pbd.meshes import adjacent_quads, edges, skin_builder, sphere
+
+
+def test_match_finds_each_stretch_once_in_either_orientation():
+    quads = np.array([[0, 1, 2, 3], [1, 4, 0, 5], [6, 7, 8, 9]])
+    pairs = np.array([[1, 0], [2, 3], [4, 1], [0, 1], [9, 8], [2, 6]])
+    match = match_quad_stretches(pairs, quads)
+    # (0, 1) is matched once (first occurrence, stored reversed); its duplicate stays
+    np.testing.assert_array_equal(match, [[0, 1], [2, -1], [-1, 4]])
+    coef = np.array([[1.0, 0.1, 0.2], [2.0, 0.3, 0.4], [3.0, 0.5, 0.6], [4.0, 0.7, 0.8],
+                     [5.0, 0.9, 1.0], [6.0, 0.0, 0.0]])
+    table = stretch_table(pairs, quads, match, coef)
+    # shares follow the quad's particle order: pair (1, 0) -> share of p0 is its 2nd share
+    np.testing.assert_array_equal(table[0], [1.0, 0.2, 0.1, 2.0, 0.3, 0.4])
+    np.testing.assert_array_equal(table[1], [3.0, 0.6, 0.5, 1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(table[2], [1.0, 0.0, 0.0, 5.0, 1.0, 0.9])
+
+
+@pytest.mark.parametrize("scale", [0.002, 0.2])  # small: Padé branch; large: atan2 fix-up
+def test_fused_sweep_is_stretch_stretch_bending_per_quad(scale):
+    v, f = sphere(3)
+    q = adjacent_quads(f)
+    order, runs = colour_order(q, len(v), np.array([[0, 100], [100, len(q)]]))
+    q = q[order]
+    rng = np.random.default_rng(8)
+    x0 = v + rng.normal(scale=scale, size=v.shape)
+    w = rng.uniform(0.0, 2.0, len(v))
+    w[::13] = 0.0
+    pairs = np.concatenate([edges(f)[::-1], q[:, [3, 2]]])  # mixed orientations
+    pairs[::2] = pairs[::2, ::-1]
+    rest_d = init_distance(v, pairs) * 1.05
+    k_d = rng.uniform(0.1, 1.0, len(pairs))
+    coef = pbd_coefficients(pairs, rest_d, k_d, w)
+    match = match_quad_stretches(pairs, q)
+    assert (match >= 0).all()
+    match[::7, 1] = -1  # some quads without a cross stretch
+    rest_b = init_bending(v, q)
+    k_b = rng.uniform(0.1, 1.0, len(q))
+    got = x0.copy()
+    _project_quads_batched(got, q, np.ascontiguousarray(w[q].T),
+                           np.ascontiguousarray(rest_cos_sin(rest_b).T), k_b,
+                           np.ascontiguousarray(stretch_table(pairs, q, match, coef).T), runs,
+                           np.zeros(BATCH * BATCH_ROWS), 0, len(q))
+    want = x0.copy()
+    for j in range(len(q)):  # the plain-Python twins, quad by quad
+        for hit in match[j]:
+            if hit >= 0:
+                want, _ = twins.distance(want, w, pairs[hit:hit + 1], rest_d[hit:hit + 1],
+                                         k_d[hit:hit + 1])
+        want, _ = twins.bending(want, w, q[j:j + 1], rest_b[j:j + 1], k_b[j:j + 1])
+    assert np.abs(got - x0).max() > 1e-4
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+def test_coloured_solver_fuses_skin_stretches_and_keeps_the_others():
+    v, f = sphere(2)
+    b, _ = skin_builder(v, f)
+    model = b.finalize()
+    fused = Solver(model, SolverSettings(colouring=True))
+    kinds = fused._blocks[:, 0].tolist()
+    assert 6 in kinds and 1 not in kinds  # the bending block became a fused block
+    # only the anchors stay distance constraints (every edge is interior on a sphere)
+    assert len(fused._arrays["distance"][0]) == len(v)
+    assert Solver(model, SolverSettings(colouring=True, stiffness_mode="xpbd"))._blocks[:, 0] \
+        .tolist() == model.blocks[:, 0].tolist()
+    assert Solver(model, SolverSettings())._blocks[:, 0].tolist() == model.blocks[:, 0].tolist()
+    # the same constraints in another Gauss-Seidel order: the rest state is reached as fast
+    rng = np.random.default_rng(2)
+    start = model.state()
+    free = model.inv_mass > 0
+    start.positions[free] += rng.normal(scale=0.02, size=(free.sum(), 3))
+    error = {}
+    for colouring in (False, True):
+        state = start.copy()
+        solver = Solver(model, SolverSettings(colouring=colouring))
+        for _ in range(100):
+            solver.step(state, state, model.control(), 0.04)
+        error[colouring] = np.abs(state.positions - model.rest_positions).max()
+    initial = np.abs(start.positions - model.rest_positions).max()
+    assert error[False] < 0.1 * initial
+    assert error[True] < 1.5 * error[False]
