@@ -29,7 +29,7 @@ from faceforge.constants import FLOAT, INT
 from faceforge.geometry.rbf import hardy_rbf
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
-__all__ = ["HexTopology", "hex_topology", "template_positions", "morph_hex", "signed_volume"]
+__all__ = ["HexTopology", "hex_topology", "cell_diagonals", "template_positions", "morph_hex", "signed_volume"]
 
 
 @dataclass(frozen=True)
@@ -87,22 +87,56 @@ class HexTopology:
         return np.asarray(walk, INT)
 
 
-def _sheet(h: int, w: int, closed: bool) -> np.ndarray:
-    """Bottom-sheet triangles (grid cells split along (i, j)-(i+1, j+1)), (2 (h' ) (w-1), 3)."""
+def _cells(h: int, w: int, closed: bool) -> tuple[np.ndarray, ...]:
+    """Corners ``a, b, c, d`` (each ``(cells,)``) of the grid cells, ``(i, j), (i+1, j), (i+1, j+1), (i, j+1)``."""
     rows = h if closed else h - 1
     i, j = np.meshgrid(np.arange(rows), np.arange(w - 1), indexing="ij")
     i, j = i.ravel(), j.ravel()
     i1 = (i + 1) % h
-    a, b, c, d = i * w + j, i1 * w + j, i1 * w + j + 1, i * w + j + 1
-    return np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(INT)
+    return i * w + j, i1 * w + j, i1 * w + j + 1, i * w + j + 1
 
 
-def hex_topology(h: int, w: int, closed: bool = False) -> HexTopology:
-    """Connectivity of the template mesh (Fig. 4), see :class:`HexTopology`."""
-    if w < 2 or h < (3 if closed else 2):
-        raise ValueError(f"muscle grid needs w >= 2 and h >= {3 if closed else 2}, got h={h}, w={w}")
+def _sheet(h: int, w: int, closed: bool, flip=None) -> np.ndarray:
+    """Bottom-sheet triangles, ``(2 cells, 3)``: cell ``k`` gives rows ``k`` and ``cells + k``.
+
+    Each cell is split along ``(i, j)-(i+1, j+1)`` (``a-c``), or along ``b-d``
+    where ``flip (cells,) bool`` is set (see :func:`cell_diagonals`).
+    """
+    a, b, c, d = _cells(h, w, closed)
+    first, second = np.stack([a, b, c], 1), np.stack([a, c, d], 1)
+    if flip is not None and np.any(flip):
+        first[flip] = np.stack([a, b, d], 1)[flip]
+        second[flip] = np.stack([b, c, d], 1)[flip]
+    return np.concatenate([first, second]).astype(INT)
+
+
+def cell_diagonals(h: int, w: int, closed: bool, bottom) -> np.ndarray:
+    """Which cells of the bottom sheet ``bottom (h w, 3)`` to split along ``b-d``, ``(cells,) bool``.
+
+    A cell is a quad ``a, b, c, d``; where it is not convex (a sphincter's cells at a
+    sharp corner of its inner loop, a fan at a bunched contour) one diagonal runs
+    outside it and one of its two triangles is turned over. Both splits are scored by
+    the smaller signed area of their triangles about the cell's normal ``(c - a) x
+    (d - b)`` (which does not depend on the split); the default ``a-c`` split is kept
+    unless the ``b-d`` split's worse triangle is at least twice as large (so a convex
+    cell never changes and the choice is stable under round-off).
+    """
+    p = np.asarray(bottom, dtype=FLOAT)
+    a, b, c, d = (p[k] for k in _cells(h, w, closed))
+    n = np.cross(c - a, d - b)
+
+    def area(x, y, z):
+        return np.einsum("ij,ij->i", np.cross(y - x, z - x), n)
+
+    keep = np.minimum(area(a, b, c), area(a, c, d))
+    alt = np.minimum(area(a, b, d), area(b, c, d))
+    return (alt > 0.0) & (alt > 2.0 * keep)
+
+
+def _faces(h: int, w: int, closed: bool, flip=None) -> np.ndarray:
+    """Closed two-sheet surface: bottom sheet, top sheet (reversed), border walls, ``(m, 3)``."""
     n = h * w
-    bottom = _sheet(h, w, closed)
+    bottom = _sheet(h, w, closed, flip)
     top = bottom[:, ::-1] + n
     # border edges of the bottom sheet: directed edges without their reverse
     e = np.concatenate([bottom[:, [0, 1]], bottom[:, [1, 2]], bottom[:, [2, 0]]])
@@ -112,7 +146,14 @@ def hex_topology(h: int, w: int, closed: bool = False) -> HexTopology:
     a, b = border[:, 0], border[:, 1]
     # wall quad (b, a, a', b') uses each border edge in the opposite direction
     walls = np.concatenate([np.stack([b, a, a + n], 1), np.stack([b, a + n, b + n], 1)])
-    faces = np.concatenate([bottom, top, walls]).astype(INT)
+    return np.concatenate([bottom, top, walls]).astype(INT)
+
+
+def hex_topology(h: int, w: int, closed: bool = False) -> HexTopology:
+    """Connectivity of the template mesh (Fig. 4), see :class:`HexTopology`."""
+    if w < 2 or h < (3 if closed else 2):
+        raise ValueError(f"muscle grid needs w >= 2 and h >= {3 if closed else 2}, got h={h}, w={w}")
+    faces = _faces(h, w, closed)
     topo = HexTopology(h, w, closed, faces, np.zeros(0, INT))
     g = topo.contour_grid()
     contour = topo.bottom(g[:, 0], g[:, 1]).astype(INT)
@@ -161,7 +202,9 @@ def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float, surf
     3. The top sheet is then placed at ``bottom + thickness * n`` with ``n`` the
        bottom sheet's vertex normals (oriented like the sample normals), which
        is the paper's "displace the upper surface along the normals".
-    4. If the morph mirrored the template, the faces are flipped so the
+    4. Cells that came out non-convex are split along their other diagonal
+       (:func:`cell_diagonals`), so no sheet triangle starts turned over.
+    5. If the morph mirrored the template, the faces are flipped so the
        returned mesh is outward oriented.
 
     Returns
@@ -189,13 +232,15 @@ def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float, surf
         inner = np.setdiff1d(np.arange(hw), topo.contour)
         if len(inner):
             bottom[inner] = closest_points(bottom[inner], *surface)[0]
-    sheet = topo.faces[: len(_sheet(topo.h, topo.w, topo.closed))]
+    flip = cell_diagonals(topo.h, topo.w, topo.closed, bottom)
+    all_faces = _faces(topo.h, topo.w, topo.closed, flip) if flip.any() else topo.faces
+    sheet = all_faces[: len(flip) * 2]
     n = vertex_normals(bottom, sheet)
     # the bottom sheet faces point away from the top: its outward side is -n
     side = np.sign(np.sum(-n[topo.contour] * sn))
     side = 1.0 if side == 0 else side
     pos = np.concatenate([bottom, bottom - side * thickness * n])
-    faces = topo.faces
+    faces = all_faces
     if signed_volume(pos, faces) < 0:
         faces = faces[:, ::-1].copy()
     return pos, faces
