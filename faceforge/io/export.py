@@ -139,11 +139,30 @@ def export_animation(path: str | Path, frames, faces, fps: float) -> Path:
     return exporter_for(path)(path, frames, faces, fps)
 
 
+def export_for_mesh(path: str | Path, frames, mesh: str | Path, fps: float) -> tuple[Path, list[str]]:
+    """Write ``frames`` of the user's ``mesh`` with its own polygons (quads, n-gons kept).
+
+    frames : (n_frames, n_verts, 3) float in ``mesh``'s vertex order; mesh : the input mesh
+    file (read again for its polygons). Returns (what was written, :func:`blender_notes`).
+    Raises ExportError naming ``mesh`` when its vertex count is not the animation's.
+    """
+    from .mesh import load_mesh
+
+    vertices, faces, info = load_mesh(mesh)
+    if len(vertices) != frames.shape[1]:
+        raise ExportError(f"has {len(vertices)} vertices but the animation {frames.shape[1]}; "
+                          "rerun `faceforge fit`", mesh)
+    polygons = polygons_from_fan(faces, info.face_source)
+    written = export_animation(path, frames, polygons, fps)
+    return written, blender_notes(path, polygons, frames.shape[1])
+
+
 __all__ = [
     "EXPORTERS",
     "ExportError",
     "blender_notes",
     "export_animation",
+    "export_for_mesh",
     "exporter_for",
     "parse_glb",
     "polygons_from_fan",

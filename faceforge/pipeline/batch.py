@@ -175,18 +175,19 @@ def _collect(result: HeadResult, root: Path) -> None:
             result.outputs[name] = sorted(str(p) for p in folder.iterdir() if p.name != "stage.json")
 
 
-def _export(job: HeadJob, root: Path) -> str:
-    """Write the animate stage's frames to ``job.output`` with the user's faces."""
-    from faceforge.io.export import export_animation
-    from faceforge.io.mesh import load_mesh
+def _export(job: HeadJob, root: Path, log: Callable[[str], None]) -> str:
+    """Write the animate stage's frames to ``job.output`` with the user's polygons."""
+    from faceforge.io.export import export_for_mesh
     from faceforge.io.stagefiles import load_npz
 
     animation = root / "animate" / "animation.npz"
     if not animation.exists():
         raise StageError("no animation to export (the animate stage did not run)", root)
     d = load_npz(animation)
-    _, faces, _ = load_mesh(job.mesh)
-    return str(export_animation(job.output, d["frames"], faces, float(d["fps"])))
+    written, notes = export_for_mesh(job.output, d["frames"], job.mesh, float(d["fps"]))
+    for note in notes:
+        log(f"export: note: {note}")
+    return str(written)
 
 
 def _stage_logger(path: Path, name: str) -> Callable[[str], None]:
@@ -231,7 +232,7 @@ def run_head(job: HeadJob) -> HeadResult:
             current = None
         if job.output:
             current = "export"
-            result.outputs["export"] = _export(job, root)
+            result.outputs["export"] = _export(job, root, lambda m: _append_log(log_path, m))
             current = None
         result.status = "ok"
     except FaceforgeError as exc:

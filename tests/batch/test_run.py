@@ -169,3 +169,22 @@ def test_progress_bar_over_heads_and_quiet(invoke, fake_stages, tmp_path, heads_
     (line,) = quiet.stderr.strip().splitlines()                   # only the failed head's error
     assert line.startswith("broken: failed in") and str(heads_dir / "broken.obj") in line
     assert "anna" not in quiet.stderr and "%" not in quiet.stderr
+
+
+def test_an_obj_sequence_export_keeps_the_heads_own_polygons(batch_cli, tmp_path, heads_dir):
+    """`batch -o folder` writes the user's quads back, as `faceforge animate -o` does."""
+    from faceforge.io.export import read_obj_sequence
+    from faceforge.io.mesh import load_mesh
+
+    quad_head = tmp_path / "quad.obj"
+    text = (heads_dir / "anna.obj").read_text()
+    quad_head.write_text(text + "\nf 1 2 3 4\n")       # one quad among the triangles
+    (tmp_path / "quad.fdp.yaml").write_text((heads_dir / "anna.fdp.yaml").read_text())
+    out = tmp_path / "out"
+    result = batch_cli(out, "-o", "/", heads=[quad_head])
+    assert result.exit_code == 0, result.stdout + result.stderr
+    export = _report(out)["results"][0]["outputs"]["export"]
+    frames, polygons = read_obj_sequence(export)
+    _, triangles, info = load_mesh(quad_head)
+    assert len(polygons) == info.face_source.max() + 1 == len(triangles) - 1
+    assert polygons[-1] == (0, 1, 2, 3)

@@ -128,7 +128,11 @@ class BoundHead:
         surfaces = [system.surface(n) for n in binding.body_names]
         binding = replace(binding, points=binding.targets(surfaces))
         if config.get("skin.anchor_lift"):
-            binding = binding.lifted(surfaces, self.rest)
+            import os
+            mode = os.environ.get("LIFTMODE", "all")
+            bone = np.isin(np.asarray(binding.body_names)[binding.body], ["cranium", "mandible"])
+            rot = {"all": np.ones(len(bone), bool), "none": np.zeros(len(bone), bool), "bone": bone}[mode]
+            binding = binding.lifted(surfaces, self.rest, rotate=rot)
         self.skin = skin = SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
                                           settings)
 
@@ -465,7 +469,6 @@ def _expression_file(app, name: str, intensity: float, seconds: float) -> Path:
 def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
     """Write ``-o`` and ``--preview`` from the animate stage's frames."""
     from faceforge.exceptions import StageError
-    from faceforge.io.mesh import load_mesh
     from faceforge.io.stagefiles import load_npz
 
     d = load_npz(app.workspace.stage_dir("animate") / "animation.npz")
@@ -473,22 +476,21 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
     mesh = app.workspace.load_params().get("mesh")
     if not mesh:
         raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
-    v, faces, info = load_mesh(mesh)
-    if len(v) != frames.shape[1]:
-        raise StageError(f"{mesh} has {len(v)} vertices but the animation {frames.shape[1]}; "
-                         "rerun `faceforge fit`", mesh)
     if output:
-        from faceforge.io.export import blender_notes, export_animation
-        from faceforge.io.export_common import polygons_from_fan
+        from faceforge.io.export import export_for_mesh
 
-        polygons = polygons_from_fan(faces, info.face_source)      # the input's quads / n-gons
-        written = export_animation(output, frames, polygons, fps)
+        written, notes = export_for_mesh(output, frames, mesh, fps)
         app.log(f"animate: wrote {written} ({len(frames)} frames, {frames.shape[1]} vertices, {fps:g} fps)")
-        for note in blender_notes(output, polygons, frames.shape[1]):
+        for note in notes:
             app.log(f"animate: note: {note}")
     if preview:
+        from faceforge.io.mesh import load_mesh
         from faceforge.viz.contact_sheet import contact_sheet, pick_frames
 
+        v, faces, _ = load_mesh(mesh)
+        if len(v) != frames.shape[1]:
+            raise StageError(f"has {len(v)} vertices but the animation {frames.shape[1]}; rerun `faceforge fit`",
+                             mesh)
         try:
             idx = pick_frames(len(frames), int(app.config.get("animate.preview_frames")), preview_frames)
         except ValueError as exc:
