@@ -127,6 +127,7 @@ class Binding:
     normals: np.ndarray
     closest: np.ndarray | None = None
     offsets: np.ndarray | None = None
+    rotate_offsets: np.ndarray | None = None
 
     def __post_init__(self):
         if self.closest is None:
@@ -144,10 +145,11 @@ class Binding:
         tri = self._triangles(surfaces)
         out = np.einsum("ij,ijk->ik", self.bary, tri)
         if self.offsets is not None:
-            out += np.einsum("kij,ki->kj", triangle_frames(tri), self.offsets)
+            rot = self.rotate_offsets
+            out += np.where(rot[:, None], np.einsum("kij,ki->kj", triangle_frames(tri), self.offsets), self.offsets)
         return out
 
-    def lifted(self, surfaces, skin_rest) -> "Binding":
+    def lifted(self, surfaces, skin_rest, rotate=None) -> "Binding":
         """The same anchors, each ``q`` lifted from its surface point to its skin vertex.
 
         Beyond the paper (§8 ties ``p`` to ``q`` on the surface point with a stretch
@@ -164,8 +166,9 @@ class Binding:
         tri = self._triangles(surfaces)
         base = np.einsum("ij,ijk->ik", self.bary, tri)
         skin = np.asarray(skin_rest, FLOAT)[self.vertex_ids]
-        offsets = np.einsum("kij,kj->ki", triangle_frames(tri), skin - base)
-        return replace(self, offsets=offsets, points=skin.copy())
+        rotate = np.ones(len(skin), bool) if rotate is None else np.asarray(rotate, bool)
+        offsets = np.where(rotate[:, None], np.einsum("kij,kj->ki", triangle_frames(tri), skin - base), skin - base)
+        return replace(self, offsets=offsets, points=skin.copy(), rotate_offsets=rotate)
 
     def _triangles(self, surfaces) -> np.ndarray:
         """(k, 3, 3) corners of each anchor's triangle on ``surfaces``."""
