@@ -186,9 +186,11 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         top = np.abs(req).max()
         signs = np.unique(np.sign(req))
         drives = np.concatenate([s * top * np.asarray(sample_scale, dtype=float) for s in signs])
-        sampled = measure(rest, simulate(identity, _frames(entry.faps, drives)), probe)
-        before_skin = simulate(identity, _frames(entry.faps, req))
-        before = measure(rest, before_skin, probe)
+        drives = np.union1d(drives, req)          # the uncalibrated poses are samples too
+        skins = simulate(identity, _frames(entry.faps, drives))
+        sampled = measure(rest, skins, probe)
+        at_req = np.searchsorted(drives, req)
+        before_skin, before = skins[at_req], sampled[at_req]
         # 2. invert it, 3. refine each requested value by secant steps on its own samples
         drive = invert_monotone(drives, sampled, req)
         ok = np.isfinite(drive)
