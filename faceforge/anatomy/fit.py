@@ -581,11 +581,11 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     # 6a. a modelled eye socket is hollow (fit_orbits): bone inside it moves out along rays from
     # the socket's centre, by a one-to-one map that cannot fold the orbital walls
     if settings.skin_clearance_mm > 0 and settings.orbit_hollow:
-        from faceforge.anatomy.fit_orbits import find_orbit_hollows
+        from faceforge.anatomy.fit_orbits import find_orbit_hollows, fit_hollow
 
         hollows, shift = [], 0.0
         for h in find_orbit_hollows(skin, skin_lm, settings.skin_clearance_mm * scale_mm, settings.orbit_blend):
-            h = h.fitted(skull_fit)
+            h = fit_hollow(h, skull_fit, skull_f)
             if h.lam >= 1.0:
                 continue
             moved = h(skull_fit)
@@ -596,6 +596,7 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
             hollows.append(h)
         warp = Warp(warp.similarity, warp.rbfs + hollows)
         info["orbit_hollows"] = len(hollows)
+        info["orbit_clearance"] = [h.clearance for h in hollows]
         info["orbit_max_shift_rel"] = shift / skin.diagonal
     # 6b. bone that still swallows skin gives way locally (fit_clearance); the same fields move
     # the muscles, landmarks and axes, so everything lying on the bone stays on it

@@ -17,19 +17,22 @@ Heads with eye holes and no socket (ICT, MediaPipe) have no such centre: rays fr
 their eye openings meet the skin from inside, and no hollow is found.
 
 **The map.** Every point ``x = c + r u`` is moved along its own ray, ``x -> c + T F(r/T) u``
-with the piecewise-linear profile (``lam``: the smallest ``r/T`` of bone inside the hollow,
-``beta``: the blend width as a fraction of ``T``)
+with the piecewise-linear profile (``lam``: the smallest ``r/T`` of bone inside the hollow;
+``beta``: the blend width and ``delta = LAYER * beta`` the layer the bone inside is pressed
+into, both as fractions of ``T``)
 
     F(rho) = rho + (1 - lam)                                   rho < lam
-    F(rho) = rho + (1 - lam) (1 - (rho - lam) / (1 - lam + beta))   lam <= rho <= 1 + beta
+    F(rho) = 1 + delta (rho - lam) / (1 - lam)                 lam <= rho <= 1
+    F(rho) = 1 + delta + (rho - 1) (beta - delta) / beta       1 < rho <= 1 + beta
     F(rho) = rho                                               rho > 1 + beta
 
-``F`` is increasing (slope ``beta / (1 - lam + beta) > 0`` inside), continuous, and
-``F(lam) = 1``: bone that was inside ends at least ``clearance`` beyond the socket skin,
-bone beyond ``(1 + beta) T`` does not move. Each ray is mapped into itself by an
-increasing function, so the map is one-to-one: it cannot fold the bone, and a bone that
-did not intersect itself still does not. The fit appends it to its map, so the muscles,
-landmarks and jaw axes move with the bone.
+``F`` is continuous and increasing, and ``F(lam) = 1``: bone that was inside ends pressed
+against the socket, at least ``clearance`` beyond its skin, in a layer ``delta T`` thick;
+bone outside the socket moves by at most ``delta T`` and bone beyond ``(1 + beta) T`` not
+at all. Each ray is mapped into itself by an increasing function, so the map is
+one-to-one: it cannot fold the bone, and a bone that did not intersect itself still does
+not. The fit appends it to its map, so the muscles, landmarks and jaw axes move with the
+bone.
 """
 
 from __future__ import annotations
@@ -51,11 +54,18 @@ def fibonacci_directions(n: int) -> np.ndarray:
     return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=1)
 
 
+#: the layer bone inside a socket is pressed into, as a fraction of the blend width
+LAYER = 0.2
+
+
 def radial_profile(rho: np.ndarray, lam: float, beta: float) -> np.ndarray:
     """``F(rho)`` of the module docstring; ``rho`` (k,) radius / T, ``0 < lam < 1``, ``beta > 0``."""
     rho = np.asarray(rho, dtype=np.float64)
-    inner = rho + (1.0 - lam) * (1.0 - (rho - lam) / (1.0 - lam + beta))
-    return np.where(rho < lam, rho + (1.0 - lam), np.where(rho <= 1.0 + beta, inner, rho))
+    delta = LAYER * beta
+    pressed = 1.0 + delta * (rho - lam) / (1.0 - lam)
+    blend = 1.0 + delta + (rho - 1.0) * (beta - delta) / beta
+    return np.where(rho < lam, rho + (1.0 - lam),
+                    np.where(rho <= 1.0, pressed, np.where(rho <= 1.0 + beta, blend, rho)))
 
 
 @dataclass(frozen=True)
@@ -64,8 +74,9 @@ class OrbitHollow:
 
     centre (3,) head units; caster: :class:`faceforge.geometry.rays.RayCaster` of the skin
     (fans included); clearance: bone kept this far beyond the socket skin (head units);
-    reach: the farthest socket skin from the centre (head units); lam, beta: the profile
-    (``lam`` is set by :meth:`fitted` from the bone; 1 leaves every point in place).
+    reach: the farthest socket skin from the centre, socket_radius: the median distance
+    (head units); lam, beta: the profile (``lam`` is set by :meth:`fitted` from the bone; 1
+    leaves every point in place).
     """
 
     centre: np.ndarray
@@ -74,6 +85,7 @@ class OrbitHollow:
     reach: float
     beta: float = 0.5
     lam: float = 1.0
+    socket_radius: float = 0.0
 
     def radius(self, points: np.ndarray):
         """``(r (k,), u (k, 3), T (k,))`` of points (k, 3): distance from the centre, unit
@@ -117,6 +129,20 @@ class OrbitHollow:
             return replace(self, lam=1.0)
         return replace(self, lam=float(max(margin * rho[inside].min(), 1e-3)))
 
+    def with_chord_margin(self, vertices: np.ndarray, faces: np.ndarray) -> "OrbitHollow":
+        """This hollow with the clearance raised by the sag ``L^2 / (8 R)`` of the longest edge
+        ``L`` of the mesh ``(vertices (n, 3), faces (m, 3))`` near it on a socket of radius
+        ``R``: the map places vertices, and a straight edge between two of them, each clear
+        of the curved socket, dips towards it by that much."""
+        v = np.asarray(vertices, dtype=np.float64)
+        f = np.asarray(faces, dtype=np.int64)
+        e = np.vstack([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        near = self.near(0.5 * (v[e[:, 0]] + v[e[:, 1]]))
+        if not near.any() or self.socket_radius <= 0.0:
+            return self
+        length = float(np.linalg.norm(v[e[near, 0]] - v[e[near, 1]], axis=1).max())
+        return replace(self, clearance=self.clearance + length ** 2 / (8.0 * self.socket_radius))
+
     def __call__(self, points) -> np.ndarray:
         p = np.asarray(points, dtype=np.float64)
         flat = p.reshape(-1, 3).copy()
@@ -129,6 +155,19 @@ class OrbitHollow:
             m, r, u, big_t = m[ok], r[ok], u[ok], big_t[ok]
             flat[m] = self.centre + (big_t * radial_profile(r / big_t, self.lam, self.beta))[:, None] * u
         return flat.reshape(p.shape)
+
+
+def fit_hollow(hollow: OrbitHollow, vertices: np.ndarray, faces: np.ndarray, passes: int = 2) -> OrbitHollow:
+    """The hollow's map for the bone mesh ``(vertices (n, 3), faces (m, 3))``: the chord
+    margin (:meth:`OrbitHollow.with_chord_margin`) and ``lam`` (:meth:`OrbitHollow.fitted`).
+    The map stretches the edges it pulls out of the socket, so the margin is measured again
+    on the mapped mesh, ``passes`` times in all."""
+    v = np.asarray(vertices, dtype=np.float64)
+    h, mapped = hollow, v
+    for _ in range(max(1, passes)):
+        h = hollow.with_chord_margin(mapped, faces).fitted(v)
+        mapped = h(v)
+    return h
 
 
 def find_hollow(skin, centre_candidates: np.ndarray, clearance: float, max_radius: float,
@@ -155,7 +194,8 @@ def find_hollow(skin, centre_candidates: np.ndarray, clearance: float, max_radiu
             normal = skin.normal_near(point[hit])
             enclosed[hit] = fan_face[f] | (np.einsum("ij,ij->i", normal, dirs[hit]) < 0.0)
         if enclosed.mean() >= min_enclosed:
-            return OrbitHollow(c, skin.caster, float(clearance), float(t[hit].max()), float(beta))
+            return OrbitHollow(c, skin.caster, float(clearance), float(t[hit].max()), float(beta),
+                               socket_radius=float(np.median(t[hit])))
     return None
 
 

@@ -5,7 +5,8 @@ import pytest
 import trimesh
 
 from faceforge.anatomy.fit import SkinSurface
-from faceforge.anatomy.fit_orbits import OrbitHollow, fibonacci_directions, find_hollow, radial_profile
+from faceforge.anatomy.fit_orbits import (OrbitHollow, fibonacci_directions, find_hollow, fit_hollow,
+                                          radial_profile)
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import vertex_normals
 
@@ -96,3 +97,17 @@ def test_the_inside_query_agrees_with_the_socket_radius(socket):
     h = OrbitHollow(np.zeros(3), socket.caster, 0.05, 1.0)
     pts = np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 1.03], [0.0, 0.0, 1.06], [0.0, 0.9, 0.0]])
     assert h.inside(pts).tolist() == [True, True, False, True]
+
+
+def test_the_chord_margin_covers_the_sag_of_the_longest_nearby_edge(socket):
+    h = find_hollow(socket, np.array([[0.0, 0.0, 0.0]]), clearance=0.02, max_radius=2.0)
+    v, f = plate(-0.4, n=9)                                        # sides 0.4, diagonals 0.4 sqrt(2)
+    wide = h.with_chord_margin(v, f)
+    assert np.isclose(wide.clearance - h.clearance, 2 * 0.4 ** 2 / (8.0 * h.socket_radius), rtol=1e-9)
+    assert 0.95 < h.socket_radius <= 1.0                           # the icosphere's faces lie inside r = 1
+    # after the map with the margin measured on the mapped plate, no point of any face of
+    # the plate is inside the socket
+    moved = fit_hollow(h, v, f)(v)
+    w = np.random.default_rng(0).dirichlet(np.ones(3), size=(len(f), 20))
+    inner = np.einsum("fkc,fcd->fkd", w, moved[f]).reshape(-1, 3)
+    assert not h.inside(inner).any()
