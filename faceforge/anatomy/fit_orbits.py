@@ -176,7 +176,7 @@ def find_hollow(skin, centre_candidates: np.ndarray, clearance: float, max_radiu
 
     A centre encloses a hollow when at least ``min_enclosed`` of ``n_directions`` rays from
     it first meet the skin within ``max_radius`` either on the socket lining from outside
-    (smooth skin normal facing the centre) or on a fan closing a hole. The candidate with
+    (the face's outward normal facing the centre) or on a fan closing a hole. The candidate with
     the first (most forward) enclosing candidate wins: rays from a centre near the eye
     opening push bone at the rim sideways and bone behind the eye backwards, as an orbit
     (a cone opening forward) is shaped.
@@ -185,14 +185,15 @@ def find_hollow(skin, centre_candidates: np.ndarray, clearance: float, max_radiu
     fan_face = np.zeros(len(skin.faces), bool)
     if skin.n_real >= 0:
         fan_face = (skin.faces >= skin.n_real).any(axis=1)
+    tri = skin.vertices[skin.faces]
+    face_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])   # outward winding, unnormalised
     for c in np.asarray(centre_candidates, dtype=np.float64).reshape(-1, 3):
-        face, point, t = skin.caster.first_hit(np.broadcast_to(c, dirs.shape), dirs)
+        face, _, t = skin.caster.first_hit(np.broadcast_to(c, dirs.shape), dirs)
         hit = (face >= 0) & (t <= max_radius)
         enclosed = np.zeros(len(dirs), bool)
         if hit.any():
             f = face[hit]
-            normal = skin.normal_near(point[hit])
-            enclosed[hit] = fan_face[f] | (np.einsum("ij,ij->i", normal, dirs[hit]) < 0.0)
+            enclosed[hit] = fan_face[f] | (np.einsum("ij,ij->i", face_normal[f], dirs[hit]) < 0.0)
         if enclosed.mean() >= min_enclosed:
             return OrbitHollow(c, skin.caster, float(clearance), float(t[hit].max()), float(beta),
                                socket_radius=float(np.median(t[hit])))
