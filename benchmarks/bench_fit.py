@@ -73,9 +73,14 @@ def main() -> None:
             "max_residual": report["landmarks"]["max_residual"],
             "skull_inside": report["skull"]["inside_fraction"],
             "muscles_inside": report["muscles"]["inside_fraction"],
+            "skin_inside_bone": report["skin_inside_bone"]["count"],
+            "orbit_hollows": result.info.get("orbit_hollows", 0),
+            "orbit_max_shift_rel": result.info.get("orbit_max_shift_rel", 0.0),
+            "clearance_fields": result.info.get("clearance_fields", 0),
         })
     print_table(rows, ["head", "vertices", "fit_wall_s_best", "fit_wall_s_median", "fit_cpu_s_best",
-                       "load_check_s", "report_s", "skull_inside", "muscles_inside"],
+                       "load_check_s", "report_s", "skull_inside", "muscles_inside", "skin_inside_bone",
+                       "orbit_max_shift_rel"],
                 title="faceforge fit (template loaded)")
     mh = rows[0]
     out = write_results("fit", {

@@ -39,14 +39,18 @@ Functions on arrays. The construction, in order:
    covered by muscles are brought onto the muscle surface by cylindrical projection and
    the fit is run again (the refit), so the muscles lie at least ``muscle_gap_mm``
    beneath the skin there.
-6. **Clearance** (:mod:`faceforge.anatomy.fit_clearance`): where the bone still swallows
+6. **Eye sockets** (:mod:`faceforge.anatomy.fit_orbits`): where the skin models the closed
+   eye socket (a pocket behind the lids), the bone inside the pocket moves out along rays
+   from the pocket's centre, by a one-to-one map that cannot fold the thin orbital walls
+   (pushing single bone vertices out does). Heads without a socket are left alone.
+7. **Clearance** (:mod:`faceforge.anatomy.fit_clearance`): where the bone still swallows
    skin, it gives way locally (compact bumps of ``clearance_radius``, each pushing the
    closest bone point to ``skin_clearance_mm`` beneath the skin vertex) until no skin vertex
    is inside or ``clearance_rounds`` is reached; the muscles, landmarks and axes move with it.
 
-The map is kept as a composition of callables (similarity then RBF then refit RBF) and
-is applied to every template point: cranium, mandible, landmarks, muscle-map points and
-the jaw axes' points; the axes' directions turn with the best rotation of the whole
+The map is kept as a composition of callables (similarity, RBF, refit RBF, orbit maps,
+clearance fields) and is applied to every template point: cranium, mandible, landmarks,
+muscle-map points and the jaw axes' points; the axes' directions turn with the best rotation of the whole
 mandible (the jaw is one rigid body).
 """
 
@@ -80,7 +84,9 @@ class FitSettings:
     front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0
     muscle_gap_mm: float = 1.5         # skin tissue kept above the muscle top at landmarks (mm)
     clearance_radius: float = 0.03     # bone bends around skin it swallowed within this (x skin diagonal)
-    clearance_rounds: int = 4          # at most this many bump fields (fit_clearance)
+    clearance_rounds: int = 6          # at most this many bump fields (fit_clearance)
+    orbit_hollow: bool = True          # clear bone out of modelled eye sockets (fit_orbits)
+    orbit_blend: float = 0.5           # the orbit map fades out over this fraction of the socket radius
 
     @classmethod
     def from_config(cls, cfg: dict | None) -> "FitSettings":
@@ -572,7 +578,27 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
                 targets = rf.skull_targets
                 info["refit"] = True
                 info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
-    # 6. bone that still swallows skin gives way locally (fit_clearance); the same fields move
+    # 6a. a modelled eye socket is hollow (fit_orbits): bone inside it moves out along rays from
+    # the socket's centre, by a one-to-one map that cannot fold the orbital walls
+    if settings.skin_clearance_mm > 0 and settings.orbit_hollow:
+        from faceforge.anatomy.fit_orbits import find_orbit_hollows, fit_hollow
+
+        hollows, shift = [], 0.0
+        for h in find_orbit_hollows(skin, skin_lm, settings.skin_clearance_mm * scale_mm, settings.orbit_blend):
+            h = fit_hollow(h, skull_fit, skull_f)
+            if h.lam >= 1.0:
+                continue
+            moved = h(skull_fit)
+            shift = max(shift, float(np.linalg.norm(moved - skull_fit, axis=1).max()))
+            skull_fit = moved
+            muscles = [(n, h(v), f) for n, v, f in muscles]
+            targets = h(targets)
+            hollows.append(h)
+        warp = Warp(warp.similarity, warp.rbfs + hollows)
+        info["orbit_hollows"] = len(hollows)
+        info["orbit_clearance"] = [h.clearance for h in hollows]
+        info["orbit_max_shift_rel"] = shift / skin.diagonal
+    # 6b. bone that still swallows skin gives way locally (fit_clearance); the same fields move
     # the muscles, landmarks and axes, so everything lying on the bone stays on it
     if settings.skin_clearance_mm > 0 and settings.clearance_rounds > 0:
         from faceforge.anatomy.fit_clearance import clearance_fields

@@ -14,7 +14,11 @@ Wendland C2 bump of radius ``R``:
     phi(r) = (1 - r)^4 (4 r + 1) for r < 1, else 0
 
 The normalisation keeps overlapping bumps from adding up beyond the largest push.
-Rounds repeat until no skin vertex is inside (or ``rounds`` is reached). Each round is
+Rounds repeat until no skin vertex is inside (or ``rounds`` is reached), each with a
+radius ``shrink`` times the last: the later rounds fix what is left (a vertex on a thin
+nasal fin) locally, without moving the bone that the earlier rounds cleared (with a fixed
+radius the pushes on the two fins of a MakeHuman nostril alternated for 5 rounds; with
+0.7 it takes 3). Each round is
 a :class:`BumpField`, a callable on points that is appended to the fit's map, so the
 skull, the muscles lying on it, the landmarks and the jaw axes all move together and
 stay in contact.
@@ -77,7 +81,7 @@ def swallowed(bones, points: np.ndarray) -> np.ndarray:
 
 
 def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: float,
-                     rounds: int = 4) -> list[BumpField]:
+                     rounds: int = 4, shrink: float = 0.7) -> list[BumpField]:
     """The bump fields that move the bones off the skin they swallowed.
 
     Parameters
@@ -92,6 +96,8 @@ def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: f
         Bump radius (length units): how far around a swallowed point the bone bends.
     rounds : int
         At most this many fields (each round re-tests the moved bones).
+    shrink : float
+        Round ``k`` (from 0) uses the radius ``radius * shrink ** k``.
 
     Returns
     -------
@@ -122,7 +128,7 @@ def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: f
             deltas.append((below[keep] - clearance)[:, None] * n[keep])
         if not centres:
             break
-        field = BumpField(np.vstack(centres), np.vstack(deltas), float(radius))
+        field = BumpField(np.vstack(centres), np.vstack(deltas), float(radius) * shrink ** len(fields))
         bones = [(field(v), f) for v, f in bones]
         fields.append(field)
     return fields

@@ -121,19 +121,11 @@ def test_rest_is_a_fixed_point(bound):
     assert drift < bound_ * _diag(head.rest), f"{name}: drift {drift:.3g} after {frames} frames"
 
 
-#: known failures of the physical check, by sample, with the reason (xfail only while they fail)
-KNOWN_INSIDE = {"makehuman": "the fitted orbits fold over themselves near the outer eye corners, so ~20 of the "
-                             "closed eye-socket skin vertices stay inside the cranium; fit_clearance clears "
-                             "skin the bone swallowed but cannot undo a fold of the bone itself"}
-
-
 def test_no_skin_vertex_inside_the_skull_at_rest(bound):
     name, _, _, head = bound
     n = len(head.rest)
     for part in (head.cranium, head.mandible):
         inside = _inside(head.rest, *part)
-        if inside.any() and name in KNOWN_INSIDE:
-            pytest.xfail(f"{inside.sum()} of {n}: {KNOWN_INSIDE[name]}")
         assert not inside.any(), f"{name}: {inside.sum()} of {n} skin vertices inside the bone"
 
 
