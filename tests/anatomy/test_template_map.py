@@ -177,3 +177,29 @@ def test_jaw_opened_to_its_limit_stays_clean(template, pose):
     chin = skull.landmarks["2.1"]
     T = skull.jaw_transform(pitch, yaw)
     assert (T[:3, :3] @ chin + T[:3, 3])[1] < chin[1] - 0.05 * skull.diagonal
+
+
+def test_a_thousand_frames_of_random_contractions_and_jaw_poses_stay_clean(template):
+    """Issue 4: random expressions (each active muscle on with probability 0.3, at up to the
+    FAP mapping's ``max_contraction``) and jaw poses over the jaw's whole range, a new target
+    every second (25 frames) eased toward; no muscle face turns over in any checked frame."""
+    skull, specs, _, system = template
+    cap = yaml.safe_load((ROOT / "templates" / "fap_mapping.yaml").read_text())["max_contraction"]
+    active = _active(template)
+    rng = np.random.default_rng(7)
+    lo, hi = np.array([skull.jaw.limits["pitch"], skull.jaw.limits["yaw"]]).T
+    c, jaw = np.zeros(len(active)), np.zeros(2)
+    folded = {}
+    system.reset()
+    for frame in range(1000):
+        if frame % 25 == 0:
+            target_c = rng.uniform(0.0, cap, len(active)) * (rng.uniform(size=len(active)) < 0.3)
+            target_jaw = rng.uniform(lo, hi)
+        c += 0.2 * (target_c - c)
+        jaw += 0.2 * (target_jaw - jaw)
+        system.step(dict(zip(active, c)), skull.jaw_transform(*jaw))
+        if frame % 4 == 3:
+            for name, k in inverted_now(system).items():
+                folded[name] = max(folded.get(name, 0), k)
+    assert np.isfinite(system.world()[0]).all()
+    assert folded == {}
