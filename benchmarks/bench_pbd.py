@@ -3,7 +3,8 @@
 Measures, on one core:
 
 1. ns per constraint-iteration for each kind (one Gauss-Seidel sweep, timed in the
-   compiled step on a Mesh_D-sized skin);
+   compiled step on a Mesh_D-sized skin), and for the skin's stretch + bending blocks
+   together (fused per quad when coloured);
 2. ms per frame for synthetic sphere-like skins of the sizes of the paper's Table I
    with the §8 skin constraint set (stretch on every edge and across each adjacent
    triangle pair, dihedral bending per pair, area per triangle, one volume, one anchor
@@ -29,6 +30,7 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import numba  # noqa: E402
 import numpy as np  # noqa: E402
 from scipy.spatial import ConvexHull  # noqa: E402
 
@@ -173,6 +175,9 @@ def bench_kinds(repeat):
         "volume": lambda b: b.add_volume(f, 1.0),
         "position": lambda b: b.add_position(np.arange(len(v)), 0.2),
         "attachment": None,
+        # the skin's stretch block then bending block: fused per quad when coloured
+        "stretch+bending": lambda b: (b.add_distance(e, 0.15), b.add_distance(q[:, 2:], 0.15),
+                                      b.add_bending(q, 0.95)),
     }
     iters = 10
     base = ModelBuilder()
@@ -199,8 +204,14 @@ def bench_kinds(repeat):
             t = timeit(lambda: solver.step(state, state, control, DT), repeat=repeat, number=20)
             key = "ns_coloured" if colouring else "ns_builder_order"
             row[key] = (t["best"] - overhead) / (iters * m) * 1e9
-        row["note"] = "per body (9,541 triangles)" if kind == "volume" else (
-            "vectorised batches when coloured" if kind in ("bending", "area") else "")
+        row["note"] = {
+            "volume": "per body (9,541 triangles)",
+            "bending": "vectorised batches when coloured",
+            "area": "vectorised batches when coloured",
+            "distance": "PBD sweep with precomputed weight shares",
+            "stretch+bending": "per constraint; coloured: fused per quad (2 stretches + "
+                               "bending), vectorised",
+        }.get(kind, "")
         rows.append(row)
     return rows
 
@@ -291,6 +302,44 @@ def bench_cloth(repeat, steps=100, n=70):
     return out
 
 
+@numba.njit(cache=False)
+def _touch(x, idx, eps, runs):
+    """Read and write back every particle of every row of ``idx`` (runs times), no math."""
+    for _ in range(runs):
+        for j in range(idx.shape[0]):
+            for t in range(idx.shape[1]):
+                i = idx[j, t]
+                x[i, 0] = x[i, 0] + eps
+                x[i, 1] = x[i, 1] + eps
+                x[i, 2] = x[i, 2] + eps
+
+
+def bench_floor(repeat):
+    """The memory-traffic floor of a Mesh_D frame: 10 sweeps that only load and store the
+    particles of every projection of the coloured, fused skin solver (anchors, leftover
+    stretches, quads, triangles, the volume's triangles and particles), in its order."""
+    v, f = sphere_skin(4904, 9541)
+    model = skin_model(v, f)
+    solver = Solver(model, SolverSettings(iterations=10, colouring=True))
+    rows = {"quads": solver._arrays["bending"][0], "triangles": solver._arrays["area"][0],
+            "pairs": solver._arrays["distance"][0],
+            "volume triangles": model.volume_triangles,
+            "volume particles": model.volume_particles[:, None]}
+    x = model.rest_positions.copy()
+    out = {}
+    total = 0.0
+    for name, idx in rows.items():
+        idx = np.ascontiguousarray(idx, dtype=np.int64)
+        _touch(x, idx, 0.0, 1)
+        t = timeit(lambda: _touch(x, idx, 0.0, 10), repeat=repeat, number=5)["best"]
+        out[f"{name}_ms"] = t * 1e3
+        total += t * (2.0 if name == "volume particles" else 1.0)  # read g, update x
+    out["frame_ms"] = total * 1e3
+    out["note"] = ("10 iterations of loads + stores of each projection's particles, no math; "
+                   "a lower bound for any Gauss-Seidel sweep over these constraints")
+    return out
+
+
 COMPILE_SNIPPET = """
 import time, numpy as np
 t0 = time.perf_counter()
@@ -336,11 +385,14 @@ def main():
     print_table(frames, ["mesh", "vertices", "faces", "constraints", "paper_constraints",
                          "ms_builder_order", "ms_coloured", "ms_coloured_median", "paper_ms"],
                 title="ms per frame, §8 skin set, 10 iterations, 1 substep (best of runs)")
+    floor = bench_floor(repeat)
+    print_table([floor], title="memory-traffic floor of the Mesh_D frame (ms; loads/stores only)")
     cloth = bench_cloth(repeat)
     keys = [k for k in cloth if k.endswith(("ms_per_step", "sag")) or k.startswith("speedup")]
     print_table([{k: cloth[k] for k in keys}], title="cloth 70x70, 10 iterations: faceforge vs pypbd")
     path = write_results("pbd", {"compile": compile_, "kinds": kinds, "frames": frames,
-                                 "cloth": cloth, "target_ms_mesh_d": 3.0,
+                                 "cloth": cloth, "floor": floor,
+                                 "target_ms_mesh_d": 3.0,
                                  "wall_s": time.perf_counter() - t0})
     print(f"wrote {path}")
 

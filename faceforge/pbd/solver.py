@@ -6,7 +6,8 @@ over the substeps), predict ``p = x + h v`` for dynamic particles, move kinemati
 particles linearly toward ``control.kinematic_positions`` (reached exactly at the
 last substep), project all constraints ``iterations`` times in builder order
 (sequential Gauss-Seidel), set ``v = (p - x) / h``. Deterministic: sequential, no
-fastmath, no allocation inside the compiled step.
+threads, fastmath limited to arcp/nsz (same bytes run to run), no allocation inside
+the compiled step.
 
 With ``SolverSettings(colouring=True)`` the distance, bending and area constraints of
 each builder block are visited colour by colour (blocks keep their order, so deeper

@@ -98,9 +98,10 @@ def _project_area(x, w, idx, rest, k, c, lam, xpbd, start, stop):
             _solve_area(x, w, idx[j, 0], idx[j, 1], idx[j, 2], rest[j], k[j], 0.0, 0.0, False)
 
 
-# offsets of the scratch rows of the batched sweep (see bending._project_bending_batched)
-_U_X, _U_Y, _U_Z, _V_X, _V_Y, _V_Z = (r * BATCH for r in range(6))
-_D0X, _D0Y, _D0Z, _D1X, _D1Y, _D1Z, _D2X, _D2Y, _D2Z = (r * BATCH for r in range(6, 15))
+# offsets of the scratch rows of the batched sweep (see bending._project_bending_batched):
+# the gathered positions, then the projected ones
+_P0X, _P0Y, _P0Z, _P1X, _P1Y, _P1Z, _P2X, _P2Y, _P2Z = (r * BATCH for r in range(9))
+_Q0X, _Q0Y, _Q0Z, _Q1X, _Q1Y, _Q1Z, _Q2X, _Q2Y, _Q2Z = (r * BATCH for r in range(9, 18))
 
 
 @numba.njit(**PBD_NUMBA)
@@ -110,8 +111,9 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
     inv_mass : (3, m) float, the inverse masses of each triangle's particles (constant for
     a frozen Model, read as vectors by the math loop); rest, k : (m,) float;
     runs : (r,) int sorted boundaries of runs of constraints sharing no particle;
-    buf : (BATCH_ROWS * BATCH,) float scratch. Gather, branch-free math of
-    ``_solve_area``, scatter; equal to the sequential sweep in the same order.
+    buf : (BATCH_ROWS * BATCH,) float scratch. Gather the positions, branch-free math of
+    ``_solve_area`` giving the projected positions, store them back; equal to the
+    sequential sweep in the same order.
     """
     for q in range(runs.shape[0] - 1):
         lo = max(runs[q], start)
@@ -123,20 +125,32 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
                 i0 = idx[j, 0]
                 i1 = idx[j, 1]
                 i2 = idx[j, 2]
-                buf[_U_X + t] = x[i1, 0] - x[i0, 0]
-                buf[_U_Y + t] = x[i1, 1] - x[i0, 1]
-                buf[_U_Z + t] = x[i1, 2] - x[i0, 2]
-                buf[_V_X + t] = x[i2, 0] - x[i0, 0]
-                buf[_V_Y + t] = x[i2, 1] - x[i0, 1]
-                buf[_V_Z + t] = x[i2, 2] - x[i0, 2]
+                buf[_P0X + t] = x[i0, 0]
+                buf[_P0Y + t] = x[i0, 1]
+                buf[_P0Z + t] = x[i0, 2]
+                buf[_P1X + t] = x[i1, 0]
+                buf[_P1Y + t] = x[i1, 1]
+                buf[_P1Z + t] = x[i1, 2]
+                buf[_P2X + t] = x[i2, 0]
+                buf[_P2Y + t] = x[i2, 1]
+                buf[_P2Z + t] = x[i2, 2]
             for t in range(n):  # branch-free math
                 j = c0 + t
-                ux = buf[_U_X + t]
-                uy = buf[_U_Y + t]
-                uz = buf[_U_Z + t]
-                vx = buf[_V_X + t]
-                vy = buf[_V_Y + t]
-                vz = buf[_V_Z + t]
+                p0x = buf[_P0X + t]
+                p0y = buf[_P0Y + t]
+                p0z = buf[_P0Z + t]
+                p1x = buf[_P1X + t]
+                p1y = buf[_P1Y + t]
+                p1z = buf[_P1Z + t]
+                p2x = buf[_P2X + t]
+                p2y = buf[_P2Y + t]
+                p2z = buf[_P2Z + t]
+                ux = p1x - p0x
+                uy = p1y - p0y
+                uz = p1z - p0z
+                vx = p2x - p0x
+                vy = p2y - p0y
+                vz = p2z - p0z
                 w0 = inv_mass[0, j]
                 w1 = inv_mass[1, j]
                 w2 = inv_mass[2, j]
@@ -167,31 +181,31 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
                 s = -k[j] * (0.5 * nlen - rest[j]) / (denom if good else 1.0)
                 s = s if good else 0.0
                 f = s * w0
-                buf[_D0X + t] = f * g0x
-                buf[_D0Y + t] = f * g0y
-                buf[_D0Z + t] = f * g0z
+                buf[_Q0X + t] = p0x + f * g0x
+                buf[_Q0Y + t] = p0y + f * g0y
+                buf[_Q0Z + t] = p0z + f * g0z
                 f = s * w1
-                buf[_D1X + t] = f * g1x
-                buf[_D1Y + t] = f * g1y
-                buf[_D1Z + t] = f * g1z
+                buf[_Q1X + t] = p1x + f * g1x
+                buf[_Q1Y + t] = p1y + f * g1y
+                buf[_Q1Z + t] = p1z + f * g1z
                 f = s * w2
-                buf[_D2X + t] = f * g2x
-                buf[_D2Y + t] = f * g2y
-                buf[_D2Z + t] = f * g2z
+                buf[_Q2X + t] = p2x + f * g2x
+                buf[_Q2Y + t] = p2y + f * g2y
+                buf[_Q2Z + t] = p2z + f * g2z
             for t in range(n):  # scatter
                 j = c0 + t
                 i0 = idx[j, 0]
                 i1 = idx[j, 1]
                 i2 = idx[j, 2]
-                x[i0, 0] += buf[_D0X + t]
-                x[i0, 1] += buf[_D0Y + t]
-                x[i0, 2] += buf[_D0Z + t]
-                x[i1, 0] += buf[_D1X + t]
-                x[i1, 1] += buf[_D1Y + t]
-                x[i1, 2] += buf[_D1Z + t]
-                x[i2, 0] += buf[_D2X + t]
-                x[i2, 1] += buf[_D2Y + t]
-                x[i2, 2] += buf[_D2Z + t]
+                x[i0, 0] = buf[_Q0X + t]
+                x[i0, 1] = buf[_Q0Y + t]
+                x[i0, 2] = buf[_Q0Z + t]
+                x[i1, 0] = buf[_Q1X + t]
+                x[i1, 1] = buf[_Q1Y + t]
+                x[i1, 2] = buf[_Q1Z + t]
+                x[i2, 0] = buf[_Q2X + t]
+                x[i2, 1] = buf[_Q2Y + t]
+                x[i2, 2] = buf[_Q2Z + t]
 
 
 def solve_area(positions, inv_mass, triangles, rest_area, stiffness) -> np.ndarray:

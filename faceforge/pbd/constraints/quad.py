@@ -11,6 +11,12 @@ order (like colouring itself). The four particles are read and written once for 
 projections, and the stretch math runs in the vectorised loop. Stretches that belong to
 no quad (boundary edges, anchors) stay in their distance block, projected before.
 
+The bending multiplier ``-k atan(yy / xx) / D`` (Padé branch of ``bending._deviation``)
+is evaluated with one division, both Padé polynomials scaled by ``xx^4`` (about
+``edge^16``): fine for edge lengths between ~1e-15 and ~1e15 length units. The scatter
+stores the projected positions (no reload of the particles); the rare large deviations
+(libm atan2) are fixed up in the scratch rows before it.
+
 Only used in the PBD modes (XPBD keeps separate sweeps and multipliers).
 """
 
@@ -69,11 +75,11 @@ def stretch_table(pairs: np.ndarray, quads: np.ndarray, match: np.ndarray,
     return out
 
 
-# scratch rows: positions (gathered, then updated by the stretches), multiplier, atan2
-# fix-up, bending displacement per unit multiplier
+# scratch rows: gathered positions, atan2 fix-up data, bending displacement per unit
+# multiplier, projected positions
 _P0X, _P0Y, _P0Z, _P1X, _P1Y, _P1Z, _P2X, _P2Y, _P2Z, _P3X, _P3Y, _P3Z = (
     r * BATCH for r in range(12))
-_STEP, _GAIN, _DEV_Y, _DEV_X = (r * BATCH for r in range(12, 16))
+_FIX, _DEN, _DEV_Y, _DEV_X = (r * BATCH for r in range(12, 16))
 _D0X, _D0Y, _D0Z, _D1X, _D1Y, _D1Z, _D2X, _D2Y, _D2Z, _D3X, _D3Y, _D3Z = (
     r * BATCH for r in range(16, 28))
 _Q0X, _Q0Y, _Q0Z, _Q1X, _Q1Y, _Q1Z, _Q2X, _Q2Y, _Q2Z, _Q3X, _Q3Y, _Q3Z = (
@@ -163,19 +169,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, seg, buf, star
                 p3x = p3x + b * dx
                 p3y = p3y + b * dy
                 p3z = p3z + b * dz
-                buf[_Q0X + t] = p0x
-                buf[_Q0Y + t] = p0y
-                buf[_Q0Z + t] = p0z
-                buf[_Q1X + t] = p1x
-                buf[_Q1Y + t] = p1y
-                buf[_Q1Z + t] = p1z
-                buf[_Q2X + t] = p2x
-                buf[_Q2Y + t] = p2y
-                buf[_Q2Z + t] = p2z
-                buf[_Q3X + t] = p3x
-                buf[_Q3Y + t] = p3y
-                buf[_Q3Z + t] = p3z
-                # bending (the math of bending._project_bending_batched)
+                # bending (the math of bending._solve_bending, PBD, Padé branch)
                 ex = p1x - p0x
                 ey = p1y - p0y
                 ez = p1z - p0z
@@ -210,9 +204,13 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, seg, buf, star
                 yy = sin * rc - cos * rs
                 xx = cos * rc + sin * rs
                 small = (xx > 0.0) & (abs(yy) <= SMALL_TAN * xx)
-                z = yy / (xx if small else 1.0)
-                z2 = z * z
-                value = z * (945.0 + z2 * (735.0 + 64.0 * z2)) / (945.0 + z2 * (1050.0 + 225.0 * z2))
+                # Padé atan of z = yy / xx (bending._deviation) times 1 / denom with one
+                # division: both polynomials scaled by xx^4
+                xs = xx if small else 1.0
+                y2 = yy * yy
+                x2 = xs * xs
+                num = yy * (945.0 * x2 * x2 + 735.0 * x2 * y2 + 64.0 * y2 * y2)
+                den = xs * (945.0 * x2 * x2 + 1050.0 * x2 * y2 + 225.0 * y2 * y2)
                 prod = na1 * nb1
                 inv = 1.0 / (prod * elen)
                 ia = nb1 * elen * inv
@@ -229,48 +227,69 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, seg, buf, star
                          + w1 * (a1 * a1 * ia + a1 * b1 * cab + b1 * b1 * ib)
                          + (w2 * ia + w3 * ib) * ee1)
                 good = ok & (denom > 0.0)
-                gain = -k[j] / (denom if good else 1.0) if good else 0.0
-                buf[_STEP + t] = gain * value if small else 0.0
-                buf[_GAIN + t] = 0.0 if small else gain
+                step = -k[j] * num / (den * (denom if good else 1.0))
+                step = step if good & small else 0.0  # the multiplier s (Padé branch)
+                # 1 where s needs libm atan2 (large deviation of a non-degenerate quad)
+                buf[_FIX + t] = (1.0 if good else 0.0) * (0.0 if small else 1.0)
+                buf[_DEN + t] = denom
                 buf[_DEV_Y + t] = yy
                 buf[_DEV_X + t] = xx
                 fa = w0 * a0 * ia
                 fb = w0 * b0 * ib
-                buf[_D0X + t] = fa * ax + fb * bx
-                buf[_D0Y + t] = fa * ay + fb * by
-                buf[_D0Z + t] = fa * az + fb * bz
+                dx = fa * ax + fb * bx
+                dy = fa * ay + fb * by
+                dz = fa * az + fb * bz
+                buf[_D0X + t] = dx
+                buf[_D0Y + t] = dy
+                buf[_D0Z + t] = dz
+                buf[_Q0X + t] = p0x + step * dx
+                buf[_Q0Y + t] = p0y + step * dy
+                buf[_Q0Z + t] = p0z + step * dz
                 fa = w1 * a1 * ia
                 fb = w1 * b1 * ib
-                buf[_D1X + t] = fa * ax + fb * bx
-                buf[_D1Y + t] = fa * ay + fb * by
-                buf[_D1Z + t] = fa * az + fb * bz
+                dx = fa * ax + fb * bx
+                dy = fa * ay + fb * by
+                dz = fa * az + fb * bz
+                buf[_D1X + t] = dx
+                buf[_D1Y + t] = dy
+                buf[_D1Z + t] = dz
+                buf[_Q1X + t] = p1x + step * dx
+                buf[_Q1Y + t] = p1y + step * dy
+                buf[_Q1Z + t] = p1z + step * dz
                 fa = -w2 * elen * ia
                 buf[_D2X + t] = fa * ax
                 buf[_D2Y + t] = fa * ay
                 buf[_D2Z + t] = fa * az
+                buf[_Q2X + t] = p2x + step * (fa * ax)
+                buf[_Q2Y + t] = p2y + step * (fa * ay)
+                buf[_Q2Z + t] = p2z + step * (fa * az)
                 fb = -w3 * elen * ib
                 buf[_D3X + t] = fb * bx
                 buf[_D3Y + t] = fb * by
                 buf[_D3Z + t] = fb * bz
-            for t in range(n):  # scatter: stretched positions + s * bending displacement
+                buf[_Q3X + t] = p3x + step * (fb * bx)
+                buf[_Q3Y + t] = p3y + step * (fb * by)
+                buf[_Q3Z + t] = p3z + step * (fb * bz)
+            for t in range(n):  # large bending deviations: libm atan2, then the displacement
+                if buf[_FIX + t] != 0.0:
+                    step = -k[c0 + t] / buf[_DEN + t] * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
+                    for r in range(12):
+                        buf[_Q0X + r * BATCH + t] += step * buf[_D0X + r * BATCH + t]
+            for t in range(n):  # scatter
                 j = c0 + t
-                s = buf[_STEP + t]
-                gain = buf[_GAIN + t]
-                if gain != 0.0:  # large deviation: libm atan2
-                    s = gain * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
                 i0 = idx[j, 0]
                 i1 = idx[j, 1]
                 i2 = idx[j, 2]
                 i3 = idx[j, 3]
-                x[i0, 0] = buf[_Q0X + t] + s * buf[_D0X + t]
-                x[i0, 1] = buf[_Q0Y + t] + s * buf[_D0Y + t]
-                x[i0, 2] = buf[_Q0Z + t] + s * buf[_D0Z + t]
-                x[i1, 0] = buf[_Q1X + t] + s * buf[_D1X + t]
-                x[i1, 1] = buf[_Q1Y + t] + s * buf[_D1Y + t]
-                x[i1, 2] = buf[_Q1Z + t] + s * buf[_D1Z + t]
-                x[i2, 0] = buf[_Q2X + t] + s * buf[_D2X + t]
-                x[i2, 1] = buf[_Q2Y + t] + s * buf[_D2Y + t]
-                x[i2, 2] = buf[_Q2Z + t] + s * buf[_D2Z + t]
-                x[i3, 0] = buf[_Q3X + t] + s * buf[_D3X + t]
-                x[i3, 1] = buf[_Q3Y + t] + s * buf[_D3Y + t]
-                x[i3, 2] = buf[_Q3Z + t] + s * buf[_D3Z + t]
+                x[i0, 0] = buf[_Q0X + t]
+                x[i0, 1] = buf[_Q0Y + t]
+                x[i0, 2] = buf[_Q0Z + t]
+                x[i1, 0] = buf[_Q1X + t]
+                x[i1, 1] = buf[_Q1Y + t]
+                x[i1, 2] = buf[_Q1Z + t]
+                x[i2, 0] = buf[_Q2X + t]
+                x[i2, 1] = buf[_Q2Y + t]
+                x[i2, 2] = buf[_Q2Z + t]
+                x[i3, 0] = buf[_Q3X + t]
+                x[i3, 1] = buf[_Q3Y + t]
+                x[i3, 2] = buf[_Q3Z + t]

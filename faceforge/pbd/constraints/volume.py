@@ -63,8 +63,14 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     """Project one volume constraint in place on ``x (n, 3)``.
 
     particles : (p,) int global ids of the body; tris : (f, 3) int global ids;
-    ref : (r,) int global ids of the reference particles; g : (n, 3) float scratch
-    indexed by particle (only the body's rows are used). Returns the multiplier increment.
+    ref : (r,) int global ids of the reference particles (distinct); g : (n, 3) float
+    scratch indexed by particle, all zero on entry and left all zero (only the body's
+    rows are used). Returns the multiplier increment.
+
+    Passes: reference centroid, one over the triangles (volume and gradient), one over
+    the particles (gradient sum and ``sum w |g|^2``), one over the reference particles
+    (the ``dV/dr`` share and its effect on the denominator), one update that also clears
+    ``g``.
     """
     npart = particles.shape[0]
     nref = ref.shape[0]
@@ -81,11 +87,6 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     rx /= nref
     ry /= nref
     rz /= nref
-    for q in range(npart):
-        i = particles[q]
-        g[i, 0] = 0.0
-        g[i, 1] = 0.0
-        g[i, 2] = 0.0
     vol = 0.0
     for f in range(tris.shape[0]):
         ia = tris[f, 0]
@@ -118,34 +119,54 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     sx = 0.0
     sy = 0.0
     sz = 0.0
-    for q in range(npart):
-        i = particles[q]
-        sx += g[i, 0]
-        sy += g[i, 1]
-        sz += g[i, 2]
-    sx /= nref
-    sy /= nref
-    sz /= nref
-    for q in range(nref):
-        i = ref[q]
-        g[i, 0] -= sx
-        g[i, 1] -= sy
-        g[i, 2] -= sz
     denom = 0.0
     for q in range(npart):
         i = particles[q]
-        denom += w[i] * (g[i, 0] * g[i, 0] + g[i, 1] * g[i, 1] + g[i, 2] * g[i, 2])
-    denom /= 36.0
-    if denom <= 0.0:
-        return 0.0
-    s = _multiplier(vol / 6.0 - rest, denom, k, c, lam, xpbd)
-    f6 = s / 6.0
-    for q in range(npart):
-        i = particles[q]
-        f = f6 * w[i]
-        x[i, 0] += f * g[i, 0]
-        x[i, 1] += f * g[i, 1]
-        x[i, 2] += f * g[i, 2]
+        gx = g[i, 0]
+        gy = g[i, 1]
+        gz = g[i, 2]
+        sx += gx
+        sy += gy
+        sz += gz
+        denom += w[i] * (gx * gx + gy * gy + gz * gz)
+    sx /= nref
+    sy /= nref
+    sz /= nref
+    before = 0.0  # the reference particles' terms of denom, before and after the share
+    after = 0.0
+    for q in range(nref):
+        i = ref[q]
+        gx = g[i, 0]
+        gy = g[i, 1]
+        gz = g[i, 2]
+        before += w[i] * (gx * gx + gy * gy + gz * gz)
+        gx -= sx
+        gy -= sy
+        gz -= sz
+        after += w[i] * (gx * gx + gy * gy + gz * gz)
+        g[i, 0] = gx
+        g[i, 1] = gy
+        g[i, 2] = gz
+    denom = (denom - before + after) / 36.0
+    s = 0.0
+    if denom > 0.0:
+        s = _multiplier(vol / 6.0 - rest, denom, k, c, lam, xpbd)
+        f6 = s / 6.0
+        for q in range(npart):
+            i = particles[q]
+            f = f6 * w[i]
+            x[i, 0] += f * g[i, 0]
+            x[i, 1] += f * g[i, 1]
+            x[i, 2] += f * g[i, 2]
+            g[i, 0] = 0.0
+            g[i, 1] = 0.0
+            g[i, 2] = 0.0
+    else:
+        for q in range(npart):
+            i = particles[q]
+            g[i, 0] = 0.0
+            g[i, 1] = 0.0
+            g[i, 2] = 0.0
     return s
 
 
