@@ -36,7 +36,7 @@ is a single batched query.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -108,11 +108,6 @@ class Binding:
         The skin normals used for the rays.
     closest : (k,) bool
         True when both rays missed and the anchor is the closest skull point.
-    offsets : (k, 3) float64 or None
-        None: the paper's anchors, ``q`` on the surface point. Else each anchor's skin
-        vertex relative to its surface point in the hit triangle's frame (tangent,
-        bitangent, normal); :meth:`targets` then follows that frame (see :meth:`lifted`).
-        Derived at load time, not saved by :meth:`as_arrays`.
     """
 
     body_names: tuple
@@ -126,59 +121,25 @@ class Binding:
     outward: np.ndarray
     normals: np.ndarray
     closest: np.ndarray | None = None
-    offsets: np.ndarray | None = None
-    rotate_offsets: np.ndarray | None = None
 
     def __post_init__(self):
         if self.closest is None:
             object.__setattr__(self, "closest", np.zeros(len(self.vertex_ids), bool))
 
     def targets(self, surfaces) -> np.ndarray:
-        """Anchor targets ``(k, 3)`` on the current (deformed) bodies.
+        """Anchor surface points ``(k, 3)`` on the current (deformed) bodies.
 
         ``surfaces`` gives, for each body in ``body_names`` order, its current
         ``(vertices (n_b, 3), faces (m_b, 3))`` with the faces used at bind time
-        (``MusculoskeletalSystem.surface(name)`` does). Without :attr:`offsets` the
-        targets are the surface points; with them, the surface points plus each
-        offset carried by its triangle's current frame.
+        (``MusculoskeletalSystem.surface(name)`` does).
         """
-        tri = self._triangles(surfaces)
-        out = np.einsum("ij,ijk->ik", self.bary, tri)
-        if self.offsets is not None:
-            rot = self.rotate_offsets
-            out += np.where(rot[:, None], np.einsum("kij,ki->kj", triangle_frames(tri), self.offsets), self.offsets)
-        return out
-
-    def lifted(self, surfaces, skin_rest, rotate=None) -> "Binding":
-        """The same anchors, each ``q`` lifted from its surface point to its skin vertex.
-
-        Beyond the paper (§8 ties ``p`` to ``q`` on the surface point with a stretch
-        constraint of the hit distance): a stretch constraint only resists changes of
-        length, so a surface point sliding *along* the face (a lip corner pulled by the
-        zygomaticus) barely drags its skin vertex. Here ``q`` sits where the skin vertex
-        rests, carried by the hit triangle's frame, and the stretch ``p``-``q`` has rest
-        length 0: the skin follows sliding as well as lifting, and the rest pose is still
-        an exact fixed point.
-
-        surfaces : rest ``(vertices, faces)`` per body (as for :meth:`targets`)
-        skin_rest : (n, 3) float, the skin vertices at rest
-        """
-        tri = self._triangles(surfaces)
-        base = np.einsum("ij,ijk->ik", self.bary, tri)
-        skin = np.asarray(skin_rest, FLOAT)[self.vertex_ids]
-        rotate = np.ones(len(skin), bool) if rotate is None else np.asarray(rotate, bool)
-        offsets = np.where(rotate[:, None], np.einsum("kij,kj->ki", triangle_frames(tri), skin - base), skin - base)
-        return replace(self, offsets=offsets, points=skin.copy(), rotate_offsets=rotate)
-
-    def _triangles(self, surfaces) -> np.ndarray:
-        """(k, 3, 3) corners of each anchor's triangle on ``surfaces``."""
-        tri = np.full((len(self.vertex_ids), 3, 3), np.nan)
+        out = np.full((len(self.vertex_ids), 3), np.nan)
         for b, (verts, faces) in enumerate(surfaces):
             sel = self.body == b
             if sel.any():
-                tri[sel] = np.asarray(verts, FLOAT)[np.asarray(faces, INT)[self.face_ids[sel]]]
-        return tri
-
+                tri = np.asarray(verts, FLOAT)[np.asarray(faces, INT)[self.face_ids[sel]]]
+                out[sel] = np.einsum("ij,ijk->ik", self.bary[sel], tri)
+        return out
 
     @classmethod
     def from_arrays(cls, arrays: dict, prefix: str = "anchor_") -> "Binding":
@@ -205,23 +166,6 @@ class Binding:
             "closest": self.closest,
             "body_names": np.asarray(self.body_names, dtype=str),
         }
-
-
-def triangle_frames(tri: np.ndarray) -> np.ndarray:
-    """Orthonormal frames ``(k, 3, 3)`` (rows: tangent along edge 0-1, bitangent, normal).
-
-    tri : (k, 3, 3) float triangle corners. A degenerate triangle gets the world axes, so
-    the result is always finite.
-    """
-    e1 = tri[:, 1] - tri[:, 0]
-    n = np.cross(e1, tri[:, 2] - tri[:, 0])
-    ln, le = np.linalg.norm(n, axis=1), np.linalg.norm(e1, axis=1)
-    ok = (ln > 1e-300) & (le > 1e-300)
-    frames = np.broadcast_to(np.eye(3), (len(tri), 3, 3)).copy()
-    t = e1[ok] / le[ok, None]
-    nn = n[ok] / ln[ok, None]
-    frames[ok] = np.stack([t, np.cross(nn, t), nn], axis=1)
-    return frames
 
 
 def _merge(bodies: list[Body], ids: list[int]):

@@ -125,14 +125,7 @@ class BoundHead:
                                  bind_dir / "bind.npz")
         # anchors on the system's own rest bodies (the rebuilt muscles may differ from the meshes
         # bind saw by a projection): then the rest pose is an exact fixed point
-        surfaces = [system.surface(n) for n in binding.body_names]
-        binding = replace(binding, points=binding.targets(surfaces))
-        if config.get("skin.anchor_lift"):
-            import os
-            mode = os.environ.get("LIFTMODE", "all")
-            bone = np.isin(np.asarray(binding.body_names)[binding.body], ["cranium", "mandible"])
-            rot = {"all": np.ones(len(bone), bool), "none": np.zeros(len(bone), bool), "bone": bone}[mode]
-            binding = binding.lifted(surfaces, self.rest, rotate=rot)
+        binding = replace(binding, points=binding.targets([system.surface(n) for n in binding.body_names]))
         self.skin = skin = SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
                                           settings)
 
@@ -331,7 +324,7 @@ def run_animate(ctx):
 
 
 ANIMATE = register_stage(Stage(
-    name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.anchor_lift", "muscle", "animate"),
+    name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
     inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
     version="1", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
@@ -446,7 +439,7 @@ def _lip_opening(mapping, simulate, head, value):
 
 
 CALIBRATE = register_stage(Stage(
-    name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.anchor_lift", "muscle", "animate"),
+    name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
     inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="1", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
