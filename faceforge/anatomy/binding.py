@@ -518,10 +518,15 @@ def lip_band_width(landmarks: dict) -> float | None:
         return None
 
 
-def lip_band(cut, width: float | None) -> np.ndarray:
-    """(n,) bool: working vertices within ``width`` (skin units, shortest edge path over
-    the skin) of the inner-lip contours, corners included -- the red lips and the skin
-    where they touch. None, or no contours: no vertex."""
+#: inner lip skin faces more than 60 degrees away from the front (cosine below this)
+INNER_LIP_COS = 0.5
+
+
+def lip_band(cut, width: float | None, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """(n,) bool: the inner lip skin -- working vertices within ``width`` (skin units,
+    shortest edge path over the skin) of the inner-lip contours, corners included, whose
+    normal turns more than 60 degrees away from ``forward`` (the face's front): where the
+    lips touch each other and roll into the mouth. None, or no contours: no vertex."""
     from scipy.sparse.csgraph import dijkstra
 
     from faceforge.anatomy.mouth import _graph
@@ -529,10 +534,11 @@ def lip_band(cut, width: float | None) -> np.ndarray:
     n = len(cut.vertices)
     if width is None or len(cut.upper) < 2 or len(cut.lower) < 2:
         return np.zeros(n, bool)
+    v, f = np.asarray(cut.vertices, FLOAT), np.asarray(cut.faces, INT)
     seeds = np.unique(np.r_[cut.upper, cut.lower]).astype(INT)
-    d = dijkstra(_graph(np.asarray(cut.vertices, FLOAT), np.asarray(cut.faces, INT)), indices=seeds,
-                 min_only=True, limit=float(width) * (1.0 + 1e-9))
-    return d <= width
+    d = dijkstra(_graph(v, f), indices=seeds, min_only=True, limit=float(width) * (1.0 + 1e-9))
+    fwd = np.asarray(forward, FLOAT) / np.linalg.norm(forward)
+    return (d <= width) & (vertex_normals(v, f) @ fwd < INNER_LIP_COS)
 
 
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
@@ -555,12 +561,12 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.max_ray_distance``: longest ray as a fraction of the skin's
         bounding-box diagonal.
 
-    Lip band (:func:`lip_band`, :data:`LIP_BAND_MM`): lip skin whose rays miss gets no
-    closest-point anchor and stays unbound, carried by its ray-bound neighbours. The
-    closest bone point of the lips' inner skin lies across the oral vestibule (1.4 cm on
-    ICT): it tied the inner upper lip to the maxilla beside skin bound to the orbicularis
-    oris and the inner lower lip to the mandible, and the lip corners' small triangles
-    between them turned over whenever the jaw moved (ICT: 600 such anchors).
+    Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): inner lip skin whose rays miss
+    gets no closest-point anchor and stays unbound, carried by its ray-bound neighbours.
+    Its closest bone point lies across the oral vestibule (1.4 cm on ICT): it tied the
+    inner upper lip to the maxilla beside skin bound to the orbicularis oris and the
+    inner lower lip to the mandible, and the lip corners' small triangles between them
+    turned over whenever the jaw moved. The outer lips, which face the front, keep it.
 
     Returns
     -------
