@@ -502,6 +502,45 @@ def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
     return cKDTree(vertices).query(points)[1].astype(INT)
 
 
+#: soft tissue depth at the mouth corners, mm (Rhine 1983 ``ecm2_sup``, the deepest of the
+#: mouth region in :data:`faceforge.anatomy.fit_tissue.DEPTH_MM`): the width of the lip band
+LIP_BAND_MM = 18.0
+
+
+def lip_band_width(landmarks: dict) -> float | None:
+    """:data:`LIP_BAND_MM` in skin units (scaled by the eye separation, ``ES0 / 63 mm``);
+    None when the eye FDPs that give ES0 are missing."""
+    from faceforge.anatomy.fit_tissue import units_per_mm
+
+    try:
+        return LIP_BAND_MM * units_per_mm(landmarks)
+    except KeyError:
+        return None
+
+
+#: inner lip skin faces more than 60 degrees away from the front (cosine below this)
+INNER_LIP_COS = 0.5
+
+
+def lip_band(cut, width: float | None, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """(n,) bool: the inner lip skin -- working vertices within ``width`` (skin units,
+    shortest edge path over the skin) of the inner-lip contours, corners included, whose
+    normal turns more than 60 degrees away from ``forward`` (the face's front): where the
+    lips touch each other and roll into the mouth. None, or no contours: no vertex."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from faceforge.anatomy.mouth import _graph
+
+    n = len(cut.vertices)
+    if width is None or len(cut.upper) < 2 or len(cut.lower) < 2:
+        return np.zeros(n, bool)
+    v, f = np.asarray(cut.vertices, FLOAT), np.asarray(cut.faces, INT)
+    seeds = np.unique(np.r_[cut.upper, cut.lower]).astype(INT)
+    d = dijkstra(_graph(v, f), indices=seeds, min_only=True, limit=float(width) * (1.0 + 1e-9))
+    fwd = np.asarray(forward, FLOAT) / np.linalg.norm(forward)
+    return (d <= width) & (vertex_normals(v, f) @ fwd < INNER_LIP_COS)
+
+
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0)) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
@@ -521,6 +560,13 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     max_ray_fraction : float
         ``bind.max_ray_distance``: longest ray as a fraction of the skin's
         bounding-box diagonal.
+
+    Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): inner lip skin whose rays miss
+    gets no closest-point anchor and stays unbound, carried by its ray-bound neighbours.
+    Its closest bone point lies across the oral vestibule (1.4 cm on ICT): it tied the
+    inner upper lip to the maxilla beside skin bound to the orbicularis oris and the
+    inner lower lip to the mandible, and the lip corners' small triangles between them
+    turned over whenever the jaw moved. The outer lips, which face the front, keep it.
 
     Returns
     -------
@@ -551,16 +597,20 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         rank.append(0)
     diagonal = float(np.linalg.norm(np.ptp(v, axis=0)))
     front, rule = face_front_mask(cut.vertices, pts)
+    band_width = lip_band_width(pts)
+    lips = lip_band(cut, band_width)
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
-                        depth_rank=rank, side_of=side_of, fallback=front)
+                        depth_rank=rank, side_of=side_of, fallback=front & ~lips)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None
     weights, dist, scale = influence_weights(cut.vertices, cut.faces, sources, back_vertex=back)
 
-    report = bind_report(binding, {"face_front": front, "back_and_neck": ~front})
+    report = bind_report(binding, {"face_front": front, "face_front_outside_lips": front & ~lips,
+                                   "lip_band": lips, "back_and_neck": ~front})
     report["region_rules"] = rule
     report["max_ray_distance"] = max_ray_fraction * diagonal
+    report["lip_band_width"] = band_width
     report["mouth"] = cut.report()
     report["influence"] = {
         "sources": int(len(sources)), "normalisation": float(scale),

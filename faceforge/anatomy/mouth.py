@@ -319,12 +319,36 @@ def side_of_points(points, cut: MouthCut, up=(0.0, 1.0, 0.0), radius: float | No
     return out
 
 
+def _surface_side(cut: MouthCut, side: np.ndarray) -> np.ndarray:
+    """``side`` (n,) int8 with the lip decided by edge paths where they are decisive
+    (see :func:`lip_side`); vertices with side 0 (far from the mouth) stay 0."""
+    from scipy.sparse.csgraph import dijkstra
+
+    v = np.asarray(cut.vertices, FLOAT)
+    g = _graph(v, np.asarray(cut.faces, INT))
+    corners = np.unique([cut.upper[0], cut.upper[-1], cut.lower[0], cut.lower[-1]])
+    d_up = dijkstra(g, indices=np.asarray(cut.upper[1:-1], INT), min_only=True)
+    d_low = dijkstra(g, indices=np.asarray(cut.lower[1:-1], INT), min_only=True)
+    d_corner = dijkstra(g, indices=corners, min_only=True)
+    near = side != 0
+    out = side.copy()
+    out[near & (d_up < d_corner) & (d_up < d_low)] = 1
+    out[near & (d_low < d_corner) & (d_low < d_up)] = -1
+    return out
+
+
 def lip_side(cut: MouthCut, up=(0.0, 1.0, 0.0), radius: float | None = None) -> np.ndarray:
     """Which lip each working vertex belongs to: +1 upper, -1 lower, 0 neither.
 
-    :func:`side_of_points` of the working vertices, except that the contours'
-    own interior vertices are upper / lower by definition and the two corners
-    are 0.
+    :func:`side_of_points` of the working vertices (above / below the lip line), overruled
+    by the surface itself where it is decisive: a vertex (within ``radius``) whose
+    shortest edge path to one contour's interior is shorter than its path to either
+    corner and to the other contour lies on that lip, whatever its height. Near the
+    corners the lips roll inward and the lower lip's top surface can lie above the lip
+    line (ICT); only a path around a corner joins it to the upper lip, so it is lower lip.
+    Vertices that reach both contours only around a corner (the cheeks beside the mouth)
+    keep the height rule. The contours' own interior vertices are upper / lower by
+    definition and the two corners are 0.
 
     Returns
     -------
@@ -333,6 +357,8 @@ def lip_side(cut: MouthCut, up=(0.0, 1.0, 0.0), radius: float | None = None) -> 
     out = side_of_points(cut.vertices, cut, up, radius)
     if len(cut.upper) < 2 or len(cut.lower) < 2:
         return out
+    if len(cut.upper) > 2 and len(cut.lower) > 2:
+        out = _surface_side(cut, out)
     out[cut.upper[1:-1]] = 1
     out[cut.lower[1:-1]] = -1
     out[[cut.upper[0], cut.upper[-1]]] = 0

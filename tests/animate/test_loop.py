@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.animate import (Rig, Timings, check_animation, inverted_triangles, play,
+from faceforge.anatomy.animate import (Rig, Timings, check_animation, inverted_faces, inverted_triangles, play,
                                        points_inside, static_poses)
 
 
@@ -125,6 +125,23 @@ def test_inverted_triangles_counts_flips():
     flipped = rest * np.array([-1.0, 1.0, 1.0])        # mirrored: every triangle flips
     counts = inverted_triangles(rest, np.stack([rest, flipped, rest + 1.0]), faces)
     assert counts.tolist() == [0, len(faces), 0]
+
+
+def test_small_triangles_count_and_only_degenerate_ones_are_skipped():
+    """A sliver 1e-8 of the others' area that turns over is inverted; a rest
+    triangle with (numerically) no area has no normal to turn and is skipped."""
+    rest = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0],
+                     [0.5, 0.5, 0], [0.5 + 1e-4, 0.5, 0], [0.5, 0.5 + 1e-4, 0],   # sliver
+                     [2, 0, 0], [3, 0, 0], [4, 0, 0]])                             # collinear
+    faces = np.array([[0, 1, 2], [1, 3, 2], [4, 5, 6], [7, 8, 9]])
+    moved = rest.copy()
+    moved[6, 1] = 0.5 - 1e-4                    # the sliver turns over
+    moved[8, 1] = -1.0                          # the degenerate one gains an area
+    flips = inverted_faces(rest, moved[None], faces)
+    assert flips.tolist() == [[False, False, True, False]]
+    rep = check_animation(rest, np.stack([rest, moved, moved]), faces)
+    assert rep.inverted_triangles == 2 and rep.inverted_faces == 1 and rep.inverted_max_per_frame == 1
+    assert not rep.ok
 
 
 def test_points_inside_box_and_check_animation():

@@ -87,3 +87,27 @@ def test_lip_side_splits_upper_and_lower():
     y = cut.vertices[:, 1]
     assert np.all(side[(side != 0) & (y > 0.5 + 1e-9)] == 1)
     assert np.all(side[(side != 0) & (y < 0.5 - 1e-9)] == -1)
+
+
+def test_lip_side_follows_the_surface_where_the_lips_roll_in():
+    """Lower-lip skin lifted above the lip line (a lip rolling inward at the corners, ICT)
+    is still lower lip: only a path around a corner joins it to the upper contour. Skin
+    beside the mouth, which reaches both contours only around a corner, keeps the height
+    rule."""
+    v, f, lips = mouth_grid(8)
+    cut = cut_mouth(v, f, lips)
+    before = lip_side(cut)
+    verts = cut.vertices.copy()
+    below = np.flatnonzero(np.isclose(verts[:, 1], 0.5 - 1 / 8) & (verts[:, 0] > 0.2) & (verts[:, 0] < 0.8))
+    verts[below, 1] = 0.5 + 0.3 / 8            # the row under the lower contour, now above the line
+    rolled = cut.__class__(**{**cut.__dict__, "vertices": verts})
+    side = lip_side(rolled)
+    assert np.all(before[below] == -1)
+    assert np.all(side[below] == -1), side[below]
+    # beside the mouth (left of corner 2.5, right of corner 2.4) nothing changed
+    beside = (verts[:, 0] < 1 / 8 - 1e-9) | (verts[:, 0] > 7 / 8 + 1e-9)
+    np.testing.assert_array_equal(side[beside], before[beside])
+    # and the old rule alone would have called the lifted skin upper lip
+    from faceforge.anatomy.mouth import side_of_points
+
+    assert np.all(side_of_points(verts[below], rolled) == 1)

@@ -103,11 +103,55 @@ def _inside(points, vertices, faces):
     return votes >= 2
 
 
-def test_face_front_is_fully_bound(bound):
-    name, _, report, _ = bound
-    front = report["regions"]["face_front"]
+def test_face_front_is_fully_bound_outside_the_lip_band(bound):
+    """Every face-front vertex has an anchor, except lip skin whose rays miss: the lip band
+    takes no closest-point anchor (binding.bind_head), its ray-bound neighbours carry it."""
+    from faceforge.io.stagefiles import load_npz
+
+    name, work, report, _ = bound
+    front = report["regions"]["face_front_outside_lips"]
     assert front["vertices"] > 0
     assert front["fraction"]["bound"] == 1.0, f"{name}: {front['unbound_vertices']} front vertices unbound"
+    d = load_npz(work / "bind" / "bind.npz")
+    lips = report["regions"]["lip_band"]
+    assert lips["vertices"] > 0, f"{name}: empty lip band"
+    in_band = np.isin(d["anchor_vertex_ids"], np.flatnonzero(_lip_band(d, report)))
+    assert not np.any(d["anchor_closest"][in_band]), f"{name}: closest-point anchors in the lip band"
+
+
+def _lip_band(d, report):
+    from faceforge.anatomy.binding import lip_band
+    from faceforge.anatomy.mouth import MouthCut
+
+    cut = MouthCut("open", d["vertices"], d["faces"], int(d["n_user"]), d["duplicate_source"],
+                   d["removed_faces"], d["lip_upper"], d["lip_lower"])
+    band = lip_band(cut, report["lip_band_width"])
+    assert int(band.sum()) == report["regions"]["lip_band"]["vertices"]
+    return band
+
+
+#: known failures of the fast jaw opening, by sample (xfail only while they fail)
+KNOWN_FLIPS = {"ict": "the lip corners' small triangles (0.1-20% of the median area) turn over while the jaw "
+                      "moves (22-42 per frame at 3 degrees) and unfold once it holds; turned over, they keep "
+                      "their rest area, which the skin's unsigned area constraint (k 0.95) accepts"}
+
+
+def test_a_quick_jaw_opening_turns_no_skin_triangle_over(bound):
+    """The jaw opens 3 degrees in 4 frames at 25 fps (as in anger.fap) and holds: no skin
+    triangle's normal turns more than 90 degrees from its rest normal in any frame."""
+    from faceforge.anatomy.animate import inverted_triangles, play
+
+    name, _, _, head = bound
+    frames = 12
+    jaw = np.zeros((frames, 3))
+    jaw[:, 0] = _opening_pitch(head, np.radians(3.0)) * np.minimum(np.arange(frames) / 4.0, 1.0)
+    head.rig.reset()
+    skin = play(head.rig, np.zeros((frames, len(head.muscle_names))), jaw, 25.0)
+    head.rig.reset()
+    flips = inverted_triangles(head.rest, skin, head.faces)
+    if flips.any() and name in KNOWN_FLIPS:
+        pytest.xfail(f"{flips.tolist()}: {KNOWN_FLIPS[name]}")
+    assert not flips.any(), f"{name}: inverted triangles per frame {flips.tolist()}"
 
 
 def test_rest_is_a_fixed_point(bound):
