@@ -20,7 +20,7 @@ entry, so a file that gives both does not count them twice). The entry's value `
    for pitch and yaw, to skin length units for protrusion).
 
 A muscle asked for by several entries takes the **largest** request, clipped to
-[0, ``max_contraction``] (Eq. 4 at c = 1 collapses a muscle onto its origin):
+[0, ``max_contraction``] (the muscles map c = 1 to their largest fibre shortening):
 several FAPs usually describe one action at several points of the same tissue (the three
 upper-lip FAPs 51, 55, 56 and the one orbicularis oris), and each entry is calibrated alone,
 so adding them would over-drive the shared muscle. Jaw DOFs add (each has its own FAP) and
