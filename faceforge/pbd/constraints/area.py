@@ -2,7 +2,9 @@
 
 ``C(p0, p1, p2) = |(p1 - p0) x (p2 - p0)| / 2 - A0`` (paper §8). With the unit normal
 ``n``: ``grad_p0 = n x (p2 - p1) / 2``, ``grad_p1 = n x (p0 - p2) / 2``,
-``grad_p2 = n x (p1 - p0) / 2`` (they sum to zero: momentum is conserved). A
+``grad_p2 = n x (p1 - p0) / 2`` (they sum to zero: momentum is conserved). The edges lie
+in the triangle's plane, normal to ``n``, so ``|grad_i|^2 = |edge opposite i|^2 / 4``: the
+kernels compute the denominator ``sum_i w_i |grad_i|^2`` from the edge lengths. A
 zero-area triangle has no normal and is skipped.
 """
 
@@ -56,6 +58,10 @@ def _solve_area(x, w, i0, i1, i2, rest, k, c, lam, xpbd):
     ox = vx - ux
     oy = vy - uy
     oz = vz - uz
+    denom = 0.25 * (w0 * (ox * ox + oy * oy + oz * oz) + w1 * (vx * vx + vy * vy + vz * vz)
+                    + w2 * (ux * ux + uy * uy + uz * uz))
+    if denom <= 0.0:
+        return 0.0
     g0x = h * (ny * oz - nz * oy)
     g0y = h * (nz * ox - nx * oz)
     g0z = h * (nx * oy - ny * ox)
@@ -65,11 +71,6 @@ def _solve_area(x, w, i0, i1, i2, rest, k, c, lam, xpbd):
     g2x = h * (ny * uz - nz * uy)
     g2y = h * (nz * ux - nx * uz)
     g2z = h * (nx * uy - ny * ux)
-    denom = (w0 * (g0x * g0x + g0y * g0y + g0z * g0z)
-             + w1 * (g1x * g1x + g1y * g1y + g1z * g1z)
-             + w2 * (g2x * g2x + g2y * g2y + g2z * g2z))
-    if denom <= 0.0:
-        return 0.0
     s = _multiplier(0.5 * nlen - rest, denom, k, c, lam, xpbd)
     f = s * w0
     x[i0, 0] += f * g0x
@@ -158,40 +159,32 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
                 ny = uz * vx - ux * vz
                 nz = ux * vy - uy * vx
                 n2 = nx * nx + ny * ny + nz * nz
-                scale = ux * ux + uy * uy + uz * uz + vx * vx + vy * vy + vz * vz
-                ok = (n2 > DEGENERATE * scale * scale) & (n2 > 0.0)
-                nlen = math.sqrt(n2 if ok else 1.0)
-                h = 0.5 / nlen
                 ox = vx - ux
                 oy = vy - uy
                 oz = vz - uz
-                g0x = h * (ny * oz - nz * oy)
-                g0y = h * (nz * ox - nx * oz)
-                g0z = h * (nx * oy - ny * ox)
-                g1x = -h * (ny * vz - nz * vy)
-                g1y = -h * (nz * vx - nx * vz)
-                g1z = -h * (nx * vy - ny * vx)
-                g2x = h * (ny * uz - nz * uy)
-                g2y = h * (nz * ux - nx * uz)
-                g2z = h * (nx * uy - ny * ux)
-                denom = (w0 * (g0x * g0x + g0y * g0y + g0z * g0z)
-                         + w1 * (g1x * g1x + g1y * g1y + g1z * g1z)
-                         + w2 * (g2x * g2x + g2y * g2y + g2z * g2z))
+                uu = ux * ux + uy * uy + uz * uz
+                vv = vx * vx + vy * vy + vz * vz
+                scale = uu + vv
+                ok = (n2 > DEGENERATE * scale * scale) & (n2 > 0.0)
+                nlen = math.sqrt(n2 if ok else 1.0)
+                # sum_i w_i |grad_i|^2 from the edge lengths (see the module docstring)
+                denom = 0.25 * (w0 * (ox * ox + oy * oy + oz * oz) + w1 * vv + w2 * uu)
                 good = ok & (denom > 0.0)
-                s = -k[j] * (0.5 * nlen - rest[j]) / (denom if good else 1.0)
-                s = s if good else 0.0
-                f = s * w0
-                buf[_Q0X + t] = p0x + f * g0x
-                buf[_Q0Y + t] = p0y + f * g0y
-                buf[_Q0Z + t] = p0z + f * g0z
-                f = s * w1
-                buf[_Q1X + t] = p1x + f * g1x
-                buf[_Q1Y + t] = p1y + f * g1y
-                buf[_Q1Z + t] = p1z + f * g1z
-                f = s * w2
-                buf[_Q2X + t] = p2x + f * g2x
-                buf[_Q2Y + t] = p2y + f * g2y
-                buf[_Q2Z + t] = p2z + f * g2z
+                # dp_i = s w_i (n x e_i) / (2 |n|), s = -k C / denom: one division
+                h = -k[j] * (0.5 * nlen - rest[j]) * 0.5 / (nlen * (denom if good else 1.0))
+                h = h if good else 0.0
+                f = h * w0
+                buf[_Q0X + t] = p0x + f * (ny * oz - nz * oy)
+                buf[_Q0Y + t] = p0y + f * (nz * ox - nx * oz)
+                buf[_Q0Z + t] = p0z + f * (nx * oy - ny * ox)
+                f = -h * w1
+                buf[_Q1X + t] = p1x + f * (ny * vz - nz * vy)
+                buf[_Q1Y + t] = p1y + f * (nz * vx - nx * vz)
+                buf[_Q1Z + t] = p1z + f * (nx * vy - ny * vx)
+                f = h * w2
+                buf[_Q2X + t] = p2x + f * (ny * uz - nz * uy)
+                buf[_Q2Y + t] = p2y + f * (nz * ux - nx * uz)
+                buf[_Q2Z + t] = p2z + f * (nx * uy - ny * ux)
             for t in range(n):  # scatter
                 j = c0 + t
                 i0 = idx[j, 0]

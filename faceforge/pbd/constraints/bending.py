@@ -28,7 +28,7 @@ import math
 import numba
 import numpy as np
 
-from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS, DEGENERATE, _multiplier, PBD_NUMBA  # noqa: F401
+from faceforge.pbd.constraints._common import BATCH, DEGENERATE, PBD_NUMBA, _multiplier
 
 
 def dihedral_angle(positions: np.ndarray, quads: np.ndarray) -> np.ndarray:

@@ -100,9 +100,9 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, seg, buf, star
     then the dihedral constraint (see the module docstring).
 
     idx : (m, 4) int quads; inv_mass : (4, m) float; rest_cs : (2, m) float rest cosines
-    and sines; k : (m,) bending stiffness; stretch : (6, m) float, the
-    transpose of :func:`stretch_table` (rows read as vectors); seg : (s,) int sorted boundaries of runs of quads sharing no
-    particle; buf : (BATCH_ROWS * BATCH,) float scratch. The math per quad is that of
+    and sines; k : (m,) bending stiffness; stretch : (6, m) float, the transpose of
+    :func:`stretch_table` (rows read as vectors); seg : (s,) int sorted boundaries of runs
+    of quads sharing no particle; buf : (BATCH_ROWS * BATCH,) float scratch. The math per quad is that of
     ``distance._project_distance_pbd`` twice, then ``bending._solve_bending`` (PBD), on
     the updated positions.
     """
