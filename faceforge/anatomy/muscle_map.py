@@ -36,6 +36,8 @@ SPHINCTER_KEYS = COMMON_KEYS | {"inner", "outer"}
 MIRROR_KEYS = {"name", "mirror_of", "lies_on"}
 TOP_KEYS = {"units", "muscles"}
 SKULL = "skull"
+#: bone names ``lies_on`` accepts: the whole skull, or one of its two bodies
+BONES = (SKULL, "cranium", "mandible")
 
 
 @dataclass(frozen=True)
@@ -47,7 +49,8 @@ class MuscleSpec:
     name : str
     type : "linear" | "sphincter"
     layer : int, 0 lies on the skull; layer n lies only on the skull or layers < n
-    lies_on : tuple of str, "skull" (cranium + mandible) and/or names of deeper muscles
+    lies_on : tuple of str, "skull" (cranium + mandible), "cranium" or "mandible" alone,
+        and/or names of deeper muscles
     active : bool, False for passive support tissue (contraction ignored)
     h, w : int >= 2, samples along the longitudinal / latitudinal action lines
     thickness : float, fraction of the skull's bounding-box diagonal
@@ -309,12 +312,12 @@ def load_muscle_map(path: str | Path, skull) -> list[MuscleSpec]:
         if len(set(f["lies_on"])) != len(f["lies_on"]):
             ctx.fail("lies_on lists a name twice", line, name)
         for under in f["lies_on"]:
-            if under == SKULL:
+            if under in BONES:
                 continue
             if under == name:
                 ctx.fail("a muscle cannot lie on itself", line, name)
             if under not in resolved:
-                ctx.fail(f"lies_on {under!r}: no such muscle (valid: skull or a muscle name)", line, name)
+                ctx.fail(f"lies_on {under!r}: no such muscle (valid: skull, cranium, mandible or a muscle name)", line, name)
             if resolved[under]["layer"] >= f["layer"]:
                 ctx.fail(f"lies on {under} (layer {resolved[under]['layer']}), which is not deeper than "
                          f"its own layer {f['layer']}", line, name)
