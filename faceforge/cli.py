@@ -49,8 +49,18 @@ class App:
         # validate every layer before any work
         self.config_file = config_file
         self._file_layer = read_config_file(config_file) if config_file else None
+        self._sets = tuple(sets)
         self._set_layer = parse_sets(sets) if sets else None
         self.config = load_config(config_file, sets, remembered=self.workspace.config_path)
+
+    def add_sets(self, *sets: str) -> None:
+        """More ``KEY.PATH=VALUE`` overrides, as if given with ``--set`` (a command's own
+        options that stand for config keys); validated at once."""
+        from faceforge.io.config import load_config, parse_sets
+
+        self._sets += tuple(sets)
+        self._set_layer = parse_sets(self._sets)
+        self.config = load_config(self.config_file, self._sets, remembered=self.workspace.config_path)
 
     def log(self, message: str) -> None:
         """A progress line on stderr (hidden with ``-q``)."""

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import csv
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -76,12 +76,15 @@ class RawLandmarks:
     ids : tuple of n FDP ids (str, e.g. ``"3.7"``), file order
     vertex : (n,) int64, vertex id or -1 where none was given
     position : (n, 3) float64, given position or NaN where none was given (mesh units)
+    orientation : ``(up (3,), forward (3,))`` unit axes of the mesh as the file declares
+        them (``orientation: {up: +Z, forward: -Y}``), or None
     """
 
     path: str
     ids: tuple
     vertex: np.ndarray
     position: np.ndarray
+    orientation: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -211,7 +214,7 @@ def read_landmarks(path: str | Path) -> RawLandmarks:
                     data = loader.get_single_data()
                 finally:
                     loader.dispose()
-            entries = _entries_from_mapping(data, path)
+            entries, orientation = _entries_from_mapping(data, path), _orientation(data, path)
         elif suffix == ".json":
             def pairs_hook(pairs):
                 keys = [k for k, _ in pairs]
@@ -221,9 +224,9 @@ def read_landmarks(path: str | Path) -> RawLandmarks:
                 return dict(pairs)
             with open(path, encoding="utf-8") as fh:
                 data = json.load(fh, object_pairs_hook=pairs_hook)
-            entries = _entries_from_mapping(data, path)
+            entries, orientation = _entries_from_mapping(data, path), _orientation(data, path)
         elif suffix == ".csv":
-            entries = _read_csv(path)
+            entries, orientation = _read_csv(path), None
         else:
             raise LandmarkError(f"unknown landmark format {suffix!r} (use .yaml, .json or .csv)", path)
     except yaml.YAMLError as exc:
@@ -234,7 +237,28 @@ def read_landmarks(path: str | Path) -> RawLandmarks:
         raise LandmarkError(f"invalid JSON: {exc.msg}", path, exc.lineno) from None
     except UnicodeDecodeError:
         raise LandmarkError("not a text file", path) from None
-    return _to_raw(entries, path)
+    return replace(_to_raw(entries, path), orientation=orientation)
+
+
+def _orientation(data, path) -> tuple | None:
+    """``(up, forward)`` unit vectors from a file's top-level ``orientation`` mapping
+    (``{up: +Z, forward: -Y, subject_left: +X}``; subject_left optional, checked), or None."""
+    from faceforge.geometry.orientation import axis_name, frame_rotation, parse_axis
+
+    if not isinstance(data, dict) or data.get("orientation") is None:
+        return None
+    spec = data["orientation"]
+    if not isinstance(spec, dict) or "up" not in spec or "forward" not in spec:
+        raise LandmarkError(f"orientation: expected {{up: AXIS, forward: AXIS}}, got {spec!r}", path)
+    try:
+        up, forward = parse_axis(spec["up"]), parse_axis(spec["forward"])
+        left = frame_rotation(up, forward)[0]
+        if spec.get("subject_left") is not None and not np.array_equal(parse_axis(spec["subject_left"]), left):
+            raise ValueError(f"subject_left {spec['subject_left']} contradicts up {spec['up']} and forward "
+                             f"{spec['forward']} (a right-handed head has its left at {axis_name(left)})")
+    except ValueError as exc:
+        raise LandmarkError(f"orientation: {exc}", path) from None
+    return up, forward
 
 
 def _to_raw(entries: list, path) -> RawLandmarks:
@@ -379,19 +403,52 @@ def remap_vertices(raw: RawLandmarks, user_to_internal: np.ndarray) -> RawLandma
         raise LandmarkError(f"vertex id out of range (mesh has {len(user_to_internal)} vertices) "
                             f"for FDP {', '.join(bad)}", raw.path)
     vertex = np.where(raw.vertex >= 0, np.asarray(user_to_internal)[np.maximum(raw.vertex, 0)], -1)
-    return RawLandmarks(raw.path, raw.ids, vertex.astype(np.int64), raw.position.copy())
+    return replace(raw, vertex=vertex.astype(np.int64), position=raw.position.copy())
 
 
 def load_landmarks(path: str | Path, vertices: np.ndarray, faces: np.ndarray,
-                   required=REQUIRED_FDPS, user_to_internal: np.ndarray | None = None) -> Landmarks:
+                   required=REQUIRED_FDPS, user_to_internal: np.ndarray | None = None,
+                   rotation: np.ndarray | None = None, raw: RawLandmarks | None = None) -> Landmarks:
     """Read, snap and validate a landmark file for the mesh ``(vertices, faces)``.
 
     With ``user_to_internal`` (from :func:`faceforge.io.mesh_check.check_mesh`) the file's
     vertex ids refer to the user's mesh and ``(vertices, faces)`` is the internal one.
+    With ``rotation (3, 3)`` (:func:`faceforge.geometry.orientation.frame_rotation`) the
+    file's positions are in the user's frame and ``vertices`` already in faceforge's: the
+    positions are turned by it before they meet the mesh. ``raw``: the file already read.
     """
-    raw = read_landmarks(path)
+    raw = read_landmarks(path) if raw is None else raw
+    if rotation is not None:
+        raw = replace(raw, position=raw.position @ np.asarray(rotation, dtype=np.float64).T)
     if user_to_internal is not None:
         raw = remap_vertices(raw, user_to_internal)
     lm = snap_landmarks(raw, vertices, faces)
     check_landmarks(lm, vertices, required)
     return lm
+
+
+#: FDPs low on the face (chin, chin boss) and high on it (eye corners, pupils, inner brows),
+#: for :func:`landmark_frame`
+LOW_FDPS = ("2.1", "2.10")
+HIGH_FDPS = ("3.5", "3.6", "3.7", "3.8", "3.11", "3.12", "4.1", "4.2")
+
+
+def landmark_frame(raw: RawLandmarks, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Up and forward of the head (unit (3,), the mesh's own coordinates) from its landmarks:
+    the mirror pairs give the left, chin -> eyes the up (:func:`faceforge.geometry.orientation.
+    estimate_frame`). ``vertices``: the mesh the file's vertex ids refer to. Raises LandmarkError."""
+    from faceforge.geometry.orientation import estimate_frame
+
+    v = np.asarray(vertices, dtype=np.float64)
+    ok = (raw.vertex >= 0) & (raw.vertex < len(v))
+    pos = np.where(ok[:, None], v[np.where(ok, raw.vertex, 0)], raw.position)
+    at = {f: pos[i] for i, f in enumerate(raw.ids) if np.isfinite(pos[i]).all()}
+    pairs = [(a, b) for a, b in LEFT_RIGHT_PAIRS if a in at and b in at]
+    low, high = [at[f] for f in LOW_FDPS if f in at], [at[f] for f in HIGH_FDPS if f in at]
+    if not pairs or not low or not high:
+        raise LandmarkError("cannot tell the head's orientation from its landmarks (need a left/right pair, "
+                            f"one of {', '.join(LOW_FDPS)} and one of {', '.join(HIGH_FDPS)})", raw.path)
+    try:
+        return estimate_frame([at[a] for a, _ in pairs], [at[b] for _, b in pairs], low, high)
+    except ValueError as exc:
+        raise LandmarkError(f"cannot tell the head's orientation from its landmarks: {exc}", raw.path) from None

@@ -66,6 +66,7 @@ class BoundHead:
     fapu : faceforge.mpeg4.Fapu
     rest : (n, 3) working skin at rest; faces : (m, 3) working faces
     user_index : (n_user,) int, working vertex of each of the user's vertices
+    user_rotation : (3, 3) head space = the user's frame ``@ user_rotation.T`` (fit.npz)
     fdp_vertex : dict FDP -> working vertex index
     cranium, mandible : (vertices, faces) at rest
     """
@@ -94,6 +95,7 @@ class BoundHead:
         n_internal = int(bind["n_user"])
         u2i = fit["skin_user_to_internal"] if "skin_user_to_internal" in fit else np.arange(n_internal)
         self.user_index = np.asarray(u2i, dtype=np.int64)
+        self.user_rotation = np.asarray(fit["user_rotation"], dtype=float) if "user_rotation" in fit else np.eye(3)
         try:
             axes = JawAxes(*(np.asarray(fit[f"jaw_{k}"], dtype=float) for k in (
                 "pitch_point", "pitch_direction", "yaw_point", "yaw_direction",
@@ -162,8 +164,11 @@ class BoundHead:
         return [self.cranium, (v @ t[:3, :3].T + t[:3, 3], f)]
 
     def to_user(self, frames):
-        """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order."""
-        return frames[:, self.user_index]
+        """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order and frame."""
+        import numpy as np
+
+        out = frames[:, self.user_index]
+        return out if np.array_equal(self.user_rotation, np.eye(3)) else out @ self.user_rotation
 
 
 def _lever(point, axis_point, axis_dir) -> float:
@@ -488,6 +493,9 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
             idx = pick_frames(len(frames), int(app.config.get("animate.preview_frames")), preview_frames)
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
+        fit = load_npz(app.workspace.stage_dir("fit") / "fit.npz")
+        if "user_rotation" in fit:   # drawn upright, in head space
+            frames = frames @ fit["user_rotation"].T.astype(frames.dtype)
         contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name, focus=True)
         app.log(f"animate: wrote {preview}")
 

@@ -13,7 +13,15 @@ fit.npz (no pickle; head space, mesh units)
     ``muscle_names (q,) str``, ``muscle_vertices (sum,3)``, ``muscle_vertex_start (q+1,)``,
     ``muscle_faces (sum,3)`` (muscle-local ids), ``muscle_face_start (q+1,)``, ``muscle_thickness (q,)``;
     ``muscle_map_names (r,)``, ``muscle_map_points (sum,3)``, ``muscle_map_start (r+1,)``:
-    every point of the morphed muscle map; ``similarity (4,4)``: the initial alignment.
+    every point of the morphed muscle map; ``similarity (4,4)``: the initial alignment;
+    ``user_rotation (3,3)``: ``R`` of :func:`faceforge.geometry.orientation.frame_rotation`,
+    head space = the user's coordinates ``@ R.T`` (identity for a +Y-up head facing +Z).
+
+Head space is faceforge's frame (+Y up, face along +Z, subject's left +X). A head in
+another frame is turned into it first (``fit.orientation``: ``auto`` takes the landmark
+file's ``orientation: {up, forward}`` or, without one, the frame its landmarks span,
+snapped to the nearest axes; or ``UP,FORWARD`` such as ``+Z,-Y``); ``animate`` turns the
+frames back, so the outputs are in the user's own frame.
 muscle_map.yaml
     the muscle map in head space (same format as templates/muscle_map.yaml; every muscle
     written out, mirrors included), loadable with the fitted skull.
@@ -32,7 +40,29 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "3"
+VERSION = "4"
+
+
+def _check_orientation(value, base):
+    """``fit.orientation``: ``auto`` or ``UP,FORWARD`` (two signed axes, e.g. ``+Z,-Y``)."""
+    axes = {"+x", "-x", "+y", "-y", "+z", "-z", "x", "y", "z"}
+    words = [w.strip().lower() for w in value.split(",")] if isinstance(value, str) else []
+    if value == "auto" or (len(words) == 2 and set(words) <= axes and words[0][-1] != words[1][-1]):
+        return value
+    raise ValueError("auto, or the mesh's up and forward axes as UP,FORWARD (e.g. +Z,-Y)")
+
+
+def _register_rules() -> None:
+    from faceforge.io.config import Rule, add_rule
+
+    class Orientation(Rule):
+        def check(self, value, base):
+            return _check_orientation(value, base)
+
+    add_rule("fit.orientation", Orientation())
+
+
+_register_rules()
 
 
 def run(ctx) -> None:
@@ -189,17 +219,23 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
 
     from faceforge.anatomy.fit import FitSettings, SkinSurface, fit_head, orient_outward
     from faceforge.anatomy.fit_report import build_report
-    from faceforge.io.landmarks import load_landmarks
+    from faceforge.io.landmarks import load_landmarks, read_landmarks
     from faceforge.io.mesh import load_mesh
     from faceforge.io.mesh_check import check_mesh
 
     t = time.perf_counter()
     v, f, _ = load_mesh(mesh_path)
     checked = check_mesh(v, f, str(mesh_path))
+    raw = read_landmarks(lm_path)
+    orientation = head_orientation(fit_config.get("orientation", "auto"), raw, v)
+    if not orientation.identity:   # exact (a signed permutation): same head space bits as an upright mesh
+        checked.vertices = checked.vertices @ orientation.rotation.T
+        log(f"{mesh_path}: {orientation.describe()}")
     checked.faces = orient_outward(checked.vertices, checked.faces)   # stage files: outward winding
     for w in checked.report.warnings:
         log(f"{mesh_path}: {w}")
-    lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal)
+    lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
+                        rotation=None if orientation.identity else orientation.rotation, raw=raw)
     t_load = time.perf_counter() - t
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)
@@ -215,8 +251,88 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
     report = build_report(result, skin, lm, mesh_report, settings.front_offset_es0)
     report["settings"] = dict(settings.__dict__)
+    report["orientation"] = orientation.as_dict()
     report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
-    return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template}
+    return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template,
+                            "orientation": orientation}
+
+
+class HeadOrientation:
+    """How the user's mesh is turned into head space (see the module docstring).
+
+    rotation : (3, 3) float, head space = user coordinates ``@ rotation.T``
+    up, forward : the mesh's own axes, as names (``"+Z"``)
+    source : "config" (``fit.orientation``), "landmark file" (its ``orientation``) or
+        "landmarks" (the frame they span, snapped to the axes)
+    tilt_deg : largest angle between the landmarks' own up and forward and those used,
+        degrees (NaN when the landmarks do not span a frame)
+    """
+
+    def __init__(self, rotation, up: str, forward: str, source: str, tilt_deg: float):
+        self.rotation, self.up, self.forward, self.source, self.tilt_deg = rotation, up, forward, source, tilt_deg
+
+    @property
+    def identity(self) -> bool:
+        import numpy as np
+
+        return bool(np.array_equal(self.rotation, np.eye(3)))
+
+    def describe(self) -> str:
+        return (f"the head is {self.up} up and faces {self.forward} (from the {self.source}); it is fitted "
+                f"and simulated turned to +Y up, facing +Z, and the animation is written back in its own frame")
+
+    def as_dict(self) -> dict:
+        return {"up": self.up, "forward": self.forward, "source": self.source,
+                "landmark_tilt_deg": None if self.tilt_deg != self.tilt_deg else round(float(self.tilt_deg), 3),
+                "rotation": self.rotation.tolist()}
+
+
+#: the landmarks' own up may differ from the declared or snapped one by at most this (degrees)
+MAX_ORIENTATION_TILT_DEG = 50.0
+
+
+def head_orientation(setting: str, raw, vertices) -> HeadOrientation:
+    """The orientation of a head (``fit.orientation``; see the module docstring).
+
+    ``raw``: :class:`faceforge.io.landmarks.RawLandmarks` read from the file;
+    ``vertices (n, 3)``: the user's mesh (the file's vertex ids refer to it). Raises
+    LandmarkError when the frame cannot be told, or when the given one contradicts the
+    landmarks by more than :data:`MAX_ORIENTATION_TILT_DEG`.
+    """
+    import numpy as np
+
+    from faceforge.exceptions import LandmarkError
+    from faceforge.geometry.orientation import (angle_between, axis_name, frame_rotation, parse_axis,
+                                                snap_to_axes)
+    from faceforge.io.landmarks import landmark_frame
+
+    if setting != "auto":
+        up, forward = (parse_axis(w) for w in setting.split(","))
+        source = "config"
+    elif raw.orientation is not None:
+        (up, forward), source = raw.orientation, "landmark file"
+    else:
+        up = forward = None
+        source = "landmarks"
+    try:
+        est_up, est_forward = landmark_frame(raw, vertices)
+    except LandmarkError:
+        if up is None:
+            raise
+        return HeadOrientation(frame_rotation(up, forward), axis_name(up), axis_name(forward), source, float("nan"))
+    if up is None:
+        try:
+            up, forward = snap_to_axes(est_up, est_forward)
+        except ValueError as exc:
+            raise LandmarkError(f"{exc} (fit.orientation=UP,FORWARD, or orientation: {{up, forward}} "
+                                "in the landmark file)", raw.path) from None
+    tilt = max(angle_between(up, est_up), angle_between(forward, est_forward))
+    if tilt > MAX_ORIENTATION_TILT_DEG:
+        raise LandmarkError(f"the {source} say{'s' if source != 'landmarks' else ''} the head is "
+                            f"{axis_name(up)} up facing {axis_name(forward)}, but its landmarks rise along "
+                            f"{np.round(est_up, 2).tolist()} and face {np.round(est_forward, 2).tolist()} "
+                            f"({tilt:.0f} degrees apart)", raw.path)
+    return HeadOrientation(frame_rotation(up, forward), axis_name(up), axis_name(forward), source, tilt)
 
 
 def write_outputs(out_dir, result, report, extra) -> None:
@@ -226,8 +342,9 @@ def write_outputs(out_dir, result, report, extra) -> None:
 
     checked, lm = extra["checked"], extra["landmarks"]
     out_dir = Path(out_dir)
-    save_npz(out_dir / "fit.npz", **npz_arrays(result, checked.vertices, checked.faces, checked.user_to_internal,
-                                               lm, extra["template"].layers))
+    save_npz(out_dir / "fit.npz", user_rotation=extra["orientation"].rotation,
+             **npz_arrays(result, checked.vertices, checked.faces, checked.user_to_internal, lm,
+                          extra["template"].layers))
     save_json(out_dir / "report.json", report)
     from faceforge.anatomy.fit_muscles import fitted_muscle_map
     from faceforge.io.stagefiles import save_yaml
@@ -257,13 +374,18 @@ STAGE = register_stage(Stage(
 @click.argument("mesh", type=click.Path(dir_okay=False))
 @click.option("--landmarks", type=click.Path(dir_okay=False), default=None,
               help="FDP landmark file (.yaml, .json, .csv) [default: <mesh stem>.fdp.yaml next to the mesh].")
+@click.option("--orientation", default=None, metavar="UP,FORWARD",
+              help="The mesh's up and forward axes, e.g. +Z,-Y (sets fit.orientation) "
+                   "[default: from the landmark file or the landmarks].")
 @click.option("--force", is_flag=True, help="Rerun even if up to date.")
 @click.pass_obj
-def command(app, mesh, landmarks, force):
+def command(app, mesh, landmarks, orientation, force):
     from faceforge.io.landmarks import default_landmark_path
 
     if landmarks is None:
         landmarks = str(default_landmark_path(mesh))
+    if orientation is not None:
+        app.add_sets(f"fit.orientation={orientation}")
     app.run_stage("fit", params={"mesh": mesh, "landmarks": landmarks}, force=force)
     app.log(f"fit: wrote {app.workspace.stage_dir('fit')}")
 
