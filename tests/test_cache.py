@@ -117,7 +117,7 @@ def test_force_reruns_the_target_only(chain):
 
 def test_missing_input_is_a_stage_error(chain):
     calls, ws, _ = chain
-    with pytest.raises(StageError, match=r"stage t_a needs input src$"):
+    with pytest.raises(StageError, match=r"stage t_a needs input src; run `faceforge run t_a` first$"):
         run_chain(ws, {})
     with pytest.raises(StageError, match=r"needs input src \(/nonexistent/x.txt not found\)"):
         run_chain(ws, {"src": "/nonexistent/x.txt"})

@@ -154,6 +154,10 @@ def test_unknown_stage_and_missing_input(invoke, echo_stage, tmp_path):
     result = invoke("-w", tmp_path / "w", "run", "t_echo")
     assert result.exit_code == 2
     assert result.stderr == f"faceforge: error: {tmp_path / 'w'}: stage t_echo needs input src\n"
+    result = invoke("-w", tmp_path / "w", "run", "t_echo_down")     # the missing input is upstream's
+    assert result.exit_code == 2
+    assert result.stderr == (f"faceforge: error: {tmp_path / 'w'}: stage t_echo needs input src; "
+                             "run `faceforge run t_echo` first\n")
 
 
 def test_quiet_silences_logs_and_progress_can_be_forced(invoke, echo_stage, tmp_path):

@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterable, Mapping
 from faceforge.exceptions import StageError
 from faceforge.pipeline.cache import file_digest, read_stage_json, record_key, stale_reasons
 from faceforge.pipeline.lock import WorkdirLock
-from faceforge.pipeline.stage import STAGES, Stage, StageContext, broken_stages, stage_order
+from faceforge.pipeline.stage import COMMANDS, STAGES, Stage, StageContext, broken_stages, stage_order
 
 PARAMS_FILE = "faceforge.yaml"
 CONFIG_FILE = "config.yaml"
@@ -226,7 +226,9 @@ def run(workspace: Workspace, config, params: Mapping, targets: Iterable[str], f
         for status in statuses:
             name = status.stage.name
             if status.reasons and status.reasons[0].startswith("needs input"):
-                raise StageError(f"stage {name} {status.reasons[0]}", workspace.root)
+                hint = "" if name in targets else \
+                    f"; run `faceforge {name if name in COMMANDS else 'run ' + name}` first"
+                raise StageError(f"stage {name} {status.reasons[0]}{hint}", workspace.root)
             if not status.reasons:
                 log(f"{name}: up to date")
                 continue
