@@ -263,8 +263,23 @@ class SkinSimulation:
             raise ValueError(f"weights {self.weights.shape} must have one entry per skin vertex")
 
     def anchor_targets(self, system) -> np.ndarray:
-        """Surface points of every anchor on the system's current bodies, ``(k, 3)``."""
-        return self.binding.targets([system.surface(name) for name in self.binding.body_names])
+        """Surface points of every anchor on the system's current bodies, ``(k, 3)``: the
+        same points as ``binding.targets([system.surface(n) for n in body_names])``, in one
+        gather from the system's world mesh (its vertex ids are found once per system)."""
+        if getattr(self, "_gather_for", None) is not system:
+            self._gather = self._world_vertex_ids(system)
+            self._gather_for = system
+        v, _ = system.world()
+        return np.einsum("ij,ijk->ik", self.binding.bary, v[self._gather])
+
+    def _world_vertex_ids(self, system) -> np.ndarray:
+        """``(k, 3)`` world vertex ids of each anchor's triangle."""
+        b = self.binding
+        out = np.zeros((len(b.vertex_ids), 3), dtype=INT)
+        for i, name in enumerate(b.body_names):
+            sel = b.body == i
+            out[sel] = system.vertex_range(name).start + np.asarray(system.faces(name), INT)[b.face_ids[sel]]
+        return out
 
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""

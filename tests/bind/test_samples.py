@@ -209,3 +209,19 @@ def test_upper_lip_binds_above_lower_lip_to_the_jaw_side(bound):
     assert len(upper) and len(lower), f"{name}: no lip contours ({report['mouth']})"
     assert not np.any(status[upper] == MANDIBLE) and not np.any(status[lower] == CRANIUM)
     assert np.all(d["lip_sides"][upper] == 1) and np.all(d["lip_sides"][lower] == -1)
+
+
+def test_anchor_targets_gather_is_the_per_body_evaluation(bound):
+    """The skin's one-gather anchor targets equal, to the bit, the surface points evaluated
+    body by body (Binding.targets) on a deformed system (jaw open, muscles contracted)."""
+    name, _, _, head = bound
+    head.rig.reset()
+    pitch = _opening_pitch(head, np.radians(8.0))
+    c = {m: 0.7 for m in head.muscle_names}
+    for _ in range(5):
+        head.system.step(c, head.skull.jaw_transform(pitch, 0.0, 0.0))
+    sk = head.skin
+    per_body = sk.binding.targets([head.system.surface(n) for n in sk.binding.body_names])
+    assert np.abs(per_body - sk.binding.points).max() > 1e-3 * _diag(head.rest)   # they did move
+    assert np.array_equal(sk.anchor_targets(head.system), per_body), name
+    head.rig.reset()
