@@ -6,6 +6,8 @@
 ``x.pc2``      PC2 point cache (little endian, float32)     :mod:`faceforge.io.export_cache`
 ``x.mdd``      MDD point cache (big endian, float32)        :mod:`faceforge.io.export_cache`
 ``x.glb``      glTF binary, morph targets + weights anim.   :mod:`faceforge.io.export_gltf`
+``x.usda``     USD text, a mesh with time-sampled points    :mod:`faceforge.io.export_usd`
+``x.usdc``     USD binary (crate), the same (``usd-core``)  :mod:`faceforge.io.export_usd`
 ``x`` (none)   folder ``x/`` of ``x_0001.obj``, ...          :mod:`faceforge.io.export_obj`
 =============  ===========================================  =================================
 
@@ -53,11 +55,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import export_cache, export_gltf, export_obj  # noqa: F401  (each registers its suffixes)
+from . import export_cache, export_gltf, export_obj, export_usd  # noqa: F401  (each registers its suffixes)
 from .export_cache import read_mdd, read_pc2, write_mdd, write_pc2
 from .export_common import EXPORTERS, ExportError, polygons_from_fan, register_exporter, unused_vertices
 from .export_gltf import parse_glb, read_glb, write_glb
 from .export_obj import read_obj_sequence, write_obj_sequence
+from .export_usd import read_usd, up_axis_of, write_usda, write_usdc
+
+#: suffixes whose writers take the user's ``up_axis`` ("Y" or "Z")
+UP_AXIS_SUFFIXES = (".usda", ".usdc", ".usd")
 
 
 def valid_suffixes() -> str:
@@ -80,6 +86,14 @@ def exporter_for(path: str | Path):
         return EXPORTERS[suffix]
     except KeyError:
         raise ExportError(f"unknown output format {suffix!r}; valid: {valid_suffixes()}", path) from None
+
+
+def check_output(path: str | Path) -> None:
+    """Fail early (before any simulation) on an output the export could not write: an
+    unknown suffix, or binary USD without ``usd-core``. Raises ExportError."""
+    exporter_for(path)
+    if Path(path).suffix.lower() in (".usdc", ".usd"):
+        export_usd.require_usd_core(path)
 
 
 def blender_notes(path: str | Path, faces, n_verts: int) -> list[str]:
@@ -117,7 +131,7 @@ def blender_notes(path: str | Path, faces, n_verts: int) -> list[str]:
             "have smaller numbers in Blender than in your mesh"]
 
 
-def export_animation(path: str | Path, frames, faces, fps: float) -> Path:
+def export_animation(path: str | Path, frames, faces, fps: float, up_axis: str = "Y") -> Path:
     """Write ``frames`` with the exporter chosen by ``path``'s suffix.
 
     Parameters
@@ -130,20 +144,27 @@ def export_animation(path: str | Path, frames, faces, fps: float) -> Path:
         The input mesh's faces, 0-based.
     fps : float
         Frames per second.
+    up_axis : "Y" or "Z"
+        The up axis of the frames' coordinates, for the formats that record one (USD).
 
     Returns
     -------
     Path
         What was written.
     """
-    return exporter_for(path)(path, frames, faces, fps)
+    writer = exporter_for(path)
+    if Path(path).suffix.lower() in UP_AXIS_SUFFIXES:
+        return writer(path, frames, faces, fps, up_axis=up_axis)
+    return writer(path, frames, faces, fps)
 
 
-def export_for_mesh(path: str | Path, frames, mesh: str | Path, fps: float) -> tuple[Path, list[str]]:
+def export_for_mesh(path: str | Path, frames, mesh: str | Path, fps: float,
+                    up_axis: str = "Y") -> tuple[Path, list[str]]:
     """Write ``frames`` of the user's ``mesh`` with its own polygons (quads, n-gons kept).
 
     frames : (n_frames, n_verts, 3) float in ``mesh``'s vertex order; mesh : the input mesh
-    file (read again for its polygons). Returns (what was written, :func:`blender_notes`).
+    file (read again for its polygons); up_axis : of the mesh's frame (:func:`up_axis_of`).
+    Returns (what was written, :func:`blender_notes`).
     Raises ExportError naming ``mesh`` when its vertex count is not the animation's.
     """
     from .mesh import load_mesh
@@ -153,7 +174,7 @@ def export_for_mesh(path: str | Path, frames, mesh: str | Path, fps: float) -> t
         raise ExportError(f"has {len(vertices)} vertices but the animation {frames.shape[1]}; "
                           "rerun `faceforge fit`", mesh)
     polygons = polygons_from_fan(faces, info.face_source)
-    written = export_animation(path, frames, polygons, fps)
+    written = export_animation(path, frames, polygons, fps, up_axis)
     return written, blender_notes(path, polygons, frames.shape[1])
 
 
@@ -161,6 +182,7 @@ __all__ = [
     "EXPORTERS",
     "ExportError",
     "blender_notes",
+    "check_output",
     "export_animation",
     "export_for_mesh",
     "exporter_for",
@@ -170,10 +192,14 @@ __all__ = [
     "read_mdd",
     "read_obj_sequence",
     "read_pc2",
+    "read_usd",
     "register_exporter",
+    "up_axis_of",
     "valid_suffixes",
     "write_glb",
     "write_mdd",
     "write_obj_sequence",
     "write_pc2",
+    "write_usda",
+    "write_usdc",
 ]

@@ -177,14 +177,16 @@ def _collect(result: HeadResult, root: Path) -> None:
 
 def _export(job: HeadJob, root: Path, log: Callable[[str], None]) -> str:
     """Write the animate stage's frames to ``job.output`` with the user's polygons."""
-    from faceforge.io.export import export_for_mesh
+    from faceforge.io.export import export_for_mesh, up_axis_of
     from faceforge.io.stagefiles import load_npz
+    from faceforge.pipeline.stages.fit import user_rotation
 
     animation = root / "animate" / "animation.npz"
     if not animation.exists():
         raise StageError("no animation to export (the animate stage did not run)", root)
     d = load_npz(animation)
-    written, notes = export_for_mesh(job.output, d["frames"], job.mesh, float(d["fps"]))
+    written, notes = export_for_mesh(job.output, d["frames"], job.mesh, float(d["fps"]),
+                                     up_axis_of(user_rotation(root / "fit")))
     for note in notes:
         log(f"export: note: {note}")
     return str(written)

@@ -137,6 +137,14 @@ def test_a_turned_head_animates_as_the_unturned_one_turned(invoke, tmp_path, ref
     from faceforge.io.export_cache import read_pc2
 
     assert np.array_equal(read_pc2(tmp_path / "out.pc2")[0], got)
+    pytest.importorskip("pxr")
+    from faceforge.io.export import read_usd
+
+    r = invoke("-w", work, "--no-progress", "animate", "--expression", "joy", "--seconds", "0.4",
+               "-o", tmp_path / "out.usda")
+    assert r.exit_code == 0 and "animate: up to date" in r.stderr        # an export only
+    frames, _, _, _, usd_up = read_usd(tmp_path / "out.usda")
+    assert np.array_equal(frames, got) and usd_up == ("Z" if up == "+Z" else "Y")
 
 
 def test_an_orientation_that_contradicts_the_landmarks_is_a_one_line_error(invoke, tmp_path, template):

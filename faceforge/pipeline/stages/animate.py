@@ -12,8 +12,8 @@ report.json
     per-layer time per frame, and the physical checks (NaN, inverted triangles, skin inside
     the skull).
 
-then exports ``-o`` by suffix (:mod:`faceforge.io.export`: .pc2, .mdd, .glb, or a folder of
-OBJ files) and ``--preview sheet.png`` (a contact sheet). Exports are not cached: a new
+then exports ``-o`` by suffix (:mod:`faceforge.io.export`: .pc2, .mdd, .glb, .usda/.usdc, or a
+folder of OBJ files) and ``--preview sheet.png`` (a contact sheet). Exports are not cached: a new
 ``-o`` reuses the simulated frames.
 
 ``faceforge calibrate`` writes ``<workdir>/calibrate/``: ``fap_mapping.yaml`` (the mapping with
@@ -474,10 +474,13 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
     mesh = app.workspace.load_params().get("mesh")
     if not mesh:
         raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
-    if output:
-        from faceforge.io.export import export_for_mesh
+    from faceforge.pipeline.stages.fit import user_rotation
 
-        written, notes = export_for_mesh(output, frames, mesh, fps)
+    rotation = user_rotation(app.workspace.stage_dir("fit"))
+    if output:
+        from faceforge.io.export import export_for_mesh, up_axis_of
+
+        written, notes = export_for_mesh(output, frames, mesh, fps, up_axis_of(rotation))
         app.log(f"animate: wrote {written} ({len(frames)} frames, {frames.shape[1]} vertices, {fps:g} fps)")
         for note in notes:
             app.log(f"animate: note: {note}")
@@ -493,9 +496,7 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
             idx = pick_frames(len(frames), int(app.config.get("animate.preview_frames")), preview_frames)
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
-        fit = load_npz(app.workspace.stage_dir("fit") / "fit.npz")
-        if "user_rotation" in fit:   # drawn upright, in head space
-            frames = frames @ fit["user_rotation"].T.astype(frames.dtype)
+        frames = frames @ rotation.T.astype(frames.dtype)   # drawn upright, in head space
         contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name, focus=True)
         app.log(f"animate: wrote {preview}")
 
@@ -510,7 +511,8 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
 @click.option("--seconds", type=click.FloatRange(min=0.1), default=None,
               help="Length of --expression [default: animate.expression_seconds].")
 @click.option("-o", "--output", type=click.Path(), default=None,
-              help="Output by suffix: .pc2, .mdd (Blender Mesh Cache), .glb, or a folder (OBJ sequence).")
+              help="Output by suffix: .pc2, .mdd (Blender Mesh Cache), .glb, .usda or .usdc (USD), "
+                   "or a folder (OBJ sequence).")
 @click.option("--preview", type=click.Path(dir_okay=False), default=None, help="Contact sheet PNG.")
 @click.option("--preview-frames", default=None, help="Frames for --preview, e.g. 0,20,40 [default: evenly spaced].")
 @click.option("--force", is_flag=True, help="Resimulate even if up to date.")
@@ -520,6 +522,10 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
 
     if (fap is None) == (expression is None):
         raise StageError("give exactly one of --fap FILE or --expression NAME")
+    if output:
+        from faceforge.io.export import check_output
+
+        check_output(output)      # an output it cannot write fails before the simulation
     if expression is not None:
         seconds = seconds or float(app.config.get("animate.expression_seconds"))
         fap = _expression_file(app, expression, intensity, seconds)

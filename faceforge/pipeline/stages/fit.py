@@ -287,6 +287,17 @@ class HeadOrientation:
                 "rotation": self.rotation.tolist()}
 
 
+def user_rotation(fit_dir):
+    """``user_rotation (3, 3)`` of a fit stage folder's fit.npz (identity for fits made
+    before faceforge turned heads): head space = the user's frame ``@ R.T``."""
+    import numpy as np
+
+    from faceforge.io.stagefiles import load_npz
+
+    fit = load_npz(Path(fit_dir) / "fit.npz")
+    return np.asarray(fit["user_rotation"], dtype=float) if "user_rotation" in fit else np.eye(3)
+
+
 #: the landmarks' own up may differ from the declared or snapped one by at most this (degrees)
 MAX_ORIENTATION_TILT_DEG = 50.0
 
