@@ -31,7 +31,7 @@ HEADS = {
     "mediapipe": ROOT / "samples" / "mediapipe" / "face_model_with_iris.obj",
     "ict": ROOT / "samples" / "ict" / "ict_face_headneck_neutral.obj",
 }
-OUTPUTS = ("anim.pc2", "anim.mdd", "anim.glb", "anim_frames")
+OUTPUTS = ("anim.pc2", "anim.mdd", "anim.glb", "anim.usda", "anim.usdc", "anim_frames")
 FPS = 25.0
 
 
@@ -92,7 +92,7 @@ def test_every_format_opens_in_blender_with_the_users_vertex_order(tmp_path, hea
     assert status == 0, json.dumps(result, indent=1)
     assert [(r["format"], r["variant"]) for r in result["results"]] == [
         ("pc2", "obj-import"), ("pc2", "blender-object"), ("mdd", "obj-import"), ("mdd", "blender-object"),
-        ("glb", "gltf-import"), ("objseq", "obj-import")]
+        ("glb", "gltf-import"), ("usd", "usd-import"), ("usd", "usd-import"), ("objseq", "obj-import")]
     n_verts = len(load_mesh(HEADS[head])[0])
     for record in result["results"]:
         assert record["n_frames"] == 7

@@ -15,6 +15,8 @@ For every output it builds a fresh scene the way the README tells users to:
   Frame); and the same object with its rotation applied (a Z-up Blender object, like the one
   the OBJ was exported from) with the modifier's Forward +Z, Up -Y;
 * ``.glb``: ``bpy.ops.import_scene.gltf`` at its defaults (+Y up converted to +Z up);
+* ``.usda`` / ``.usdc``: ``bpy.ops.wm.usd_import`` at its defaults (the stage's up axis
+  converted to +Z up; the time-sampled points become a Mesh Sequence Cache modifier);
 * an OBJ-sequence folder: the frame's file imported like ``MESH.obj``;
 
 sets the scene frame rate to the animation's, goes to the Blender frame that shows
@@ -63,7 +65,8 @@ def _script_argv(argv: list[str]) -> list[str]:
 def _parse(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="blender_check.py", description=__doc__.split("\n\n")[0])
     parser.add_argument("mesh", type=Path, help="the user's mesh (.obj) that was animated")
-    parser.add_argument("outputs", type=Path, nargs="+", help=".pc2, .mdd, .glb files or OBJ-sequence folders")
+    parser.add_argument("outputs", type=Path, nargs="+",
+                        help=".pc2, .mdd, .glb, .usda, .usdc files or OBJ-sequence folders")
     parser.add_argument("--reference", type=Path, help=".npz (frames, fps) or .npy frames (n_frames, n_verts, 3)")
     parser.add_argument("--fps", type=float, help="frames per second [default: the reference's, else the output's]")
     parser.add_argument("--frames", help="faceforge frames to compare, 0-based, e.g. 0,37,75 [default: first, middle, last]")
@@ -77,13 +80,16 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 
 
 def format_of(path: Path) -> str:
-    """``pc2``, ``mdd``, ``glb`` or ``objseq`` (a folder), from the output path."""
+    """``pc2``, ``mdd``, ``glb``, ``usd`` or ``objseq`` (a folder), from the output path."""
     if path.is_dir():
         return "objseq"
     suffix = path.suffix.lower()
     if suffix in (".pc2", ".mdd", ".glb"):
         return suffix[1:]
-    raise CheckError(f"{path}: unknown output format {suffix!r}; expected .pc2, .mdd, .glb or a folder")
+    if suffix in (".usda", ".usdc", ".usd"):
+        return "usd"
+    raise CheckError(f"{path}: unknown output format {suffix!r}; expected .pc2, .mdd, .glb, .usda, .usdc "
+                     "or a folder")
 
 
 def load_reference(path: Path) -> tuple[np.ndarray, float | None]:
@@ -110,6 +116,9 @@ def read_output(path: Path, fmt: str) -> tuple[np.ndarray, float | None]:
     if fmt == "glb":
         frames, _, times = export.read_glb(path)
         return frames, (1.0 / float(times[1] - times[0]) if times.size > 1 else None)
+    if fmt == "usd":
+        frames, fps, _, _, _ = export.read_usd(path)
+        return frames, fps
     return export.read_obj_sequence(path)[0], None
 
 
@@ -171,6 +180,17 @@ def _import_glb(path: Path):
     made = [ob for ob in bpy.data.objects if ob not in before and ob.type == "MESH"]
     if len(made) != 1:
         raise CheckError(f"{path}: Blender's glTF importer made {len(made)} mesh objects, expected 1")
+    return made[0]
+
+
+def _import_usd(path: Path):
+    import bpy
+
+    before = set(bpy.data.objects)
+    bpy.ops.wm.usd_import(filepath=str(path))
+    made = [ob for ob in bpy.data.objects if ob not in before and ob.type == "MESH"]
+    if len(made) != 1:
+        raise CheckError(f"{path}: Blender's USD importer made {len(made)} mesh objects, expected 1")
     return made[0]
 
 
@@ -257,6 +277,7 @@ VARIANTS = {
     "pc2": ("obj-import", "blender-object"),
     "mdd": ("obj-import", "blender-object"),
     "glb": ("gltf-import",),
+    "usd": ("usd-import",),
     "objseq": ("obj-import",),
 }
 
@@ -296,6 +317,10 @@ def check_output(mesh: Path, output: Path, fmt: str, variant: str, expected: np.
     elif fmt == "glb":
         obj = _import_glb(output)
         settings = {"gltf_import": "defaults (+Y up converted to +Z up)"}
+    elif fmt == "usd":
+        obj = _import_usd(output)
+        settings = {"usd_import": "defaults (stage up axis converted to +Z up)",
+                    "modifiers": [m.type for m in obj.modifiers]}
     else:
         settings = {"obj_import": "defaults (forward -Z, up Y), one file per frame"}
     settings["scene_fps"] = scene.render.fps / scene.render.fps_base
@@ -328,7 +353,10 @@ def run(args: argparse.Namespace) -> dict:
         raise CheckError(f"--object-axes {args.object_axes!r}: expected two different axes like POS_Z,NEG_Y")
     results = []
     for output, fmt in zip(args.outputs, formats):
-        stored, out_fps = read_output(output, fmt)
+        if fmt == "usd" and reference is not None:   # bpy has no pxr: Blender's import is the reader
+            stored, out_fps = reference, None
+        else:
+            stored, out_fps = read_output(output, fmt)
         expected = stored if reference is None else reference
         fps = args.fps or ref_fps or out_fps
         if fps is None:

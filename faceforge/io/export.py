@@ -45,6 +45,10 @@ rate to ``fps`` (before a glTF import), Start to 0 and End to ``n_frames - 1``.
   but not for PC2: Blender 4.5 then shows sample ``frame / fps**2`` (it divides by the
   frame rate twice), i.e. the head barely moves. The PC2 header (start 0, 1 frame per
   sample) follows the format's definition; "Frame" mode ignores it.
+* ``.usda`` / ``.usdc``: File > Import > Universal Scene Description at its defaults. The
+  importer turns the stage's up axis into Z-up and the time-sampled points into a Mesh
+  Sequence Cache modifier; ``metersPerUnit = 1`` keeps one mesh unit one Blender unit (the
+  vertex data exact, like the point caches).
 * OBJ sequence: every file imports as its own object like the OBJ above; Blender has no
   built-in sequence importer, but the folder is what sequence add-ons and other tools read.
 * Vertices that no face uses are dropped by Blender's OBJ and glTF importers (faceforge

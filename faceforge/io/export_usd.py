@@ -6,7 +6,7 @@ that hint, without it. Both hold the same scene::
 
     #usda 1.0
     (defaultPrim = "faceforge", startTimeCode = 0, endTimeCode = F - 1,
-     timeCodesPerSecond = fps, framesPerSecond = fps, upAxis = "Y")
+     timeCodesPerSecond = fps, framesPerSecond = fps, upAxis = "Y", metersPerUnit = 1)
     def Xform "faceforge" (kind = "component")
         def Mesh "head"
             int[] faceVertexCounts, int[] faceVertexIndices     # the user's polygons
@@ -15,7 +15,9 @@ that hint, without it. Both hold the same scene::
 
 Time code ``k`` is faceforge frame ``k`` (time ``k / fps``), vertex ``i`` the user's vertex
 ``i``; polygons keep their corner order (USD's default ``rightHanded`` orientation is OBJ's
-counter-clockwise). Points are float32, written with 9 significant digits, so a USD reader
+counter-clockwise). ``metersPerUnit = 1``: one unit of your mesh is one scene unit, as when
+its OBJ is imported (USD's default, 0.01, would make an importer shrink a head modelled in
+any unit 100-fold). Points are float32, written with 9 significant digits, so a USD reader
 gets faceforge's float32 frames back exactly. ``up_axis``: "Y" or "Z" (USD knows no other);
 ``faceforge animate`` passes the up axis of the user's own frame (``fit.orientation``).
 Blender (File > Import > USD), Maya, Houdini and usdview read either file; Blender turns the
@@ -76,7 +78,7 @@ def write_usda(path: str | Path, frames, faces, fps: float, *, up_axis: str = "Y
     n = len(data)
     head = (f'#usda 1.0\n(\n    defaultPrim = "{ROOT_PRIM}"\n    startTimeCode = 0\n'
             f"    endTimeCode = {n - 1}\n    timeCodesPerSecond = {_fps(fps)}\n"
-            f'    framesPerSecond = {_fps(fps)}\n    upAxis = "{up_axis}"\n'
+            f'    framesPerSecond = {_fps(fps)}\n    upAxis = "{up_axis}"\n    metersPerUnit = 1\n'
             f'    doc = "faceforge animation: {n} frames, {data.shape[1]} vertices"\n)\n\n'
             f'def Xform "{ROOT_PRIM}" (\n    kind = "component"\n)\n{{\n'
             f'    def Mesh "{MESH_PRIM}"\n    {{\n'
@@ -133,6 +135,7 @@ def write_usdc(path: str | Path, frames, faces, fps: float, *, up_axis: str = "Y
         stage.SetTimeCodesPerSecond(float(fps))
         stage.SetFramesPerSecond(float(fps))
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if up_axis == "Y" else UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
         root = UsdGeom.Xform.Define(stage, f"/{ROOT_PRIM}")
         Usd.ModelAPI(root.GetPrim()).SetKind("component")
         stage.SetDefaultPrim(root.GetPrim())
