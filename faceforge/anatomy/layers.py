@@ -53,6 +53,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from faceforge.anatomy.action_line import ActionLine
+from faceforge.anatomy.layer_targets import LinearTargets
 from faceforge.anatomy.muscle import Muscle
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
@@ -88,6 +89,7 @@ class _Layer:
     vids: np.ndarray = None    # (k, 3) world vertex ids of every action-line surface point
     bary: np.ndarray = None    # (k, 3)
     pieces: list = None        # per muscle: {line key: slice into the k points}
+    linear: object = None      # LinearTargets of the layer's linear muscles (compiled)
 
     def gather(self):
         """Precompute one gather for all surface points of all lines of the layer."""
@@ -104,6 +106,9 @@ class _Layer:
         self.vids = np.concatenate(vids) if vids else np.zeros(0, INT)
         self.bary = np.concatenate(bary) if bary else np.zeros((0, 3))
         self.pieces = pieces
+        lin = [i for i, m in enumerate(self.muscles) if m.kind == "linear" and len(self.slots[i])]
+        self.linear = LinearTargets([self.muscles[i] for i in lin], [pieces[i] for i in lin],
+                                    [self.slots[i] for i in lin]) if lin else None
 
 
 class MusculoskeletalSystem:
@@ -308,8 +313,10 @@ class MusculoskeletalSystem:
     def _set_targets(self, layer: _Layer, contractions) -> None:
         # every surface point of every line of the layer in one gather
         pts = np.einsum("ij,ijk->ik", layer.bary, self._world_v[layer.vids])
+        if layer.linear is not None:   # every linear muscle in one compiled call
+            layer.control.position_targets[layer.linear.slots] = layer.linear(pts, contractions)
         for m, s, own in zip(layer.muscles, layer.slots, layer.pieces):
-            if len(s):
+            if len(s) and m.kind != "linear":          # the sphincter, in numpy
                 lp = {key: pts[sl] for key, sl in own.items()}
                 c = contractions.get(m.name, 0.0)
                 layer.control.position_targets[s] = m.targets_from_line_points(c, lp)

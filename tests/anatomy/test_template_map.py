@@ -240,3 +240,26 @@ def test_a_thousand_frames_of_random_contractions_and_jaw_poses_stay_clean(templ
             and folded:
         pytest.xfail(f"{folded}: {KNOWN_TRANSIENT_FOLDS}")
     assert folded == {}
+
+
+def test_compiled_layer_targets_equal_the_per_muscle_twin(template):
+    """LinearTargets (one numba call per layer) against Muscle.targets_from_line_points, to the
+    bit, on the real map with random contractions (out of range ones clipped) and jaw poses."""
+    skull, _, _, system = template
+    rng = np.random.default_rng(1)
+    names = list(system.muscles)
+    system.reset()
+    checked = 0
+    for _ in range(12):
+        c = dict(zip(names, rng.uniform(-0.2, 1.2, len(names)) * (rng.uniform(size=len(names)) < 0.6)))
+        system.step(c, skull.jaw_transform(rng.uniform(0.0, 0.3), rng.uniform(-0.05, 0.05)))
+        for layer in system._layers:
+            if layer.linear is None:
+                continue
+            pts = np.einsum("ij,ijk->ik", layer.bary, system.world()[0][layer.vids])
+            twin = [m.targets_from_line_points(c.get(m.name, 0.0), {k: pts[sl] for k, sl in own.items()})
+                    for m, s, own in zip(layer.muscles, layer.slots, layer.pieces) if m.kind == "linear" and len(s)]
+            assert np.array_equal(layer.linear(pts, c), np.concatenate(twin)), layer.index
+            checked += 1
+    assert checked >= 12 * 4
+    system.reset()
