@@ -78,6 +78,7 @@ class BoundHead:
         from faceforge.anatomy.animate import Rig, SkullGuard
         from faceforge.anatomy.binding import Binding
         from faceforge.anatomy.fap_mapping import JawLevers
+        from faceforge.anatomy.orientation import OrientationGuard
         from faceforge.anatomy.skin import SkinSimulation, SkinStiffness
         from faceforge.anatomy.skull import JawAxes, Skull
         from faceforge.exceptions import StageError
@@ -141,11 +142,22 @@ class BoundHead:
             reach=float(config.get("animate.skull_guard.reach")) * diag,
             keep=float(config.get("animate.skull_guard.keep")))
 
+        self.orientation = orientation = OrientationGuard(
+            self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area")))
+        rounds = int(config.get("animate.orientation_guard.rounds"))
+
         def skin_step(_bones, _muscles, dt):
             skin.step(system, dt)
-            if len(guard.vertex):
-                guard.apply(skin.layer.skin_positions(skin.state.positions),
-                            {n: system.positions(n) for n in ("cranium", "mandible")})
+            x = skin.layer.skin_positions(skin.state.positions)
+            bones = {n: system.positions(n) for n in ("cranium", "mandible")}
+            # the skull guard pushes vertices one by one along the bone's normals, which can turn
+            # a sliver over; the orientation guard moves them sideways, which can sink one below
+            # its floor: alternate until the orientation pass has nothing left to do
+            for _ in range(rounds):
+                if len(guard.vertex):
+                    guard.apply(x, bones)
+                if not orientation.apply(x):
+                    break
             return skin.simulated()
 
         def reset():
@@ -153,7 +165,8 @@ class BoundHead:
             skin.reset()
 
         self.rig = Rig(skull=skull, muscles=muscles, skin=skin_step, rest=self.rest,
-                       influence=np.asarray(bind["influence"], dtype=float), reset=reset)
+                       influence=np.asarray(bind["influence"], dtype=float), reset=reset,
+                       finish=orientation.apply)
 
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
