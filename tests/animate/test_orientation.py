@@ -117,3 +117,14 @@ def test_play_applies_the_rigs_finish_to_the_weighted_frames():
     rig.finish = guard.apply
     out = play(rig, np.zeros((1, 0)), np.zeros((1, 3)), fps=25)
     assert not inverted_faces(rest, out, faces).any()
+
+
+def test_config_turns_the_guard_off_with_zero_rounds():
+    import faceforge.pipeline.stages.animate  # noqa: F401  (adds the guard's config rules)
+    from faceforge.exceptions import ConfigError
+    from faceforge.io.config import load_config
+
+    assert load_config().get("animate.orientation_guard.rounds") >= 1
+    assert load_config(sets=["animate.orientation_guard.rounds=0"]).get("animate.orientation_guard.rounds") == 0
+    with pytest.raises(ConfigError):
+        load_config(sets=["animate.orientation_guard.min_area=1.5"])

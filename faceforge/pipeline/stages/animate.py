@@ -30,7 +30,11 @@ from pathlib import Path
 
 import click
 
+from faceforge.io.config import Integer, Number, add_rule
 from faceforge.pipeline import Stage, register_command, register_stage
+
+add_rule("animate.orientation_guard.rounds", Integer(0))           # 0 turns the guard off
+add_rule("animate.orientation_guard.min_area", Number(0.0, 0.95))
 
 #: FDPs on the lower lip (inner and outer contour), located on the lower side of a cut lip line
 LOWER_LIP_FDPS = ("2.3", "2.8", "2.9", "8.2", "8.7", "8.8")
@@ -142,9 +146,10 @@ class BoundHead:
             reach=float(config.get("animate.skull_guard.reach")) * diag,
             keep=float(config.get("animate.skull_guard.keep")))
 
-        self.orientation = orientation = OrientationGuard(
-            self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area")))
         rounds = int(config.get("animate.orientation_guard.rounds"))
+        self.orientation = orientation = OrientationGuard(
+            self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \
+            if rounds > 0 else None
 
         def skin_step(_bones, _muscles, dt):
             skin.step(system, dt)
@@ -153,10 +158,10 @@ class BoundHead:
             # the skull guard pushes vertices one by one along the bone's normals, which can turn
             # a sliver over; the orientation guard moves them sideways, which can sink one below
             # its floor: alternate until the orientation pass has nothing left to do
-            for _ in range(rounds):
+            for _ in range(max(rounds, 1)):
                 if len(guard.vertex):
                     guard.apply(x, bones)
-                if not orientation.apply(x):
+                if orientation is None or not orientation.apply(x):
                     break
             return skin.simulated()
 
@@ -166,7 +171,7 @@ class BoundHead:
 
         self.rig = Rig(skull=skull, muscles=muscles, skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
-                       finish=orientation.apply)
+                       finish=None if orientation is None else orientation.apply)
 
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
