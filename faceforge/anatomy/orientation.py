@@ -20,7 +20,8 @@ times its rest area ``A0``::
 
     C(x) = 0.5 n0 . ((x1 - x0) x (x2 - x0)) - min_area * A0 >= 0
 
-projected Gauss-Seidel with stiffness 1 and equal masses (the skin's), with the
+projected Gauss-Seidel with stiffness 1 and equal masses (the skin's; a
+violated triangle is projected a quarter above its floor, :data:`AIM`), with the
 gradients ``0.5 n0 x (x2 - x1)``, ``0.5 n0 x (x0 - x2)``, ``0.5 n0 x (x1 - x0)``
 (they lie in the plane normal to ``n0``: the pass moves vertices sideways, it
 does not lift them). Only triangles turned more than ``watch_angle`` from their
@@ -45,6 +46,11 @@ import numpy as np
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 
 __all__ = ["OrientationGuard"]
+
+#: a triangle below its floor is projected to (1 + AIM) times the floor: aiming exactly at
+#: the floor, the next push of a neighbour re-triggers it and the sweeps go on (ICT fear.fap:
+#: 3.3 million projections over the file with AIM 0, 12 thousand with 0.25, same result)
+AIM = 0.25
 
 
 @numba.njit(**NUMBA_OPTIONS)
@@ -71,10 +77,11 @@ def _watched(x, faces, normal0, floor, cos_watch, active):  # pragma: no cover -
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_signed_areas(x, tris, nref, floor, iterations):  # pragma: no cover - numba
+def _project_signed_areas(x, tris, nref, floor, aim, iterations):  # pragma: no cover - numba
     """Gauss-Seidel over the triangles ``tris (k, 3)``: signed area along ``nref (k, 3)``
-    (unit) at least ``floor (k,)``; ``x (n, 3)`` in place. Returns how many projections moved
-    a vertex."""
+    (unit) at least ``floor (k,)``; a triangle below its floor is projected (linearised) to
+    ``(1 + aim) floor``, so that the next small push of a neighbour does not bring it back
+    below. ``x (n, 3)`` in place. Returns how many projections moved a vertex."""
     moved = 0
     for _ in range(iterations):
         changed = 0
@@ -102,7 +109,7 @@ def _project_signed_areas(x, tris, nref, floor, iterations):  # pragma: no cover
                 denom += g[k, 0] * g[k, 0] + g[k, 1] * g[k, 1] + g[k, 2] * g[k, 2]
             if denom <= 1e-300:
                 continue
-            lam = -cval / denom
+            lam = -(cval - aim * floor[t]) / denom
             for k in range(3):
                 v = tris[t, k]
                 x[v, 0] += lam * g[k, 0]
@@ -140,7 +147,7 @@ class OrientationGuard:
     """
 
     def __init__(self, rest, faces, min_area: float = 0.1, watch_angle: float = 60.0,
-                 rounds: int = 4, iterations: int = 20):
+                 rounds: int = 8, iterations: int = 50):
         if not 0.0 <= min_area < 1.0:
             raise ValueError(f"min_area must be in [0, 1), got {min_area}")
         self.rest = np.array(rest, dtype=FLOAT)
@@ -182,7 +189,7 @@ class OrientationGuard:
             if not len(rows):
                 break
             done = _project_signed_areas(positions, self.faces[rows], self.normal0[rows], self.floor[rows],
-                                         self.iterations)
+                                         AIM, self.iterations)
             moved += int(done)
             if done == 0:
                 break
