@@ -72,6 +72,10 @@ class BoundHead:
     user_index : (n_user,) int, working vertex of each of the user's vertices
     fdp_vertex : dict FDP -> working vertex index
     cranium, mandible : (vertices, faces) at rest
+    guard : faceforge.anatomy.animate.SkullGuard
+    orientation : faceforge.anatomy.orientation.OrientationGuard, or None when
+        ``animate.orientation_guard.rounds`` is 0; after each skin step it alternates with
+        the skull guard, and it is the rig's ``finish`` on each weighted frame
     """
 
     def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
