@@ -8,7 +8,8 @@ drives the shallower ones and never the reverse):
 3. **skin**: the anchor particles follow their surface points on the deformed muscles
    and bones, then the skin's PBD constraints are projected (``solver.substeps`` x
    ``solver.iterations``);
-4. the **influence map** weights the skin displacement: ``rest + w (sim - rest)``.
+4. the **influence map** weights the skin displacement: ``rest + w (sim - rest)``, then the
+   rig's optional ``finish`` pass corrects the weighted frame in place.
 
 The three layer steps are callables of a :class:`Rig` so the loop is independent of
 how the layers are built (and testable with stand-ins); :func:`play` times each of
@@ -38,6 +39,10 @@ class Rig:
     rest : (n, 3) float, the skin at rest (working mesh)
     influence : (n,) float in [0, 1] or None (all ones)
     reset : callable () -> None, back to the rest state (optional)
+    finish : callable (n, 3) float64 -> None, applied in place to each weighted frame (optional;
+        e.g. :meth:`faceforge.anatomy.orientation_guard.OrientationGuard.apply`: the influence map
+        blends rest and simulation with weights that vary from vertex to vertex, which can
+        turn over a triangle the simulation kept upright)
     """
 
     skull: Callable
@@ -46,6 +51,7 @@ class Rig:
     rest: np.ndarray
     influence: np.ndarray | None = None
     reset: Callable | None = None
+    finish: Callable | None = None
 
 
 @dataclass
@@ -121,6 +127,8 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
         if not np.all(np.isfinite(skin)):
             raise FloatingPointError(f"frame {i}: the simulation produced non-finite skin positions")
         out[i] = rest + w[:, None] * (skin - rest)
+        if rig.finish is not None:
+            rig.finish(out[i])
     return out
 
 

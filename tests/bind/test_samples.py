@@ -130,10 +130,10 @@ def _lip_band(d, report):
     return band
 
 
-#: known failures of the fast jaw opening, by sample (xfail only while they fail)
-KNOWN_FLIPS = {"ict": "the lip corners' small triangles (0.1-20% of the median area) turn over while the jaw "
-                      "moves (22-42 per frame at 3 degrees) and unfold once it holds; turned over, they keep "
-                      "their rest area, which the skin's unsigned area constraint (k 0.95) accepts"}
+#: known failures of the fast jaw opening, by sample (xfail only while they fail). ICT's lip
+#: corners (22-64 slivers per frame at 3 degrees, unbound inner lip between anchors on the jaw
+#: and on the orbicularis oris) no longer turn over since anatomy.orientation_guard.OrientationGuard
+KNOWN_FLIPS: dict = {}
 
 
 def test_a_quick_jaw_opening_turns_no_skin_triangle_over(bound):

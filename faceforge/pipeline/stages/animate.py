@@ -30,7 +30,11 @@ from pathlib import Path
 
 import click
 
+from faceforge.io.config import Integer, Number, add_rule
 from faceforge.pipeline import Stage, register_command, register_stage
+
+add_rule("animate.orientation_guard.rounds", Integer(0))           # 0 turns the guard off
+add_rule("animate.orientation_guard.min_area", Number(0.0, 0.95))
 
 #: FDPs on the lower lip (inner and outer contour), located on the lower side of a cut lip line
 LOWER_LIP_FDPS = ("2.3", "2.8", "2.9", "8.2", "8.7", "8.8")
@@ -69,6 +73,10 @@ class BoundHead:
     user_rotation : (3, 3) head space = the user's frame ``@ user_rotation.T`` (fit.npz)
     fdp_vertex : dict FDP -> working vertex index
     cranium, mandible : (vertices, faces) at rest
+    guard : faceforge.anatomy.animate.SkullGuard
+    orientation : faceforge.anatomy.orientation_guard.OrientationGuard, or None when
+        ``animate.orientation_guard.rounds`` is 0; after each skin step it alternates with
+        the skull guard, and it is the rig's ``finish`` on each weighted frame
     """
 
     def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
@@ -79,6 +87,7 @@ class BoundHead:
         from faceforge.anatomy.animate import Rig, SkullGuard
         from faceforge.anatomy.binding import Binding
         from faceforge.anatomy.fap_mapping import JawLevers
+        from faceforge.anatomy.orientation_guard import OrientationGuard
         from faceforge.anatomy.skin import SkinSimulation, SkinStiffness
         from faceforge.anatomy.skull import JawAxes, Skull
         from faceforge.exceptions import StageError
@@ -143,11 +152,23 @@ class BoundHead:
             reach=float(config.get("animate.skull_guard.reach")) * diag,
             keep=float(config.get("animate.skull_guard.keep")))
 
+        rounds = int(config.get("animate.orientation_guard.rounds"))
+        self.orientation = orientation = OrientationGuard(
+            self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \
+            if rounds > 0 else None
+
         def skin_step(_bones, _muscles, dt):
             skin.step(system, dt)
-            if len(guard.vertex):
-                guard.apply(skin.layer.skin_positions(skin.state.positions),
-                            {n: system.positions(n) for n in ("cranium", "mandible")})
+            x = skin.layer.skin_positions(skin.state.positions)
+            bones = {n: system.positions(n) for n in ("cranium", "mandible")}
+            # the skull guard pushes vertices one by one along the bone's normals, which can turn
+            # a sliver over; the orientation guard moves them sideways, which can sink one below
+            # its floor: alternate until the orientation pass has nothing left to do
+            for _ in range(max(rounds, 1)):
+                if len(guard.vertex):
+                    guard.apply(x, bones)
+                if orientation is None or not orientation.apply(x):
+                    break
             return skin.simulated()
 
         def reset():
@@ -155,7 +176,8 @@ class BoundHead:
             skin.reset()
 
         self.rig = Rig(skull=skull, muscles=muscles, skin=skin_step, rest=self.rest,
-                       influence=np.asarray(bind["influence"], dtype=float), reset=reset)
+                       influence=np.asarray(bind["influence"], dtype=float), reset=reset,
+                       finish=None if orientation is None else orientation.apply)
 
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""

@@ -1,0 +1,130 @@
+"""The orientation guard (anatomy.orientation_guard): skin triangles do not turn over."""
+
+import numpy as np
+import pytest
+
+from faceforge.anatomy.animate import Rig, inverted_faces, play
+from faceforge.anatomy.orientation_guard import OrientationGuard, _project_signed_areas, _watched
+
+from .test_loop import grid
+
+
+def _twin(x, tris, nref, floor, aim, iterations):
+    """Plain-Python twin of the numba kernel (same order, same updates)."""
+    moved = 0
+    for _ in range(iterations):
+        changed = 0
+        for t, (a, b, c) in enumerate(tris):
+            n = nref[t]
+            s = 0.5 * n @ np.cross(x[b] - x[a], x[c] - x[a])
+            if s - floor[t] >= 0.0:
+                continue
+            g = [0.5 * np.cross(n, x[tris[t, (k + 2) % 3]] - x[tris[t, (k + 1) % 3]]) for k in range(3)]
+            denom = sum(gk @ gk for gk in g)
+            if denom <= 1e-300:
+                continue
+            lam = -(s - floor[t] - aim * floor[t]) / denom
+            for k in range(3):
+                x[tris[t, k]] += lam * g[k]
+            changed += 1
+        moved += changed
+        if changed == 0:
+            break
+    return moved
+
+
+def test_kernel_matches_its_python_twin():
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(30, 3))
+    tris = np.array([rng.choice(30, 3, replace=False) for _ in range(40)], dtype=np.int64)
+    n = rng.normal(size=(40, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    floor = rng.uniform(0.0, 0.3, 40)
+    a, b = x.copy(), x.copy()
+    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7)
+    kb = _twin(b, tris, n, floor, 0.25, 7)
+    assert ka == kb > 0
+    assert np.allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_watched_kernel_matches_the_numpy_test():
+    rng = np.random.default_rng(5)
+    rest, faces = grid(7)
+    guard = OrientationGuard(rest, faces, min_area=0.2)
+    for scale in (0.02, 0.1, 0.3):
+        pos = np.ascontiguousarray(rest + rng.normal(scale=scale, size=rest.shape))
+        rows = _watched(pos, guard.faces, guard.normal0, guard.floor, guard.cos_watch, guard.active)
+        assert rows.tolist() == np.flatnonzero(guard.watched(pos)).tolist()
+
+
+def test_a_folded_sheet_is_unfolded_and_the_rest_of_it_left_alone():
+    rest, faces = grid(6)
+    guard = OrientationGuard(rest, faces, min_area=0.1)
+    pos = rest.copy()
+    pos[14] += [0.5, 0.0, 0.0]                       # an inner vertex dragged across two neighbours
+    before = inverted_faces(rest, pos[None], faces)[0]
+    assert before.any()
+    moved = guard.apply(pos)
+    assert moved > 0
+    assert not inverted_faces(rest, pos[None], faces)[0].any()
+    t = pos[faces]
+    signed = 0.5 * np.einsum("ij,ij->i", np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), guard.normal0)
+    assert np.all(signed >= guard.floor * (1 - 1e-9))
+    # only the fold moves: vertices away from it keep their positions exactly
+    far = np.linalg.norm(rest - rest[14], axis=1) > 0.45
+    assert np.array_equal(pos[far], rest[far])
+
+
+def test_rest_and_moderate_rotations_are_fixed_points():
+    rest, faces = grid(5)
+    guard = OrientationGuard(rest, faces)
+    pos = rest.copy()
+    assert guard.apply(pos) == 0 and np.array_equal(pos, rest)
+    a = np.radians(50.0)                              # below the 60-degree watch angle
+    rot = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    turned = np.ascontiguousarray(rest @ rot.T + [0.3, -0.2, 0.1])
+    copy = turned.copy()
+    assert guard.apply(turned) == 0 and np.array_equal(turned, copy)
+    # a stretched (not turned) sheet is above the floor: left alone too
+    stretched = np.ascontiguousarray(rest * [2.0, 0.5, 1.0])
+    assert guard.apply(stretched.copy()) == 0
+
+
+def test_degenerate_rest_triangles_and_bad_arrays():
+    rest = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]])
+    faces = np.array([[0, 1, 2], [0, 1, 3]])         # the first has no area, no orientation
+    guard = OrientationGuard(rest, faces)
+    assert guard.active.tolist() == [False, True]
+    with pytest.raises(ValueError):
+        guard.apply(rest.astype(np.float32))
+    with pytest.raises(ValueError):
+        OrientationGuard(rest, faces, min_area=1.0)
+
+
+def test_play_applies_the_rigs_finish_to_the_weighted_frames():
+    rest, faces = grid(6)
+    guard = OrientationGuard(rest, faces)
+    flipped = rest.copy()
+    flipped[14] += [0.5, 0.0, 0.0]                    # folds the triangles around vertex 14
+
+    def skin(bones, muscles, dt):
+        return flipped
+
+    rig = Rig(skull=lambda jaw: None, muscles=lambda c, b, dt: None, skin=skin, rest=rest,
+              influence=np.ones(len(rest)))
+    raw = play(rig, np.zeros((1, 0)), np.zeros((1, 3)), fps=25)
+    assert inverted_faces(rest, raw, faces).any()
+    rig.finish = guard.apply
+    out = play(rig, np.zeros((1, 0)), np.zeros((1, 3)), fps=25)
+    assert not inverted_faces(rest, out, faces).any()
+
+
+def test_config_turns_the_guard_off_with_zero_rounds():
+    import faceforge.pipeline.stages.animate  # noqa: F401  (adds the guard's config rules)
+    from faceforge.exceptions import ConfigError
+    from faceforge.io.config import load_config
+
+    assert load_config().get("animate.orientation_guard.rounds") >= 1
+    assert load_config(sets=["animate.orientation_guard.rounds=0"]).get("animate.orientation_guard.rounds") == 0
+    with pytest.raises(ConfigError):
+        load_config(sets=["animate.orientation_guard.min_area=1.5"])
