@@ -25,12 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.pbd._kernels import QUAD, _step
+from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step
 from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
 from faceforge.pbd.constraints.distance import pbd_coefficients
-from faceforge.pbd.constraints.quad import match_quad_stretches, stretch_table
+from faceforge.pbd.constraints.quad import (
+    area_table, match_quad_stretches, match_quad_triangles, stretch_table)
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
@@ -113,8 +114,10 @@ class Solver:
         d_idx, d_rest, d_k, _ = self._arrays["distance"]
         self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass)
         self._q_stretch = np.zeros((6, m.bending_count))  # transposed: rows are vectors
+        self._q_area = np.zeros((3, m.bending_count))
         if s.colouring and s.stiffness_mode != "xpbd":
             self._fuse_quad_stretches()
+            self._fuse_quad_areas()
         b_idx, b_rest, _, _ = self._arrays["bending"]
         self._b_w = np.ascontiguousarray(m.inv_mass[b_idx].T)
         self._b_rest_t = np.ascontiguousarray(b_rest.T)
@@ -161,6 +164,46 @@ class Solver:
                                          for a in self._arrays["distance"])
         self._d_coef = np.ascontiguousarray(self._d_coef[keep])
 
+    def _fuse_quad_areas(self) -> None:
+        """Fold area constraints into the fused quads (kind ``QUAD_AREA``).
+
+        For every fused quad block directly followed by an area block, each quad takes
+        at most one of that block's triangles lying on it (:func:`match_quad_triangles`),
+        projected right after the quad's bending (a Gauss-Seidel order change within the
+        layer, like the stretch fusion); the other triangles keep their block, order and
+        colour runs.
+        """
+        blocks = self._blocks
+        a_idx = self._arrays["area"][0]
+        b_idx = self._arrays["bending"][0]
+        drop = np.zeros(len(a_idx), dtype=bool)
+        for r in range(len(blocks) - 1):
+            if blocks[r, 0] != QUAD or blocks[r + 1, 0] != AREA:
+                continue
+            (bs, be), (a_s, ae) = blocks[r, 1:], blocks[r + 1, 1:]
+            match = match_quad_triangles(a_idx[a_s:ae], b_idx[bs:be])
+            if not (match >= 0).any():
+                continue
+            _, rest, kk, _ = self._arrays["area"]
+            self._q_area[:, bs:be] = area_table(a_idx[a_s:ae], b_idx[bs:be], match,
+                                                rest[a_s:ae], kk[a_s:ae]).T
+            drop[a_s + match[match >= 0]] = True
+            blocks[r, 0] = QUAD_AREA
+        if not drop.any():
+            return
+        keep = ~drop
+        new_index = np.concatenate([[0], np.cumsum(keep)])
+        rows = []
+        for kind, start, stop in blocks:
+            if kind == AREA:
+                start, stop = new_index[start], new_index[stop]
+                if start == stop:
+                    continue
+            rows.append((kind, start, stop))
+        self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        self._arrays["area"] = tuple(np.ascontiguousarray(a[keep]) for a in self._arrays["area"])
+        self._runs["area"] = np.unique(new_index[self._runs["area"]])
+
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
 
@@ -194,7 +237,7 @@ class Solver:
               s.stiffness_mode == "xpbd", self._blocks, self._lams,
               *self._arrays["distance"], self._d_coef,
               *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
-              self._q_stretch,
+              self._q_stretch, self._q_area,
               *self._arrays["area"], self._runs["area"], self._a_w, self._buf,
               *self._volume, *k["volume"], self._vol_g,
               self._position, targets, *k["position"],
