@@ -341,6 +341,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
         hi = min(seg[q + 1], stop)
         for c0 in range(lo, hi, BATCH):
             n = min(BATCH, hi - c0)
+            any_fix = 0
             for t in range(n):  # gather
                 j = c0 + t
                 i0 = idx[j, 0]
@@ -364,6 +365,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
                     j = c0 + t
                     (q0x, q0y, q0z, q1x, q1y, q1z, q2x, q2y, q2z, q3x, q3y, q3z,
                      fix) = _quad_math(buf, t, j, inv_mass, rest_cs, k, stretch)
+                    any_fix |= 1 if fix else 0
                     side = area[2, j] != 0.0  # third vertex p2, else p3
                     d0x, d0y, d0z, d1x, d1y, d1z, d2x, d2y, d2z = _area_increments(
                         q0x, q0y, q0z, q1x, q1y, q1z, q2x if side else q3x,
@@ -386,6 +388,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
                 for t in range(n):  # branch-free math
                     (q0x, q0y, q0z, q1x, q1y, q1z, q2x, q2y, q2z, q3x, q3y, q3z,
                      fix) = _quad_math(buf, t, c0 + t, inv_mass, rest_cs, k, stretch)
+                    any_fix |= 1 if fix else 0
                     buf[_Q0X + t] = q0x
                     buf[_Q0Y + t] = q0y
                     buf[_Q0Z + t] = q0z
@@ -398,7 +401,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
                     buf[_Q3X + t] = q3x
                     buf[_Q3Y + t] = q3y
                     buf[_Q3Z + t] = q3z
-            for t in range(n):  # large bending deviations: libm atan2, then the displacement
+            for t in range(n if any_fix else 0):  # large deviations: libm atan2, displacement
                 if buf[_FIX + t] != 0.0:
                     j = c0 + t
                     step = -k[j] / buf[_DEN + t] * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
