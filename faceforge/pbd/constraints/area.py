@@ -162,10 +162,10 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
         for c0 in range(lo, hi, BATCH):
             n = min(BATCH, hi - c0)
             for t in range(n):  # gather
-                j = c0 + t
-                i0 = idx[j, 0]
-                i1 = idx[j, 1]
-                i2 = idx[j, 2]
+                j = np.uint64(c0 + t)
+                i0 = np.uint64(idx[j, 0])
+                i1 = np.uint64(idx[j, 1])
+                i2 = np.uint64(idx[j, 2])
                 buf[_P0X + t] = x[i0, 0]
                 buf[_P0Y + t] = x[i0, 1]
                 buf[_P0Z + t] = x[i0, 2]
@@ -176,7 +176,7 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
                 buf[_P2Y + t] = x[i2, 1]
                 buf[_P2Z + t] = x[i2, 2]
             for t in range(n):  # branch-free math
-                j = c0 + t
+                j = np.uint64(c0 + t)
                 p0x = buf[_P0X + t]
                 p0y = buf[_P0Y + t]
                 p0z = buf[_P0Z + t]
@@ -199,10 +199,10 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
                 buf[_Q2Y + t] = p2y + d2y
                 buf[_Q2Z + t] = p2z + d2z
             for t in range(n):  # scatter
-                j = c0 + t
-                i0 = idx[j, 0]
-                i1 = idx[j, 1]
-                i2 = idx[j, 2]
+                j = np.uint64(c0 + t)
+                i0 = np.uint64(idx[j, 0])
+                i1 = np.uint64(idx[j, 1])
+                i2 = np.uint64(idx[j, 2])
                 x[i0, 0] = buf[_Q0X + t]
                 x[i0, 1] = buf[_Q0Y + t]
                 x[i0, 2] = buf[_Q0Z + t]

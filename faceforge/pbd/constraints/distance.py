@@ -91,9 +91,10 @@ def _project_distance_pbd(x, idx, coef, start, stop):
     share for p1), with the weight shares precomputed: one division per projection
     and no inverse-mass loads (~20 % faster than ``_project_distance``).
     """
-    for j in range(start, stop):
-        i0 = idx[j, 0]
-        i1 = idx[j, 1]
+    for jj in range(start, stop):
+        j = np.uint64(jj)  # unsigned ids (non-negative): no numba wraparound selects
+        i0 = np.uint64(idx[j, 0])
+        i1 = np.uint64(idx[j, 1])
         p0x = x[i0, 0]
         p0y = x[i0, 1]
         p0z = x[i0, 2]

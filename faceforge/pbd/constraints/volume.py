@@ -80,7 +80,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     ry = 0.0
     rz = 0.0
     for q in range(nref):
-        i = ref[q]
+        i = np.uint64(ref[q])
         rx += x[i, 0]
         ry += x[i, 1]
         rz += x[i, 2]
@@ -89,9 +89,9 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     rz /= nref
     vol = 0.0
     for f in range(tris.shape[0]):
-        ia = tris[f, 0]
-        ib = tris[f, 1]
-        ic = tris[f, 2]
+        ia = np.uint64(tris[f, 0])
+        ib = np.uint64(tris[f, 1])
+        ic = np.uint64(tris[f, 2])
         ax = x[ia, 0] - rx
         ay = x[ia, 1] - ry
         az = x[ia, 2] - rz
@@ -121,7 +121,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     sz = 0.0
     denom = 0.0
     for q in range(npart):
-        i = particles[q]
+        i = np.uint64(particles[q])
         gx = g[i, 0]
         gy = g[i, 1]
         gz = g[i, 2]
@@ -135,7 +135,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     before = 0.0  # the reference particles' terms of denom, before and after the share
     after = 0.0
     for q in range(nref):
-        i = ref[q]
+        i = np.uint64(ref[q])
         gx = g[i, 0]
         gy = g[i, 1]
         gz = g[i, 2]
@@ -153,7 +153,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
         s = _multiplier(vol / 6.0 - rest, denom, k, c, lam, xpbd)
         f6 = s / 6.0
         for q in range(npart):
-            i = particles[q]
+            i = np.uint64(particles[q])
             f = f6 * w[i]
             x[i, 0] += f * g[i, 0]
             x[i, 1] += f * g[i, 1]
@@ -163,7 +163,7 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
             g[i, 2] = 0.0
     else:
         for q in range(npart):
-            i = particles[q]
+            i = np.uint64(particles[q])
             g[i, 0] = 0.0
             g[i, 1] = 0.0
             g[i, 2] = 0.0
