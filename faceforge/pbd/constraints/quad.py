@@ -158,15 +158,12 @@ def area_table(triangles: np.ndarray, quads: np.ndarray, match: np.ndarray,
     return out
 
 
-# scratch rows: gathered positions, atan2 fix-up data, bending displacement per unit
-# multiplier, projected positions
+# scratch rows: gathered positions, the atan2 fix-up flag, projected positions
 _P0X, _P0Y, _P0Z, _P1X, _P1Y, _P1Z, _P2X, _P2Y, _P2Z, _P3X, _P3Y, _P3Z = (
     r * BATCH for r in range(12))
-_FIX, _DEN, _DEV_Y, _DEV_X = (r * BATCH for r in range(12, 16))
-_D0X, _D0Y, _D0Z, _D1X, _D1Y, _D1Z, _D2X, _D2Y, _D2Z, _D3X, _D3Y, _D3Z = (
-    r * BATCH for r in range(16, 28))
+_FIX = 12 * BATCH
 _Q0X, _Q0Y, _Q0Z, _Q1X, _Q1Y, _Q1Z, _Q2X, _Q2Y, _Q2Z, _Q3X, _Q3Y, _Q3Z = (
-    r * BATCH for r in range(28, 40))
+    r * BATCH for r in range(13, 25))
 
 
 @numba.njit(inline="always", **PBD_NUMBA)
@@ -180,9 +177,12 @@ def _stretch_factor(d2, rest):
 @numba.njit(inline="always", **PBD_NUMBA)
 def _quad_math(buf, t, j, inv_mass, rest_cs, k, stretch):
     """Branch-free math of quad ``j`` gathered in lane ``t`` of ``buf``: the two
-    stretches, then the bending (Padé branch). Returns the 12 projected coordinates and
-    whether the bending needs the libm atan2 fix-up (then its step is 0 here; the
-    fix-up data is in the ``_FIX``, ``_DEN``, ``_DEV_*`` and ``_D*`` rows)."""
+    stretches, then the bending (Padé branch). Returns 28 floats: the 12 projected
+    coordinates; 1.0 if the bending needs the libm atan2 fix-up (then its step is 0
+    here; also stored in the ``_FIX`` row), else 0.0; the 12 bending displacements per
+    unit multiplier; the bending denominator and the rotated pair ``(y, x)`` whose atan2
+    is the deviation. The vectorised loop uses the first 13 (LLVM drops the rest); the
+    fix-up loop recomputes the rare lanes that need the rest."""
     p0x = buf[_P0X + t]
     p0y = buf[_P0Y + t]
     p0z = buf[_P0Z + t]
@@ -284,46 +284,33 @@ def _quad_math(buf, t, j, inv_mass, rest_cs, k, stretch):
     # 1 where s needs libm atan2 (large deviation of a non-degenerate quad)
     fix = (1.0 if good else 0.0) * (0.0 if small else 1.0)
     buf[_FIX + t] = fix
-    buf[_DEN + t] = denom
-    buf[_DEV_Y + t] = yy
-    buf[_DEV_X + t] = xx
     fa = w0 * a0 * ia
     fb = w0 * b0 * ib
-    dx = fa * ax + fb * bx
-    dy = fa * ay + fb * by
-    dz = fa * az + fb * bz
-    buf[_D0X + t] = dx
-    buf[_D0Y + t] = dy
-    buf[_D0Z + t] = dz
-    q0x = p0x + step * dx
-    q0y = p0y + step * dy
-    q0z = p0z + step * dz
+    d0x = fa * ax + fb * bx
+    d0y = fa * ay + fb * by
+    d0z = fa * az + fb * bz
+    q0x = p0x + step * d0x
+    q0y = p0y + step * d0y
+    q0z = p0z + step * d0z
     fa = w1 * a1 * ia
     fb = w1 * b1 * ib
-    dx = fa * ax + fb * bx
-    dy = fa * ay + fb * by
-    dz = fa * az + fb * bz
-    buf[_D1X + t] = dx
-    buf[_D1Y + t] = dy
-    buf[_D1Z + t] = dz
-    q1x = p1x + step * dx
-    q1y = p1y + step * dy
-    q1z = p1z + step * dz
+    d1x = fa * ax + fb * bx
+    d1y = fa * ay + fb * by
+    d1z = fa * az + fb * bz
+    q1x = p1x + step * d1x
+    q1y = p1y + step * d1y
+    q1z = p1z + step * d1z
     fa = -w2 * elen * ia
-    buf[_D2X + t] = fa * ax
-    buf[_D2Y + t] = fa * ay
-    buf[_D2Z + t] = fa * az
     q2x = p2x + step * (fa * ax)
     q2y = p2y + step * (fa * ay)
     q2z = p2z + step * (fa * az)
     fb = -w3 * elen * ib
-    buf[_D3X + t] = fb * bx
-    buf[_D3Y + t] = fb * by
-    buf[_D3Z + t] = fb * bz
     q3x = p3x + step * (fb * bx)
     q3y = p3y + step * (fb * by)
     q3z = p3z + step * (fb * bz)
-    return (q0x, q0y, q0z, q1x, q1y, q1z, q2x, q2y, q2z, q3x, q3y, q3z, fix != 0.0)
+    return (q0x, q0y, q0z, q1x, q1y, q1z, q2x, q2y, q2z, q3x, q3y, q3z, fix,
+            d0x, d0y, d0z, d1x, d1y, d1z, fa * ax, fa * ay, fa * az, fb * bx, fb * by, fb * bz,
+            denom, yy, xx)
 
 
 @numba.njit(**PBD_NUMBA)
@@ -369,8 +356,10 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
             if with_area:
                 for t in range(n):  # branch-free math
                     j = np.uint64(c0 + t)
-                    (q0x, q0y, q0z, q1x, q1y, q1z, q2x, q2y, q2z, q3x, q3y, q3z,
-                     fix) = _quad_math(buf, t, j, inv_mass, rest_cs, k, stretch)
+                    r = _quad_math(buf, t, j, inv_mass, rest_cs, k, stretch)
+                    q0x, q0y, q0z, q1x, q1y, q1z = r[0], r[1], r[2], r[3], r[4], r[5]
+                    q2x, q2y, q2z, q3x, q3y, q3z = r[6], r[7], r[8], r[9], r[10], r[11]
+                    fix = r[12] != 0.0
                     any_fix |= 1 if fix else 0
                     side = area[2, j] != 0.0  # third vertex p2, else p3
                     w2 = inv_mass[2, j]
@@ -394,27 +383,27 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
                     buf[_Q3Z + t] = q3z + (0.0 if side else d2z)
             else:
                 for t in range(n):  # branch-free math
-                    (q0x, q0y, q0z, q1x, q1y, q1z, q2x, q2y, q2z, q3x, q3y, q3z,
-                     fix) = _quad_math(buf, t, np.uint64(c0 + t), inv_mass, rest_cs, k, stretch)
-                    any_fix |= 1 if fix else 0
-                    buf[_Q0X + t] = q0x
-                    buf[_Q0Y + t] = q0y
-                    buf[_Q0Z + t] = q0z
-                    buf[_Q1X + t] = q1x
-                    buf[_Q1Y + t] = q1y
-                    buf[_Q1Z + t] = q1z
-                    buf[_Q2X + t] = q2x
-                    buf[_Q2Y + t] = q2y
-                    buf[_Q2Z + t] = q2z
-                    buf[_Q3X + t] = q3x
-                    buf[_Q3Y + t] = q3y
-                    buf[_Q3Z + t] = q3z
+                    r = _quad_math(buf, t, np.uint64(c0 + t), inv_mass, rest_cs, k, stretch)
+                    any_fix |= 1 if r[12] != 0.0 else 0
+                    buf[_Q0X + t] = r[0]
+                    buf[_Q0Y + t] = r[1]
+                    buf[_Q0Z + t] = r[2]
+                    buf[_Q1X + t] = r[3]
+                    buf[_Q1Y + t] = r[4]
+                    buf[_Q1Z + t] = r[5]
+                    buf[_Q2X + t] = r[6]
+                    buf[_Q2Y + t] = r[7]
+                    buf[_Q2Z + t] = r[8]
+                    buf[_Q3X + t] = r[9]
+                    buf[_Q3Y + t] = r[10]
+                    buf[_Q3Z + t] = r[11]
             for t in range(n if any_fix else 0):  # large deviations: libm atan2, displacement
-                if buf[_FIX + t] != 0.0:
-                    j = c0 + t
-                    step = -k[j] / buf[_DEN + t] * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
-                    for r in range(12):
-                        buf[_Q0X + r * BATCH + t] += step * buf[_D0X + r * BATCH + t]
+                if buf[_FIX + t] != 0.0:  # recompute the lane (the P rows are unchanged)
+                    j = np.uint64(c0 + t)
+                    r = _quad_math(buf, t, j, inv_mass, rest_cs, k, stretch)
+                    step = -k[j] / r[25] * math.atan2(r[26], r[27])
+                    for c in range(12):
+                        buf[_Q0X + c * BATCH + t] = r[c] + step * r[13 + c]
                     if with_area:  # the fused area constraint, after the bending
                         third = _Q2X if area[2, j] != 0.0 else _Q3X
                         w3 = inv_mass[2, j] if area[2, j] != 0.0 else inv_mass[3, j]
