@@ -99,7 +99,7 @@ class Solver:
             "area": (_own(m.area_indices), _own(m.area_rest_area)),
         }
         # runs of independent constraints for the vectorised sweeps; empty: the scalar sweep
-        self._runs = {"bending": np.zeros(0, dtype=np.int64), "area": np.zeros(0, dtype=np.int64)}
+        self._runs = {kind: np.zeros(0, dtype=np.int64) for kind in ("distance", "bending", "area")}
         for code, kind in ((DISTANCE, "distance"), (BENDING, "bending"), (AREA, "area")):
             idx, rest = self._arrays[kind]
             kk, c = self._k[kind]
@@ -122,6 +122,7 @@ class Solver:
         self._b_w = np.ascontiguousarray(m.inv_mass[b_idx].T)
         self._b_rest_t = np.ascontiguousarray(b_rest.T)
         self._a_w = np.ascontiguousarray(m.inv_mass[self._arrays["area"][0]].T)
+        self._d_coef_t = np.ascontiguousarray(self._d_coef.T)
         self._buf = np.zeros(BATCH_ROWS * BATCH)
 
     def _fuse_quad_stretches(self) -> None:
@@ -162,6 +163,7 @@ class Solver:
         self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
         self._arrays["distance"] = tuple(np.ascontiguousarray(a[keep])
                                          for a in self._arrays["distance"])
+        self._runs["distance"] = np.unique(new_index[self._runs["distance"]])
         self._d_coef = np.ascontiguousarray(self._d_coef[keep])
 
     def _fuse_quad_areas(self) -> None:
@@ -235,7 +237,7 @@ class Solver:
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", self._blocks, self._lams,
-              *self._arrays["distance"], self._d_coef,
+              *self._arrays["distance"], self._d_coef, self._runs["distance"], self._d_coef_t,
               *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
               self._q_stretch, self._q_area,
               *self._arrays["area"], self._runs["area"], self._a_w, self._buf,
