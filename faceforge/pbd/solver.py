@@ -14,8 +14,10 @@ each builder block are visited colour by colour (blocks keep their order, so dee
 layers are still projected first), and in the PBD modes bending and area run in
 vectorised batches of independent constraints (see :mod:`faceforge.pbd.colouring`);
 there, a bending block right after a distance block also takes over the stretches on
-its quads' edges and cross pairs, projected quad by quad in one fused pass (see
-:mod:`faceforge.pbd.constraints.quad`).
+its quads' edges and cross pairs, projected quad by quad in one fused pass, and an area
+block right after that takes each quad's matched triangle into the same pass (see
+:mod:`faceforge.pbd.constraints.quad`). Distance blocks run in vectorised batches of
+their colour runs too.
 
 Note: numba's on-disk cache does not track the constraint modules that ``_step``
 inlines; after editing one, delete ``faceforge/pbd/**/__pycache__/*.nb[ic]``.

@@ -91,7 +91,7 @@ def match_quad_triangles(triangles: np.ndarray, quads: np.ndarray) -> np.ndarray
 
     triangles : (t, 3) int; quads : (m, 4) int. A quad holds the triangles
     ``{p0, p1, p2}`` and ``{p0, p1, p3}``. Returns ``(m,) int64`` indices into
-    ``triangles`` (-1: none): a maximum matching (greedy in quad order, then augmenting
+    ``triangles`` (-1: none): a maximum matching (greedy in triangle order, then augmenting
     paths in triangle order), deterministic. Duplicated triangles are matched at most
     once each.
     """
