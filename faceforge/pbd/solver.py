@@ -34,6 +34,7 @@ from faceforge.pbd.constraints.bending import rest_cos_sin
 from faceforge.pbd.constraints.distance import pbd_coefficients
 from faceforge.pbd.constraints.quad import (
     area_table, match_quad_stretches, match_quad_triangles, stretch_table)
+from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
@@ -81,9 +82,14 @@ class Solver:
             m.volume_particles[m.volume_particle_start[j]:][
                 m.volume_reference[m.volume_reference_start[j]:m.volume_reference_start[j + 1]]]
             for j in range(m.volume_count)]) if m.volume_count else np.zeros(0, dtype=np.int64)
+        ts = m.volume_triangle_start  # the kernel takes each body's triangles paired
+        rows = [pair_triangles(m.volume_triangles[ts[j]:ts[j + 1]])
+                for j in range(m.volume_count)]
+        row_start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
         self._volume = tuple(_own(a) for a in (
-            m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
-            m.volume_triangles, m.volume_reference_start, ref_global, m.volume_rest_volume))
+            m.volume_particle_start, m.volume_particles, row_start,
+            np.concatenate(rows) if rows else np.zeros((0, 4), dtype=np.int64),
+            m.volume_reference_start, ref_global, m.volume_rest_volume))
         self._position = _own(m.position_indices)
         self._attachment = tuple(_own(a) for a in (
             m.attachment_indices, m.attachment_triangles, m.attachment_bary))

@@ -168,16 +168,35 @@ def test_volume_matches_twin(mesh, open_surface):
     got = solve_volume(x, w, f, v0, 0.7)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
     # the solver's kernel leaves its gradient scratch all zero (it relies on that)
-    from faceforge.pbd.constraints.volume import _project_volume, localize
+    from faceforge.pbd.constraints.volume import _project_volume, localize, pair_triangles
     particles, _, local_ref = localize(f)
+    rows = pair_triangles(f)
+    assert (rows[:, 3] >= 0).any() and (rows[:, 3] < 0).any()  # pairs and singles
     g = np.zeros_like(x)
     again = x.copy()
     one = np.ones(1)
-    _project_volume(again, w, np.array([0, len(particles)]), particles, np.array([0, len(f)]),
-                    f, np.array([0, len(local_ref)]), particles[local_ref], np.array([v0]),
+    _project_volume(again, w, np.array([0, len(particles)]), particles, np.array([0, len(rows)]),
+                    rows, np.array([0, len(local_ref)]), particles[local_ref], np.array([v0]),
                     one * 0.7, one * 0.0, one * 0.0, g, False, 0, 1)
     np.testing.assert_array_equal(again, got)
     assert not g.any()
+
+
+def test_pair_triangles_keeps_every_triangle_once_with_its_orientation():
+    from faceforge.pbd.constraints.volume import pair_triangles
+    v, f = sphere(2)
+    f = np.concatenate([f[:-7], f[-7:-5, ::-1], [[0, 1, 1]]])  # two flipped, a degenerate
+    rows = pair_triangles(f)
+    got = []
+    for a, b, c, d in rows.tolist():
+        got.append((a, b, c))
+        if d >= 0:
+            got.append((b, a, d))
+    canon = {tuple(np.roll(t, -int(np.argmin(t)))) for t in f.tolist()}
+    assert len(got) == len(f) and {tuple(np.roll(t, -int(np.argmin(t)))) for t in got} == canon
+    assert (rows[:, 3] >= 0).sum() > 0.45 * len(f)  # most triangles found a partner
+    singles = rows[rows[:, 3] < 0]
+    assert [0, 1, 1, -1] in singles.tolist()
 
 
 def test_position_and_attachment_match_twins(mesh):
