@@ -42,8 +42,9 @@ def _project(x, w, blocks, iterations, xpbd,
     ``a_w (3, m)`` their per-constraint inverse masses and ``b_rest_t (2, m)`` the rest
     cosines and sines. ``d_coef (m, 3)``: the PBD distance data (see
     ``distance.pbd_coefficients``); ``q_stretch (6, m_bending)``: the stretches fused into
-    the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``); ``q_area (3, m_bending)``:
-    the area constraints fused into the quads of ``QUAD_AREA`` blocks (``quad.area_table``).
+    the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``); ``q_area
+    (3, m_bending)``: the area constraints fused into the quads of ``QUAD_AREA`` blocks
+    (transposed ``quad.area_table``).
     """
     for _ in range(iterations):
         for b in range(blocks.shape[0]):
@@ -147,7 +148,8 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
             lams[:] = 0.0
         _project(x_out, w, blocks, iterations, xpbd,
                  d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t,
-                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch, q_area,
+                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
+                 q_area,
                  a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, buf,
                  v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                  lams[o3:o4], v_g,

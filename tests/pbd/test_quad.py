@@ -144,7 +144,8 @@ def test_fused_sweep_with_areas_is_stretch_stretch_bending_area_per_quad(scale):
     got = x0.copy()
     _project_quads_batched(
         got, q, np.ascontiguousarray(w[q].T), np.ascontiguousarray(rest_cos_sin(rest_b).T), k_b,
-        np.ascontiguousarray(stretch_table(pairs, q, match, pbd_coefficients(pairs, rest_d, k_d, w)).T),
+        np.ascontiguousarray(
+            stretch_table(pairs, q, match, pbd_coefficients(pairs, rest_d, k_d, w)).T),
         np.ascontiguousarray(area_table(tris, q, tri_of, rest_a, k_a).T), True, runs,
         np.zeros(BATCH * BATCH_ROWS), 0, len(q))
     want = x0.copy()
