@@ -73,6 +73,13 @@ class Solver:
         self.model = model
         self.settings = settings or SolverSettings()
         m, s = model, self.settings
+        for name in ("kinematic_indices", "distance_indices", "bending_indices", "area_indices",
+                     "volume_triangles", "volume_particles", "position_indices",
+                     "attachment_indices", "attachment_triangles"):
+            ids = getattr(m, name)  # the kernels read ids unsigned, without bounds checks
+            if ids.size and (ids.min() < 0 or ids.max() >= m.particle_count):
+                raise ValueError(f"model.{name} holds particle ids outside "
+                                 f"[0, {m.particle_count})")
         # every array handed to the compiled step is a private writable copy, so that all
         # models share one compiled signature (read-only arrays would type differently)
         self._w = _own(m.inv_mass)

@@ -190,6 +190,8 @@ def solve_distance(positions, inv_mass, indices, rest_length, stiffness) -> np.n
     """One PBD Gauss-Seidel sweep over all distance constraints; returns new ``(n, 3)`` positions."""
     x = np.array(positions, dtype=np.float64, order="C")
     idx = np.ascontiguousarray(indices, dtype=np.int64).reshape(-1, 2)
+    if idx.size and (idx.min() < 0 or idx.max() >= len(x)):  # the kernel reads ids unsigned
+        raise ValueError(f"particle ids outside [0, {len(x)})")
     m = len(idx)
     k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,))
     _project_distance_pbd(x, idx, pbd_coefficients(idx, rest_length, k, inv_mass), 0, m)

@@ -247,6 +247,8 @@ def solve_volume(positions, inv_mass, triangles, rest_volume, stiffness) -> np.n
     """One PBD projection of one body's volume constraint; returns new ``(n, 3)`` positions."""
     x = np.array(positions, dtype=np.float64, order="C")
     tris = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if tris.size and (tris.min() < 0 or tris.max() >= len(x)):  # the kernel reads ids unsigned
+        raise ValueError(f"particle ids outside [0, {len(x)})")
     particles, _, ref = localize(tris)
     rows = pair_triangles(tris)
     one = np.ones(1, dtype=np.float64)
