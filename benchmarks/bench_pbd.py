@@ -3,8 +3,8 @@
 Measures, on one core:
 
 1. ns per constraint-iteration for each kind (one Gauss-Seidel sweep, timed in the
-   compiled step on a Mesh_D-sized skin), and for the skin's stretch + bending blocks
-   together (fused per quad when coloured);
+   compiled step on a Mesh_D-sized skin), and for the skin's stretch + bending (+ area)
+   blocks together (fused per quad when coloured);
 2. ms per frame for synthetic sphere-like skins of the sizes of the paper's Table I
    with the §8 skin constraint set (stretch on every edge and across each adjacent
    triangle pair, dihedral bending per pair, area per triangle, one volume, one anchor
