@@ -3,8 +3,8 @@
 Measures, on one core:
 
 1. ns per constraint-iteration for each kind (one Gauss-Seidel sweep, timed in the
-   compiled step on a Mesh_D-sized skin), and for the skin's stretch + bending blocks
-   together (fused per quad when coloured);
+   compiled step on a Mesh_D-sized skin), and for the skin's stretch + bending (+ area)
+   blocks together (fused per quad when coloured);
 2. ms per frame for synthetic sphere-like skins of the sizes of the paper's Table I
    with the §8 skin constraint set (stretch on every edge and across each adjacent
    triangle pair, dihedral bending per pair, area per triangle, one volume, one anchor
@@ -178,6 +178,10 @@ def bench_kinds(repeat):
         # the skin's stretch block then bending block: fused per quad when coloured
         "stretch+bending": lambda b: (b.add_distance(e, 0.15), b.add_distance(q[:, 2:], 0.15),
                                       b.add_bending(q, 0.95)),
+        # ... then the area block: coloured, each quad also projects one triangle's area
+        "stretch+bending+area": lambda b: (b.add_distance(e, 0.15),
+                                           b.add_distance(q[:, 2:], 0.15),
+                                           b.add_bending(q, 0.95), b.add_area(f, 0.95)),
     }
     iters = 10
     base = ModelBuilder()
@@ -211,6 +215,8 @@ def bench_kinds(repeat):
             "distance": "PBD sweep with precomputed weight shares",
             "stretch+bending": "per constraint; coloured: fused per quad (2 stretches + "
                                "bending), vectorised",
+            "stretch+bending+area": "per constraint; coloured: fused per quad (2 stretches "
+                                    "+ bending + the area of one of its triangles)",
         }.get(kind, "")
         rows.append(row)
     return rows
@@ -317,7 +323,8 @@ def _touch(x, idx, eps, runs):
 def bench_floor(repeat):
     """The memory-traffic floor of a Mesh_D frame: 10 sweeps that only load and store the
     particles of every projection of the coloured, fused skin solver (anchors, leftover
-    stretches, quads, triangles, the volume's triangles and particles), in its order."""
+    stretches, quads (with their fused stretches and areas), leftover triangles, the
+    volume's triangles and particles), in its order."""
     v, f = sphere_skin(4904, 9541)
     model = skin_model(v, f)
     solver = Solver(model, SolverSettings(iterations=10, colouring=True))

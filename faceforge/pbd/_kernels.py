@@ -14,31 +14,37 @@ from faceforge.pbd.constraints._common import PBD_NUMBA
 from faceforge.pbd.constraints.area import _project_area, _project_area_batched
 from faceforge.pbd.constraints.attachment import _project_attachment
 from faceforge.pbd.constraints.bending import _project_bending, _project_bending_batched
-from faceforge.pbd.constraints.distance import _project_distance, _project_distance_pbd
+from faceforge.pbd.constraints.distance import (
+    _project_distance, _project_distance_batched, _project_distance_pbd)
 from faceforge.pbd.constraints.position import _project_position
 from faceforge.pbd.constraints.quad import _project_quads_batched
 from faceforge.pbd.constraints.volume import _project_volume
 
-#: solver-only block kind: a bending block fused with its quads' stretches (PBD, coloured)
+#: solver-only block kinds: a bending block fused with its quads' stretches (PBD, coloured),
+#: and such a block that also projects one area constraint per quad
 QUAD = 6
+QUAD_AREA = 7
 
 
 @numba.njit(**PBD_NUMBA)
 def _project(x, w, blocks, iterations, xpbd,
-             d_idx, d_rest, d_k, d_c, d_lam, d_coef,
-             b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch,
+             d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t,
+             b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
              a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, buf,
              v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
              p_idx, p_target, p_k, p_c, p_lam,
              t_idx, t_tri, t_bary, t_k, t_c, t_lam):
     """``iterations`` Gauss-Seidel sweeps over ``blocks (nb, 3)`` rows (kind, start, stop).
 
-    ``b_runs`` / ``a_runs`` (runs of independent bending / area constraints, empty unless
-    colouring) select the vectorised sweeps; ``buf`` is their scratch, ``b_w (4, m)`` /
+    ``d_runs`` / ``b_runs`` / ``a_runs`` (runs of independent distance / bending / area
+    constraints, empty unless colouring in a PBD mode) select the vectorised sweeps
+    (``d_coef_t (3, m)``: ``d_coef`` transposed); ``buf`` is their scratch, ``b_w (4, m)`` /
     ``a_w (3, m)`` their per-constraint inverse masses and ``b_rest_t (2, m)`` the rest
     cosines and sines. ``d_coef (m, 3)``: the PBD distance data (see
     ``distance.pbd_coefficients``); ``q_stretch (6, m_bending)``: the stretches fused into
-    the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``).
+    the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``); ``q_area
+    (3, m_bending)``: the area constraints fused into the quads of ``QUAD_AREA`` blocks
+    (transposed ``quad.area_table``).
     """
     for _ in range(iterations):
         for b in range(blocks.shape[0]):
@@ -48,6 +54,8 @@ def _project(x, w, blocks, iterations, xpbd,
             if kind == 0:
                 if xpbd:
                     _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, True, start, stop)
+                elif d_runs.shape[0] > 1:  # coloured, PBD modes: vectorised batches
+                    _project_distance_batched(x, d_idx, d_coef_t, d_runs, buf, start, stop)
                 else:
                     _project_distance_pbd(x, d_idx, d_coef, start, stop)
             elif kind == 1:
@@ -67,9 +75,9 @@ def _project(x, w, blocks, iterations, xpbd,
                 _project_position(x, w, p_idx, p_target, p_k, p_c, p_lam, xpbd, start, stop)
             elif kind == 5:
                 _project_attachment(x, w, t_idx, t_tri, t_bary, t_k, t_c, t_lam, xpbd, start, stop)
-            else:  # QUAD: bending fused with its quads' stretches
-                _project_quads_batched(x, b_idx, b_w, b_rest_t, b_k, q_stretch, b_runs, buf,
-                                       start, stop)
+            else:  # QUAD (bending fused with its quads' stretches), QUAD_AREA (and areas)
+                _project_quads_batched(x, b_idx, b_w, b_rest_t, b_k, q_stretch, q_area,
+                                       kind == 7, b_runs, buf, start, stop)
 
 
 @numba.njit(**PBD_NUMBA)
@@ -102,8 +110,8 @@ def _velocities(x, v, prev, inv_h):
 @numba.njit(**PBD_NUMBA)
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
           substeps, iterations, xpbd, blocks, lams,
-          d_idx, d_rest, d_k, d_c, d_coef,
-          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch,
+          d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t,
+          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch, q_area,
           a_idx, a_rest, a_k, a_c, a_runs, a_w, buf,
           v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
@@ -136,10 +144,12 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
                     x_out[i, d] = kin_target[q, d]
                 else:
                     x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
-        lams[:] = 0.0
+        if xpbd:  # the PBD modes never read the multipliers
+            lams[:] = 0.0
         _project(x_out, w, blocks, iterations, xpbd,
-                 d_idx, d_rest, d_k, d_c, lams[:o1], d_coef,
+                 d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t,
                  b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
+                 q_area,
                  a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, buf,
                  v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                  lams[o3:o4], v_g,

@@ -14,8 +14,10 @@ each builder block are visited colour by colour (blocks keep their order, so dee
 layers are still projected first), and in the PBD modes bending and area run in
 vectorised batches of independent constraints (see :mod:`faceforge.pbd.colouring`);
 there, a bending block right after a distance block also takes over the stretches on
-its quads' edges and cross pairs, projected quad by quad in one fused pass (see
-:mod:`faceforge.pbd.constraints.quad`).
+its quads' edges and cross pairs, projected quad by quad in one fused pass, and an area
+block right after that takes each quad's matched triangle into the same pass (see
+:mod:`faceforge.pbd.constraints.quad`). Distance blocks run in vectorised batches of
+their colour runs too.
 
 Note: numba's on-disk cache does not track the constraint modules that ``_step``
 inlines; after editing one, delete ``faceforge/pbd/**/__pycache__/*.nb[ic]``.
@@ -25,12 +27,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.pbd._kernels import QUAD, _step
+from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step
 from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
 from faceforge.pbd.constraints.distance import pbd_coefficients
-from faceforge.pbd.constraints.quad import match_quad_stretches, stretch_table
+from faceforge.pbd.constraints.quad import (
+    area_table, match_quad_stretches, match_quad_triangles, stretch_table)
+from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
 
@@ -69,6 +73,13 @@ class Solver:
         self.model = model
         self.settings = settings or SolverSettings()
         m, s = model, self.settings
+        for name in ("kinematic_indices", "distance_indices", "bending_indices", "area_indices",
+                     "volume_triangles", "volume_particles", "position_indices",
+                     "attachment_indices", "attachment_triangles"):
+            ids = getattr(m, name)  # the kernels read ids unsigned, without bounds checks
+            if ids.size and (ids.min() < 0 or ids.max() >= m.particle_count):
+                raise ValueError(f"model.{name} holds particle ids outside "
+                                 f"[0, {m.particle_count})")
         # every array handed to the compiled step is a private writable copy, so that all
         # models share one compiled signature (read-only arrays would type differently)
         self._w = _own(m.inv_mass)
@@ -78,9 +89,14 @@ class Solver:
             m.volume_particles[m.volume_particle_start[j]:][
                 m.volume_reference[m.volume_reference_start[j]:m.volume_reference_start[j + 1]]]
             for j in range(m.volume_count)]) if m.volume_count else np.zeros(0, dtype=np.int64)
+        ts = m.volume_triangle_start  # the kernel takes each body's triangles paired
+        rows = [pair_triangles(m.volume_triangles[ts[j]:ts[j + 1]])
+                for j in range(m.volume_count)]
+        row_start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
         self._volume = tuple(_own(a) for a in (
-            m.volume_particle_start, m.volume_particles, m.volume_triangle_start,
-            m.volume_triangles, m.volume_reference_start, ref_global, m.volume_rest_volume))
+            m.volume_particle_start, m.volume_particles, row_start,
+            np.concatenate(rows) if rows else np.zeros((0, 4), dtype=np.int64),
+            m.volume_reference_start, ref_global, m.volume_rest_volume))
         self._position = _own(m.position_indices)
         self._attachment = tuple(_own(a) for a in (
             m.attachment_indices, m.attachment_triangles, m.attachment_bary))
@@ -98,7 +114,7 @@ class Solver:
             "area": (_own(m.area_indices), _own(m.area_rest_area)),
         }
         # runs of independent constraints for the vectorised sweeps; empty: the scalar sweep
-        self._runs = {"bending": np.zeros(0, dtype=np.int64), "area": np.zeros(0, dtype=np.int64)}
+        self._runs = {kind: np.zeros(0, dtype=np.int64) for kind in ("distance", "bending", "area")}
         for code, kind in ((DISTANCE, "distance"), (BENDING, "bending"), (AREA, "area")):
             idx, rest = self._arrays[kind]
             kk, c = self._k[kind]
@@ -113,12 +129,15 @@ class Solver:
         d_idx, d_rest, d_k, _ = self._arrays["distance"]
         self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass)
         self._q_stretch = np.zeros((6, m.bending_count))  # transposed: rows are vectors
+        self._q_area = np.zeros((3, m.bending_count))
         if s.colouring and s.stiffness_mode != "xpbd":
             self._fuse_quad_stretches()
+            self._fuse_quad_areas()
         b_idx, b_rest, _, _ = self._arrays["bending"]
         self._b_w = np.ascontiguousarray(m.inv_mass[b_idx].T)
         self._b_rest_t = np.ascontiguousarray(b_rest.T)
         self._a_w = np.ascontiguousarray(m.inv_mass[self._arrays["area"][0]].T)
+        self._d_coef_t = np.ascontiguousarray(self._d_coef.T)
         self._buf = np.zeros(BATCH_ROWS * BATCH)
 
     def _fuse_quad_stretches(self) -> None:
@@ -159,7 +178,48 @@ class Solver:
         self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
         self._arrays["distance"] = tuple(np.ascontiguousarray(a[keep])
                                          for a in self._arrays["distance"])
+        self._runs["distance"] = np.unique(new_index[self._runs["distance"]])
         self._d_coef = np.ascontiguousarray(self._d_coef[keep])
+
+    def _fuse_quad_areas(self) -> None:
+        """Fold area constraints into the fused quads (kind ``QUAD_AREA``).
+
+        For every fused quad block directly followed by an area block, each quad takes
+        at most one of that block's triangles lying on it (:func:`match_quad_triangles`),
+        projected right after the quad's bending (a Gauss-Seidel order change within the
+        layer, like the stretch fusion); the other triangles keep their block, order and
+        colour runs.
+        """
+        blocks = self._blocks
+        a_idx = self._arrays["area"][0]
+        b_idx = self._arrays["bending"][0]
+        drop = np.zeros(len(a_idx), dtype=bool)
+        for r in range(len(blocks) - 1):
+            if blocks[r, 0] != QUAD or blocks[r + 1, 0] != AREA:
+                continue
+            (bs, be), (a_s, ae) = blocks[r, 1:], blocks[r + 1, 1:]
+            match = match_quad_triangles(a_idx[a_s:ae], b_idx[bs:be])
+            if not (match >= 0).any():
+                continue
+            _, rest, kk, _ = self._arrays["area"]
+            self._q_area[:, bs:be] = area_table(a_idx[a_s:ae], b_idx[bs:be], match,
+                                                rest[a_s:ae], kk[a_s:ae]).T
+            drop[a_s + match[match >= 0]] = True
+            blocks[r, 0] = QUAD_AREA
+        if not drop.any():
+            return
+        keep = ~drop
+        new_index = np.concatenate([[0], np.cumsum(keep)])
+        rows = []
+        for kind, start, stop in blocks:
+            if kind == AREA:
+                start, stop = new_index[start], new_index[stop]
+                if start == stop:
+                    continue
+            rows.append((kind, start, stop))
+        self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        self._arrays["area"] = tuple(np.ascontiguousarray(a[keep]) for a in self._arrays["area"])
+        self._runs["area"] = np.unique(new_index[self._runs["area"]])
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
@@ -192,9 +252,9 @@ class Solver:
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", self._blocks, self._lams,
-              *self._arrays["distance"], self._d_coef,
+              *self._arrays["distance"], self._d_coef, self._runs["distance"], self._d_coef_t,
               *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
-              self._q_stretch,
+              self._q_stretch, self._q_area,
               *self._arrays["area"], self._runs["area"], self._a_w, self._buf,
               *self._volume, *k["volume"], self._vol_g,
               self._position, targets, *k["position"],

@@ -106,3 +106,18 @@ def test_effective_stiffness_modes():
     kx, cx = effective_stiffness(k, SolverSettings(stiffness_mode="xpbd"))
     np.testing.assert_array_equal(kx, [0.0, 1.0, 1.0, 1.0])
     np.testing.assert_allclose(cx, [0.0, 4.0, 0.05 / 0.95, 0.0])
+
+
+def test_solver_rejects_a_model_with_ids_out_of_range():
+    import dataclasses
+
+    from faceforge.pbd.constraints import solve_distance
+    b = ModelBuilder()
+    b.add_particles(np.eye(3), 1.0)
+    b.add_distance([[0, 1]], 0.5)
+    model = b.finalize()
+    bad = dataclasses.replace(model, distance_indices=np.array([[0, -1]]))
+    with pytest.raises(ValueError, match="distance_indices"):
+        Solver(bad)
+    with pytest.raises(ValueError, match="outside"):
+        solve_distance(np.eye(3), np.ones(3), [[0, 3]], [1.0], 0.5)

@@ -11,7 +11,7 @@ from faceforge.pbd.constraints import (
 from faceforge.pbd.constraints.area import _project_area
 from faceforge.pbd.constraints.bending import _project_bending, dihedral_angle, rest_cos_sin
 from faceforge.pbd.constraints.distance import (
-    _project_distance, _project_distance_pbd, pbd_coefficients)
+    _project_distance, _project_distance_batched, _project_distance_pbd, pbd_coefficients)
 from faceforge.pbd.constraints.volume import reference_vertices
 from tests.pbd import twins
 from tests.pbd.meshes import adjacent_quads, edges, sphere
@@ -64,6 +64,33 @@ def test_pbd_distance_sweep_matches_twin_and_the_general_kernel(mesh):
     general = x.copy()
     _project_distance(general, w, e, r, k, np.zeros(m), np.zeros(m), False, 0, m)
     np.testing.assert_allclose(got, general, rtol=1e-13, atol=1e-14)
+
+
+def test_batched_distance_sweep_matches_twin_and_the_sequential_sweep():
+    """The vectorised PBD sweep over runs of independent constraints (coloured solver)."""
+    from faceforge.pbd.colouring import colour_order
+    from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
+    v, f = sphere(3)
+    rng = np.random.default_rng(5)
+    x = v + rng.normal(scale=0.02, size=v.shape)
+    w = rng.uniform(0.0, 2.0, len(v))
+    w[::7] = 0.0
+    e = np.concatenate([edges(f), [[3, 3]]])  # and a coincident pair
+    w[e[5]] = 0.0  # one constraint with both ends kinematic
+    order, runs = colour_order(e, len(v), np.array([[0, 200], [200, len(e)]]))
+    e = e[order]
+    r = init_distance(v, e) * 1.05
+    k = rng.uniform(0.1, 1.0, len(e))
+    coef = pbd_coefficients(e, r, k, w)
+    got = x.copy()
+    _project_distance_batched(got, e, np.ascontiguousarray(coef.T), runs,
+                              np.zeros(BATCH * BATCH_ROWS), 0, len(e))
+    sequential = x.copy()
+    _project_distance_pbd(sequential, e, coef, 0, len(e))
+    want, _ = twins.distance(x, w, e, r, k)
+    assert np.abs(got - x).max() > 1e-3
+    np.testing.assert_array_equal(got, sequential)  # the same math, lane by lane
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
 
 
 @pytest.mark.parametrize("xpbd", [False, True])
@@ -141,16 +168,35 @@ def test_volume_matches_twin(mesh, open_surface):
     got = solve_volume(x, w, f, v0, 0.7)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
     # the solver's kernel leaves its gradient scratch all zero (it relies on that)
-    from faceforge.pbd.constraints.volume import _project_volume, localize
+    from faceforge.pbd.constraints.volume import _project_volume, localize, pair_triangles
     particles, _, local_ref = localize(f)
+    rows = pair_triangles(f)
+    assert (rows[:, 3] >= 0).any() and (rows[:, 3] < 0).any()  # pairs and singles
     g = np.zeros_like(x)
     again = x.copy()
     one = np.ones(1)
-    _project_volume(again, w, np.array([0, len(particles)]), particles, np.array([0, len(f)]),
-                    f, np.array([0, len(local_ref)]), particles[local_ref], np.array([v0]),
+    _project_volume(again, w, np.array([0, len(particles)]), particles, np.array([0, len(rows)]),
+                    rows, np.array([0, len(local_ref)]), particles[local_ref], np.array([v0]),
                     one * 0.7, one * 0.0, one * 0.0, g, False, 0, 1)
     np.testing.assert_array_equal(again, got)
     assert not g.any()
+
+
+def test_pair_triangles_keeps_every_triangle_once_with_its_orientation():
+    from faceforge.pbd.constraints.volume import pair_triangles
+    v, f = sphere(2)
+    f = np.concatenate([f[:-7], f[-7:-5, ::-1], [[0, 1, 1]]])  # two flipped, a degenerate
+    rows = pair_triangles(f)
+    got = []
+    for a, b, c, d in rows.tolist():
+        got.append((a, b, c))
+        if d >= 0:
+            got.append((b, a, d))
+    canon = {tuple(np.roll(t, -int(np.argmin(t)))) for t in f.tolist()}
+    assert len(got) == len(f) and {tuple(np.roll(t, -int(np.argmin(t)))) for t in got} == canon
+    assert (rows[:, 3] >= 0).sum() > 0.45 * len(f)  # most triangles found a partner
+    singles = rows[rows[:, 3] < 0]
+    assert [0, 1, 1, -1] in singles.tolist()
 
 
 def test_position_and_attachment_match_twins(mesh):

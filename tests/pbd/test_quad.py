@@ -10,8 +10,10 @@ from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import init_bending, rest_cos_sin
 from faceforge.pbd.constraints.distance import init_distance, pbd_coefficients
+from faceforge.pbd.constraints.area import init_area
 from faceforge.pbd.constraints.quad import (
-    _project_quads_batched, match_quad_stretches, stretch_table)
+    _project_quads_batched, area_table, match_quad_stretches, match_quad_triangles,
+    stretch_table)
 from tests.pbd import twins
 from tests.pbd.meshes import adjacent_quads, edges, skin_builder, sphere
 
@@ -54,7 +56,8 @@ def test_fused_sweep_is_stretch_stretch_bending_per_quad(scale):
     got = x0.copy()
     _project_quads_batched(got, q, np.ascontiguousarray(w[q].T),
                            np.ascontiguousarray(rest_cos_sin(rest_b).T), k_b,
-                           np.ascontiguousarray(stretch_table(pairs, q, match, coef).T), runs,
+                           np.ascontiguousarray(stretch_table(pairs, q, match, coef).T),
+                           np.zeros((3, len(q))), False, runs,
                            np.zeros(BATCH * BATCH_ROWS), 0, len(q))
     want = x0.copy()
     for j in range(len(q)):  # the plain-Python twins, quad by quad
@@ -73,9 +76,12 @@ def test_coloured_solver_fuses_skin_stretches_and_keeps_the_others():
     model = b.finalize()
     fused = Solver(model, SolverSettings(colouring=True))
     kinds = fused._blocks[:, 0].tolist()
-    assert 6 in kinds and 1 not in kinds  # the bending block became a fused block
+    # the bending block became a fused block with the areas (all triangles of a sphere
+    # find a quad, so the area block is gone)
+    assert 7 in kinds and 1 not in kinds and 2 not in kinds
     # only the anchors stay distance constraints (every edge is interior on a sphere)
     assert len(fused._arrays["distance"][0]) == len(v)
+    assert len(fused._arrays["area"][0]) == 0
     assert Solver(model, SolverSettings(colouring=True, stiffness_mode="xpbd"))._blocks[:, 0] \
         .tolist() == model.blocks[:, 0].tolist()
     assert Solver(model, SolverSettings())._blocks[:, 0].tolist() == model.blocks[:, 0].tolist()
@@ -94,3 +100,62 @@ def test_coloured_solver_fuses_skin_stretches_and_keeps_the_others():
     initial = np.abs(start.positions - model.rest_positions).max()
     assert error[False] < 0.1 * initial
     assert error[True] < 1.5 * error[False]
+
+
+def test_match_quad_triangles_gives_each_triangle_to_one_quad_holding_it():
+    v, f = sphere(2)
+    q = adjacent_quads(f)
+    tris = np.concatenate([f, f[:3]])  # three duplicates: no quad left for some of them
+    match = match_quad_triangles(tris[:, ::-1], q)  # orientation does not matter
+    hit = match[match >= 0]
+    assert len(np.unique(hit)) == len(hit)  # a triangle to one quad at most
+    assert set(range(len(f))) <= set(hit.tolist())  # the augmenting paths place all
+    for j in np.flatnonzero(match >= 0):
+        held = {frozenset(q[j, [0, 1, 2]]), frozenset(q[j, [0, 1, 3]])}
+        assert frozenset(tris[match[j]]) in held
+    table = area_table(tris, q, match, np.arange(len(tris)) + 1.0, np.full(len(tris), 0.5))
+    for j in np.flatnonzero(match >= 0)[:20]:
+        third = q[j, 2] if table[j, 2] else q[j, 3]
+        assert third in tris[match[j]] and table[j, 0] == match[j] + 1.0
+    assert (table[match < 0, :2] == 0.0).all()
+
+
+@pytest.mark.parametrize("scale", [0.002, 0.2])  # small: Padé branch; large: atan2 fix-up
+def test_fused_sweep_with_areas_is_stretch_stretch_bending_area_per_quad(scale):
+    v, f = sphere(3)
+    q = adjacent_quads(f)
+    order, runs = colour_order(q, len(v), np.array([[0, len(q)]]))
+    q = q[order]
+    rng = np.random.default_rng(9)
+    x0 = v + rng.normal(scale=scale, size=v.shape)
+    w = rng.uniform(0.0, 2.0, len(v))
+    w[::11] = 0.0
+    pairs = np.concatenate([q[:, [1, 0]], q[:, 2:]])
+    rest_d = init_distance(v, pairs) * 0.97
+    k_d = rng.uniform(0.1, 1.0, len(pairs))
+    match = match_quad_stretches(pairs, q)
+    rest_b = init_bending(v, q)
+    k_b = rng.uniform(0.1, 1.0, len(q))
+    tris = f[rng.permutation(len(f))]
+    rest_a = init_area(v, tris) * 1.1
+    k_a = rng.uniform(0.1, 1.0, len(tris))
+    tri_of = match_quad_triangles(tris, q)
+    assert (tri_of >= 0).sum() == len(f)
+    got = x0.copy()
+    _project_quads_batched(
+        got, q, np.ascontiguousarray(w[q].T), np.ascontiguousarray(rest_cos_sin(rest_b).T), k_b,
+        np.ascontiguousarray(
+            stretch_table(pairs, q, match, pbd_coefficients(pairs, rest_d, k_d, w)).T),
+        np.ascontiguousarray(area_table(tris, q, tri_of, rest_a, k_a).T), True, runs,
+        np.zeros(BATCH * BATCH_ROWS), 0, len(q))
+    want = x0.copy()
+    for j in range(len(q)):  # the plain-Python twins, quad by quad
+        for hit in match[j]:
+            want, _ = twins.distance(want, w, pairs[hit:hit + 1], rest_d[hit:hit + 1],
+                                     k_d[hit:hit + 1])
+        want, _ = twins.bending(want, w, q[j:j + 1], rest_b[j:j + 1], k_b[j:j + 1])
+        t = tri_of[j]
+        if t >= 0:
+            want, _ = twins.area(want, w, tris[t:t + 1], rest_a[t:t + 1], k_a[t:t + 1])
+    assert np.abs(got - x0).max() > 1e-4
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)

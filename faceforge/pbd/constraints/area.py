@@ -99,6 +99,46 @@ def _project_area(x, w, idx, rest, k, c, lam, xpbd, start, stop):
             _solve_area(x, w, idx[j, 0], idx[j, 1], idx[j, 2], rest[j], k[j], 0.0, 0.0, False)
 
 
+@numba.njit(inline="always", **PBD_NUMBA)
+def _area_increments(p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z, w0, w1, w2, rest, k):
+    """Branch-free PBD projection of one triangle: the nine position increments
+    ``(dp0, dp1, dp2)`` (length units), all 0 when degenerate or immovable.
+
+    The math of :func:`_solve_area` with one division: ``dp_i = s w_i (n x e_i) / (2 |n|)``,
+    ``s = -k C / D`` (``e_i`` the edge opposite ``p_i``, ``D`` from the edge lengths).
+    Shared by the batched area sweep and the fused quad sweep.
+    """
+    ux = p1x - p0x
+    uy = p1y - p0y
+    uz = p1z - p0z
+    vx = p2x - p0x
+    vy = p2y - p0y
+    vz = p2z - p0z
+    nx = uy * vz - uz * vy
+    ny = uz * vx - ux * vz
+    nz = ux * vy - uy * vx
+    n2 = nx * nx + ny * ny + nz * nz
+    ox = vx - ux
+    oy = vy - uy
+    oz = vz - uz
+    uu = ux * ux + uy * uy + uz * uz
+    vv = vx * vx + vy * vy + vz * vz
+    scale = uu + vv
+    ok = (n2 > DEGENERATE * scale * scale) & (n2 > 0.0)
+    nlen = math.sqrt(n2 if ok else 1.0)
+    # sum_i w_i |grad_i|^2 from the edge lengths (see the module docstring)
+    denom = 0.25 * (w0 * (ox * ox + oy * oy + oz * oz) + w1 * vv + w2 * uu)
+    good = ok & (denom > 0.0)
+    h = -k * (0.5 * nlen - rest) * 0.5 / (nlen * (denom if good else 1.0))
+    h = h if good else 0.0
+    f0 = h * w0
+    f1 = -h * w1
+    f2 = h * w2
+    return (f0 * (ny * oz - nz * oy), f0 * (nz * ox - nx * oz), f0 * (nx * oy - ny * ox),
+            f1 * (ny * vz - nz * vy), f1 * (nz * vx - nx * vz), f1 * (nx * vy - ny * vx),
+            f2 * (ny * uz - nz * uy), f2 * (nz * ux - nx * uz), f2 * (nx * uy - ny * ux))
+
+
 # offsets of the scratch rows of the batched sweep (see bending._project_bending_batched):
 # the gathered positions, then the projected ones
 _P0X, _P0Y, _P0Z, _P1X, _P1Y, _P1Z, _P2X, _P2Y, _P2Z = (r * BATCH for r in range(9))
@@ -122,10 +162,10 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
         for c0 in range(lo, hi, BATCH):
             n = min(BATCH, hi - c0)
             for t in range(n):  # gather
-                j = c0 + t
-                i0 = idx[j, 0]
-                i1 = idx[j, 1]
-                i2 = idx[j, 2]
+                j = np.uint64(c0 + t)
+                i0 = np.uint64(idx[j, 0])
+                i1 = np.uint64(idx[j, 1])
+                i2 = np.uint64(idx[j, 2])
                 buf[_P0X + t] = x[i0, 0]
                 buf[_P0Y + t] = x[i0, 1]
                 buf[_P0Z + t] = x[i0, 2]
@@ -136,7 +176,7 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
                 buf[_P2Y + t] = x[i2, 1]
                 buf[_P2Z + t] = x[i2, 2]
             for t in range(n):  # branch-free math
-                j = c0 + t
+                j = np.uint64(c0 + t)
                 p0x = buf[_P0X + t]
                 p0y = buf[_P0Y + t]
                 p0z = buf[_P0Z + t]
@@ -146,50 +186,23 @@ def _project_area_batched(x, idx, inv_mass, rest, k, runs, buf, start, stop):
                 p2x = buf[_P2X + t]
                 p2y = buf[_P2Y + t]
                 p2z = buf[_P2Z + t]
-                ux = p1x - p0x
-                uy = p1y - p0y
-                uz = p1z - p0z
-                vx = p2x - p0x
-                vy = p2y - p0y
-                vz = p2z - p0z
-                w0 = inv_mass[0, j]
-                w1 = inv_mass[1, j]
-                w2 = inv_mass[2, j]
-                nx = uy * vz - uz * vy
-                ny = uz * vx - ux * vz
-                nz = ux * vy - uy * vx
-                n2 = nx * nx + ny * ny + nz * nz
-                ox = vx - ux
-                oy = vy - uy
-                oz = vz - uz
-                uu = ux * ux + uy * uy + uz * uz
-                vv = vx * vx + vy * vy + vz * vz
-                scale = uu + vv
-                ok = (n2 > DEGENERATE * scale * scale) & (n2 > 0.0)
-                nlen = math.sqrt(n2 if ok else 1.0)
-                # sum_i w_i |grad_i|^2 from the edge lengths (see the module docstring)
-                denom = 0.25 * (w0 * (ox * ox + oy * oy + oz * oz) + w1 * vv + w2 * uu)
-                good = ok & (denom > 0.0)
-                # dp_i = s w_i (n x e_i) / (2 |n|), s = -k C / denom: one division
-                h = -k[j] * (0.5 * nlen - rest[j]) * 0.5 / (nlen * (denom if good else 1.0))
-                h = h if good else 0.0
-                f = h * w0
-                buf[_Q0X + t] = p0x + f * (ny * oz - nz * oy)
-                buf[_Q0Y + t] = p0y + f * (nz * ox - nx * oz)
-                buf[_Q0Z + t] = p0z + f * (nx * oy - ny * ox)
-                f = -h * w1
-                buf[_Q1X + t] = p1x + f * (ny * vz - nz * vy)
-                buf[_Q1Y + t] = p1y + f * (nz * vx - nx * vz)
-                buf[_Q1Z + t] = p1z + f * (nx * vy - ny * vx)
-                f = h * w2
-                buf[_Q2X + t] = p2x + f * (ny * uz - nz * uy)
-                buf[_Q2Y + t] = p2y + f * (nz * ux - nx * uz)
-                buf[_Q2Z + t] = p2z + f * (nx * uy - ny * ux)
+                d0x, d0y, d0z, d1x, d1y, d1z, d2x, d2y, d2z = _area_increments(
+                    p0x, p0y, p0z, p1x, p1y, p1z, p2x, p2y, p2z,
+                    inv_mass[0, j], inv_mass[1, j], inv_mass[2, j], rest[j], k[j])
+                buf[_Q0X + t] = p0x + d0x
+                buf[_Q0Y + t] = p0y + d0y
+                buf[_Q0Z + t] = p0z + d0z
+                buf[_Q1X + t] = p1x + d1x
+                buf[_Q1Y + t] = p1y + d1y
+                buf[_Q1Z + t] = p1z + d1z
+                buf[_Q2X + t] = p2x + d2x
+                buf[_Q2Y + t] = p2y + d2y
+                buf[_Q2Z + t] = p2z + d2z
             for t in range(n):  # scatter
-                j = c0 + t
-                i0 = idx[j, 0]
-                i1 = idx[j, 1]
-                i2 = idx[j, 2]
+                j = np.uint64(c0 + t)
+                i0 = np.uint64(idx[j, 0])
+                i1 = np.uint64(idx[j, 1])
+                i2 = np.uint64(idx[j, 2])
                 x[i0, 0] = buf[_Q0X + t]
                 x[i0, 1] = buf[_Q0Y + t]
                 x[i0, 2] = buf[_Q0Z + t]

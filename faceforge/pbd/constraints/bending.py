@@ -209,11 +209,11 @@ def _project_bending_batched(x, idx, inv_mass, rest_cs, k, seg, buf, start, stop
         for c0 in range(lo, hi, BATCH):
             n = min(BATCH, hi - c0)
             for t in range(n):  # gather
-                j = c0 + t
-                i0 = idx[j, 0]
-                i1 = idx[j, 1]
-                i2 = idx[j, 2]
-                i3 = idx[j, 3]
+                j = np.uint64(c0 + t)
+                i0 = np.uint64(idx[j, 0])
+                i1 = np.uint64(idx[j, 1])
+                i2 = np.uint64(idx[j, 2])
+                i3 = np.uint64(idx[j, 3])
                 p0x = x[i0, 0]
                 p0y = x[i0, 1]
                 p0z = x[i0, 2]
@@ -230,7 +230,7 @@ def _project_bending_batched(x, idx, inv_mass, rest_cs, k, seg, buf, start, stop
                 buf[_V_Y + t] = x[i3, 1] - p1y
                 buf[_V_Z + t] = x[i3, 2] - p1z
             for t in range(n):  # branch-free math of _solve_bending
-                j = c0 + t
+                j = np.uint64(c0 + t)
                 ex = buf[_E_X + t]
                 ey = buf[_E_Y + t]
                 ez = buf[_E_Z + t]
@@ -308,15 +308,15 @@ def _project_bending_batched(x, idx, inv_mass, rest_cs, k, seg, buf, start, stop
                 buf[_D3Y + t] = fb * by
                 buf[_D3Z + t] = fb * bz
             for t in range(n):  # scatter dp_i = s w_i grad_i C
-                j = c0 + t
+                j = np.uint64(c0 + t)
                 s = buf[_STEP + t]
                 gain = buf[_GAIN + t]
                 if gain != 0.0:  # large deviation: libm atan2
                     s = gain * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
-                i0 = idx[j, 0]
-                i1 = idx[j, 1]
-                i2 = idx[j, 2]
-                i3 = idx[j, 3]
+                i0 = np.uint64(idx[j, 0])
+                i1 = np.uint64(idx[j, 1])
+                i2 = np.uint64(idx[j, 2])
+                i3 = np.uint64(idx[j, 3])
                 x[i0, 0] += s * buf[_D0X + t]
                 x[i0, 1] += s * buf[_D0Y + t]
                 x[i0, 2] += s * buf[_D0Z + t]
