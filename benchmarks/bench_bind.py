@@ -46,6 +46,24 @@ def fitted(mesh: Path, work: Path) -> dict:
     return head_from_fit_arrays(load_npz(work / "fit" / "fit.npz"))
 
 
+def cli_bind(mesh: Path, work: Path, repeats: int = 3) -> dict:
+    """``faceforge fit MESH`` once, then ``faceforge bind --force`` in a new process each time,
+    wall seconds: what a user waits
+    for, cold (no in-process cache of the bodies' ray casters and projectors, which the
+    in-process repeats of :func:`run_case` reuse), with loading fit.npz, the report and
+    influence.png. min and median over ``repeats``."""
+    import subprocess
+
+    cmd = [sys.executable, "-m", "faceforge.cli", "-q", "-w", str(work)]
+    subprocess.run([*cmd, "fit", str(mesh)], check=True, cwd=ROOT)
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        subprocess.run([*cmd, "bind", "--force"], check=True, cwd=ROOT)
+        times.append(time.perf_counter() - t0)
+    return {"min": min(times), "median": float(np.median(times))}
+
+
 def run_case(name, v, f, head, repeats=3):
     """Time bind_head + skin layer assembly of skin ``(v, f)`` against the fitted ``head``."""
     from faceforge.pbd import ModelBuilder
@@ -115,6 +133,7 @@ def main():
         run_case("makehuman", mh["vertices"], mh["faces"], mh, repeats=1)  # warm-up
         case = run_case("makehuman", mh["vertices"], mh["faces"], mh)
         case["target_s"] = 5.0
+        case["cli_s"] = cli_bind(SAMPLES / "makehuman" / "mh_head_default.obj", tmp / "cli")
         out["cases"].append(case)
         ict = heads["ict"]
         v2, f2 = trimesh.remesh.subdivide(ict["vertices"], ict["faces"])

@@ -561,12 +561,14 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.max_ray_distance``: longest ray as a fraction of the skin's
         bounding-box diagonal.
 
-    Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): inner lip skin whose rays miss
-    gets no closest-point anchor and stays unbound, carried by its ray-bound neighbours.
-    Its closest bone point lies across the oral vestibule (1.4 cm on ICT): it tied the
-    inner upper lip to the maxilla beside skin bound to the orbicularis oris and the
-    inner lower lip to the mandible, and the lip corners' small triangles between them
-    turned over whenever the jaw moved. The outer lips, which face the front, keep it.
+    Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): like all the face's front skin,
+    inner lip skin whose rays miss gets a closest-point anchor, across the oral vestibule
+    (1.4 cm on ICT): the upper lip on the maxilla, the lower on the mandible
+    (``lip_sides``), so every front vertex is bound. The lip corners' small triangles
+    between those and the orbicularis oris used to turn over while the jaw moved, which is
+    why this band was once left unbound; the skin's orientation guard
+    (:mod:`faceforge.anatomy.orientation_guard`) now keeps them upright. The band is still
+    a region of the report.
 
     Returns
     -------
@@ -600,7 +602,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     band_width = lip_band_width(pts)
     lips = lip_band(cut, band_width)
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
-                        depth_rank=rank, side_of=side_of, fallback=front & ~lips)
+                        depth_rank=rank, side_of=side_of, fallback=front)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None
