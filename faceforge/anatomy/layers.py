@@ -54,7 +54,7 @@ import numpy as np
 
 from faceforge.anatomy.action_line import ActionLine
 from faceforge.anatomy.layer_targets import LinearTargets
-from faceforge.anatomy.muscle import Muscle
+from faceforge.anatomy.muscle import Muscle, add_muscles_to_builder
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
 from faceforge.geometry.surface_points import SurfacePoints
@@ -181,11 +181,7 @@ class MusculoskeletalSystem:
         for index in sorted(set(layer_of.values())):
             group = [_to_world(m, fstart, fcount) for m in muscles if m.layer == index]
             b = ModelBuilder()
-            firsts, slots = [], []
-            for m in group:
-                first, s = m.add_to_builder(b)
-                firsts.append(first)
-                slots.append(s)
+            firsts, slots = add_muscles_to_builder(b, group)
             model = b.finalize()
             layers.append(_Layer(index, group, firsts, slots, model, Solver(model, settings),
                                  model.state(), model.control()))

@@ -402,6 +402,36 @@ class Muscle:
         return first, slots
 
 
+def add_muscles_to_builder(builder, muscles) -> tuple[list[int], list[np.ndarray]]:
+    """Add muscles that share no particle (one layer) to a ``pbd.ModelBuilder`` kind by kind.
+
+    Each muscle's own constraints keep the order of :meth:`Muscle.add_to_builder`
+    (distance kinds, bending, volume, position), and as no constraint reaches from one
+    muscle into another, projecting them kind by kind over all the muscles is the same
+    Gauss-Seidel sweep per muscle; the builder then makes four blocks in all instead of four
+    per muscle, so the coloured solver's batches fill up. Returns ``(firsts, slots)`` per
+    muscle, as :meth:`Muscle.add_to_builder` would.
+    """
+    firsts = [builder.add_particles(m.rest_positions, 1.0) for m in muscles]
+    for kind in STIFFNESS_KEYS:
+        if kind == "bend":
+            continue
+        for m, first in zip(muscles, firsts):
+            if kind in m.constraints:
+                builder.add_distance(m.constraints[kind] + first, m.stiffness[kind])
+    for m, first in zip(muscles, firsts):
+        if "bend" in m.constraints:
+            builder.add_bending(m.constraints["bend"] + first, m.stiffness["bend"])
+    for m, first in zip(muscles, firsts):
+        if m.stiffness["volume"] > 0:
+            builder.add_volume(m.faces + first, m.stiffness["volume"])
+    slots = []
+    for m, first in zip(muscles, firsts):
+        slots.append(builder.add_position(m.bound + first, m.stiffness["position"])
+                     if m.stiffness["position"] > 0 else np.zeros(0, INT))
+    return firsts, slots
+
+
 def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw) -> Muscle:
     v, f = check_mesh(vertices, faces)
     material = kw.pop("material_sampling", False)
