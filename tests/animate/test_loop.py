@@ -235,3 +235,42 @@ def test_contact_sheet_focus_zooms_on_what_moves(tmp_path):
     # zoomed in, the sheet's triangles cover more of the panel (fewer background pixels)
     bg = lambda img: np.mean(np.all(img[..., :3] > 0.99, axis=-1))   # noqa: E731
     assert bg(zoom) < bg(whole)
+
+
+def _skull_guard_twin(guard, positions, bodies_now):
+    """Plain numpy twin of the compiled SkullGuard.apply (the algorithm as first written)."""
+    s = np.empty((len(guard.vertex), 3))
+    nrm = np.empty((len(guard.vertex), 3))
+    for b, name in enumerate(guard.names):
+        sel = guard.body == b
+        if not sel.any():
+            continue
+        tri = np.asarray(bodies_now[name], dtype=float)[guard.faces[b][guard.face[sel]]]
+        s[sel] = np.einsum("ij,ijk->ik", guard.bary[sel], tri)
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        nrm[sel] = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    p = positions[guard.vertex]
+    depth = np.einsum("ij,ij->i", p - s, nrm)
+    low = depth < guard.floor
+    positions[guard.vertex[low]] = p[low] + (guard.floor[low] - depth[low])[:, None] * nrm[low]
+    return int(np.count_nonzero(low))
+
+
+def test_compiled_skull_guard_matches_its_twin_on_two_moving_bones():
+    from faceforge.anatomy.animate import SkullGuard
+
+    bv, bf = box()
+    rng = np.random.default_rng(5)
+    # skin points near a cube (the cranium) and near a second, offset cube (the mandible)
+    rest = np.vstack([rng.uniform(-0.7, 0.7, (300, 3)), rng.uniform(-0.7, 0.7, (300, 3)) + [0.0, -2.0, 0.0]])
+    bodies = {"cranium": (bv, bf), "mandible": (bv + [0.0, -2.0, 0.0], bf)}
+    guard = SkullGuard(rest, bodies, reach=0.3, keep=0.5)
+    assert set(guard.body.tolist()) == {0, 1} and len(guard.vertex) > 100
+    for step in range(3):
+        now = {"cranium": bv + rng.normal(scale=0.02, size=bv.shape),
+               "mandible": bv + [0.0, -2.0, 0.05 * step] + rng.normal(scale=0.02, size=bv.shape)}
+        pulled = rest + rng.normal(scale=0.1, size=rest.shape)
+        a, b = pulled.copy(), pulled.copy()
+        moved = guard.apply(a, now)
+        assert moved == _skull_guard_twin(guard, b, now) and moved > 0
+        assert np.allclose(a, b, rtol=0.0, atol=1e-12)
