@@ -115,8 +115,12 @@ def main():
     t0 = time.perf_counter()
     cranium, mandible, muscles = template_scene() if use_template else scene()
     build_s = time.perf_counter() - t0
+    from faceforge.io.config import load_config
+    from faceforge.pbd import SolverSettings
+
+    settings = SolverSettings.from_config(load_config().get("solver"))   # what animate runs
     t0 = time.perf_counter()
-    system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles)
+    system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
     assemble_s = time.perf_counter() - t0
     v, f = system.world()
     n_muscle_faces = sum(len(m.faces) for m in muscles)
@@ -153,11 +157,13 @@ def main():
                      "cpu_best_ms": 1e3 * cpu["best"]})
     print_table([size], title="scene (paper: 4,297 vertices, 8,352 faces, 4,919 constraints)")
     print_table(rows, ["what", "best_ms", "median_ms", "cpu_best_ms"],
-                title="per frame, 10 iterations (paper: 6 ms, C++, one core)")
+                title=f"per frame, {settings.iterations} iterations, colouring {settings.colouring} "
+                      "(paper: 6 ms, C++, one core)")
     print(f"build muscles {build_s:.2f} s, assemble {assemble_s:.2f} s")
     print(f"muscles with sheet faces turned over at rest: {folded or 'none'}")
     out = write_results("muscles_template" if use_template else "muscles",
                         {"scene": size, "rows": rows, "build_s": build_s, "assemble_s": assemble_s,
+                         "solver": {"iterations": settings.iterations, "colouring": settings.colouring},
                          "folded_at_rest": folded,
                          "paper": {"vertices": 4297, "faces": 8352, "constraints": 4919, "ms": 6}})
     print(f"-> {out}")
