@@ -172,26 +172,28 @@ def _import_obj(path: Path, split: bool = True):
     return made[0]
 
 
-def _import_glb(path: Path):
+def _import_one(path: Path, importer, what: str):
+    """Run a Blender importer at its defaults; the one mesh object it made."""
     import bpy
 
     before = set(bpy.data.objects)
-    bpy.ops.import_scene.gltf(filepath=str(path))
+    importer(filepath=str(path))
     made = [ob for ob in bpy.data.objects if ob not in before and ob.type == "MESH"]
     if len(made) != 1:
-        raise CheckError(f"{path}: Blender's glTF importer made {len(made)} mesh objects, expected 1")
+        raise CheckError(f"{path}: Blender's {what} importer made {len(made)} mesh objects, expected 1")
     return made[0]
+
+
+def _import_glb(path: Path):
+    import bpy
+
+    return _import_one(path, bpy.ops.import_scene.gltf, "glTF")
 
 
 def _import_usd(path: Path):
     import bpy
 
-    before = set(bpy.data.objects)
-    bpy.ops.wm.usd_import(filepath=str(path))
-    made = [ob for ob in bpy.data.objects if ob not in before and ob.type == "MESH"]
-    if len(made) != 1:
-        raise CheckError(f"{path}: Blender's USD importer made {len(made)} mesh objects, expected 1")
-    return made[0]
+    return _import_one(path, bpy.ops.wm.usd_import, "USD")
 
 
 def _evaluated_yup(obj) -> tuple[np.ndarray, np.ndarray]:

@@ -164,22 +164,29 @@ class Solver:
                                                       self._d_coef[ds:de]).T
             drop[ds + match[match >= 0]] = True
             blocks[r, 0] = QUAD
+        keep = self._drop_constraints(DISTANCE, "distance", drop)
+        if keep is not None:
+            self._d_coef = np.ascontiguousarray(self._d_coef[keep])
+
+    def _drop_constraints(self, code: int, kind: str, drop: np.ndarray):
+        """Remove the constraints ``drop (m,) bool`` of ``kind`` (taken over by a fused sweep):
+        their arrays, colour runs and block ranges are renumbered, emptied blocks go. Returns
+        the kept mask, or None when nothing is dropped."""
         if not drop.any():
-            return
+            return None
         keep = ~drop
         new_index = np.concatenate([[0], np.cumsum(keep)])
         rows = []
-        for kind, start, stop in blocks:
-            if kind == DISTANCE:
+        for k, start, stop in self._blocks:
+            if k == code:
                 start, stop = new_index[start], new_index[stop]
                 if start == stop:
                     continue
-            rows.append((kind, start, stop))
+            rows.append((k, start, stop))
         self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
-        self._arrays["distance"] = tuple(np.ascontiguousarray(a[keep])
-                                         for a in self._arrays["distance"])
-        self._runs["distance"] = np.unique(new_index[self._runs["distance"]])
-        self._d_coef = np.ascontiguousarray(self._d_coef[keep])
+        self._arrays[kind] = tuple(np.ascontiguousarray(a[keep]) for a in self._arrays[kind])
+        self._runs[kind] = np.unique(new_index[self._runs[kind]])
+        return keep
 
     def _fuse_quad_areas(self) -> None:
         """Fold area constraints into the fused quads (kind ``QUAD_AREA``).
@@ -206,20 +213,7 @@ class Solver:
                                                 rest[a_s:ae], kk[a_s:ae]).T
             drop[a_s + match[match >= 0]] = True
             blocks[r, 0] = QUAD_AREA
-        if not drop.any():
-            return
-        keep = ~drop
-        new_index = np.concatenate([[0], np.cumsum(keep)])
-        rows = []
-        for kind, start, stop in blocks:
-            if kind == AREA:
-                start, stop = new_index[start], new_index[stop]
-                if start == stop:
-                    continue
-            rows.append((kind, start, stop))
-        self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
-        self._arrays["area"] = tuple(np.ascontiguousarray(a[keep]) for a in self._arrays["area"])
-        self._runs["area"] = np.unique(new_index[self._runs["area"]])
+        self._drop_constraints(AREA, "area", drop)
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
