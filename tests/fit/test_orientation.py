@@ -168,3 +168,15 @@ def test_a_declared_orientation_must_be_right_handed(tmp_path):
     path.write_text('orientation: {up: +Z, forward: -Y, subject_left: -X}\nlandmarks:\n  "2.1": {vertex: 0}\n')
     with pytest.raises(LandmarkError, match="subject_left -X contradicts"):
         read_landmarks(path)
+
+
+def test_too_few_landmarks_to_tell_the_frame_is_reported_as_the_missing_fdps(invoke, tmp_path):
+    mesh = tmp_path / "head.obj"
+    mesh.write_text(SAMPLES["mediapipe"].read_text())
+    data = yaml.safe_load(SAMPLES["mediapipe"].with_name("face_model_with_iris.fdp.yaml").read_text())
+    data.pop("orientation")
+    data["landmarks"] = {k: v for k, v in data["landmarks"].items() if k not in ("2.1", "2.10")}
+    (tmp_path / "head.fdp.yaml").write_text(yaml.safe_dump(data))
+    result = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
+    assert result.exit_code == 2
+    assert "required FDP 2.1 missing" in result.stderr and "orientation" not in result.stderr

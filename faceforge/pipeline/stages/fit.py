@@ -262,8 +262,9 @@ class HeadOrientation:
 
     rotation : (3, 3) float, head space = user coordinates ``@ rotation.T``
     up, forward : the mesh's own axes, as names (``"+Z"``)
-    source : "config" (``fit.orientation``), "landmark file" (its ``orientation``) or
-        "landmarks" (the frame they span, snapped to the axes)
+    source : "config" (``fit.orientation``), "landmark file" (its ``orientation``),
+        "landmarks" (the frame they span, snapped to the axes) or "default" (too few
+        landmarks to tell: faceforge's own frame)
     tilt_deg : largest angle between the landmarks' own up and forward and those used,
         degrees (NaN when the landmarks do not span a frame)
     """
@@ -328,8 +329,8 @@ def head_orientation(setting: str, raw, vertices) -> HeadOrientation:
     try:
         est_up, est_forward = landmark_frame(raw, vertices)
     except LandmarkError:
-        if up is None:
-            raise
+        if up is None:   # too few landmarks to tell: faceforge's frame, and the landmark checks say what is missing
+            up, forward, source = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]), "default"
         return HeadOrientation(frame_rotation(up, forward), axis_name(up), axis_name(forward), source, float("nan"))
     if up is None:
         try:
