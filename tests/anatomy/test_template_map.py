@@ -205,8 +205,9 @@ def test_muscles_clear_of_the_mandible_stay_still_when_the_jaw_opens(template):
 KNOWN_TRANSIENT_FOLDS = (
     "single bottom-sheet faces at the insertion end of the depressor anguli (the modiolus) turn "
     "over for a few frames while its contraction rises by ~0.1 per frame with the jaw moving, and "
-    "unfold as the contraction holds; at 20 iterations instead of the configured 10 they are gone "
-    "(the bottom particles follow their sliding samples with k_position 0.2, §5.2.1)")
+    "unfold as the contraction holds; the face joins fibre-side nodes, pulled to their sliding "
+    "samples (k_position 0.2, §5.2.1), to an interior node that no sample holds and that lags; "
+    "at 20 iterations instead of the configured 10 they are gone")
 
 
 def test_a_thousand_frames_of_random_contractions_and_jaw_poses_stay_clean(template):
