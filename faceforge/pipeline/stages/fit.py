@@ -319,7 +319,13 @@ def head_orientation(setting: str, raw, vertices) -> HeadOrientation:
     from faceforge.io.landmarks import landmark_frame
 
     if setting != "auto":
-        up, forward = (parse_axis(w) for w in setting.split(","))
+        try:
+            _check_orientation(setting, None)
+            up, forward = (parse_axis(w) for w in setting.split(","))
+        except ValueError as exc:
+            from faceforge.exceptions import ConfigError
+
+            raise ConfigError(f"fit.orientation: expected {exc}, got {setting!r}") from None
         source = "config"
     elif raw.orientation is not None:
         (up, forward), source = raw.orientation, "landmark file"
