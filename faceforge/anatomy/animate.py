@@ -336,9 +336,7 @@ class SkullGuard:
         self.floor = keep * depth[sel]
         self.faces = faces
         # each guarded vertex's bone triangle as ids into the bodies stacked in ``names`` order
-        self._ids = np.ascontiguousarray(offs[self.body][:, None] + np.vstack(
-            [faces[b][f] for b, f in zip(self.body, self.face)]) if len(self.vertex) else np.zeros((0, 3)),
-            dtype=np.int64)
+        self._ids = np.ascontiguousarray(np.asarray(mesh.faces)[tri[sel]], dtype=np.int64)
 
     def apply(self, positions: np.ndarray, bodies_now: dict) -> int:
         """Push guarded vertices of ``positions`` (n, 3, modified in place) out to their floor.

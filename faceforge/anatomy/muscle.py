@@ -386,33 +386,24 @@ class Muscle:
         Returns ``(first_particle, position_slots (k,))``; slots are empty when
         ``position`` stiffness is 0.
         """
-        p = self.rest_positions if positions is None else positions
-        first = builder.add_particles(p, 1.0)
-        k = self.stiffness
-        for kind in STIFFNESS_KEYS:
-            if kind in self.constraints and kind != "bend":
-                builder.add_distance(self.constraints[kind] + first, k[kind])
-        if "bend" in self.constraints:
-            builder.add_bending(self.constraints["bend"] + first, k["bend"])
-        if k["volume"] > 0:
-            builder.add_volume(self.faces + first, k["volume"])
-        slots = np.zeros(0, INT)
-        if k["position"] > 0:
-            slots = builder.add_position(self.bound + first, k["position"])
-        return first, slots
+        firsts, slots = add_muscles_to_builder(builder, [self], None if positions is None else [positions])
+        return firsts[0], slots[0]
 
 
-def add_muscles_to_builder(builder, muscles) -> tuple[list[int], list[np.ndarray]]:
+def add_muscles_to_builder(builder, muscles, positions=None) -> tuple[list[int], list[np.ndarray]]:
     """Add muscles that share no particle (one layer) to a ``pbd.ModelBuilder`` kind by kind.
 
-    Each muscle's own constraints keep the order of :meth:`Muscle.add_to_builder`
-    (distance kinds, bending, volume, position), and as no constraint reaches from one
-    muscle into another, projecting them kind by kind over all the muscles is the same
-    Gauss-Seidel sweep per muscle; the builder then makes four blocks in all instead of four
-    per muscle, so the coloured solver's batches fill up. Returns ``(firsts, slots)`` per
-    muscle, as :meth:`Muscle.add_to_builder` would.
+    Each muscle's own constraints come in the order distance kinds (:data:`STIFFNESS_KEYS`
+    order), bending, volume, position, and as no constraint reaches from one muscle into
+    another, projecting them kind by kind over all the muscles is the same Gauss-Seidel
+    sweep per muscle as adding the muscles one after another; the builder then makes four
+    blocks in all instead of four per muscle, so the coloured solver's batches fill up.
+    ``positions``: per muscle, rest values instead of its :attr:`Muscle.rest_positions`.
+    Returns ``(firsts, slots)`` per muscle: first particle, position slots (empty when
+    ``position`` stiffness is 0).
     """
-    firsts = [builder.add_particles(m.rest_positions, 1.0) for m in muscles]
+    rest = [m.rest_positions for m in muscles] if positions is None else positions
+    firsts = [builder.add_particles(p, 1.0) for p in rest]
     for kind in STIFFNESS_KEYS:
         if kind == "bend":
             continue

@@ -273,13 +273,11 @@ class SkinSimulation:
         return np.einsum("ij,ijk->ik", self.binding.bary, v[self._gather])
 
     def _world_vertex_ids(self, system) -> np.ndarray:
-        """``(k, 3)`` world vertex ids of each anchor's triangle."""
+        """``(k, 3)`` world vertex ids of each anchor's triangle (the system's world faces)."""
         b = self.binding
-        out = np.zeros((len(b.vertex_ids), 3), dtype=INT)
-        for i, name in enumerate(b.body_names):
-            sel = b.body == i
-            out[sel] = system.vertex_range(name).start + np.asarray(system.faces(name), INT)[b.face_ids[sel]]
-        return out
+        _, world_faces = system.world()
+        starts = np.array([system.face_range(name).start for name in b.body_names], dtype=INT)
+        return world_faces[starts[b.body] + b.face_ids]
 
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""
