@@ -244,16 +244,33 @@ class SkinSimulation:
     settings : faceforge.pbd.SolverSettings, optional
     weights : (n,) float, optional
         Influence map; :meth:`positions` returns ``rest + w (simulated - rest)``.
+    carried : (k,) bool, optional
+        Anchors that *carry* their skin vertex (default: none, the paper's anchors). §8 ties
+        a skin vertex ``p`` to its anchor particle ``q`` (held on the surface point) by a
+        stretch of the rest length ``|p - q|``; that link passes on only the part of the
+        anchor's motion along ``p - q`` (to first order), so a muscle sliding under the skin
+        (the mouth corner pulled down) barely drags it. A carried anchor's ``q`` starts at
+        ``p`` (rest length 0) and is held where ``p`` sits relative to the surface point in
+        the anchor triangle's frame (:meth:`carry_targets`): the skin goes where the tissue
+        under it goes, as where mimetic muscles insert into the skin. Bone anchors are
+        best left uncarried (skin slides over bone).
     """
 
-    def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None):
+    def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
+                 carried=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
         self.faces = np.asarray(faces, dtype=INT)
         self.binding = binding
+        k = len(binding.vertex_ids)
+        self.carried = np.zeros(k, bool) if carried is None else np.asarray(carried, bool).reshape(-1)
+        if self.carried.shape != (k,):
+            raise ValueError(f"carried must have one flag per anchor ({k}), got {self.carried.shape}")
+        q_rest = binding.points.copy()
+        q_rest[self.carried] = self.rest[binding.vertex_ids[self.carried]]
         builder = ModelBuilder()
-        self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, binding.points)
+        self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest)
         self.model = builder.finalize()
         self.solver = Solver(self.model, settings or SolverSettings())
         self.state = self.model.state()
@@ -262,14 +279,14 @@ class SkinSimulation:
         if self.weights is not None and len(self.weights) != len(self.rest):
             raise ValueError(f"weights {self.weights.shape} must have one entry per skin vertex")
 
-    def anchor_targets(self, system) -> np.ndarray:
+    def anchor_targets(self, system, vertices=None) -> np.ndarray:
         """Surface points of every anchor on the system's current bodies, ``(k, 3)``: the
         same points as ``binding.targets([system.surface(n) for n in body_names])``, in one
         gather from the system's world mesh (its vertex ids are found once per system)."""
         if getattr(self, "_gather_for", None) is not system:
             self._gather = self._world_vertex_ids(system)
             self._gather_for = system
-        v, _ = system.world()
+        v = system.world()[0] if vertices is None else vertices
         return np.einsum("ij,ijk->ik", self.binding.bary, v[self._gather])
 
     def _world_vertex_ids(self, system) -> np.ndarray:
@@ -279,10 +296,40 @@ class SkinSimulation:
         starts = np.array([system.face_range(name).start for name in b.body_names], dtype=INT)
         return world_faces[starts[b.body] + b.face_ids]
 
+    def carry_targets(self, system, targets, vertices=None) -> np.ndarray:
+        """Targets of the carried anchors' ``q``, ``(c, 3)``, from the surface points
+        ``targets (k, 3)`` on the current bodies: the skin vertex's rest offset from its surface
+        point, turned with the anchor triangle's frame (:func:`~faceforge.geometry.triangles.
+        triangle_frames`), ``p0 + (s - s0) + (R - R0)^T o`` with ``o = R0 (p0 - s0)``; exactly
+        ``p0`` at rest (the rest state stays a fixed point). A triangle crushed flat (no
+        frame) carries its offset unturned."""
+        from faceforge.geometry.triangles import triangle_frames
+
+        if getattr(self, "_carry_for", None) is not system:
+            self.anchor_targets(system)                  # sets self._gather for this system
+            v0, _ = system.world(rest=True)
+            corners = self._gather[self.carried]
+            s0 = np.einsum("ij,ijk->ik", self.binding.bary[self.carried], v0[corners])
+            r0 = triangle_frames(*v0[corners].transpose(1, 0, 2))
+            p0 = self.rest[self.binding.vertex_ids[self.carried]]
+            self._carry = (corners, s0, r0, p0, np.einsum("kij,kj->ki", r0, p0 - s0))
+            self._carry_for = system
+        corners, s0, r0, p0, o = self._carry
+        v = system.world()[0] if vertices is None else vertices
+        r = triangle_frames(*v[corners].transpose(1, 0, 2))
+        flat = ~np.isfinite(r).all(axis=(1, 2))     # a triangle crushed to a sliver: no turn
+        if flat.any():
+            r[flat] = r0[flat]
+        return p0 + (targets[self.carried] - s0) + np.einsum("kji,kj->ki", r - r0, o)
+
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""
         if len(self.layer.anchor_slots):
-            self.control.position_targets[self.layer.anchor_slots] = self.anchor_targets(system)
+            v, _ = system.world()
+            t = self.anchor_targets(system, v)
+            if self.carried.any():
+                t[self.carried] = self.carry_targets(system, t, v)
+            self.control.position_targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
 
     def simulated(self) -> np.ndarray:

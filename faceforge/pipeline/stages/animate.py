@@ -30,9 +30,10 @@ from pathlib import Path
 
 import click
 
-from faceforge.io.config import Integer, Number, add_rule
+from faceforge.io.config import Choice, Integer, Number, add_rule
 from faceforge.pipeline import Stage, register_command, register_stage
 
+add_rule("skin.carry", Choice(("muscles", "all", "none")))
 add_rule("animate.orientation_guard.rounds", Integer(0))           # 0 turns the guard off
 add_rule("animate.orientation_guard.min_area", Number(0.0, 0.95))
 
@@ -138,7 +139,7 @@ class BoundHead:
         # bind saw by a projection): then the rest pose is an exact fixed point
         binding = replace(binding, points=binding.targets([system.surface(n) for n in binding.body_names]))
         self.skin = skin = SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
-                                          settings)
+                                          settings, carried=carried_anchors(binding, config.get("skin.carry")))
 
         def skull(jaw):
             system.set_jaw(self.skull.jaw_transform(*jaw))
@@ -191,6 +192,15 @@ class BoundHead:
 
         out = frames[:, self.user_index]
         return out if np.array_equal(self.user_rotation, np.eye(3)) else out @ self.user_rotation
+
+
+def carried_anchors(binding, carry: str):
+    """(k,) bool: the anchors that carry their skin vertex (``skin.carry``: muscles | all | none;
+    :class:`faceforge.anatomy.skin.SkinSimulation`)."""
+    import numpy as np
+
+    bone = np.isin(np.asarray(binding.body_names, dtype=object)[binding.body], ("cranium", "mandible"))
+    return {"muscles": ~bone, "all": np.ones(len(bone), bool), "none": np.zeros(len(bone), bool)}[carry]
 
 
 def _lever(point, axis_point, axis_dir) -> float:
@@ -351,7 +361,8 @@ def run_animate(ctx):
 
 
 ANIMATE = register_stage(Stage(
-    name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
+    name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
+                                                "animate"),
     inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
     version="1", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
@@ -466,7 +477,8 @@ def _lip_opening(mapping, simulate, head, value):
 
 
 CALIBRATE = register_stage(Stage(
-    name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "muscle", "animate"),
+    name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
+                                                "animate"),
     inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="1", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
