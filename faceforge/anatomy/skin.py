@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from faceforge.anatomy.layer_targets import bary_points
 from faceforge.constants import FLOAT, INT
 
 __all__ = [
@@ -258,31 +259,39 @@ class SkinSimulation:
         self.solver = Solver(self.model, settings or SolverSettings())
         self.state = self.model.state()
         self.control = self.model.control()
+        self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)
+        slots = self.layer.anchor_slots
+        self._direct = bool(np.array_equal(slots, np.arange(len(slots)))
+                            and self.control.position_targets.shape == (len(slots), 3)
+                            and self.control.position_targets.flags.c_contiguous)
         self.weights = None if weights is None else np.asarray(weights, FLOAT).reshape(-1)
         if self.weights is not None and len(self.weights) != len(self.rest):
             raise ValueError(f"weights {self.weights.shape} must have one entry per skin vertex")
 
-    def anchor_targets(self, system) -> np.ndarray:
+    def anchor_targets(self, system, out: np.ndarray | None = None) -> np.ndarray:
         """Surface points of every anchor on the system's current bodies, ``(k, 3)``: the
         same points as ``binding.targets([system.surface(n) for n in body_names])``, in one
-        gather from the system's world mesh (its vertex ids are found once per system)."""
+        compiled gather from the system's world mesh (its vertex ids are found once per
+        system). ``out`` (k, 3) float64, filled and returned when given."""
         if getattr(self, "_gather_for", None) is not system:
             self._gather = self._world_vertex_ids(system)
             self._gather_for = system
-        v, _ = system.world()
-        return np.einsum("ij,ijk->ik", self.binding.bary, v[self._gather])
+        return bary_points(self._bary, self._gather, system.world_view(), out)
 
     def _world_vertex_ids(self, system) -> np.ndarray:
         """``(k, 3)`` world vertex ids of each anchor's triangle (the system's world faces)."""
         b = self.binding
         _, world_faces = system.world()
         starts = np.array([system.face_range(name).start for name in b.body_names], dtype=INT)
-        return world_faces[starts[b.body] + b.face_ids]
+        return np.ascontiguousarray(world_faces[starts[b.body] + b.face_ids], dtype=INT)
 
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""
         if len(self.layer.anchor_slots):
-            self.control.position_targets[self.layer.anchor_slots] = self.anchor_targets(system)
+            if self._direct:  # the anchors hold every position slot, in order: fill in place
+                self.anchor_targets(system, self.control.position_targets)
+            else:
+                self.control.position_targets[self.layer.anchor_slots] = self.anchor_targets(system)
         self.solver.step(self.state, self.state, self.control, dt)
 
     def simulated(self) -> np.ndarray:
