@@ -110,6 +110,7 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
     if w.shape != (len(rest),):
         raise ValueError(f"influence must be ({len(rest)},), got {w.shape}")
     out = np.empty((len(jaw), len(rest), 3))
+    w3 = w[:, None]
     frames = range(len(jaw))
     if progress is not None:
         frames = progress(frames, total=len(jaw), desc="frames")
@@ -130,7 +131,10 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
         skin = np.asarray(skin, dtype=float)
         if not np.all(np.isfinite(skin)):
             raise FloatingPointError(f"frame {i}: the simulation produced non-finite skin positions")
-        out[i] = rest + w[:, None] * (skin - rest)
+        frame = out[i]   # rest + w (skin - rest), in place
+        np.subtract(skin, rest, out=frame)
+        np.multiply(w3, frame, out=frame)
+        np.add(rest, frame, out=frame)
         if rig.finish is not None:
             rig.finish(out[i])
     return out
@@ -347,6 +351,14 @@ class SkullGuard:
         if not len(self.vertex):
             return 0
         bones = np.ascontiguousarray(np.vstack([np.asarray(bodies_now[n], dtype=float) for n in self.names]))
+        return self.apply_stacked(positions, bones)
+
+    def apply_stacked(self, positions: np.ndarray, bones: np.ndarray) -> int:
+        """:meth:`apply` with the current bone vertices already stacked in :attr:`names` order,
+        ``bones (sum v, 3)`` float64 C-contiguous (e.g. rows of a world mesh that starts with
+        the same bodies in the same order): no per-frame copy."""
+        if not len(self.vertex):
+            return 0
         return int(_skull_guard(positions, self.vertex, self._ids, self.bary, self.floor, bones))
 
 

@@ -53,7 +53,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from faceforge.anatomy.action_line import ActionLine
-from faceforge.anatomy.layer_targets import LinearTargets
+from faceforge.anatomy.layer_targets import LinearTargets, bary_points
 from faceforge.anatomy.muscle import Muscle, add_muscles_to_builder
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
@@ -64,6 +64,9 @@ __all__ = ["MusculoskeletalSystem", "SKULL", "expand_lies_on", "underlying_mesh"
 
 #: bodies that are not simulated; "skull" in ``lies_on`` means both
 SKULL = ("cranium", "mandible")
+
+_EYE3 = np.eye(3)
+_HOMOGENEOUS = np.array([0.0, 0.0, 0.0, 1.0])
 
 
 def expand_lies_on(names) -> tuple[str, ...]:
@@ -90,6 +93,8 @@ class _Layer:
     bary: np.ndarray = None    # (k, 3)
     pieces: list = None        # per muscle: {line key: slice into the k points}
     linear: object = None      # LinearTargets of the layer's linear muscles (compiled)
+    pts: np.ndarray = None     # (k, 3) scratch: the gathered surface points
+    copies: list = None        # (world slice, layer state slice) pairs written back each step
 
     def gather(self):
         """Precompute one gather for all surface points of all lines of the layer."""
@@ -109,6 +114,21 @@ class _Layer:
         lin = [i for i, m in enumerate(self.muscles) if m.kind == "linear" and len(self.slots[i])]
         self.linear = LinearTargets([self.muscles[i] for i in lin], [pieces[i] for i in lin],
                                     [self.slots[i] for i in lin]) if lin else None
+        self.pts = np.empty((len(self.vids), 3))
+
+    def plan_copies(self, vslice: dict) -> None:
+        """The write-back of the solved muscles into the world vertices as few slice copies
+        as possible: muscles that follow one another in both the layer model and the world
+        mesh (the usual case: one copy for the whole layer) share one."""
+        copies = []
+        for m, first in zip(self.muscles, self.firsts):
+            w, n = vslice[m.name], m.n_particles
+            if copies and copies[-1][0].stop == w.start and copies[-1][1].stop == first:
+                w0, s0 = copies.pop()
+                copies.append((slice(w0.start, w.stop), slice(s0.start, first + n)))
+            else:
+                copies.append((slice(w.start, w.stop), slice(first, first + n)))
+        self.copies = copies
 
 
 class MusculoskeletalSystem:
@@ -188,7 +208,9 @@ class MusculoskeletalSystem:
             layers[-1].gather()
         system = cls(bodies, layers, settings)
         for layer in layers:  # face ids -> world vertex ids, once
-            layer.vids = system._world_f[layer.vids]
+            layer.vids = np.ascontiguousarray(system._world_f[layer.vids], dtype=INT)
+            layer.bary = np.ascontiguousarray(layer.bary, dtype=FLOAT)
+            layer.plan_copies(system._vslice)
         for layer in layers:  # rest targets: the rest state is a fixed point
             system._set_targets(layer, {})
         return system
@@ -232,6 +254,13 @@ class MusculoskeletalSystem:
         """
         return (self._rest if rest else self._world_v).copy(), self._world_f
 
+    def world_view(self) -> np.ndarray:
+        """The current world vertices ``(N, 3)`` as a read-only view (no copy): valid until the
+        next :meth:`step`, :meth:`set_jaw` or :meth:`reset`, which write into it."""
+        v = self._world_v.view()
+        v.flags.writeable = False
+        return v
+
     def composite(self, names, rest: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """The bodies ``names`` ("skull" allowed) concatenated, faces renumbered."""
         from faceforge.geometry.triangles import concatenate_meshes
@@ -271,9 +300,17 @@ class MusculoskeletalSystem:
         T = np.asarray(jaw_matrix, dtype=FLOAT)
         if T.shape != (4, 4):
             raise ValueError(f"jaw_matrix must be (4, 4), got {T.shape}")
+        if np.array_equal(T, self._jaw):  # the mandible is already there
+            return
         R = T[:3, :3]
-        if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0
-                and np.allclose(T[3], [0, 0, 0, 1])):
+        # np.allclose(R.T R, I, atol=1e-6), det R > 0 and np.allclose(T[3], (0, 0, 0, 1)),
+        # without allclose's per-call overhead (this runs every frame)
+        r = R.tolist()
+        det = (r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+               - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+               + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]))
+        if not (np.all(np.abs(R.T @ R - _EYE3) <= 1e-6 + 1e-5 * _EYE3) and det > 0
+                and np.all(np.abs(T[3] - _HOMOGENEOUS) <= 1e-8 + 1e-5 * _HOMOGENEOUS)):
             raise ValueError("jaw_matrix must be a rigid transform (rotation + translation)")
         sl = self._vslice["mandible"]
         self._world_v[sl] = self._rest[sl] @ T[:3, :3].T + T[:3, 3]
@@ -301,14 +338,14 @@ class MusculoskeletalSystem:
         for layer in self._layers:
             self._set_targets(layer, contractions)
             layer.solver.step(layer.state, layer.state, layer.control, dt)
-            for m, first in zip(layer.muscles, layer.firsts):
-                self._world_v[self._vslice[m.name]] = layer.state.positions[first:first + m.n_particles]
+            for world, own in layer.copies:
+                self._world_v[world] = layer.state.positions[own]
         for extra in self._extra:
             extra.step(self, dt)
 
     def _set_targets(self, layer: _Layer, contractions) -> None:
         # every surface point of every line of the layer in one gather
-        pts = np.einsum("ij,ijk->ik", layer.bary, self._world_v[layer.vids])
+        pts = bary_points(layer.bary, layer.vids, self._world_v, layer.pts)
         if layer.linear is not None:   # every linear muscle in one compiled call
             layer.control.position_targets[layer.linear.slots] = layer.linear(pts, contractions)
         for m, s, own in zip(layer.muscles, layer.slots, layer.pieces):

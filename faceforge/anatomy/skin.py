@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from faceforge.anatomy.layer_targets import bary_points
 from faceforge.constants import FLOAT, INT
 
 __all__ = [
@@ -275,28 +276,33 @@ class SkinSimulation:
         self.solver = Solver(self.model, settings or SolverSettings())
         self.state = self.model.state()
         self.control = self.model.control()
+        self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)
+        slots = self.layer.anchor_slots
+        self._direct = bool(np.array_equal(slots, np.arange(len(slots)))
+                            and self.control.position_targets.shape == (len(slots), 3)
+                            and self.control.position_targets.flags.c_contiguous)
         self.weights = None if weights is None else np.asarray(weights, FLOAT).reshape(-1)
         if self.weights is not None and len(self.weights) != len(self.rest):
             raise ValueError(f"weights {self.weights.shape} must have one entry per skin vertex")
 
-    def anchor_targets(self, system, vertices=None) -> np.ndarray:
+    def anchor_targets(self, system, out: np.ndarray | None = None) -> np.ndarray:
         """Surface points of every anchor on the system's current bodies, ``(k, 3)``: the
         same points as ``binding.targets([system.surface(n) for n in body_names])``, in one
-        gather from the system's world mesh (its vertex ids are found once per system)."""
+        compiled gather from the system's world mesh (its vertex ids are found once per
+        system). ``out`` (k, 3) float64, filled and returned when given."""
         if getattr(self, "_gather_for", None) is not system:
             self._gather = self._world_vertex_ids(system)
             self._gather_for = system
-        v = system.world()[0] if vertices is None else vertices
-        return np.einsum("ij,ijk->ik", self.binding.bary, v[self._gather])
+        return bary_points(self._bary, self._gather, system.world_view(), out)
 
     def _world_vertex_ids(self, system) -> np.ndarray:
         """``(k, 3)`` world vertex ids of each anchor's triangle (the system's world faces)."""
         b = self.binding
         _, world_faces = system.world()
         starts = np.array([system.face_range(name).start for name in b.body_names], dtype=INT)
-        return world_faces[starts[b.body] + b.face_ids]
+        return np.ascontiguousarray(world_faces[starts[b.body] + b.face_ids], dtype=INT)
 
-    def carry_targets(self, system, targets, vertices=None) -> np.ndarray:
+    def carry_targets(self, system, targets) -> np.ndarray:
         """Targets of the carried anchors' ``q``, ``(c, 3)``, from the surface points
         ``targets (k, 3)`` on the current bodies: the skin vertex's rest offset from its surface
         point, turned with the anchor triangle's frame (:func:`~faceforge.geometry.triangles.
@@ -315,7 +321,7 @@ class SkinSimulation:
             self._carry = (corners, s0, r0, p0, np.einsum("kij,kj->ki", r0, p0 - s0))
             self._carry_for = system
         corners, s0, r0, p0, o = self._carry
-        v = system.world()[0] if vertices is None else vertices
+        v = system.world_view()
         r = triangle_frames(*v[corners].transpose(1, 0, 2))
         flat = ~np.isfinite(r).all(axis=(1, 2))     # a triangle crushed to a sliver: no turn
         if flat.any():
@@ -325,11 +331,12 @@ class SkinSimulation:
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""
         if len(self.layer.anchor_slots):
-            v, _ = system.world()
-            t = self.anchor_targets(system, v)
+            # when the anchors hold every position slot, in order, they are filled in place
+            t = self.anchor_targets(system, self.control.position_targets if self._direct else None)
             if self.carried.any():
-                t[self.carried] = self.carry_targets(system, t, v)
-            self.control.position_targets[self.layer.anchor_slots] = t
+                t[self.carried] = self.carry_targets(system, t)
+            if not self._direct:
+                self.control.position_targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
 
     def simulated(self) -> np.ndarray:

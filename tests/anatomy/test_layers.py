@@ -31,6 +31,32 @@ def test_layers_and_world(system, head):
     assert expand_lies_on(["skull", "frontalis", "cranium"]) == ("cranium", "mandible", "frontalis")
 
 
+def test_compiled_surface_gather_matches_its_einsum_twin():
+    """``bary_points`` (the per-frame gather of action lines and skin anchors) gives the bits
+    of ``np.einsum("ij,ijk->ik", bary, v[ids])``, which the rest targets were computed with."""
+    from faceforge.anatomy.layer_targets import bary_points
+
+    rng = np.random.default_rng(7)
+    v = rng.normal(size=(500, 3)) * 10.0 ** rng.uniform(-3, 3, size=(500, 1))
+    for k in (0, 1, 5, 300):
+        ids = rng.integers(0, len(v), size=(k, 3))
+        bary = rng.dirichlet([1.0, 1.0, 1.0], size=k)
+        bary[::2] = rng.normal(size=bary[::2].shape)       # outside the triangle too
+        twin = np.einsum("ij,ijk->ik", bary, v[ids])
+        assert np.array_equal(bary_points(bary, ids, v), twin)
+        out = np.full((k, 3), np.nan)
+        assert bary_points(bary, ids, v, out) is out and np.array_equal(out, twin)
+    view = v.view()
+    view.flags.writeable = False                           # the system's world_view()
+    assert np.array_equal(bary_points(bary, ids, view), twin)
+
+
+def test_world_view_is_the_current_world_read_only(system):
+    system.step({"oris": 1.0})
+    view = system.world_view()
+    assert np.array_equal(view, system.world()[0]) and not view.flags.writeable
+
+
 def test_rest_is_a_fixed_point(system):
     rest = snapshot(system)
     for _ in range(100):

@@ -23,6 +23,9 @@ class Bodies:
     def world(self, rest=False):
         return (self.rest if rest else self.v).copy(), self.f
 
+    def world_view(self):
+        return self.v
+
     def face_range(self, name):
         return slice(0, len(self.f))
 

@@ -141,8 +141,13 @@ class BoundHead:
         self.skin = skin = SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
                                           settings, carried=carried_anchors(binding, config.get("skin.carry")))
 
+        last = [None, None]  # the last jaw DOFs and their transform (held poses repeat them)
+
         def skull(jaw):
-            system.set_jaw(self.skull.jaw_transform(*jaw))
+            key = np.asarray(jaw, dtype=float).tobytes()  # bits: -0.0 is not 0.0 here
+            if key != last[0]:
+                last[:] = key, self.skull.jaw_transform(*jaw)
+            system.set_jaw(last[1])  # returns at once when the mandible is already there
 
         def muscles(c, _bones, dt):
             system.step(dict(zip(self.muscle_names, c)), None, dt)
@@ -158,16 +163,19 @@ class BoundHead:
             self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \
             if rounds > 0 else None
 
+        # the guard's bones (cranium, mandible) are the first rows of the system's world mesh,
+        # in the same order (MusculoskeletalSystem.from_parts puts them there)
+        bone_rows = system.vertex_range("mandible").stop
+
         def skin_step(_bones, _muscles, dt):
             skin.step(system, dt)
             x = skin.layer.skin_positions(skin.state.positions)
-            bones = {n: system.positions(n) for n in ("cranium", "mandible")}
+            bones = system.world_view()[:bone_rows]
             # the skull guard pushes vertices one by one along the bone's normals, which can turn
             # a sliver over; the orientation guard moves them sideways, which can sink one below
             # its floor: alternate until the orientation pass has nothing left to do
             for _ in range(max(rounds, 1)):
-                if len(guard.vertex):
-                    guard.apply(x, bones)
+                guard.apply_stacked(x, bones)
                 if orientation is None or not orientation.apply(x):
                     break
             return skin.simulated()
