@@ -3,8 +3,10 @@
 Each frame, every linear muscle resamples its four action lines on the current deeper
 layers (A0 and A2 at the step ``1 - c kappa`` of Eq. 4, A3 and A1 at the full step), moves
 its insertion with the ends of the two fibres, and hands the contour samples to its
-bottom particles as position targets (:meth:`faceforge.anatomy.muscle.Muscle.
-targets_from_line_points`, the plain twin). Done muscle by muscle in numpy that is ~35
+bottom particles as position targets; its interior bottom particles get the blend of
+their row's two side samples plus their rest offset in the row's basis
+(:func:`faceforge.anatomy.muscle.interior_targets`). :meth:`faceforge.anatomy.muscle.
+Muscle.targets_from_line_points` is the plain twin. Done muscle by muscle in numpy that is ~35
 small array operations per muscle, ~0.9 ms a frame for the 25 sheets of the default map;
 :class:`LinearTargets` does the same arithmetic, in the same order (so the same bits), for
 all of a layer's linear muscles in one numba kernel.
@@ -15,8 +17,11 @@ Layout (CSR over the layer's linear muscles, ``q`` of them):
   points ``pts (k, 3)``;
 * ``hw (q, 2)`` samples along the fibres and across them; ``kappa (q,)`` fibre shortening
   at c = 1;
-* ``cells (t, 2)`` contour-grid cells ``(i, j)`` of every muscle, one after another, and
-  ``cell_start (q + 1,)``; the targets come out in the same rows, ``(t, 3)``.
+* ``cells (t, 2)`` grid cells ``(i, j)`` of every muscle's bound particles (its contour,
+  then its interior ones), one muscle after another, and ``cell_start (q + 1,)``; the
+  targets come out in the same rows, ``(t, 3)``; ``offsets (t, 3)`` the rest offsets of the
+  interior rows in their row's basis (:attr:`faceforge.anatomy.muscle.Muscle.interior`),
+  zero on the contour rows.
 """
 
 from __future__ import annotations
@@ -34,8 +39,8 @@ LINE_KEYS = ("A0", "A1", "A2", "A3")
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _linear_targets(pts, lines, hw, kappa, cells, cell_start, c, out):
-    """Fill ``out (t, 3)`` with every muscle's contour targets (see the module docstring)."""
+def _linear_targets(pts, lines, hw, kappa, cells, cell_start, offsets, c, out):
+    """Fill ``out (t, 3)`` with every muscle's targets (see the module docstring)."""
     for m in range(len(kappa)):
         h, w = hw[m, 0], hw[m, 1]
         scale = 1.0 - c[m] * kappa[m]
@@ -58,6 +63,9 @@ def _linear_targets(pts, lines, hw, kappa, cells, cell_start, c, out):
                         + t * (a2[h - 1, d] - pts[e2, d])
         for r in range(cell_start[m], cell_start[m + 1]):
             i, j = cells[r, 0], cells[r, 1]
+            if 0 < i < h - 1 and 0 < j < w - 1:
+                _interior_target(a0, a2, i, j * (1.0 / (w - 1)), offsets[r], out[r])
+                continue
             # the grid's borders, written as the twin does: A3, A1, then A0 and A2 over the corners
             if j == 0:
                 src, k = a0, i
@@ -69,6 +77,27 @@ def _linear_targets(pts, lines, hw, kappa, cells, cell_start, c, out):
                 src, k = a1, j
             for d in range(3):
                 out[r, d] = src[k, d]
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _interior_target(a0, a2, i, t, k, out):
+    """``out (3,)``: the interior target of row ``i`` at ``t`` (muscle.interior_targets, same
+    arithmetic in the same order; ``t = j / (w - 1)`` as numpy.linspace for 0 < j < w - 1)."""
+    u = np.empty(3)
+    v = np.empty(3)
+    for d in range(3):
+        u[d] = a2[i, d] - a0[i, d]
+        v[d] = ((a0[i + 1, d] - a0[i - 1, d]) + (a2[i + 1, d] - a2[i - 1, d])) * 0.25
+    n = np.empty(3)
+    n[0] = u[1] * v[2] - u[2] * v[1]
+    n[1] = u[2] * v[0] - u[0] * v[2]
+    n[2] = u[0] * v[1] - u[1] * v[0]
+    nn = max(np.sqrt((n[0] * n[0] + n[1] * n[1]) + n[2] * n[2]), 1e-300)
+    for d in range(3):
+        n[d] = n[d] / nn
+    for d in range(3):
+        off = (k[0] * u[d] + k[1] * v[d]) + k[2] * n[d]
+        out[d] = ((1.0 - t) * a0[i, d] + t * a2[i, d]) + off
 
 
 class LinearTargets:
@@ -95,12 +124,17 @@ class LinearTargets:
                 self.lines[i, k] = own[key].start, own[key].stop
         self.hw = np.array([[m.topology.h, m.topology.w] for m in muscles], dtype=INT).reshape(q, 2)
         self.kappa = np.array([m.max_contraction for m in muscles], dtype=FLOAT)
-        grids = [m._contour_grid for m in muscles]
+        grids = [m.bound_grid for m in muscles]
         self.cells = np.ascontiguousarray(np.concatenate(grids) if grids else np.zeros((0, 2)), dtype=INT)
         self.cell_start = np.cumsum([0] + [len(g) for g in grids]).astype(INT)
+        offsets = [np.zeros((len(g), 3)) for g in grids]
+        for m, o in zip(muscles, offsets):
+            if m.interior is not None:
+                o[len(m.topology.contour):] = np.asarray(m.interior, FLOAT).reshape(-1, 3)
+        self.offsets = np.ascontiguousarray(np.concatenate(offsets) if offsets else np.zeros((0, 3)))
         self.slots = np.concatenate(slots).astype(INT) if slots else np.zeros(0, INT)
         if len(self.slots) != len(self.cells):
-            raise ValueError(f"{len(self.slots)} position slots for {len(self.cells)} contour targets")
+            raise ValueError(f"{len(self.slots)} position slots for {len(self.cells)} targets")
         self._out = np.empty((len(self.cells), 3))
 
     def __call__(self, pts: np.ndarray, contractions: dict) -> np.ndarray:
@@ -109,5 +143,5 @@ class LinearTargets:
         c = np.array([contractions.get(n, 0.0) for n in self.names], dtype=FLOAT)
         c = np.where(self.active, np.clip(c, 0.0, 1.0), 0.0)
         _linear_targets(np.ascontiguousarray(pts, dtype=FLOAT), self.lines, self.hw, self.kappa,
-                        self.cells, self.cell_start, c, self._out)
+                        self.cells, self.cell_start, self.offsets, c, self._out)
         return self._out
