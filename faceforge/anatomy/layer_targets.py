@@ -83,21 +83,16 @@ def _linear_targets(pts, lines, hw, kappa, cells, cell_start, offsets, c, out):
 def _interior_target(a0, a2, i, t, k, out):
     """``out (3,)``: the interior target of row ``i`` at ``t`` (muscle.interior_targets, same
     arithmetic in the same order; ``t = j / (w - 1)`` as numpy.linspace for 0 < j < w - 1)."""
-    u = np.empty(3)
-    v = np.empty(3)
-    for d in range(3):
-        u[d] = a2[i, d] - a0[i, d]
-        v[d] = ((a0[i + 1, d] - a0[i - 1, d]) + (a2[i + 1, d] - a2[i - 1, d])) * 0.25
-    n = np.empty(3)
-    n[0] = u[1] * v[2] - u[2] * v[1]
-    n[1] = u[2] * v[0] - u[0] * v[2]
-    n[2] = u[0] * v[1] - u[1] * v[0]
-    nn = max(np.sqrt((n[0] * n[0] + n[1] * n[1]) + n[2] * n[2]), 1e-300)
-    for d in range(3):
-        n[d] = n[d] / nn
-    for d in range(3):
-        off = (k[0] * u[d] + k[1] * v[d]) + k[2] * n[d]
-        out[d] = ((1.0 - t) * a0[i, d] + t * a2[i, d]) + off
+    u0, u1, u2 = a2[i, 0] - a0[i, 0], a2[i, 1] - a0[i, 1], a2[i, 2] - a0[i, 2]
+    v0 = ((a0[i + 1, 0] - a0[i - 1, 0]) + (a2[i + 1, 0] - a2[i - 1, 0])) * 0.25
+    v1 = ((a0[i + 1, 1] - a0[i - 1, 1]) + (a2[i + 1, 1] - a2[i - 1, 1])) * 0.25
+    v2 = ((a0[i + 1, 2] - a0[i - 1, 2]) + (a2[i + 1, 2] - a2[i - 1, 2])) * 0.25
+    n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+    nn = max(np.sqrt((n0 * n0 + n1 * n1) + n2 * n2), 1e-300)
+    n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
+    out[0] = ((1.0 - t) * a0[i, 0] + t * a2[i, 0]) + ((k[0] * u0 + k[1] * v0) + k[2] * n0)
+    out[1] = ((1.0 - t) * a0[i, 1] + t * a2[i, 1]) + ((k[0] * u1 + k[1] * v1) + k[2] * n1)
+    out[2] = ((1.0 - t) * a0[i, 2] + t * a2[i, 2]) + ((k[0] * u2 + k[1] * v2) + k[2] * n2)
 
 
 class LinearTargets:
