@@ -30,6 +30,7 @@ QUAD_AREA = 7
 def _project(x, w, blocks, iterations, xpbd,
              d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t,
              b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
+             q_area_stop,
              a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, buf,
              v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
              p_idx, p_target, p_k, p_c, p_lam,
@@ -44,7 +45,8 @@ def _project(x, w, blocks, iterations, xpbd,
     ``distance.pbd_coefficients``); ``q_stretch (6, m_bending)``: the stretches fused into
     the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``); ``q_area
     (3, m_bending)``: the area constraints fused into the quads of ``QUAD_AREA`` blocks
-    (transposed ``quad.area_table``).
+    (transposed ``quad.area_table``); ``q_area_stop (runs - 1,)``: per bending run, the end
+    of its quads with a fused area (``quad.areas_first``).
     """
     for _ in range(iterations):
         for b in range(blocks.shape[0]):
@@ -77,7 +79,7 @@ def _project(x, w, blocks, iterations, xpbd,
                 _project_attachment(x, w, t_idx, t_tri, t_bary, t_k, t_c, t_lam, xpbd, start, stop)
             else:  # QUAD (bending fused with its quads' stretches), QUAD_AREA (and areas)
                 _project_quads_batched(x, b_idx, b_w, b_rest_t, b_k, q_stretch, q_area,
-                                       kind == 7, b_runs, buf, start, stop)
+                                       kind == 7, b_runs, q_area_stop, buf, start, stop)
 
 
 @numba.njit(**PBD_NUMBA)
@@ -111,7 +113,7 @@ def _velocities(x, v, prev, inv_h):
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
           substeps, iterations, xpbd, blocks, lams,
           d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t,
-          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch, q_area,
+          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch, q_area, q_area_stop,
           a_idx, a_rest, a_k, a_c, a_runs, a_w, buf,
           v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
@@ -149,7 +151,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
         _project(x_out, w, blocks, iterations, xpbd,
                  d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t,
                  b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
-                 q_area,
+                 q_area, q_area_stop,
                  a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, buf,
                  v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                  lams[o3:o4], v_g,

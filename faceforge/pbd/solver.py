@@ -33,7 +33,7 @@ from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
 from faceforge.pbd.constraints.distance import pbd_coefficients
 from faceforge.pbd.constraints.quad import (
-    area_table, match_quad_stretches, match_quad_triangles, stretch_table)
+    area_table, areas_first, match_quad_stretches, match_quad_triangles, stretch_table)
 from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.settings import SolverSettings
@@ -130,6 +130,8 @@ class Solver:
         self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass)
         self._q_stretch = np.zeros((6, m.bending_count))  # transposed: rows are vectors
         self._q_area = np.zeros((3, m.bending_count))
+        # per bending run, the end of its quads with a fused area (all of them by default)
+        self._q_area_stop = np.ascontiguousarray(self._runs["bending"][1:])
         if s.colouring and s.stiffness_mode != "xpbd":
             self._fuse_quad_stretches()
             self._fuse_quad_areas()
@@ -201,6 +203,7 @@ class Solver:
         a_idx = self._arrays["area"][0]
         b_idx = self._arrays["bending"][0]
         drop = np.zeros(len(a_idx), dtype=bool)
+        owner = np.full(len(b_idx), -1, dtype=np.int64)  # fused triangle of each quad
         for r in range(len(blocks) - 1):
             if blocks[r, 0] != QUAD or blocks[r + 1, 0] != AREA:
                 continue
@@ -212,8 +215,15 @@ class Solver:
             self._q_area[:, bs:be] = area_table(a_idx[a_s:ae], b_idx[bs:be], match,
                                                 rest[a_s:ae], kk[a_s:ae]).T
             drop[a_s + match[match >= 0]] = True
+            owner[bs:be] = match
             blocks[r, 0] = QUAD_AREA
         self._drop_constraints(AREA, "area", drop)
+        if (owner >= 0).any():  # quads with an area first in each run: the sweep skips the rest
+            order, self._q_area_stop = areas_first(owner, self._runs["bending"])
+            self._arrays["bending"] = tuple(np.ascontiguousarray(a[order])
+                                            for a in self._arrays["bending"])
+            self._q_stretch = np.ascontiguousarray(self._q_stretch[:, order])
+            self._q_area = np.ascontiguousarray(self._q_area[:, order])
 
     def step(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
@@ -248,7 +258,7 @@ class Solver:
               s.stiffness_mode == "xpbd", self._blocks, self._lams,
               *self._arrays["distance"], self._d_coef, self._runs["distance"], self._d_coef_t,
               *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
-              self._q_stretch, self._q_area,
+              self._q_stretch, self._q_area, self._q_area_stop,
               *self._arrays["area"], self._runs["area"], self._a_w, self._buf,
               *self._volume, *k["volume"], self._vol_g,
               self._position, targets, *k["position"],

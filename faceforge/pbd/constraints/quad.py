@@ -13,7 +13,10 @@ projections, and the stretch math runs in the vectorised loop. Stretches that be
 no quad (boundary edges, anchors) stay in their distance block, projected before.
 Likewise an area block right after gives each quad at most one triangle lying on it
 (:func:`match_quad_triangles`), projected after the quad's bending; the triangles left
-over keep their area block, projected after.
+over keep their area block, projected after. A closed mesh has 1.5 quads per triangle, so
+a third of the quads get none: the solver moves the quads with an area to the front of
+each colour run (:func:`areas_first`; the quads of a run are independent, so the bits do
+not change) and the sweep skips the area rows of the others.
 
 The bending multiplier ``-k atan(yy / xx) / D`` (Padé branch of ``bending._deviation``)
 is evaluated with one division, both Padé polynomials scaled by ``xx^4`` (about
@@ -351,9 +354,27 @@ def _quad_math(buf, t, j, inv_mass, rest_cs, k):
             denom, yy, xx)
 
 
+def areas_first(match: np.ndarray, seg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reorder the quads inside each run so that those with a fused area come first.
+
+    match : (m,) int, the triangle of each quad (-1: none, :func:`match_quad_triangles`);
+    seg : (s,) int sorted run boundaries (0 ... m) of quads sharing no particle. Returns
+    ``(order (m,) int64, area_stop (s - 1,) int64)``: a stable permutation that moves
+    quads only within their run (the quads of a run are independent, so a sweep in the new
+    order gives the same bits), and, per run, the end of its quads with an area, for the
+    ``area_stop`` of :func:`_project_quads_batched`.
+    """
+    match = np.asarray(match).reshape(-1)
+    seg = np.asarray(seg, dtype=np.int64).reshape(-1)
+    run = np.repeat(np.arange(len(seg) - 1), np.diff(seg))
+    order = np.lexsort((np.arange(len(match)), match < 0, run)).astype(np.int64)
+    count = np.concatenate([[0], np.cumsum(match >= 0)]).astype(np.int64)
+    return order, seg[:-1] + count[seg[1:]] - count[seg[:-1]]
+
+
 @numba.njit(**PBD_NUMBA)
-def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_area, seg, buf,
-                           start, stop):
+def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_area, seg,
+                           area_stop, buf, start, stop):
     """PBD sweep over quads ``start:stop``: per quad, stretch (p0, p1), stretch (p2, p3),
     the dihedral constraint, then (``with_area``) its fused area constraint (see the
     module docstring).
@@ -362,7 +383,10 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
     and sines; k : (m,) bending stiffness; stretch : (6, m) float, the transpose of
     :func:`stretch_table` (rows read as vectors); area : (3, m) float, the transpose of
     :func:`area_table` (read only when ``with_area``); seg : (s,) int sorted boundaries
-    of runs of quads sharing no particle; buf : (BATCH_ROWS * BATCH,) float scratch. The
+    of runs of quads sharing no particle; area_stop : (s - 1,) int, per run, the end of
+    the quads ``seg[q]:area_stop[q]`` that have an area constraint, the others having none
+    (:func:`areas_first`; ``seg[1:]``: every quad's area row is projected, an unmatched
+    row of :func:`area_table` moving nothing); buf : (BATCH_ROWS * BATCH,) float scratch. The
     math per quad is that of ``distance._project_distance_pbd`` twice, then
     ``bending._solve_bending`` (PBD), then ``area._area_increments``, each on the updated
     positions.
@@ -372,6 +396,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
         hi = min(seg[q + 1], stop)
         for c0 in range(lo, hi, BATCH):
             n = min(BATCH, hi - c0)
+            n_area = min(n, max(0, area_stop[q] - c0)) if with_area else 0
             any_fix = 0
             for t in range(n):  # gather
                 j = np.uint64(c0 + t)
@@ -410,7 +435,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
                 buf[_Q3X + t] = r[9]
                 buf[_Q3Y + t] = r[10]
                 buf[_Q3Z + t] = r[11]
-            for t in range(n if with_area else 0):  # the fused area constraint
+            for t in range(n_area):  # the fused area constraint
                 j = np.uint64(c0 + t)
                 side = area[2, j] != 0.0  # third vertex p2, else p3
                 w2 = inv_mass[2, j]
@@ -446,7 +471,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
                     step = -k[j] / r[25] * math.atan2(r[26], r[27])
                     for c in range(12):
                         buf[_Q0X + c * BATCH + t] = r[c] + step * r[13 + c]
-                    if with_area:  # the fused area constraint, after the bending
+                    if t < n_area:  # the fused area constraint, after the bending
                         third = _Q2X if area[2, j] != 0.0 else _Q3X
                         w3 = inv_mass[2, j] if area[2, j] != 0.0 else inv_mass[3, j]
                         d = _area_increments(
