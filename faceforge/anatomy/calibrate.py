@@ -157,7 +157,9 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
     simulate : callable (mapping, faps (k, 68) float) -> skin (k, n, 3) float, the settled
         skin of k independent static poses
     rest : (n, 3) float, skin at rest
-    probes : dict FAP number -> Probe; entries whose first FAP has no probe are skipped
+    probes : dict FAP number -> Probe; entries whose first FAP has no probe are skipped; an
+        entry of several FAPs (outer and inner lip twins, driven together) is fitted to the mean
+        of its FAPs' probes, and each FAP gets its own report rows
     requested : dict FAP number -> (r,) float requested values (FAPU, nonzero)
     refine : secant refinements per requested value after the first inversion
     sample_scale : drives sampled for the first curve, as fractions of max |requested|
@@ -180,7 +182,12 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         req = req[req != 0.0]
         if len(req) == 0:
             continue
-        probe = probes[lead]
+        # one drive moves every FAP of the entry (outer and inner lip twins get the same value):
+        # fit it to the mean of their FDPs' displacements, so neither twin is favoured
+        observed = [probes[f] for f in entry.faps if f in probes]
+
+        def probe(skins, observed=observed):
+            return np.mean([measure(rest, skins, p) for p in observed], axis=0)
         identity = with_entry(calibrated, idx, response=None)
         # 1. sample the drive -> displacement curve (identity response: drive = value)
         top = np.abs(req).max()
@@ -188,20 +195,18 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         drives = np.concatenate([s * top * np.asarray(sample_scale, dtype=float) for s in signs])
         drives = np.union1d(drives, req)          # the uncalibrated poses are samples too
         skins = simulate(identity, _frames(entry.faps, drives))
-        sampled = measure(rest, skins, probe)
+        sampled = probe(skins)
         at_req = np.searchsorted(drives, req)
-        before_skin, before = skins[at_req], sampled[at_req]
+        before_skin = skins[at_req]
         # 2. invert it, 3. refine each requested value by secant steps on its own samples
         drive = invert_monotone(drives, sampled, req)
         ok = np.isfinite(drive)
         d_all, a_all = list(drives), list(sampled)
-        achieved = before.copy()
         for _ in range(refine + 1):
             if not np.any(ok):
                 break
             trial = with_entry(calibrated, idx, response=None)
-            got = measure(rest, simulate(trial, _frames(entry.faps, drive[ok])), probe)
-            achieved[ok] = got
+            got = probe(simulate(trial, _frames(entry.faps, drive[ok])))
             d_all += list(drive[ok])
             a_all += list(got)
             # secant on the two nearest samples around each requested value

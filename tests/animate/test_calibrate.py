@@ -145,3 +145,18 @@ def test_inversion_holds_at_a_saturation_knee():
     assert linear[0] == pytest.approx(300.0)                 # straight line: extrapolated
     flat = invert_monotone(drives, np.array([40.0, 44.0, 45.0]), np.array([150.0]))
     assert flat[0] == pytest.approx(150.0)                   # saturated: held at the last sample
+
+
+def test_lip_twins_driven_together_are_fitted_to_their_mean():
+    """An entry drives its outer and inner FAP with one control. When the inner FDP moves
+    only 0.8 x the outer one, the fit favours neither: the outer overshoots and the inner
+    falls short by the same relative error, (1 - 0.8) / (1 + 0.8) = 11.1 %."""
+    def head(mapping, faps):
+        skin = synthetic_head(mapping, faps)
+        return np.concatenate([skin, skin[:, :1] * 0.8], axis=1)    # v5: the inner twin of v0
+
+    probes = {59: Probe(59, 0, -1, UP, FAPU["MNS"]), 12: Probe(12, 5, -1, UP, FAPU["MNS"])}
+    m = mapping_from_dict(MAPPING)
+    _, rows = calibrate_mapping(m, head, np.zeros((6, 3)), probes, {59: [60.0]}, refine=3)
+    err = {r.fap: (r.achieved - r.requested) / r.requested for r in rows}
+    assert err[59] == pytest.approx(1 / 9, abs=0.005) and err[12] == pytest.approx(-1 / 9, abs=0.005)
