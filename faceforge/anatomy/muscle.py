@@ -61,13 +61,17 @@ Sphincter contraction (§5.2.2). The paper's
 ``delta = (o - s1) (1 - c) cos(pi/2 (1 - sqrt(y^2 b^2 + x^2 a^2) / (ab)))``
 moves every sample to the centre at c = 0, contradicting "c = 0 is rest". We
 read ``(1 - c)`` as the *remaining* fraction of the orifice and use
-``delta = c kappa (o - s1) cos(pi/2 (1 - r))``: c = 0 is the rest state and c = 1
+``delta = c kappa P (o - s1) cos(pi/2 (1 - r))``: c = 0 is the rest state and c = 1
 the maximal contraction, which moves each inner sample the fraction ``kappa``
 (``max_contraction``, default :data:`SPHINCTER_MAX_CONTRACTION` = 0.5) of the
 way to the centre, times the fall-off. kappa = 1 (a fully closed orifice)
 collapses the inner loop to a point; its wall triangles degenerate and the
 dihedral bending projection diverges (observed from kappa c ~ 0.6 on the
-synthetic mouth), so the default stops half way (a puckered mouth). ``r`` is the ellipse
+synthetic mouth), so the default stops half way (a puckered mouth). ``P`` projects onto
+the ellipse's plane (dir_a, dir_b): the loops wrap around the face, so their mean ``o`` lies
+behind the lips, and the literal ``o - s1`` pulled the lips into the head (on the MakeHuman
+head the lower lip went down and back at c = 1 instead of up); the paper's ellipse is planar
+and its (x, y) are in-plane coordinates, so the contraction is taken in that plane. ``r`` is the ellipse
 radius of the outer sample ``s3 = o + x dir_a + y dir_b``, written correctly as
 ``r = sqrt(x^2 / a^2 + y^2 / b^2) = sqrt(x^2 b^2 + y^2 a^2) / (ab)`` (the paper
 swaps a and b, which would give r != 1 on the ellipse itself), clipped so that
@@ -203,7 +207,8 @@ def sphincter_displacement(inner, outer, c: float) -> np.ndarray:
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
-    multiplied by the maximal closure. ``delta = c (o - s1) cos(pi/2 (1 - r))``.
+    multiplied by the maximal closure. ``delta = c P (o - s1) cos(pi/2 (1 - r))``, ``P`` the
+    projection onto the ellipse's plane.
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -212,7 +217,9 @@ def sphincter_displacement(inner, outer, c: float) -> np.ndarray:
     y = (s3 - o) @ db
     r = np.sqrt(x * x * b * b + y * y * a * a) / (a * b)
     fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
-    return float(c) * (o - s1) * fall[:, None]
+    to = o - s1
+    to = np.outer(to @ da, da) + np.outer(to @ db, db)      # in the ellipse's plane
+    return float(c) * to * fall[:, None]
 
 
 @dataclass

@@ -241,6 +241,19 @@ def test_fit_ellipse_recovers_axes():
     assert abs(da @ e1) == pytest.approx(1.0) and abs(db @ e2) == pytest.approx(1.0)
 
 
+def test_sphincter_moves_its_loops_in_the_ellipse_plane():
+    """Loops wrapped around a face (a bowl: the lips in front, the corners further back) have
+    their mean behind the lips; the contraction moves them toward it within the ellipse's
+    plane, not into the head: no component along the plane's normal."""
+    ang = np.linspace(0, 2 * np.pi, 20, endpoint=False)
+    outer = np.stack([2 * np.cos(ang), np.sin(ang), -0.5 * (2 * np.cos(ang)) ** 2], 1)
+    inner = 0.5 * outer
+    d = sphincter_displacement(inner, outer, 0.4)
+    _, _, vt = np.linalg.svd(np.concatenate([inner, outer]) - np.concatenate([inner, outer]).mean(0))
+    np.testing.assert_allclose(d @ vt[2], 0.0, atol=1e-12)
+    assert np.abs(d).max() > 0.1
+
+
 def test_sphincter_displacement_formula():
     """On the fitted ellipse r = 1, so delta = c (o - s1); c = 0 gives no motion."""
     ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
