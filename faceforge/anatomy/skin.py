@@ -251,9 +251,9 @@ class SkinSimulation:
         stretch of the rest length ``|p - q|``; that link passes on only the part of the
         anchor's motion along ``p - q`` (to first order), so a muscle sliding under the skin
         (the mouth corner pulled down) barely drags it. A carried anchor's ``q`` starts at
-        ``p`` (rest length 0) and is held where ``p`` sits relative to the surface point in
-        the anchor triangle's frame (:meth:`carry_targets`): the skin goes where the tissue
-        under it goes, as where mimetic muscles insert into the skin. Bone anchors are
+        ``p`` (rest length 0) and is held at ``p``'s rest position moved as the surface point
+        moved (:meth:`carry_targets`): the skin goes where the tissue under it goes, as where
+        mimetic muscles insert into the skin. Bone anchors are
         best left uncarried (skin slides over bone).
     """
 
@@ -290,10 +290,14 @@ class SkinSimulation:
         same points as ``binding.targets([system.surface(n) for n in body_names])``, in one
         compiled gather from the system's world mesh (its vertex ids are found once per
         system). ``out`` (k, 3) float64, filled and returned when given."""
+        return bary_points(self._bary, self._gather_ids(system), system.world_view(), out)
+
+    def _gather_ids(self, system) -> np.ndarray:
+        """:meth:`_world_vertex_ids`, found once per system."""
         if getattr(self, "_gather_for", None) is not system:
             self._gather = self._world_vertex_ids(system)
             self._gather_for = system
-        return bary_points(self._bary, self._gather, system.world_view(), out)
+        return self._gather
 
     def _world_vertex_ids(self, system) -> np.ndarray:
         """``(k, 3)`` world vertex ids of each anchor's triangle (the system's world faces)."""
@@ -303,30 +307,22 @@ class SkinSimulation:
         return np.ascontiguousarray(world_faces[starts[b.body] + b.face_ids], dtype=INT)
 
     def carry_targets(self, system, targets) -> np.ndarray:
-        """Targets of the carried anchors' ``q``, ``(c, 3)``, from the surface points
-        ``targets (k, 3)`` on the current bodies: the skin vertex's rest offset from its surface
-        point, turned with the anchor triangle's frame (:func:`~faceforge.geometry.triangles.
-        triangle_frames`), ``p0 + (s - s0) + (R - R0)^T o`` with ``o = R0 (p0 - s0)``; exactly
-        ``p0`` at rest (the rest state stays a fixed point). A triangle crushed flat (no
-        frame) carries its offset unturned."""
-        from faceforge.geometry.triangles import triangle_frames
-
+        """Targets of the carried anchors' ``q``, ``(c, 3)``, from the surface points ``targets
+        (k, 3)`` on the current bodies: the skin vertex's rest position moved as its surface
+        point moved, ``p0 + (s - s0)``; exactly ``p0`` at rest (the rest state stays a fixed
+        point). The offset is not turned with the anchor triangle: a muscle's triangles tilt
+        and shear as it contracts, and turning the ~1-2 mm offset with them threw the skin
+        about (the MakeHuman chin moved 1.5 mm down and back while the mentalis under it rose
+        3 mm); a rigid turn of the tissue (the jaw) leaves an error of the turn angle times
+        the offset (0.2 rad x 1.5 mm = 0.3 mm), and skin on the mandible itself slides as in §8."""
         if getattr(self, "_carry_for", None) is not system:
-            self.anchor_targets(system)                  # sets self._gather for this system
             v0, _ = system.world(rest=True)
-            corners = self._gather[self.carried]
-            s0 = np.einsum("ij,ijk->ik", self.binding.bary[self.carried], v0[corners])
-            r0 = triangle_frames(*v0[corners].transpose(1, 0, 2))
-            p0 = self.rest[self.binding.vertex_ids[self.carried]]
-            self._carry = (corners, s0, r0, p0, np.einsum("kij,kj->ki", r0, p0 - s0))
+            ids = self._gather_ids(system)[self.carried]
+            self._carry = (bary_points(np.ascontiguousarray(self._bary[self.carried]), ids, v0),
+                           self.rest[self.binding.vertex_ids[self.carried]])
             self._carry_for = system
-        corners, s0, r0, p0, o = self._carry
-        v = system.world_view()
-        r = triangle_frames(*v[corners].transpose(1, 0, 2))
-        flat = ~np.isfinite(r).all(axis=(1, 2))     # a triangle crushed to a sliver: no turn
-        if flat.any():
-            r[flat] = r0[flat]
-        return p0 + (targets[self.carried] - s0) + np.einsum("kji,kj->ki", r - r0, o)
+        s0, p0 = self._carry
+        return p0 + (targets[self.carried] - s0)
 
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""

@@ -11,7 +11,6 @@ import numpy as np
 from faceforge.constants import FLOAT, INT
 
 __all__ = [
-    "triangle_frames",
     "check_mesh",
     "face_normals",
     "face_areas",
@@ -138,17 +137,3 @@ def concatenate_meshes(meshes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return np.zeros((0, 3), FLOAT), np.zeros((0, 3), INT), np.zeros(1, INT)
     return np.concatenate(vs), np.concatenate(fs), np.asarray(offsets, INT)
 
-
-def triangle_frames(p0, p1, p2) -> np.ndarray:
-    """Orthonormal frame of each triangle, ``(k, 3, 3)``: rows ``e1`` (along ``p1 - p0``),
-    ``e2 = n x e1`` and the unit normal ``n`` (right-handed, counter-clockwise winding).
-
-    ``p0, p1, p2 : (k, 3)`` corners. ``R @ x`` gives a vector's frame coordinates and
-    ``R.T @ y`` turns them back. Degenerate triangles get non-finite rows.
-    """
-    p0, p1, p2 = (np.asarray(p, dtype=FLOAT).reshape(-1, 3) for p in (p0, p1, p2))
-    e1 = p1 - p0
-    n = np.cross(e1, p2 - p0)
-    e1 = e1 / np.linalg.norm(e1, axis=1, keepdims=True)
-    n = n / np.linalg.norm(n, axis=1, keepdims=True)
-    return np.stack([e1, np.cross(n, e1), n], axis=1)

@@ -2,7 +2,7 @@
 
 The paper's anchor (§8) is a stretch of rest length |p - q|; it passes on only the part of
 the anchor's motion along p - q. A carried anchor holds q (and so p) at the skin vertex's
-rest offset from its surface point, turned with the anchor triangle's frame.
+rest position moved as its surface point moved.
 """
 
 import numpy as np
@@ -43,20 +43,14 @@ def _sim(bound, carry: bool):
                           carried=np.full(len(b.vertex_ids), carry))
 
 
-def _rotation(axis, angle):
-    a = np.asarray(axis, float) / np.linalg.norm(axis)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
-
-
-def test_carried_targets_follow_a_rigid_motion_of_the_body_exactly(bound):
+def test_carried_targets_follow_their_surface_points_exactly(bound):
     v, f, muscle, b = bound
     sim = _sim(bound, True)
     body = Bodies(muscle.vertices, muscle.faces)
-    r, t = _rotation([0.3, 1.0, -0.2], 0.4), np.array([0.05, -0.1, 0.2])
-    body.v = body.rest @ r.T + t
+    shift = np.array([0.05, -0.1, 0.2])
+    body.v = body.rest + shift
     got = sim.carry_targets(body, sim.anchor_targets(body))
-    np.testing.assert_allclose(got, v[b.vertex_ids] @ r.T + t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(got, v[b.vertex_ids] + shift, rtol=0, atol=1e-12)
 
 
 def test_the_rest_state_with_carried_anchors_is_a_fixed_point(bound):
@@ -71,15 +65,20 @@ def test_the_rest_state_with_carried_anchors_is_a_fixed_point(bound):
     assert np.abs(sim.simulated() - v).max() < 1e-12 * np.linalg.norm(np.ptp(v, axis=0))
 
 
-def test_carried_skin_turns_with_a_body_turning_under_it(bound):
-    """The body turns 0.1 rad about the vertical axis (its surface slides sideways under the
-    skin): the settled skin is the rest skin turned, to 5 % of the motion."""
-    v, f, muscle, _ = bound
-    r = _rotation([0.0, 1.0, 0.0], 0.1)
+def test_carried_skin_goes_where_the_tissue_under_it_goes(bound):
+    """Half the body (x > 0.2) slides up 0.1 under the skin, the other half (x < 0) stays.
+    Carried, the skin over the moving half follows (mean within 10 %, every vertex at least
+    75 %: the skin's own area and volume resist the shear) and the skin over the still half
+    moves less than 0.02. (With the paper's anchors the still half moved 0.058 and the
+    moving half overshot, 0.121 on average, on this sphere.)"""
+    v, f, muscle, b = bound
     sim = _sim(bound, True)
     body = Bodies(muscle.vertices, muscle.faces)
-    body.v = body.rest @ r.T
+    slide = 0.1 * np.clip(body.rest[:, 0] / 0.2, 0.0, 1.0)
+    body.v = body.rest + slide[:, None] * [0.0, 1.0, 0.0]
     for _ in range(150):
         sim.step(body, 1 / 25)
-    err = np.linalg.norm(sim.simulated() - v @ r.T, axis=1).max()
-    assert err < 0.05 * np.linalg.norm(v @ r.T - v, axis=1).max()
+    d = sim.simulated()[:, 1] - v[:, 1]
+    moving, still = d[v[:, 0] > 0.5], d[v[:, 0] < -0.3]
+    assert abs(moving.mean() - 0.1) < 0.01 and moving.min() > 0.075, moving
+    assert np.abs(still).max() < 0.02, still
