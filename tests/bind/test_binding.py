@@ -141,3 +141,27 @@ def test_rays_into_a_hole_fall_back_to_the_closest_skull_point(skin):
     assert np.all(b.distance[sel] <= 0.8) and np.all(b.points[sel, 2] <= 0.6 + 1e-9)
     near = np.linalg.norm(b.points[sel][:, None] - sv[None], axis=2).min(axis=1)
     assert np.all(near < 0.2)  # on the bone that is left, by the rim
+
+
+def test_lip_vertices_whose_rays_miss_fall_back_to_their_own_half_of_a_muscle(skin):
+    """A lip vertex whose rays miss binds to the nearer of its own jaw's bone and its own
+    side of a muscle around the mouth (never the other side's); non-lip vertices still fall
+    back to bone only."""
+    v, f = skin
+    sv, sf = sphere(0.8, 3)
+    hole = (sv[sf][:, :, 2] > 0.6).any(axis=1)
+    skull = Body("cranium", "cranium", sv, sf[~hole])
+    jaw = Body("mandible", "mandible", sv, sf[~hole])
+    mv, mf = sphere(0.7, 3)                          # a "ring" muscle behind the hole, nearer than the rim
+    ring = Body("ring", "muscle", mv, mf[(mv[mf][:, :, 2] > 0.6).all(axis=1)])
+    sides = np.where(v[:, 0] > 0.2, 1, np.where(v[:, 0] < -0.2, -1, 0))
+
+    def side_of(points):
+        return np.where(points[:, 0] >= 0.0, 1, -1)
+
+    b = bind_skin(v, f, [ring, skull, jaw], max_distance=0.8, lip_sides=sides, side_of=side_of)
+    lips = b.closest & (sides[b.vertex_ids] != 0)
+    on_ring = lips & (b.body == 0)
+    assert on_ring.any()
+    assert np.all(side_of(b.points[on_ring]) == sides[b.vertex_ids[on_ring]])
+    assert np.all(b.body[b.closest & (sides[b.vertex_ids] == 0)] != 0)
