@@ -141,17 +141,23 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
 
 
 def static_poses(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float,
-                 settle: int = 30) -> np.ndarray:
-    """Settled skin for each independent pose: reset, hold the controls ``settle`` frames.
+                 settle: int = 30, ramp: int | None = None) -> np.ndarray:
+    """Settled skin for each independent pose: reset, ease the controls in linearly over
+    ``ramp`` frames (default a third of ``settle``), hold them to frame ``settle``.
 
+    A pose is approached, not jumped to: the jaw thrown open to 0.34 rad in one frame made
+    the orbicularis oris diverge on the MakeHuman head (a Gauss-Seidel sweep cannot absorb
+    a one-frame step of a centimetre).
     contractions (k, m), jaw (k, 3) -> (k, n, 3) float. Needs ``rig.reset``.
     """
     if rig.reset is None:
         raise ValueError("static_poses needs a rig with reset()")
+    ramp = max(1, settle // 3) if ramp is None else max(1, int(ramp))
+    t = np.minimum(np.arange(1, max(settle, ramp) + 1) / ramp, 1.0)[:, None]
     out = []
     for c, j in zip(np.atleast_2d(contractions), np.atleast_2d(jaw)):
         rig.reset()
-        out.append(play(rig, c[None], j[None], fps, settle=settle - 1)[0])
+        out.append(play(rig, t * c, t * j, fps)[-1])
     rig.reset()
     return np.stack(out) if out else np.zeros((0,) + np.shape(rig.rest))
 

@@ -86,3 +86,28 @@ def test_each_muscle_moves_the_skin_where_it_acts(head, muscle, fdp, axis, sign,
     h, _ = head
     d = moved(h, muscle)
     assert sign * d[h.fdp_vertex[fdp], axis] / h.fapu.unit(unit) > least
+
+
+def test_a_static_pose_with_the_jaw_at_its_limit_stays_bounded(head):
+    """Calibration holds poses from rest; eased in (static_poses' ramp), the jaw opened to its
+    limit moves no muscle by more than a fifth of the head's diagonal and the skin stays
+    finite. (Thrown open in one frame, the orbicularis oris diverged on this head.)"""
+    from faceforge.anatomy.animate import static_poses
+
+    h, _ = head
+    limit = 0.45                                            # templates/fap_mapping.yaml jaw_limits
+    skin = static_poses(h.rig, np.zeros((1, len(h.muscle_names))), np.array([[limit, 0.0, 0.0]]),
+                        25.0, settle=30)[0]
+    diag = np.linalg.norm(np.ptp(h.rest, axis=0))
+    assert np.isfinite(skin).all()
+    h.rig.reset()
+    moved = {}                                              # the same ramp, watching the muscles
+    t = np.minimum(np.arange(1, 31) / 10, 1.0)
+    for f in t:
+        h.rig.skull(np.array([f * limit, 0.0, 0.0]))
+        h.rig.muscles(np.zeros(len(h.muscle_names)), None, 0.04)
+        h.rig.skin(None, None, 0.04)
+        for n in h.muscle_names:
+            moved[n] = max(moved.get(n, 0.0), np.abs(h.system.positions(n) - h.system.rest_positions(n)).max())
+    h.rig.reset()
+    assert max(moved.values()) < 0.2 * diag, max(moved.items(), key=lambda kv: kv[1])
