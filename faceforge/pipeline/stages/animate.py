@@ -34,6 +34,7 @@ from faceforge.io.config import Choice, Integer, Number, add_rule
 from faceforge.pipeline import Stage, register_command, register_stage
 
 add_rule("skin.carry", Choice(("muscles", "all", "none")))
+add_rule("muscle.damping", Number(0.0, 0.99))
 add_rule("animate.orientation_guard.rounds", Integer(0))           # 0 turns the guard off
 add_rule("animate.orientation_guard.min_area", Number(0.0, 0.95))
 
@@ -282,6 +283,7 @@ def _muscle_system(fit, cranium, mandible, settings, config, log):
     stiffness = {"linear": dict(config.get("muscle.linear.stiffness")),
                  "sphincter": dict(config.get("muscle.sphincter.stiffness"))}
     muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness)
+    settings = replace(settings, damping=float(config.get("muscle.damping")))
     return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
 
 
