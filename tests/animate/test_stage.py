@@ -153,3 +153,16 @@ def test_expression_preset_through_fap2(workdir, patched, tmp_path):
     c = d["contractions"][:, 0]
     assert c[0] == 0.0 and c[-1] == 0.0                        # ramps in from and out to neutral
     assert c.max() == pytest.approx(0.8 * 150 * 0.003)         # joy's corner FAPs x intensity x gain
+
+
+def test_a_diverging_simulation_is_a_one_line_stage_error_naming_the_track(workdir, patched, monkeypatch):
+    import faceforge.anatomy.animate as anim
+    from faceforge.exceptions import StageError
+
+    def diverges(*args, **kwargs):
+        raise FloatingPointError("frame 3: the simulation produced non-finite skin positions")
+
+    monkeypatch.setattr(anim, "play", diverges)
+    with pytest.raises(StageError, match=r"joy\.fap.*frame 3.*diverged") as err:
+        run_stage("animate", workdir, {"fap": str(JOY), "animate_mapping": str(workdir / "mapping.yaml")})
+    assert "\n" not in str(err.value)

@@ -354,7 +354,13 @@ def run_animate(ctx):
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
     head.rig.reset()
     timings = Timings()
-    frames = play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings)
+    try:
+        frames = play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings)
+    except FloatingPointError as exc:
+        from faceforge.exceptions import StageError
+
+        raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
+                         "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
     checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
     user = head.to_user(frames).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
