@@ -253,8 +253,8 @@ class SkinSimulation:
         (the mouth corner pulled down) barely drags it. A carried anchor's ``q`` starts at
         ``p`` (rest length 0) and is held at ``p``'s rest position moved as the surface point
         moved (:meth:`carry_targets`): the skin goes where the tissue under it goes, as where
-        mimetic muscles insert into the skin. Bone anchors are
-        best left uncarried (skin slides over bone).
+        mimetic muscles insert into the skin. Bone anchors are best left uncarried (skin
+        slides over bone).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
