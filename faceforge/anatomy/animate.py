@@ -140,6 +140,13 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
     return out
 
 
+def ease_in(settle: int = 30, ramp: int | None = None) -> np.ndarray:
+    """Fraction of a static pose's controls at each of its frames, ``(max(settle, ramp),)``:
+    linear up to 1 over ``ramp`` frames (default a third of ``settle``), then held."""
+    ramp = max(1, settle // 3) if ramp is None else max(1, int(ramp))
+    return np.minimum(np.arange(1, max(settle, ramp) + 1) / ramp, 1.0)
+
+
 def static_poses(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float,
                  settle: int = 30, ramp: int | None = None) -> np.ndarray:
     """Settled skin for each independent pose: reset, ease the controls in linearly over
@@ -152,8 +159,7 @@ def static_poses(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float
     """
     if rig.reset is None:
         raise ValueError("static_poses needs a rig with reset()")
-    ramp = max(1, settle // 3) if ramp is None else max(1, int(ramp))
-    t = np.minimum(np.arange(1, max(settle, ramp) + 1) / ramp, 1.0)[:, None]
+    t = ease_in(settle, ramp)[:, None]
     out = []
     for c, j in zip(np.atleast_2d(contractions), np.atleast_2d(jaw)):
         rig.reset()

@@ -234,8 +234,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     lip line, of the mandible below it, of either elsewhere. A lip vertex (``sides``
     +1 / -1, given ``side_of``) may also bind to the closest point of a muscle on its
     own side of the lip line (the orbicularis oris), whichever is nearer: the lips are
-    muscle, and bound to the teeth they did not follow the muscles that move them (on
-    MakeHuman the calibration's median error fell from 26 % to 21.5 %). Updates the
+    muscle, and bound to the teeth they did not follow the muscles that move them. Updates the
     arrays in place; returns the ``(n,) bool`` mask of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points

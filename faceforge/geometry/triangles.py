@@ -136,4 +136,3 @@ def concatenate_meshes(meshes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not vs:
         return np.zeros((0, 3), FLOAT), np.zeros((0, 3), INT), np.zeros(1, INT)
     return np.concatenate(vs), np.concatenate(fs), np.asarray(offsets, INT)
-
