@@ -143,3 +143,15 @@ def test_given_meshes_replace_the_proxy(template):
     drawn = {l.label: l for l in layers[2:]}
     assert np.array_equal(drawn["mentalis"].vertices, box.vertices)
     assert len(drawn["risorius L"].vertices) != len(box.vertices)
+
+
+def test_template_render_command_simulates_the_map(invoke, tmp_path):
+    """`faceforge template render` end to end (it builds and steps the whole layered map with the
+    config's muscle section, damping included): a PNG, and a one-line error for an unknown muscle."""
+    out = tmp_path / "frown.png"
+    ok = invoke("-w", tmp_path, "template", "render", "-o", out, "--frames", "2",
+                "--contract", "corrugator_supercilii_L=0.5")
+    assert ok.exit_code == 0, ok.stderr
+    assert matplotlib.image.imread(out).std() > 0.05
+    bad = invoke("-w", tmp_path, "template", "render", "-o", tmp_path / "x.png", "--contract", "nope=0.5")
+    assert bad.exit_code == 2 and "unknown muscle(s) nope" in bad.stderr and len(bad.stderr.splitlines()) == 1

@@ -15,7 +15,7 @@ import click
 from faceforge.pipeline import register_command
 
 
-def simulate_template(skull, specs, stiffness: dict, solver: dict, contractions: dict,
+def simulate_template(skull, specs, muscle: dict, solver: dict, contractions: dict,
                       jaw: tuple[float, float, float], frames: int) -> dict:
     """Muscle meshes of the template after ``frames`` steps toward a pose.
 
@@ -26,7 +26,8 @@ def simulate_template(skull, specs, stiffness: dict, solver: dict, contractions:
     ----------
     skull : anatomy.skull.Skull
     specs : [MuscleSpec]
-    stiffness : ``{"linear": {...}, "sphincter": {...}}`` (the config's ``muscle`` section)
+    muscle : the config's ``muscle`` section (``linear.stiffness``, ``sphincter.stiffness``,
+        ``damping``)
     solver : the config's ``solver`` section
     contractions : {muscle name: c in [0, 1]}
     jaw : (pitch rad, yaw rad, protrusion template units)
@@ -36,14 +37,16 @@ def simulate_template(skull, specs, stiffness: dict, solver: dict, contractions:
     -------
     {muscle name: (vertices (n, 3), faces (m, 3))}
     """
+    from dataclasses import replace
+
     from faceforge.anatomy.fit_muscles import build_muscles_on
     from faceforge.anatomy.layers import MusculoskeletalSystem
     from faceforge.pbd import SolverSettings
 
     muscles = build_muscles_on(specs, skull.cranium, skull.mandible, skull.diagonal,
-                               {k: v["stiffness"] for k, v in stiffness.items()})
-    system = MusculoskeletalSystem.from_parts(skull.cranium, skull.mandible, muscles,
-                                              SolverSettings.from_config(solver))
+                               {k: dict(muscle[k]["stiffness"]) for k in ("linear", "sphincter")})
+    settings = replace(SolverSettings.from_config(solver), damping=float(muscle["damping"]))
+    system = MusculoskeletalSystem.from_parts(skull.cranium, skull.mandible, muscles, settings)
     ramp = max(1, frames // 2)
     for i in range(frames):
         s = min(1.0, (i + 1) / ramp)
