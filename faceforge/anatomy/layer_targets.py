@@ -3,8 +3,10 @@
 Each frame, every linear muscle resamples its four action lines on the current deeper
 layers (A0 and A2 at the step ``1 - c kappa`` of Eq. 4, A3 and A1 at the full step), moves
 its insertion with the ends of the two fibres, and hands the contour samples to its
-bottom particles as position targets (:meth:`faceforge.anatomy.muscle.Muscle.
-targets_from_line_points`, the plain twin). Done muscle by muscle in numpy that is ~35
+bottom particles as position targets; its interior bottom particles get the blend of
+their row's two side samples plus their rest offset in the row's basis
+(:func:`faceforge.anatomy.muscle.interior_targets`). :meth:`faceforge.anatomy.muscle.
+Muscle.targets_from_line_points` is the plain twin. Done muscle by muscle in numpy that is ~35
 small array operations per muscle, ~0.9 ms a frame for the 25 sheets of the default map;
 :class:`LinearTargets` does the same arithmetic, in the same order (so the same bits), for
 all of a layer's linear muscles in one numba kernel.
@@ -15,8 +17,11 @@ Layout (CSR over the layer's linear muscles, ``q`` of them):
   points ``pts (k, 3)``;
 * ``hw (q, 2)`` samples along the fibres and across them; ``kappa (q,)`` fibre shortening
   at c = 1;
-* ``cells (t, 2)`` contour-grid cells ``(i, j)`` of every muscle, one after another, and
-  ``cell_start (q + 1,)``; the targets come out in the same rows, ``(t, 3)``.
+* ``cells (t, 2)`` grid cells ``(i, j)`` of every muscle's bound particles (its contour,
+  then its interior ones), one muscle after another, and ``cell_start (q + 1,)``; the
+  targets come out in the same rows, ``(t, 3)``; ``offsets (t, 3)`` the rest offsets of the
+  interior rows in their row's basis (:attr:`faceforge.anatomy.muscle.Muscle.interior`),
+  zero on the contour rows.
 """
 
 from __future__ import annotations
@@ -34,8 +39,8 @@ LINE_KEYS = ("A0", "A1", "A2", "A3")
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _linear_targets(pts, lines, hw, kappa, cells, cell_start, c, out):
-    """Fill ``out (t, 3)`` with every muscle's contour targets (see the module docstring)."""
+def _linear_targets(pts, lines, hw, kappa, cells, cell_start, offsets, c, out):
+    """Fill ``out (t, 3)`` with every muscle's targets (see the module docstring)."""
     for m in range(len(kappa)):
         h, w = hw[m, 0], hw[m, 1]
         scale = 1.0 - c[m] * kappa[m]
@@ -58,6 +63,9 @@ def _linear_targets(pts, lines, hw, kappa, cells, cell_start, c, out):
                         + t * (a2[h - 1, d] - pts[e2, d])
         for r in range(cell_start[m], cell_start[m + 1]):
             i, j = cells[r, 0], cells[r, 1]
+            if 0 < i < h - 1 and 0 < j < w - 1:
+                _interior_target(a0, a2, i, j * (1.0 / (w - 1)), offsets[r], out[r])
+                continue
             # the grid's borders, written as the twin does: A3, A1, then A0 and A2 over the corners
             if j == 0:
                 src, k = a0, i
@@ -96,6 +104,22 @@ def bary_points(bary: np.ndarray, ids: np.ndarray, vertices: np.ndarray,
     return out
 
 
+@numba.njit(**NUMBA_OPTIONS)
+def _interior_target(a0, a2, i, t, k, out):
+    """``out (3,)``: the interior target of row ``i`` at ``t`` (muscle.interior_targets, same
+    arithmetic in the same order; ``t = j / (w - 1)`` as numpy.linspace for 0 < j < w - 1)."""
+    u0, u1, u2 = a2[i, 0] - a0[i, 0], a2[i, 1] - a0[i, 1], a2[i, 2] - a0[i, 2]
+    v0 = ((a0[i + 1, 0] - a0[i - 1, 0]) + (a2[i + 1, 0] - a2[i - 1, 0])) * 0.25
+    v1 = ((a0[i + 1, 1] - a0[i - 1, 1]) + (a2[i + 1, 1] - a2[i - 1, 1])) * 0.25
+    v2 = ((a0[i + 1, 2] - a0[i - 1, 2]) + (a2[i + 1, 2] - a2[i - 1, 2])) * 0.25
+    n0, n1, n2 = u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0
+    nn = max(np.sqrt((n0 * n0 + n1 * n1) + n2 * n2), 1e-300)
+    n0, n1, n2 = n0 / nn, n1 / nn, n2 / nn
+    out[0] = ((1.0 - t) * a0[i, 0] + t * a2[i, 0]) + ((k[0] * u0 + k[1] * v0) + k[2] * n0)
+    out[1] = ((1.0 - t) * a0[i, 1] + t * a2[i, 1]) + ((k[0] * u1 + k[1] * v1) + k[2] * n1)
+    out[2] = ((1.0 - t) * a0[i, 2] + t * a2[i, 2]) + ((k[0] * u2 + k[1] * v2) + k[2] * n2)
+
+
 class LinearTargets:
     """The compiled target plan of a layer's linear muscles.
 
@@ -120,12 +144,17 @@ class LinearTargets:
                 self.lines[i, k] = own[key].start, own[key].stop
         self.hw = np.array([[m.topology.h, m.topology.w] for m in muscles], dtype=INT).reshape(q, 2)
         self.kappa = np.array([m.max_contraction for m in muscles], dtype=FLOAT)
-        grids = [m._contour_grid for m in muscles]
+        grids = [m.bound_grid for m in muscles]
         self.cells = np.ascontiguousarray(np.concatenate(grids) if grids else np.zeros((0, 2)), dtype=INT)
         self.cell_start = np.cumsum([0] + [len(g) for g in grids]).astype(INT)
+        offsets = [np.zeros((len(g), 3)) for g in grids]
+        for m, o in zip(muscles, offsets):
+            if m.interior is not None:
+                o[len(m.topology.contour):] = np.asarray(m.interior, FLOAT).reshape(-1, 3)
+        self.offsets = np.ascontiguousarray(np.concatenate(offsets) if offsets else np.zeros((0, 3)))
         self.slots = np.concatenate(slots).astype(INT) if slots else np.zeros(0, INT)
         if len(self.slots) != len(self.cells):
-            raise ValueError(f"{len(self.slots)} position slots for {len(self.cells)} contour targets")
+            raise ValueError(f"{len(self.slots)} position slots for {len(self.cells)} targets")
         self._out = np.empty((len(self.cells), 3))
 
     def __call__(self, pts: np.ndarray, contractions: dict) -> np.ndarray:
@@ -134,5 +163,5 @@ class LinearTargets:
         c = np.array([contractions.get(n, 0.0) for n in self.names], dtype=FLOAT)
         c = np.where(self.active, np.clip(c, 0.0, 1.0), 0.0)
         _linear_targets(np.ascontiguousarray(pts, dtype=FLOAT), self.lines, self.hw, self.kappa,
-                        self.cells, self.cell_start, c, self._out)
+                        self.cells, self.cell_start, self.offsets, c, self._out)
         return self._out

@@ -16,7 +16,8 @@ shear_up/low        both diagonals of every grid cell, top / bottom sheet
 connection          bottom ``(i, j)`` to top ``(i, j)``
 bend                dihedral angle of every pair of faces sharing an edge
 volume              one volume constraint over the closed muscle surface
-position            bottom contour particles to their contour samples
+position            bottom contour particles to their contour samples, and (linear)
+                    the interior bottom particles to their fibre targets (below)
 =================  ==============================================================
 
 Linear contraction (§5.2.1, Eq. 4): the fibre lines A0, A2 are sampled with
@@ -25,6 +26,24 @@ stays on the origin). The origin line A3 is sampled normally (the fixed site).
 The interior insertion samples (A1, ``0 < j < w-1``) have no fibre of their
 own: each is moved by the linear blend (in ``j``) of the displacements of the
 two insertion corners, so the whole insertion edge travels with the fibres.
+The interior bottom particles (``0 < i < h-1``, ``0 < j < w-1``) have no sample of the
+contour either; left free (the paper binds only the contour), nothing drives them along
+the fibres: with the stiffness of §5.2.1 the bottom sheet has no distance constraint at
+all, the top sheet no shear, and ``k_longitudinal^up = 0.1`` alone drags them. Under fast
+contraction the bound insertion sample then runs over the lagging interior node next to
+it and single bottom faces turn over (the depressor anguli at the modiolus, issue 4).
+"When it contracts, the fibers shorten by equal amounts" (§5.2.1), so each interior node
+is bound like the contour, with ``k_position``, to a target that keeps its rest place
+between the two side fibres' samples of its row ``i``: their blend in ``j`` (the rule of
+the insertion edge, applied to every row) plus the node's rest offset from that blend,
+kept in the row's basis (:func:`row_bases`: the row ``a2[i] - a0[i]``, the fibres' mean
+step, the unit normal), so its part in the sheet scales with the row's width and with the
+fibre step as the fibres shorten, and its normal part (mostly the layer's sag under the
+chord) keeps its length; all of it turns with the anatomy, e.g. the jaw. At rest the
+targets are the rest positions. (A surface point of the layer under the node, tried
+first, does not do: a deeper muscle's contraction carries it along with that muscle's
+fibres while the action lines' samples stay evenly spread along the lines; with every
+muscle at c = 1 the depressor labii inferioris, on the platysma and mentalis, folded.)
 ``kappa`` (``max_contraction``, default :data:`LINEAR_MAX_CONTRACTION` = 0.5) is
 the fibre shortening at c = 1. The paper's literal kappa = 1 collapses every
 fibre sample onto the origin at c = 1; on the synthetic head the muscle then
@@ -234,6 +253,11 @@ class Muscle:
     rest_parameters : dict
         Sphincter material sampling: ``{"A1"|"A3": (segment (h,), t (h,))}``;
         empty for arc-length sampling every frame.
+    interior : (h-2, w-2, 3) float64 or None
+        Linear: the rest offset of each interior bottom particle (rows ``i = 1..h-2``,
+        columns ``j = 1..w-2``) from the blend of its row's side samples, in the row's
+        basis (:func:`row_bases`); these particles are bound to their fibre targets
+        (module docstring). None: only the contour is bound.
     constraints : dict
         Derived: ``{kind: indices}`` of the created constraints (muscle-local).
     """
@@ -251,6 +275,7 @@ class Muscle:
     thickness: float = 0.0
     max_contraction: float = SPHINCTER_MAX_CONTRACTION
     rest_parameters: dict = field(default_factory=dict)
+    interior: object = None
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -266,8 +291,12 @@ class Muscle:
 
     @property
     def bound(self) -> np.ndarray:
-        """Bottom contour particles driven by position constraints, ``(k,)`` (muscle-local)."""
-        return self.topology.contour
+        """Bottom particles driven by position constraints, ``(k,)`` (muscle-local): the
+        contour (:attr:`HexTopology.contour`), then the :attr:`interior` ones if bound."""
+        if self.interior is None:
+            return self.topology.contour
+        g = interior_grid(self.topology.h, self.topology.w)
+        return np.concatenate([self.topology.contour, self.topology.bottom(g[:, 0], g[:, 1])]).astype(INT)
 
     def constraint_count(self) -> int:
         """Number of constraints :meth:`add_to_builder` creates."""
@@ -345,14 +374,18 @@ class Muscle:
         """
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         grid = self._grid_targets(c, points)
-        g = self._contour_grid
+        g = self.bound_grid
         return grid[g[:, 0], g[:, 1]]
 
     @property
-    def _contour_grid(self) -> np.ndarray:
+    def bound_grid(self) -> np.ndarray:
+        """``(k, 2)`` grid cells ``(i, j)`` of :attr:`bound`, in order (the targets' rows)."""
         g = self.__dict__.get("_cg")
         if g is None:
-            g = self.__dict__["_cg"] = self.topology.contour_grid()
+            g = self.topology.contour_grid()
+            if self.interior is not None:
+                g = np.concatenate([g, interior_grid(self.topology.h, self.topology.w)])
+            g = self.__dict__["_cg"] = g
         return g
 
     def _grid_targets(self, c, P) -> np.ndarray:
@@ -364,13 +397,15 @@ class Muscle:
             a2 = sample_positions(P["A2"], h, False, scale)
             a3 = sample_positions(P["A3"], w, False, 1.0)
             a1 = sample_positions(P["A1"], w, False, 1.0)
+            t = np.linspace(0.0, 1.0, w)[:, None]
             if c > 0:  # the insertion travels with the ends of the two fibres
-                t = np.linspace(0.0, 1.0, w)[:, None]
                 a1 = a1 + (1.0 - t) * (a0[-1] - P["A0"][-1]) + t * (a2[-1] - P["A2"][-1])
             grid[0, :] = a3
             grid[-1, :] = a1
             grid[:, 0] = a0
             grid[:, -1] = a2
+            if self.interior is not None:  # each interior fibre shortens with the side fibres
+                grid[1:-1, 1:-1] = interior_targets(a0, a2, self.interior)
         else:
             if self.rest_parameters:  # material sampling, see build_sphincter_muscle
                 s1 = eval_polyline(P["A1"], None, *self.rest_parameters["A1"], closed=True)[0]
@@ -444,8 +479,66 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
     params = {}
     if kw.get("material_sampling", False):
         params = {key: lines[key].parameters(v, f, topo.h) for key in ("A1", "A3")}
+    interior = None
+    if kind == "linear" and topo.h > 2 and topo.w > 2:  # see the module docstring
+        h, w = topo.h, topo.w
+        bottom = pos[: h * w].reshape(h, w, 3)
+        a0, a2 = bottom[:, 0], bottom[:, -1]            # the rest samples of A0, A2, exactly
+        basis = row_bases(a0, a2)                        # (h-2, 3, 3), rows e_u, e_v, n
+        rel = bottom[1:-1, 1:-1] - _row_blend(a0, a2, w)
+        interior = np.linalg.solve(np.swapaxes(basis, 1, 2)[:, None], rel[..., None])[..., 0]
+        pos[: h * w].reshape(h, w, 3)[1:-1, 1:-1] = interior_targets(a0, a2, interior)  # round-off
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
-                  proto.layer, proto.active, float(thickness), proto.max_contraction, params)
+                  proto.layer, proto.active, float(thickness), proto.max_contraction, params,
+                  interior)
+
+
+def _cross(a, b):
+    """``a x b`` over the last axis, component by component (the compiled twin's arithmetic)."""
+    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], -1)
+
+
+def row_bases(a0, a2) -> np.ndarray:
+    """Basis of each interior row ``i = 1..h-2`` of a linear muscle, ``(h-2, 3, 3)``.
+
+    ``a0, a2 (h, 3)``: the samples of the two side fibres. Rows of each basis: ``e_u =
+    a2[i] - a0[i]`` across the row, ``e_v = ((a0[i+1] - a0[i-1]) + (a2[i+1] - a2[i-1])) / 4``
+    the mean fibre step there, and the unit normal ``n`` along ``e_u x e_v``.
+    """
+    a0 = np.asarray(a0, FLOAT)
+    a2 = np.asarray(a2, FLOAT)
+    eu = a2[1:-1] - a0[1:-1]
+    ev = ((a0[2:] - a0[:-2]) + (a2[2:] - a2[:-2])) * 0.25
+    n = _cross(eu, ev)
+    length = np.sqrt((n[..., 0] * n[..., 0] + n[..., 1] * n[..., 1]) + n[..., 2] * n[..., 2])
+    return np.stack([eu, ev, n / np.maximum(length, 1e-300)[..., None]], 1)
+
+
+def _row_blend(a0, a2, w: int) -> np.ndarray:
+    """``(1 - t_j) a0[i] + t_j a2[i]``, ``t = linspace(0, 1, w)``, for the interior rows
+    and columns, ``(h-2, w-2, 3)``."""
+    t = np.linspace(0.0, 1.0, w)[None, 1:-1, None]
+    return (1.0 - t) * np.asarray(a0, FLOAT)[1:-1, None] + t * np.asarray(a2, FLOAT)[1:-1, None]
+
+
+def interior_targets(a0, a2, offset) -> np.ndarray:
+    """Targets of the interior bottom particles, ``(h-2, w-2, 3)`` (module docstring).
+
+    ``a0, a2 (h, 3)`` the current (contracted) samples of the side fibres; ``offset
+    (h-2, w-2, 3)`` :attr:`Muscle.interior`. Per component: ``blend + ((k_u e_u + k_v e_v) + k_n n)``.
+    """
+    fr = row_bases(a0, a2)[:, None]                   # (h-2, 1, 3, 3)
+    k = np.asarray(offset, FLOAT)
+    off = (k[..., 0:1] * fr[..., 0, :] + k[..., 1:2] * fr[..., 1, :]) + k[..., 2:3] * fr[..., 2, :]
+    return _row_blend(a0, a2, k.shape[1] + 2) + off
+
+
+def interior_grid(h: int, w: int) -> np.ndarray:
+    """``((h-2) (w-2), 2)`` grid cells ``(i, j)``, ``0 < i < h-1``, ``0 < j < w-1``, row-major."""
+    i, j = np.meshgrid(np.arange(1, h - 1), np.arange(1, w - 1), indexing="ij")
+    return np.stack([i.ravel(), j.ravel()], 1).astype(INT)
 
 
 def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:

@@ -137,7 +137,7 @@ def test_contraction_shortens_fibres_and_keeps_volume(linear, sphere):
     for c in (0.3, 0.6, 1.0):
         want = 1 - c * linear.max_contraction
         tg = linear.sample_targets(c, v, f)
-        g = linear.topology.contour_grid()
+        g = linear.bound_grid
         grid = np.zeros((linear.topology.h, linear.topology.w, 3))
         grid[g[:, 0], g[:, 1]] = tg
         for j in (0, -1):
@@ -152,9 +152,44 @@ def test_contraction_shortens_fibres_and_keeps_volume(linear, sphere):
         assert not linear.inverted_faces(p, v, f).any()
 
 
+def test_interior_bottom_particles_are_bound_and_their_fibres_shorten_like_the_sides(linear, sphere):
+    """The interior bottom particles are bound after the contour; their targets keep their
+    rest place between the side fibres' samples of their row, so between the interior rows
+    every column of the target grid shortens by c * max_contraction like the two side
+    fibres (within the 2 % of the chords, as the sides in
+    test_contraction_shortens_fibres_and_keeps_volume). (The first and last segments of an
+    interior column end on the origin and insertion lines, which are curved: their middle
+    samples lie off the chord between the corners, so those two segments do not scale.)"""
+    v, f = sphere
+    h, w = linear.topology.h, linear.topology.w
+    assert len(linear.bound) == 2 * (h + w) - 4 + (h - 2) * (w - 2)
+    np.testing.assert_array_equal(linear.bound[: len(linear.topology.contour)], linear.topology.contour)
+    g = linear.bound_grid
+    assert np.array_equal(linear.bound, linear.topology.bottom(g[:, 0], g[:, 1]))
+    rest = linear.rest_positions[: h * w].reshape(h, w, 3)
+    rest_len = np.linalg.norm(np.diff(rest[1:-1], axis=0), axis=2).sum(axis=0)
+    for c in (0.3, 1.0):
+        grid = np.zeros((h, w, 3))
+        grid[g[:, 0], g[:, 1]] = linear.sample_targets(c, v, f)
+        ratio = np.linalg.norm(np.diff(grid[1:-1], axis=0), axis=2).sum(axis=0) / rest_len
+        assert ratio == pytest.approx(np.full(w, 1 - c * linear.max_contraction), abs=0.02)
+
+
+def test_targets_turn_with_a_rigid_motion_of_the_layer(linear, sphere):
+    """Every target, the interior ones (rest offsets kept in their row's frame) included,
+    moves with a rigid motion of the layer the muscle lies on."""
+    v, f = sphere
+    a = 0.7
+    R = np.array([[np.cos(a), 0.0, np.sin(a)], [0.0, 1.0, 0.0], [-np.sin(a), 0.0, np.cos(a)]])
+    T = np.array([0.3, -1.2, 2.0])
+    for c in (0.0, 0.6):
+        np.testing.assert_allclose(linear.sample_targets(c, v @ R.T + T, f),
+                                   linear.sample_targets(c, v, f) @ R.T + T, atol=1e-12)
+
+
 def test_contraction_moves_insertion_toward_origin_only(linear, sphere):
     v, f = sphere
-    g = linear.topology.contour_grid()
+    g = linear.bound_grid
     rest = linear.sample_targets(0.0, v, f)
     tg = linear.sample_targets(0.6, v, f)
     origin = g[:, 0] == 0

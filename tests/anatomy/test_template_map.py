@@ -201,20 +201,11 @@ def test_muscles_clear_of_the_mandible_stay_still_when_the_jaw_opens(template):
         assert d > 0.01 * skull.diagonal, f"{name} lies on the mandible but did not follow it ({d:.3g})"
 
 
-#: transient folds of the random-expression run, while they happen (xfail only while they do)
-KNOWN_TRANSIENT_FOLDS = (
-    "single bottom-sheet faces at the insertion end of the depressor anguli (the modiolus) turn "
-    "over for a few frames while its contraction rises by ~0.1 per frame with the jaw moving, and "
-    "unfold as the contraction holds; the face joins fibre-side nodes, pulled to their sliding "
-    "samples (k_position 0.2, §5.2.1), to an interior node that no sample holds and that lags; "
-    "at 20 iterations instead of the configured 10 they are gone")
-
-
 def test_a_thousand_frames_of_random_contractions_and_jaw_poses_stay_clean(template):
     """Issue 4: random expressions (each active muscle on with probability 0.3, at up to the
     FAP mapping's ``max_contraction``) and jaw poses over the jaw's whole range, a new target
     every second (25 frames) eased toward; no NaN, no muscle face turned over once the last
-    pose is held, and none in any checked frame (transient folds: :data:`KNOWN_TRANSIENT_FOLDS`)."""
+    pose is held, and none in any checked frame."""
     skull, specs, _, system = template
     cap = yaml.safe_load((ROOT / "templates" / "fap_mapping.yaml").read_text())["max_contraction"]
     active = _active(template)
@@ -237,9 +228,6 @@ def test_a_thousand_frames_of_random_contractions_and_jaw_poses_stay_clean(templ
     for _ in range(FRAMES):
         system.step(dict(zip(active, c)), skull.jaw_transform(*jaw))
     assert inverted_now(system) == {}, "folded after holding the last pose"
-    if set(folded) <= {"depressor_anguli_L", "depressor_anguli_R"} and max(folded.values(), default=0) <= 2 \
-            and folded:
-        pytest.xfail(f"{folded}: {KNOWN_TRANSIENT_FOLDS}")
     assert folded == {}
 
 
