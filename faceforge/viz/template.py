@@ -24,7 +24,8 @@ PALETTE = {
     "frontalis_outer": (0.35, 0.65, 0.95), "depressor_labii_inferioris": (0.45, 0.7, 0.3),
     "levator_labii_inner": (0.85, 0.3, 0.55), "levator_labii_outer": (0.95, 0.5, 0.7),
     "zygomaticus_major": (0.85, 0.15, 0.15), "risorius": (0.2, 0.7, 0.7), "depressor_anguli": (0.3, 0.5, 0.2),
-    "orbicularis_oris": (0.75, 0.1, 0.35),
+    "orbicularis_oris": (0.75, 0.1, 0.35), "depressor_supercilii": (0.25, 0.8, 0.45),
+    "orbicularis_oculi": (0.3, 0.6, 0.65),
 }
 BONE_COLOUR = (0.91, 0.89, 0.83)
 MANDIBLE_COLOUR = (0.86, 0.88, 0.9)
@@ -206,7 +207,7 @@ def muscle_layers(skull, muscles, jaw=(0.0, 0.0, 0.0), contractions=None, meshes
 
 
 def _short(name: str) -> str:
-    words = {"supercilii": "", "inferioris": "inf", "labii": "lab", "levator": "lev", "depressor": "dep",
+    words = {"supercilii": "sup", "inferioris": "inf", "labii": "lab", "levator": "lev", "depressor": "dep",
              "zygomaticus": "zyg", "orbicularis": "orb", "frontalis": "front", "corrugator": "corr",
              "fatty": "fat", "tissue": "", "major": "maj", "anguli": "ang", "inner": "in", "outer": "out"}
     parts = [words.get(p, p) for p in name.split("_")]

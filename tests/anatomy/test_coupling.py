@@ -81,6 +81,9 @@ def test_zygomaticus_widens_the_mouth(head):
     ("levator_labii_inner_R", "8.1", 1, +1, "MNS", 30.0),
     ("risorius_L", "8.3", 0, +1, "MW", 8.0),
     ("depressor_labii_inferioris_L", "8.7", 1, -1, "MNS", 15.0),
+    ("depressor_supercilii_L", "4.1", 1, -1, "ENS", 5.0),      # measured 11.0 (R: 6.4)
+    ("depressor_supercilii_R", "4.2", 1, -1, "ENS", 3.0),
+    ("orbicularis_oculi_L", "4.5", 1, -1, "ENS", 6.0),         # measured 12.6
 ])
 def test_each_muscle_moves_the_skin_where_it_acts(head, muscle, fdp, axis, sign, unit, least):
     h, _ = head

@@ -21,6 +21,7 @@ PASSIVE = {"masseter", "fatty_tissue", "platysma"}
 FIG6 = {"frontalis_inner", "frontalis_outer", "corrugator_supercilii", "levator_labii_inner",
         "levator_labii_outer", "zygomaticus_major", "risorius", "depressor_anguli", "masseter",
         "fatty_tissue", "platysma"}
+BROW_DEPRESSORS = {"depressor_supercilii", "orbicularis_oculi"}   # beyond Fig. 6: they lower the brows
 
 
 @pytest.fixture(scope="module")
@@ -42,15 +43,16 @@ def base(name):
     return name[:-2] if name.endswith(("_L", "_R")) else name
 
 
-def test_25_linear_and_the_orbicularis_oris(muscles):
+def test_29_linear_and_the_orbicularis_oris(muscles):
+    """Fig. 6's 25 linear muscles, the two pairs of brow depressors and the sphincter."""
     kinds = Counter(m.type for m in muscles)
-    assert kinds == {"linear": 25, "sphincter": 1}
+    assert kinds == {"linear": 29, "sphincter": 1}
     assert [m.name for m in muscles if m.type == "sphincter"] == ["orbicularis_oris"]
     assert len({m.name for m in muscles}) == len(muscles)
 
 
 def test_figure_6_muscles_present_on_both_sides(by_name):
-    for b in FIG6:
+    for b in FIG6 | BROW_DEPRESSORS:
         assert f"{b}_L" in by_name and f"{b}_R" in by_name, b
 
 
@@ -97,7 +99,7 @@ def test_bones_under_each_muscle(skull, by_name):
         return set(project(by_name[name].points())[1].tolist())
 
     for name in ("frontalis_inner_L", "frontalis_outer_R", "corrugator_supercilii_L", "levator_labii_inner_L",
-                 "levator_labii_outer_R"):
+                 "levator_labii_outer_R", "depressor_supercilii_L", "orbicularis_oculi_R"):
         assert bones(name) == {0}, name
     # the zygomaticus hangs from the cheek bone; its insertion, the modiolus at the mouth
     # corner, straddles the occlusal line (both jaws)

@@ -131,7 +131,7 @@ def template_cache_dir() -> Path:
 def load_template(skull_dir, muscle_map) -> Template:
     """The template named by ``template.*``, with its muscles built on the template skull.
 
-    Building the 26 muscles takes seconds, so they are kept per process and on disk
+    Building the 30 muscles takes seconds, so they are kept per process and on disk
     (:func:`template_cache_dir`, an npz named by the SHA-256 of the template files, the
     muscle-building source files and :data:`TEMPLATE_CACHE_VERSION`); a changed template
     file or muscle-model edit gives a new key.
