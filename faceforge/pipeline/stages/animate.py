@@ -380,7 +380,7 @@ ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
-    version="1", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="2", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- calibrate
@@ -496,7 +496,7 @@ CALIBRATE = register_stage(Stage(
     name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
-    version="1", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
+    version="2", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
 # --------------------------------------------------------------------------- commands
