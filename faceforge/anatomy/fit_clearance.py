@@ -7,13 +7,19 @@ landmarks cannot always push the bone out of it without ringing elsewhere. The s
 is the user's and never moves; the bone there is only a rough template. So the bone
 gives way locally: for every skin vertex inside a bone, the closest bone point ``b``
 (outward normal ``n``) is to move inward by ``delta = min(0, (s - b) . n - clearance)
-n``, and the displacement is spread over the neighbourhood with a compactly supported
-Wendland C2 bump of radius ``R``:
+n``. The bone is a mesh and moves by its vertices, so the push is put on the three corners
+of the closest face (whose edges can be longer than the later rounds' radius), and the
+displacement is spread over the neighbourhood with a compactly supported Wendland C2 bump
+of radius ``R`` around each corner ``c_i``:
 
-    u(x) = sum_i phi(|x - b_i| / R) delta_i / max(1, sum_i phi(|x - b_i| / R))
+    u(x) = sum_i phi(|x - c_i| / R) delta_i / max(1, sum_i phi(|x - c_i| / R))
     phi(r) = (1 - r)^4 (4 r + 1) for r < 1, else 0
 
 The normalisation keeps overlapping bumps from adding up beyond the largest push.
+Only faces on the bones' common outer surface count as the closest face: where two bones
+meet face to face (the molars of both jaws in occlusion) one field moves both alike, and a
+skin vertex on that seam pushed out of one bone would end inside the other (MakeHuman's
+cheek lining, alternating between cranium and mandible every round).
 Rounds repeat until no skin vertex is inside (or ``rounds`` is reached), each with a
 radius ``shrink`` times the last: the later rounds fix what is left (a vertex on a thin
 nasal fin) locally, without moving the bone that the earlier rounds cleared (with a fixed
@@ -80,6 +86,18 @@ def swallowed(bones, points: np.ndarray) -> np.ndarray:
     return inside
 
 
+def covered_faces(vertices: np.ndarray, faces: np.ndarray, others) -> np.ndarray:
+    """Bool (m,): faces of the closed bone ``(vertices (n, 3), faces (m, 3))`` whose outer side
+    lies inside one of the ``others`` [(vertices, faces)] (where two bones touch or overlap):
+    the centroid, moved out along the face normal by 1e-4 of the bone's diagonal, is inside."""
+    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces)
+    tri = v[f]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    probe = tri.mean(axis=1) + 1e-4 * float(np.linalg.norm(np.ptp(v, axis=0))) * n
+    return swallowed(others, probe) if len(others) else np.zeros(len(f), bool)
+
+
 def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: float,
                      rounds: int = 4, shrink: float = 0.7) -> list[BumpField]:
     """The bump fields that move the bones off the skin they swallowed.
@@ -109,12 +127,17 @@ def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: f
     bones = [(np.asarray(v, dtype=np.float64), np.asarray(f)) for v, f in bones if len(f)]
     for _ in range(rounds):
         centres, deltas = [], []
-        for v, f in bones:
+        for i, (v, f) in enumerate(bones):
             inside = swallowed([(v, f)], skin_points)
             if not inside.any():
                 continue
             s = skin_points[inside]
-            mesh = trimesh.Trimesh(v, f, process=False, validate=False)
+            # push from the bones' common outer surface: faces of this bone that another
+            # bone covers (the molars of the upper and lower jaw in occlusion share faces with
+            # opposite normals) are no way out, since the field moves both bones alike and a
+            # point on such a seam pushed out of one bone ends inside the other
+            open_f = f[~covered_faces(v, f, [b for j, b in enumerate(bones) if j != i])]
+            mesh = trimesh.Trimesh(v, open_f, process=False, validate=False)
             b, _, tri = trimesh.proximity.closest_point(mesh, s)
             n = mesh.face_normals[tri]
             below = np.einsum("ij,ij->i", s - b, n)
@@ -124,8 +147,13 @@ def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: f
             keep = below < 0.0
             if not keep.any():
                 continue
-            centres.append(b[keep])
-            deltas.append((below[keep] - clearance)[:, None] * n[keep])
+            # the bumps sit on the corners of the closest face, each with the whole push: the
+            # bone is a mesh and moves by its vertices, and a face can be larger than the
+            # later rounds' radius (the template's edges reach 26 mm), so a bump centred on the
+            # closest point alone moved no corner and left the skin inside (MakeHuman cheek)
+            corners = open_f[tri[keep]].reshape(-1)
+            centres.append(v[corners])
+            deltas.append(np.repeat((below[keep] - clearance)[:, None] * n[keep], 3, axis=0))
         if not centres:
             break
         field = BumpField(np.vstack(centres), np.vstack(deltas), float(radius) * shrink ** len(fields))

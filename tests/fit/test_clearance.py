@@ -44,3 +44,35 @@ def test_swallowed_skin_ends_outside_and_far_bone_stays():
     assert np.all(dist > 1e-3)     # clearly outside (overlapping bumps average their pushes)
     far = bone.vertices[:, 2] < 0.5
     assert np.array_equal(v[far], bone.vertices[far])     # the back of the bone does not move
+
+
+def test_a_face_larger_than_the_radius_still_gives_way():
+    """The bone moves by its vertices: a swallowed point in the middle of a face whose corners
+    all lie beyond the bump radius is cleared all the same (MakeHuman's cheek, 18 mm faces)."""
+    bone = trimesh.creation.box(extents=(4.0, 4.0, 4.0))        # 12 faces, corners 2.8 from a face centre
+    skin = np.array([[0.3, 0.2, 1.97]])                         # 0.03 beneath the top face
+    fields = clearance_fields([(bone.vertices, bone.faces)], skin, clearance=0.05, radius=0.5)
+    v = bone.vertices
+    for g in fields:
+        v = g(v)
+    assert not swallowed([(v, bone.faces)], skin).any()
+    # the corners of the closest triangle went 0.03 + 0.05 down, the rest stayed
+    moved = np.linalg.norm(v - bone.vertices, axis=1) > 0
+    assert moved.sum() == 3 and np.allclose(v[moved, 2], 2.0 - 0.08)
+
+
+def test_skin_on_the_seam_of_two_touching_bones_ends_outside_both():
+    """Two bones meeting face to face (upper and lower molars in occlusion): skin on the seam
+    is pushed out through their common outer surface, not from one bone into the other."""
+    upper = trimesh.creation.box(extents=(2.0, 2.0, 1.0))
+    upper.apply_translation([0.0, 0.0, 0.5])
+    lower = trimesh.creation.box(extents=(2.0, 2.0, 1.0))
+    lower.apply_translation([0.0, 0.0, -0.5])
+    skin = np.array([[0.97, 0.1, 0.005], [0.97, -0.1, -0.005]])     # near the side wall, on the seam
+    bones = [(upper.vertices, upper.faces), (lower.vertices, lower.faces)]
+    assert swallowed(bones, skin).all()
+    fields = clearance_fields(bones, skin, clearance=0.02, radius=1.0)
+    for g in fields:
+        bones = [(g(v), f) for v, f in bones]
+    assert not swallowed(bones, skin).any()
+    assert len(fields) <= 2

@@ -168,3 +168,52 @@ def test_settings_from_config_reject_other_kernels():
     with pytest.raises(ConfigError, match="rbf_kernel"):
         FitSettings.from_config({"rbf_kernel": "gaussian"})
     assert apply_affine(np.eye(4), np.ones((2, 3))).shape == (2, 3)
+
+
+def test_enhancement_flow_keeps_placed_landmarks_and_does_not_fold():
+    """§7 enhancement as a flow: points where the field is zero stay exactly, a new pair's
+    bone point moves most of the way to its target, and a dense grid carried along keeps
+    every cell's orientation (the map is one-to-one) even where the exact RBF through the
+    same pairs turns cells over (a target pulled past a held landmark 1 unit away: the
+    flow brings the bone point up to the landmark, never across)."""
+    from faceforge.anatomy.fit import Flow, enhancement_field, integrate_flow
+    from faceforge.geometry.rbf import hardy_epsilon, hardy_rbf
+
+    rng = np.random.default_rng(3)
+    held = rng.uniform(-4, 4, (12, 3))
+    held[0] = 0.0
+    start = np.array([[1.0, 0.0, 0.0]])
+    target = np.array([[-1.5, 0.0, 0.0]])          # pulled past the held landmark at the origin
+    eps = hardy_epsilon(held)
+    u = enhancement_field(held, start, target - start, eps)
+    np.testing.assert_allclose(u(held), 0.0, atol=1e-9)
+    flow = Flow(u, 8)
+    np.testing.assert_allclose(flow(held), held, atol=1e-8)
+    # it cannot cross the held landmark: the bone point comes up to it and stops short
+    assert 0.0 < flow(start)[0, 0] < 0.5
+    # a pair not pulled across anything goes most of the way
+    away = np.array([[1.6, 0.4, 0.0]])
+    moved = Flow(enhancement_field(held, start, away - start, eps), 8)(start)
+    assert np.linalg.norm(moved - away) < 0.5 * np.linalg.norm(away - start)
+    assert np.array_equal(integrate_flow(u, held[:3], 8), flow(held[:3]))
+    # orientation of a grid's cells: determinant of the finite-difference Jacobian
+    g = np.stack(np.meshgrid(*[np.linspace(-2, 2, 21)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    h = 1e-4
+
+    def min_det(f):
+        jac = np.stack([(f(g + h * e) - f(g - h * e)) / (2 * h) for e in np.eye(3)], -1)
+        return np.linalg.det(jac).min()
+
+    assert min_det(flow) > 0.0
+    exact = hardy_rbf(np.vstack([held, start]), np.vstack([held, target]), epsilon=eps)
+    assert min_det(exact) < 0.0       # the exact RBF folds here: the case the flow is for
+
+
+def test_exact_rbf_enhancement_is_still_available():
+    """``enhancement_flow_steps: 0``: the paper's exact RBF through all pairs (one map)."""
+    sv, sf, template, ids, pts = synthetic_case()
+    skin = SkinSurface.build(sv, sf)
+    a = fit_head(template, skin, ids, pts, FitSettings(enhancement_flow_steps=0))
+    b = fit_head(template, skin, ids, pts, FitSettings())
+    for res in (a, b):
+        assert np.linalg.norm(res.reached - res.targets, axis=1).max() < 1e-8 * skin.diagonal

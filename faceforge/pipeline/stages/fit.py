@@ -40,7 +40,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "4"
+VERSION = "5"
 
 
 def _check_orientation(value, base):
