@@ -365,21 +365,24 @@ class SkullGuard:
         bones = np.ascontiguousarray(np.vstack([np.asarray(bodies_now[n], dtype=float) for n in self.names]))
         return self.apply_stacked(positions, bones)
 
-    def apply_stacked(self, positions: np.ndarray, bones: np.ndarray) -> int:
+    def apply_stacked(self, positions: np.ndarray, bones: np.ndarray, moved=None) -> int:
         """:meth:`apply` with the current bone vertices already stacked in :attr:`names` order,
         ``bones (sum v, 3)`` float64 C-contiguous (e.g. rows of a world mesh that starts with
-        the same bodies in the same order): no per-frame copy."""
+        the same bodies in the same order): no per-frame copy. ``moved`` (optional, int64,
+        at least ``len(vertex)`` long) receives the moved vertices in its first rows."""
         if not len(self.vertex):
             return 0
-        return int(_skull_guard(positions, self.vertex, self._ids, self.bary, self.floor, bones))
+        if moved is None:
+            moved = np.empty(len(self.vertex), dtype=np.int64)
+        return int(_skull_guard(positions, self.vertex, self._ids, self.bary, self.floor, bones, moved))
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _skull_guard(x, vertex, ids, bary, floor, bones):
+def _skull_guard(x, vertex, ids, bary, floor, bones, out):
     """For each guarded vertex ``vertex[k]`` of ``x (n, 3)``: its bone point ``s`` (``bary[k]``
     on triangle ``ids[k]`` of ``bones``) and unit normal ``nrm``; where the depth
     ``(x - s) . nrm`` is below ``floor[k]``, move it out along ``nrm`` to the floor. In place;
-    returns how many moved."""
+    returns how many moved, whose vertex ids go to the first rows of ``out``."""
     moved = 0
     for k in range(len(vertex)):
         a, b, c = ids[k, 0], ids[k, 1], ids[k, 2]
@@ -398,5 +401,6 @@ def _skull_guard(x, vertex, ids, bary, floor, bones):
             x[v, 0] += push * nx
             x[v, 1] += push * ny
             x[v, 2] += push * nz
+            out[moved] = v
             moved += 1
     return moved
