@@ -175,9 +175,11 @@ def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds
     """The rounds of :meth:`OrientationGuard.apply` from ``rows``, the :func:`_watched` rows of
     ``x (n, 3)`` (in place): project them (:func:`_project_signed_areas`), test again around
     the projected triangles (:func:`_rewatched`), until a test finds nothing, a projection
-    moves nothing or ``rounds`` are done. Returns ``(projections, rows, known)``: ``rows`` is
-    the last test's result, which holds for ``x`` as left when ``known``."""
+    moves nothing or ``rounds`` are done. Returns ``(projections, rows, known, touched)``:
+    ``rows`` is the last test's result, which holds for ``x`` as left when ``known``;
+    ``touched``, a list of int64 arrays, holds every vertex that may have moved (repeats)."""
     moved = 0
+    touched = [np.empty(0, np.int64)]
     for r in range(rounds):
         k = rows.shape[0]
         if k == 0:
@@ -196,8 +198,6 @@ def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds
         moved += done
         if done == 0:
             break
-        if r == rounds - 1:
-            return moved, rows, False      # moved after the last test
         verts = np.empty(3 * k, np.int64)
         nv = 0
         for i in range(k):
@@ -205,8 +205,11 @@ def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds
                 for d in range(3):
                     verts[nv] = tris[i, d]
                     nv += 1
+        touched.append(verts[:nv])
+        if r == rounds - 1:
+            return moved, rows, False, touched      # moved after the last test
         rows = _rewatched(x, faces, normal0, floor, cos_watch, active, rows, verts[:nv], vstart, vtris, mark)
-    return moved, rows, True
+    return moved, rows, True, touched
 
 
 class OrientationGuard:
@@ -257,6 +260,7 @@ class OrientationGuard:
         self._vstart = np.concatenate([[0], np.cumsum(np.bincount(corner, minlength=len(self.rest)))]).astype(INT)
         self._mark = np.zeros(len(self.faces), np.uint8)
         self._last = None   # (array, rows): the watched rows of the array the last apply left
+        self.touched = np.zeros(0, INT)
 
     def watched(self, positions) -> np.ndarray:
         """(m,) bool: triangles turned more than ``watch_angle`` from their rest normal, or
@@ -278,7 +282,8 @@ class OrientationGuard:
         way the rows tested and projected, hence the result, are those of a full test.
 
         Returns how many triangle projections moved vertices (0: no triangle was turned
-        over or below its floor).
+        over or below its floor); :attr:`touched` then holds every vertex it may have moved
+        ((p,) int, repeats allowed; the others kept their bits).
         """
         if positions.dtype != FLOAT or not positions.flags.c_contiguous:
             raise ValueError("positions must be a C-contiguous float64 array (modified in place)")
@@ -289,12 +294,14 @@ class OrientationGuard:
             rows = _watched(positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active)
         if not len(rows):   # nothing to project (most frames)
             self._last = (positions, rows)
+            self.touched = rows
             return 0
-        done, rows, known = _guard_rounds(positions, self.faces, self.normal0, self.floor, self.cos_watch,
-                                          self.active, rows, AIM, self.rounds, self.iterations,
-                                          self._vstart, self._vtris, self._mark)
+        done, rows, known, touched = _guard_rounds(
+            positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows, AIM,
+            self.rounds, self.iterations, self._vstart, self._vtris, self._mark)
         if known:
             self._last = (positions, rows)
+        self.touched = np.concatenate(touched)
         return int(done)
 
     def _rewatched(self, positions, rows, moved) -> np.ndarray:

@@ -96,6 +96,13 @@ def test_apply_after_moved_vertices_is_apply_from_scratch():
         ref = pos.copy()
         assert guard.apply(pos, moved) == fresh.apply(ref)
         assert np.array_equal(pos, ref)
+    # what the last apply may have moved: every other vertex kept its bits
+    pos[moved] += rng.normal(scale=0.3, size=(4, 3))
+    before = pos.copy()
+    assert guard.apply(pos, moved) > 0
+    still = np.setdiff1d(np.arange(len(rest)), guard.touched)
+    assert len(still) and np.array_equal(pos[still], before[still])
+    assert np.any(pos[guard.touched] != before[guard.touched])
     # another array, or no last verdict: a full test
     other = np.ascontiguousarray(rest + rng.normal(scale=0.15, size=rest.shape))
     ref = other.copy()
