@@ -353,6 +353,9 @@ class SkullGuard:
         self.faces = faces
         # each guarded vertex's bone triangle as ids into the bodies stacked in ``names`` order
         self._ids = np.ascontiguousarray(np.asarray(mesh.faces)[tri[sel]], dtype=np.int64)
+        self._slot = np.full(len(rest), -1, dtype=np.int64)   # skin vertex -> its row here, or -1
+        self._slot[self.vertex] = self._all = np.arange(len(self.vertex), dtype=np.int64)
+        self._mark = np.zeros(len(self.vertex), dtype=np.uint8)
 
     def apply(self, positions: np.ndarray, bodies_now: dict) -> int:
         """Push guarded vertices of ``positions`` (n, 3, modified in place) out to their floor.
@@ -365,23 +368,54 @@ class SkullGuard:
         bones = np.ascontiguousarray(np.vstack([np.asarray(bodies_now[n], dtype=float) for n in self.names]))
         return self.apply_stacked(positions, bones)
 
-    def apply_stacked(self, positions: np.ndarray, bones: np.ndarray) -> int:
+    def apply_stacked(self, positions: np.ndarray, bones: np.ndarray, moved=None, only=None) -> int:
         """:meth:`apply` with the current bone vertices already stacked in :attr:`names` order,
         ``bones (sum v, 3)`` float64 C-contiguous (e.g. rows of a world mesh that starts with
-        the same bodies in the same order): no per-frame copy."""
+        the same bodies in the same order): no per-frame copy. ``moved`` (optional, int64,
+        at least ``len(vertex)`` long) receives the moved vertices in its first rows.
+
+        ``only`` (optional, (p,) int skin vertices, repeats allowed): test just these (the
+        guarded ones among them, in the guard's order); for a caller that knows every other
+        guarded vertex is where a pass with the same bones left it without pushing it (a
+        pushed vertex may be nudged again by round-off, so it belongs in ``only``): then the
+        result is that of a full pass."""
         if not len(self.vertex):
             return 0
-        return int(_skull_guard(positions, self.vertex, self._ids, self.bary, self.floor, bones))
+        if moved is None:
+            moved = np.empty(len(self.vertex), dtype=np.int64)
+        slots = self._all if only is None else _guarded_rows(np.asarray(only, dtype=np.int64), self._slot, self._mark)
+        return int(_skull_guard(positions, self.vertex, self._ids, self.bary, self.floor, bones, moved, slots))
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _skull_guard(x, vertex, ids, bary, floor, bones):
-    """For each guarded vertex ``vertex[k]`` of ``x (n, 3)``: its bone point ``s`` (``bary[k]``
-    on triangle ``ids[k]`` of ``bones``) and unit normal ``nrm``; where the depth
-    ``(x - s) . nrm`` is below ``floor[k]``, move it out along ``nrm`` to the floor. In place;
-    returns how many moved."""
+def _guarded_rows(vertices, slot, mark):
+    """Ascending unique rows ``slot[v] >= 0`` of the skin vertices ``vertices (p,)`` (repeats
+    allowed); ``mark`` uint8 scratch, one per row, all 0 (left so)."""
+    count = 0
+    for v in vertices:
+        k = slot[v]
+        if k >= 0 and mark[k] == 0:
+            mark[k] = 1
+            count += 1
+    out = np.empty(count, np.int64)
+    i = 0
+    for k in range(mark.shape[0]):
+        if mark[k]:
+            out[i] = k
+            i += 1
+            mark[k] = 0
+    return out
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _skull_guard(x, vertex, ids, bary, floor, bones, out, slots):
+    """For each guarded vertex ``vertex[k]``, ``k`` in ``slots`` (ascending), of ``x (n, 3)``:
+    its bone point ``s`` (``bary[k]`` on triangle ``ids[k]`` of ``bones``) and unit normal
+    ``nrm``; where the depth ``(x - s) . nrm`` is below ``floor[k]``, move it out along ``nrm``
+    to the floor. In place; returns how many moved, whose vertex ids go to the first rows of
+    ``out``."""
     moved = 0
-    for k in range(len(vertex)):
+    for k in slots:
         a, b, c = ids[k, 0], ids[k, 1], ids[k, 2]
         e1x, e1y, e1z = bones[b, 0] - bones[a, 0], bones[b, 1] - bones[a, 1], bones[b, 2] - bones[a, 2]
         e2x, e2y, e2z = bones[c, 0] - bones[a, 0], bones[c, 1] - bones[a, 1], bones[c, 2] - bones[a, 2]
@@ -398,5 +432,6 @@ def _skull_guard(x, vertex, ids, bary, floor, bones):
             x[v, 0] += push * nx
             x[v, 1] += push * ny
             x[v, 2] += push * nz
+            out[moved] = v
             moved += 1
     return moved

@@ -80,18 +80,22 @@ swaps a and b, which would give r != 1 on the ellipse itself), clipped so that
 inner and outer samples) in the plane of best fit (PCA) of those samples,
 recomputed every frame from the current, uncontracted samples. The same delta
 moves the pair's inner and outer samples; the interior (``0 < j < w-1``)
-bottom particles are not bound, as in the linear muscle.
+bottom particles are not bound, as in the linear muscle. With material sampling the
+per-frame targets are compiled (:func:`_sphincter_grid`: the plane from the eigenvectors of
+the 3 x 3 scatter matrix, the conic by Gram-Schmidt); :meth:`Muscle._grid_targets` is its
+numpy twin, equal to round-off.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from faceforge.anatomy.action_line import eval_polyline, sample_positions
 from faceforge.anatomy.hexmesh import HexTopology, hex_topology, morph_hex
-from faceforge.constants import FLOAT, INT
+from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
 __all__ = [
@@ -195,6 +199,117 @@ def fit_ellipse(points) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, floa
     dir_a = ua[0] * e1 + ua[1] * e2
     dir_b = ub[0] * e1 + ub[1] * e2
     return o, dir_a, dir_b, float(a), float(b)
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _loop_samples(p, seg, t, out, col):  # pragma: no cover - numba
+    """``eval_polyline(p, None, seg, t, closed=True)`` into ``out[:, col]`` (``out (h, w, 3)``)."""
+    m = p.shape[0]
+    for i in range(seg.shape[0]):
+        a = seg[i]
+        b = a + 1 if a + 1 < m else 0
+        for d in range(3):
+            out[i, col, d] = (1.0 - t[i]) * p[a, d] + t[i] * p[b, d]
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _conic_lstsq(x, y):  # pragma: no cover - numba
+    """Least-squares ``q (3,)`` of ``q0 x^2 + 2 q1 x y + q2 y^2 = 1`` over the points ``x, y
+    (k,)``: modified Gram-Schmidt on the columns and the right-hand side together (backward
+    stable, as ``np.linalg.lstsq`` for a full-rank system)."""
+    k = x.shape[0]
+    m = np.empty((4, k))
+    for i in range(k):
+        m[0, i] = x[i] * x[i]
+        m[1, i] = 2.0 * x[i] * y[i]
+        m[2, i] = y[i] * y[i]
+        m[3, i] = 1.0
+    r = np.zeros((3, 4))
+    for j in range(3):
+        r[j, j] = np.sqrt(np.sum(m[j] * m[j]))
+        m[j] /= r[j, j]
+        for l in range(j + 1, 4):
+            r[j, l] = np.sum(m[j] * m[l])
+            m[l] -= r[j, l] * m[j]
+    q = np.empty(3)
+    for j in range(2, -1, -1):
+        acc = r[j, 3]
+        for l in range(j + 1, 3):
+            acc -= r[j, l] * q[l]
+        q[j] = acc / r[j, j]
+    return q
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid):  # pragma: no cover - numba
+    """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
+    fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
+    at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
+    :func:`sphincter_displacement` with ``c`` (already times the maximal closure) when
+    ``c > 0``. Same values as the numpy code to round-off (LAPACK's, summation order)."""
+    h = grid.shape[0]
+    w1 = grid.shape[1] - 1
+    _loop_samples(p1, seg1, t1, grid, 0)
+    _loop_samples(p3, seg3, t3, grid, w1)
+    if not c > 0.0:
+        return
+    # fit_ellipse of the 2h samples (inner then outer)
+    k = 2 * h
+    d = np.empty((k, 3))
+    for i in range(h):
+        for j in range(3):
+            d[i, j] = grid[i, 0, j]
+            d[h + i, j] = grid[i, w1, j]
+    o = np.empty(3)
+    for j in range(3):
+        o[j] = np.mean(d[:, j])
+    for i in range(k):
+        for j in range(3):
+            d[i, j] -= o[j]
+    # the plane of best fit: the right singular vectors of d are the eigenvectors of d^T d
+    gram = d.T @ d
+    ev, evec = np.linalg.eigh(gram)                  # ascending
+    e1 = evec[:, 2].copy()
+    e2 = evec[:, 1].copy()
+    sv0 = np.sqrt(max(ev[2], 0.0))
+    sv1 = np.sqrt(max(ev[1], 0.0))
+    x = d @ e1
+    y = d @ e2
+    q = _conic_lstsq(x, y)
+    lam = np.full(2, -1.0)      # no conic (collinear samples: q is not finite): the PCA fallback
+    vec = np.eye(2)
+    if np.all(np.isfinite(q)):
+        Q = np.empty((2, 2))
+        Q[0, 0] = q[0]
+        Q[0, 1] = q[1]
+        Q[1, 0] = q[1]
+        Q[1, 1] = q[2]
+        lam, vec = np.linalg.eigh(Q)
+    if lam[0] > 0:
+        a, b = 1.0 / np.sqrt(lam[0]), 1.0 / np.sqrt(lam[1])
+        ua0, ua1, ub0, ub1 = vec[0, 0], vec[1, 0], vec[0, 1], vec[1, 1]
+    else:
+        a, b = sv0 * np.sqrt(2.0 / k), max(sv1 * np.sqrt(2.0 / k), 1e-300)
+        ua0, ua1, ub0, ub1 = 1.0, 0.0, 0.0, 1.0
+    da = ua0 * e1 + ua1 * e2
+    db = ub0 * e1 + ub1 * e2
+    # sphincter_displacement: delta = c P (o - s1) cos(pi/2 (1 - r)), r of the outer sample
+    for i in range(h):
+        xo = 0.0
+        yo = 0.0
+        ta = 0.0
+        tb = 0.0
+        for j in range(3):
+            xo += (grid[i, w1, j] - o[j]) * da[j]
+            yo += (grid[i, w1, j] - o[j]) * db[j]
+            ta += (o[j] - grid[i, 0, j]) * da[j]
+            tb += (o[j] - grid[i, 0, j]) * db[j]
+        r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
+        fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
+        for j in range(3):
+            dj = c * (ta * da[j] + tb * db[j]) * fall
+            grid[i, 0, j] += dj
+            grid[i, w1, j] += dj
 
 
 #: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
@@ -373,9 +488,27 @@ class Muscle:
         them (a caller that evaluates many lines at once gathers them itself).
         """
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
-        grid = self._grid_targets(c, points)
         g = self.bound_grid
+        if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
+            grid = np.empty((self.topology.h, self.topology.w, 3))
+            (s1, t1), (s3, t3) = self._loop_parameters
+            _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
+                            np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
+                            c * self.max_contraction, grid)
+        else:
+            grid = self._grid_targets(c, points)
         return grid[g[:, 0], g[:, 1]]
+
+    @property
+    def _loop_parameters(self):
+        """Sphincter, material sampling: ``((segment, t) of A1, (segment, t) of A3)`` as
+        int64 / float64 arrays (:attr:`rest_parameters`, for the compiled targets)."""
+        lp = self.__dict__.get("_lp")
+        if lp is None:
+            lp = self.__dict__["_lp"] = tuple(
+                (np.ascontiguousarray(self.rest_parameters[k][0], dtype=INT),
+                 np.ascontiguousarray(self.rest_parameters[k][1], dtype=FLOAT)) for k in ("A1", "A3"))
+        return lp
 
     @property
     def bound_grid(self) -> np.ndarray:

@@ -52,35 +52,82 @@ __all__ = ["OrientationGuard"]
 AIM = 0.25
 
 
+@numba.njit(inline="always", **NUMBA_OPTIONS)
+def _is_watched(x, faces, normal0, floor, cos_watch, t):  # pragma: no cover - numba
+    """Whether triangle ``t`` of ``faces (m, 3)`` on ``x (n, 3)`` is turned more than the watch
+    angle from its unit rest normal ``normal0[t]`` (``c . n0 <= cos_watch |c|``) or has a signed
+    area along it below ``floor[t]``."""
+    a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+    e1x, e1y, e1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+    e2x, e2y, e2z = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+    cx = e1y * e2z - e1z * e2y
+    cy = e1z * e2x - e1x * e2z
+    cz = e1x * e2y - e1y * e2x
+    along = cx * normal0[t, 0] + cy * normal0[t, 1] + cz * normal0[t, 2]
+    return along <= cos_watch * np.sqrt(cx * cx + cy * cy + cz * cz) or 0.5 * along < floor[t]
+
+
 @numba.njit(**NUMBA_OPTIONS)
 def _watched(x, faces, normal0, floor, cos_watch, active):  # pragma: no cover - numba
-    """Indices of the triangles ``faces (m, 3)`` of ``x (n, 3)`` turned more than the watch
-    angle from their unit rest normals ``normal0 (m, 3)`` (``c . n0 <= cos_watch |c|``) or
-    with a signed area along it below ``floor (m,)``; ``active (m,)`` bool masks the rest."""
+    """Indices (ascending) of the triangles ``faces (m, 3)`` of ``x (n, 3)`` that
+    :func:`_is_watched` picks; ``active (m,)`` bool masks the rest."""
     out = np.empty(faces.shape[0], np.int64)
     k = 0
     for t in range(faces.shape[0]):
-        if not active[t]:
-            continue
-        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-        e1x, e1y, e1z = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
-        e2x, e2y, e2z = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
-        cx = e1y * e2z - e1z * e2y
-        cy = e1z * e2x - e1x * e2z
-        cz = e1x * e2y - e1y * e2x
-        along = cx * normal0[t, 0] + cy * normal0[t, 1] + cz * normal0[t, 2]
-        if along <= cos_watch * np.sqrt(cx * cx + cy * cy + cz * cz) or 0.5 * along < floor[t]:
+        if active[t] and _is_watched(x, faces, normal0, floor, cos_watch, t):
             out[k] = t
             k += 1
     return out[:k]
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_signed_areas(x, tris, nref, floor, aim, iterations):  # pragma: no cover - numba
+def _rewatched(x, faces, normal0, floor, cos_watch, active, rows, moved, vstart, vtris,
+               mark):  # pragma: no cover - numba
+    """:func:`_watched` of ``x (n, 3)`` when its last result was ``rows (k,)`` (ascending) and
+    only the vertices ``moved (p,)`` (repeats allowed) have changed since: the triangles
+    around them are tested again, every other triangle keeps its verdict. Same result as
+    :func:`_watched`. ``vstart (n + 1,)``, ``vtris``: the triangles of each vertex
+    (``vtris[vstart[v]:vstart[v + 1]]``); ``mark (m,)`` uint8 scratch, all 0 (left so)."""
+    total = 0
+    for i in range(moved.shape[0]):
+        total += vstart[moved[i] + 1] - vstart[moved[i]]
+    cand = np.empty(total, np.int64)
+    nc = 0
+    for i in range(moved.shape[0]):
+        v = moved[i]
+        for q in range(vstart[v], vstart[v + 1]):
+            t = vtris[q]
+            if mark[t] == 0:
+                mark[t] = 1
+                cand[nc] = t
+                nc += 1
+    for i in range(nc):
+        t = cand[i]
+        if active[t] and _is_watched(x, faces, normal0, floor, cos_watch, t):
+            mark[t] = 2
+    out = np.empty(rows.shape[0] + nc, np.int64)
+    k = 0
+    for i in range(rows.shape[0]):   # the old verdict of the triangles no moved vertex touches
+        if mark[rows[i]] == 0:
+            out[k] = rows[i]
+            k += 1
+    for i in range(nc):
+        t = cand[i]
+        if mark[t] == 2:
+            out[k] = t
+            k += 1
+        mark[t] = 0
+    return np.sort(out[:k])
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit):  # pragma: no cover - numba
     """Gauss-Seidel over the triangles ``tris (k, 3)``: signed area along ``nref (k, 3)``
     (unit) at least ``floor (k,)``; a triangle below its floor is projected (linearised) to
     ``(1 + aim) floor``, so that the next small push of a neighbour does not bring it back
-    below. ``x (n, 3)`` in place. Returns how many projections moved a vertex."""
+    below. ``x (n, 3)`` in place; ``hit (k,)`` uint8 is set to 1 for each triangle projected
+    at least once (its three vertices may have moved; the others' did not, unless shared).
+    Returns how many projections moved a vertex."""
     moved = 0
     for _ in range(iterations):
         changed = 0
@@ -114,11 +161,55 @@ def _project_signed_areas(x, tris, nref, floor, aim, iterations):  # pragma: no 
                 x[v, 0] += lam * g[k, 0]
                 x[v, 1] += lam * g[k, 1]
                 x[v, 2] += lam * g[k, 2]
+            hit[t] = 1
             changed += 1
         moved += changed
         if changed == 0:
             break
     return moved
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds, iterations, vstart,
+                  vtris, mark):  # pragma: no cover - numba
+    """The rounds of :meth:`OrientationGuard.apply` from ``rows``, the :func:`_watched` rows of
+    ``x (n, 3)`` (in place): project them (:func:`_project_signed_areas`), test again around
+    the projected triangles (:func:`_rewatched`), until a test finds nothing, a projection
+    moves nothing or ``rounds`` are done. Returns ``(projections, rows, known, touched)``:
+    ``rows`` is the last test's result, which holds for ``x`` as left when ``known``;
+    ``touched``, a list of int64 arrays, holds every vertex that may have moved (repeats)."""
+    moved = 0
+    touched = [np.empty(0, np.int64)]
+    for r in range(rounds):
+        k = rows.shape[0]
+        if k == 0:
+            break
+        tris = np.empty((k, 3), np.int64)
+        nref = np.empty((k, 3))
+        fl = np.empty(k)
+        for i in range(k):
+            t = rows[i]
+            for d in range(3):
+                tris[i, d] = faces[t, d]
+                nref[i, d] = normal0[t, d]
+            fl[i] = floor[t]
+        hit = np.zeros(k, np.uint8)
+        done = _project_signed_areas(x, tris, nref, fl, aim, iterations, hit)
+        moved += done
+        if done == 0:
+            break
+        verts = np.empty(3 * k, np.int64)
+        nv = 0
+        for i in range(k):
+            if hit[i]:
+                for d in range(3):
+                    verts[nv] = tris[i, d]
+                    nv += 1
+        touched.append(verts[:nv])
+        if r == rounds - 1:
+            return moved, rows, False, touched      # moved after the last test
+        rows = _rewatched(x, faces, normal0, floor, cos_watch, active, rows, verts[:nv], vstart, vtris, mark)
+    return moved, rows, True, touched
 
 
 class OrientationGuard:
@@ -163,6 +254,13 @@ class OrientationGuard:
         self.cos_watch = float(np.cos(np.radians(watch_angle)))
         self.rounds = int(rounds)
         self.iterations = int(iterations)
+        # the triangles of each vertex (CSR), for the rescans of :meth:`apply`
+        corner = self.faces.reshape(-1)
+        self._vtris = (np.argsort(corner, kind="stable") // 3).astype(INT)
+        self._vstart = np.concatenate([[0], np.cumsum(np.bincount(corner, minlength=len(self.rest)))]).astype(INT)
+        self._mark = np.zeros(len(self.faces), np.uint8)
+        self._last = None   # (array, rows): the watched rows of the array the last apply left
+        self.touched = np.zeros(0, INT)
 
     def watched(self, positions) -> np.ndarray:
         """(m,) bool: triangles turned more than ``watch_angle`` from their rest normal, or
@@ -173,23 +271,39 @@ class OrientationGuard:
         turned = along <= self.cos_watch * np.linalg.norm(c, axis=1)
         return self.active & (turned | (0.5 * along < self.floor))
 
-    def apply(self, positions: np.ndarray) -> int:
+    def apply(self, positions: np.ndarray, moved=None) -> int:
         """Project the watched triangles of ``positions`` ((n, 3) float64, C-contiguous,
         modified in place).
 
+        ``moved`` (optional, (p,) int): the vertices of ``positions`` changed since the last
+        call on this same array object returned; the first test then looks again only at the
+        triangles around them (the others keep the last call's final verdict). After a
+        projection, the next test likewise looks only around the projected triangles. Either
+        way the rows tested and projected, hence the result, are those of a full test.
+
         Returns how many triangle projections moved vertices (0: no triangle was turned
-        over or below its floor).
+        over or below its floor); :attr:`touched` then holds every vertex it may have moved
+        ((p,) int, repeats allowed; the others kept their bits).
         """
         if positions.dtype != FLOAT or not positions.flags.c_contiguous:
             raise ValueError("positions must be a C-contiguous float64 array (modified in place)")
-        moved = 0
-        for _ in range(self.rounds):
+        last, self._last = self._last, None
+        if moved is not None and last is not None and last[0] is positions:
+            rows = self._rewatched(positions, last[1], np.asarray(moved, dtype=INT))
+        else:
             rows = _watched(positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active)
-            if not len(rows):
-                break
-            done = _project_signed_areas(positions, self.faces[rows], self.normal0[rows], self.floor[rows],
-                                         AIM, self.iterations)
-            moved += int(done)
-            if done == 0:
-                break
-        return moved
+        if not len(rows):   # nothing to project (most frames)
+            self._last = (positions, rows)
+            self.touched = rows
+            return 0
+        done, rows, known, touched = _guard_rounds(
+            positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows, AIM,
+            self.rounds, self.iterations, self._vstart, self._vtris, self._mark)
+        if known:
+            self._last = (positions, rows)
+        self.touched = np.concatenate(touched)
+        return int(done)
+
+    def _rewatched(self, positions, rows, moved) -> np.ndarray:
+        return _rewatched(positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active,
+                          rows, moved, self._vstart, self._vtris, self._mark)

@@ -23,10 +23,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from faceforge.anatomy.layer_targets import bary_points
-from faceforge.constants import FLOAT, INT
+from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 
 __all__ = [
     "SkinTopology",
@@ -268,6 +269,7 @@ class SkinSimulation:
         self.carried = np.zeros(k, bool) if carried is None else np.asarray(carried, bool).reshape(-1)
         if self.carried.shape != (k,):
             raise ValueError(f"carried must have one flag per anchor ({k}), got {self.carried.shape}")
+        self._any_carried = bool(self.carried.any())
         q_rest = binding.points.copy()
         q_rest[self.carried] = self.rest[binding.vertex_ids[self.carried]]
         builder = ModelBuilder()
@@ -315,22 +317,28 @@ class SkinSimulation:
         about (the MakeHuman chin moved 1.5 mm down and back while the mentalis under it rose
         3 mm); a rigid turn of the tissue (the jaw) leaves an error of the turn angle times
         the offset (0.2 rad x 1.5 mm = 0.3 mm), and skin on the mandible itself slides as in §8."""
+        s0, p0 = self._carry_rest(system)
+        return p0 + (targets[self.carried] - s0)
+
+    def _carry_rest(self, system):
+        """``(s0, p0)`` of :meth:`carry_targets`, ``(c, 3)`` each, computed once per system."""
         if getattr(self, "_carry_for", None) is not system:
             v0, _ = system.world(rest=True)
             ids = self._gather_ids(system)[self.carried]
             self._carry = (bary_points(np.ascontiguousarray(self._bary[self.carried]), ids, v0),
-                           self.rest[self.binding.vertex_ids[self.carried]])
+                           np.ascontiguousarray(self.rest[self.binding.vertex_ids[self.carried]]))
             self._carry_for = system
-        s0, p0 = self._carry
-        return p0 + (targets[self.carried] - s0)
+            self._carried_rows = np.flatnonzero(self.carried).astype(INT)
+        return self._carry
 
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""
         if len(self.layer.anchor_slots):
             # when the anchors hold every position slot, in order, they are filled in place
             t = self.anchor_targets(system, self.control.position_targets if self._direct else None)
-            if self.carried.any():
-                t[self.carried] = self.carry_targets(system, t)
+            if self._any_carried:   # t[carried] = carry_targets(system, t), compiled, in place
+                s0, p0 = self._carry_rest(system)
+                _carry(t, self._carried_rows, s0, p0)
             if not self._direct:
                 self.control.position_targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
@@ -351,3 +359,13 @@ class SkinSimulation:
         fresh = self.model.state()
         self.state.positions[:] = fresh.positions
         self.state.velocities[:] = fresh.velocities
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _carry(t, rows, s0, p0):  # pragma: no cover - numba
+    """``t[rows] = p0 + (t[rows] - s0)`` in place (:meth:`SkinSimulation.carry_targets`, whose
+    numpy is the plain twin): ``t (k, 3)``, ``rows (c,)`` ascending, ``s0, p0 (c, 3)``."""
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for d in range(3):
+            t[r, d] = p0[i, d] + (t[r, d] - s0[i, d])

@@ -118,7 +118,8 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
           v_pstart, v_part, v_tstart, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
           t_idx, t_tri, t_bary, t_k, t_c):
-    """A whole step of ``substeps`` substeps of length ``h``; ``x_out``/``v_out`` may alias the inputs.
+    """A whole step of ``substeps`` substeps of length ``h``; ``x_out``/``v_out`` may be the
+    inputs (the same array: then they are not copied onto themselves) or share no memory.
 
     ``lams`` is one flat scratch array holding the multipliers of all kinds in the
     order distance, bending, area, volume, position, attachment.
@@ -127,10 +128,14 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
     for q in range(kin.shape[0]):
         for d in range(3):
             kin_start[q, d] = x_in[kin[q], d]
-    for i in range(n):
-        for d in range(3):
-            x_out[i, d] = x_in[i, d]
-            v_out[i, d] = v_in[i, d]
+    if x_out.ctypes.data != x_in.ctypes.data:  # stepping in place (the usual case): no copy
+        for i in range(n):
+            for d in range(3):
+                x_out[i, d] = x_in[i, d]
+    if v_out.ctypes.data != v_in.ctypes.data:
+        for i in range(n):
+            for d in range(3):
+                v_out[i, d] = v_in[i, d]
     o1 = d_idx.shape[0]
     o2 = o1 + b_idx.shape[0]
     o3 = o2 + a_idx.shape[0]

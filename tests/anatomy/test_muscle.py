@@ -263,3 +263,47 @@ def test_sphincter_displacement_formula():
     # inner and outer on one ellipse shape: fit to both, the outer samples sit at r > 1
     d = sphincter_displacement(ring, ring, 0.4)
     np.testing.assert_allclose(d, 0.4 * (0 - ring), atol=1e-9)
+
+
+def test_compiled_sphincter_targets_match_the_numpy_twin(sphincter, sphere):
+    """Material sampling: ``targets_from_line_points`` runs the compiled ``_sphincter_grid``;
+    its plain twin is ``Muscle._grid_targets`` (numpy, ``fit_ellipse`` by SVD and lstsq)."""
+    v, f = sphere
+    assert sphincter.rest_parameters
+    rng = np.random.default_rng(4)
+    g = sphincter.bound_grid
+    scale = float(np.ptp(v, axis=0).max())
+    for trial in range(8):
+        a = rng.normal(size=3)
+        rot = trimesh.transformations.rotation_matrix(rng.uniform(0, np.pi), a)[:3, :3]
+        now = v @ rot.T * rng.uniform(0.5, 2.0) + rng.normal(size=3)
+        now = now + rng.normal(scale=0.01 * trial, size=v.shape)   # and no longer rigid
+        points = {k: line.positions(now, f) for k, line in sphincter.lines.items()}
+        for c in (0.0, 0.2, 0.7, 1.0):
+            fast = sphincter.targets_from_line_points(c, points)
+            twin = sphincter._grid_targets(min(c, 1.0), points)[g[:, 0], g[:, 1]]
+            assert np.allclose(fast, twin, rtol=0.0, atol=1e-12 * scale)
+            assert c > 0 or np.array_equal(fast, twin)    # the samples alone: same arithmetic
+
+
+def test_conic_least_squares_matches_lstsq():
+    from faceforge.anatomy.muscle import _conic_lstsq
+
+    rng = np.random.default_rng(6)
+    for a, b in ((1.0, 1.0), (3.0, 0.5), (0.01, 0.002)):
+        t = rng.uniform(0, 2 * np.pi, 40)
+        x, y = a * np.cos(t) + rng.normal(scale=0.01 * a, size=40), b * np.sin(t)
+        A = np.stack([x * x, 2 * x * y, y * y], 1)
+        ref = np.linalg.lstsq(A, np.ones(40), rcond=None)[0]
+        assert np.abs(_conic_lstsq(x, y) - ref).max() <= 1e-12 * np.abs(ref).max()   # lstsq's own accuracy
+
+
+def test_compiled_sphincter_targets_survive_collinear_loops():
+    """No conic through collinear samples: the PCA fallback, finite targets (no LinAlgError)."""
+    from faceforge.anatomy.muscle import _sphincter_grid
+
+    p = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], 1)
+    seg, t = np.arange(5), np.full(5, 0.5)
+    grid = np.empty((5, 2, 3))
+    _sphincter_grid(p, seg, t, p.copy(), seg, t, 0.3, grid)
+    assert np.all(np.isfinite(grid))

@@ -274,3 +274,19 @@ def test_compiled_skull_guard_matches_its_twin_on_two_moving_bones():
         moved = guard.apply(a, now)
         assert moved == _skull_guard_twin(guard, b, now) and moved > 0
         assert np.allclose(a, b, rtol=0.0, atol=1e-12)
+        # the moved vertices come out in the guard's order, the others kept their positions
+        ids = np.full(len(guard.vertex), -1, dtype=np.int64)
+        c = pulled.copy()
+        bones = np.ascontiguousarray(np.vstack([now[n] for n in guard.names]))
+        assert guard.apply_stacked(c, bones, ids) == moved
+        changed = np.flatnonzero(np.any(c != pulled, axis=1))
+        assert ids[:moved].tolist() == changed.tolist() and np.all(ids[moved:] == -1)
+        # after a pass, move a few vertices: a pass over just those and the pushed ones (the
+        # others were left above their floor) is a full pass, bit for bit
+        some = rng.choice(len(rest), 40)
+        c[some] += rng.normal(scale=0.1, size=(40, 3))
+        full = c.copy()
+        k_full = guard.apply_stacked(full, bones)
+        k_only = guard.apply_stacked(c, bones, ids, np.concatenate([some, ids[:moved], [0, 0]]))
+        assert k_only == k_full > 0 and np.array_equal(c, full)
+        assert not guard._mark.any()

@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 
 from faceforge.anatomy.animate import Rig, inverted_faces, play
-from faceforge.anatomy.orientation_guard import OrientationGuard, _project_signed_areas, _watched
+from faceforge.anatomy.orientation_guard import (OrientationGuard, _project_signed_areas, _rewatched,
+                                                 _watched)
 
 from .test_loop import grid
 
 
-def _twin(x, tris, nref, floor, aim, iterations):
+def _twin(x, tris, nref, floor, aim, iterations, hit):
     """Plain-Python twin of the numba kernel (same order, same updates)."""
     moved = 0
     for _ in range(iterations):
@@ -26,6 +27,7 @@ def _twin(x, tris, nref, floor, aim, iterations):
             lam = -(s - floor[t] - aim * floor[t]) / denom
             for k in range(3):
                 x[tris[t, k]] += lam * g[k]
+            hit[t] = 1
             changed += 1
         moved += changed
         if changed == 0:
@@ -41,10 +43,15 @@ def test_kernel_matches_its_python_twin():
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     floor = rng.uniform(0.0, 0.3, 40)
     a, b = x.copy(), x.copy()
-    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7)
-    kb = _twin(b, tris, n, floor, 0.25, 7)
+    ha, hb = np.zeros(40, np.uint8), np.zeros(40, np.uint8)
+    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha)
+    kb = _twin(b, tris, n, floor, 0.25, 7, hb)
     assert ka == kb > 0
     assert np.allclose(a, b, rtol=0, atol=1e-12)
+    assert ha.tolist() == hb.tolist() and 0 < ha.sum() < 40
+    # the triangles not projected moved none of their vertices (unless they share one)
+    free = np.setdiff1d(np.arange(30), tris[ha.astype(bool)])
+    assert len(free) and np.array_equal(a[free], x[free])
 
 
 def test_watched_kernel_matches_the_numpy_test():
@@ -55,6 +62,53 @@ def test_watched_kernel_matches_the_numpy_test():
         pos = np.ascontiguousarray(rest + rng.normal(scale=scale, size=rest.shape))
         rows = _watched(pos, guard.faces, guard.normal0, guard.floor, guard.cos_watch, guard.active)
         assert rows.tolist() == np.flatnonzero(guard.watched(pos)).tolist()
+
+
+def test_rescan_around_moved_vertices_gives_the_full_scan():
+    rng = np.random.default_rng(8)
+    rest, faces = grid(9)
+    guard = OrientationGuard(rest, faces, min_area=0.2)
+    for scale in (0.05, 0.2):
+        pos = np.ascontiguousarray(rest + rng.normal(scale=scale, size=rest.shape))
+        rows = _watched(pos, guard.faces, guard.normal0, guard.floor, guard.cos_watch, guard.active)
+        assert 0 < len(rows) < len(faces)
+        for count in (0, 1, 5, 40):
+            moved = rng.choice(len(rest), count)                 # repeats allowed
+            after = pos.copy()
+            after[moved] += rng.normal(scale=0.3, size=(count, 3))
+            again = guard._rewatched(after, rows, moved)
+            assert again.tolist() == np.flatnonzero(guard.watched(after)).tolist()
+            assert not guard._mark.any()                         # the scratch is left clean
+
+
+def test_apply_after_moved_vertices_is_apply_from_scratch():
+    """``apply(x, moved)`` on the array the last apply left, changed only at ``moved``, does
+    exactly what a full apply does (the skin step's skull-guard rounds)."""
+    rng = np.random.default_rng(9)
+    rest, faces = grid(9)
+    for trial in range(6):
+        guard = OrientationGuard(rest, faces, min_area=0.2, rounds=2 + trial % 3)
+        pos = np.ascontiguousarray(rest + rng.normal(scale=0.15, size=rest.shape))
+        guard.apply(pos)
+        moved = rng.choice(len(rest), 4, replace=False)
+        pos[moved] += rng.normal(scale=0.3, size=(4, 3))
+        fresh = OrientationGuard(rest, faces, min_area=0.2, rounds=guard.rounds)
+        ref = pos.copy()
+        assert guard.apply(pos, moved) == fresh.apply(ref)
+        assert np.array_equal(pos, ref)
+    # what the last apply may have moved: every other vertex kept its bits
+    pos[moved] += rng.normal(scale=0.3, size=(4, 3))
+    before = pos.copy()
+    assert guard.apply(pos, moved) > 0
+    still = np.setdiff1d(np.arange(len(rest)), guard.touched)
+    assert len(still) and np.array_equal(pos[still], before[still])
+    assert np.any(pos[guard.touched] != before[guard.touched])
+    # another array, or no last verdict: a full test
+    other = np.ascontiguousarray(rest + rng.normal(scale=0.15, size=rest.shape))
+    ref = other.copy()
+    assert guard.apply(other, np.zeros(0, np.int64)) == OrientationGuard(
+        rest, faces, min_area=0.2, rounds=guard.rounds).apply(ref)
+    assert np.array_equal(other, ref)
 
 
 def test_a_folded_sheet_is_unfolded_and_the_rest_of_it_left_alone():

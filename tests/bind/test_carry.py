@@ -82,3 +82,22 @@ def test_carried_skin_goes_where_the_tissue_under_it_goes(bound):
     moving, still = d[v[:, 0] > 0.5], d[v[:, 0] < -0.3]
     assert abs(moving.mean() - 0.1) < 0.01 and moving.min() > 0.075, moving
     assert np.abs(still).max() < 0.02, still
+
+
+def test_compiled_carry_matches_carry_targets(bound):
+    """The skin step fills the carried rows in place with ``skin._carry``; its plain twin is
+    :meth:`SkinSimulation.carry_targets`: the same bits, the other rows untouched."""
+    from faceforge.anatomy.skin import _carry
+
+    v, f, muscle, b = bound
+    rng = np.random.default_rng(2)
+    carried = rng.random(len(b.vertex_ids)) < 0.5
+    sim = SkinSimulation(v, f, b, SkinStiffness(), SolverSettings(iterations=10), carried=carried)
+    body = Bodies(muscle.vertices, muscle.faces)
+    body.v = body.rest + rng.normal(scale=0.05, size=body.rest.shape)
+    t = sim.anchor_targets(body)
+    want = t.copy()
+    want[carried] = sim.carry_targets(body, t)
+    s0, p0 = sim._carry_rest(body)
+    _carry(t, sim._carried_rows, s0, p0)
+    assert 0 < carried.sum() < len(carried) and np.array_equal(t, want)

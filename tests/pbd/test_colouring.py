@@ -135,3 +135,23 @@ def test_coloured_solver_rest_fixed_point_momentum_and_convergence(mode):
         solver.step(out, out, model.control(), 0.04)
     after = max_abs_residuals(model, out.positions)
     assert after["distance"] < 0.2 * before["distance"]
+
+
+@pytest.mark.parametrize("mode", ["paper", "xpbd"])
+def test_stepping_in_place_equals_stepping_into_another_state(mode):
+    """``_step`` skips copying the state onto itself when ``state_out`` is ``state_in``: the
+    same bits as stepping into a separate state (which copies), and the input is kept then."""
+    v, f = sphere(2)
+    b, _ = skin_builder(v, f)
+    model = b.finalize()
+    solver = Solver(model, SolverSettings(colouring=True, stiffness_mode=mode))
+    rng = np.random.default_rng(7)
+    a = model.state()
+    a.positions += rng.normal(scale=0.05, size=a.positions.shape)
+    a.velocities[:] = rng.normal(size=a.positions.shape)
+    x0, v0 = a.positions.copy(), a.velocities.copy()
+    out = model.state()
+    solver.step(a, out, model.control(), 0.04)
+    assert np.array_equal(a.positions, x0) and np.array_equal(a.velocities, v0)
+    solver.step(a, a, model.control(), 0.04)
+    assert np.array_equal(a.positions, out.positions) and np.array_equal(a.velocities, out.velocities)

@@ -167,6 +167,7 @@ class BoundHead:
         # the guard's bones (cranium, mandible) are the first rows of the system's world mesh,
         # in the same order (MusculoskeletalSystem.from_parts puts them there)
         bone_rows = system.vertex_range("mandible").stop
+        pushed = np.empty(len(guard.vertex), dtype=np.int64)
 
         def skin_step(_bones, _muscles, dt):
             skin.step(system, dt)
@@ -174,10 +175,14 @@ class BoundHead:
             bones = system.world_view()[:bone_rows]
             # the skull guard pushes vertices one by one along the bone's normals, which can turn
             # a sliver over; the orientation guard moves them sideways, which can sink one below
-            # its floor: alternate until the orientation pass has nothing left to do
-            for _ in range(max(rounds, 1)):
-                guard.apply_stacked(x, bones)
-                if orientation is None or not orientation.apply(x):
+            # its floor: alternate until the orientation pass has nothing left to do. After the
+            # first round each looks again only where the other moved something (and the skull
+            # guard at what it pushed itself, which round-off may push again): a full pass's result
+            k = 0
+            for r in range(max(rounds, 1)):
+                only = None if r == 0 else np.concatenate([pushed[:k], orientation.touched])
+                k = guard.apply_stacked(x, bones, pushed, only)
+                if orientation is None or not orientation.apply(x, None if r == 0 else pushed[:k]):
                     break
             return skin.simulated()
 
