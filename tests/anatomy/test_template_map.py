@@ -205,7 +205,7 @@ def test_a_thousand_frames_of_random_contractions_and_jaw_poses_stay_clean(templ
     """Issue 4: random expressions (each active muscle on with probability 0.3, at up to the
     FAP mapping's ``max_contraction``) and jaw poses over the jaw's whole range, a new target
     every second (25 frames) eased toward; no NaN, no muscle face turned over once the last
-    pose is held, and none in any checked frame."""
+    pose is held, and none in any frame."""
     skull, specs, _, system = template
     cap = yaml.safe_load((ROOT / "templates" / "fap_mapping.yaml").read_text())["max_contraction"]
     active = _active(template)
@@ -221,9 +221,8 @@ def test_a_thousand_frames_of_random_contractions_and_jaw_poses_stay_clean(templ
         c += 0.2 * (target_c - c)
         jaw += 0.2 * (target_jaw - jaw)
         system.step(dict(zip(active, c)), skull.jaw_transform(*jaw))
-        if frame % 4 == 3:
-            for name, k in inverted_now(system).items():
-                folded[name] = max(folded.get(name, 0), k)
+        for name, k in inverted_now(system).items():
+            folded[name] = max(folded.get(name, 0), k)
     assert np.isfinite(system.world()[0]).all()
     for _ in range(FRAMES):
         system.step(dict(zip(active, c)), skull.jaw_transform(*jaw))
