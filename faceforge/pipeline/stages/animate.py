@@ -37,6 +37,7 @@ add_rule("skin.carry", Choice(("muscles", "all", "none")))
 add_rule("muscle.damping", Number(0.0, 0.99))
 add_rule("animate.orientation_guard.rounds", Integer(0))           # 0 turns the guard off
 add_rule("animate.orientation_guard.min_area", Number(0.0, 0.95))
+add_rule("animate.skull_guard.collision_reach", Number(0.0, 0.5))    # 0 turns bone collision off
 
 #: FDPs on the lower lip (inner and outer contour), located on the lower side of a cut lip line
 LOWER_LIP_FDPS = ("2.3", "2.8", "2.9", "8.2", "8.7", "8.8")
@@ -87,6 +88,7 @@ class BoundHead:
         from dataclasses import replace
 
         from faceforge.anatomy.animate import Rig, SkullGuard
+        from faceforge.anatomy.bone_collision import BoneCollision
         from faceforge.anatomy.binding import Binding
         from faceforge.anatomy.fap_mapping import JawLevers
         from faceforge.anatomy.orientation_guard import OrientationGuard
@@ -158,6 +160,10 @@ class BoundHead:
             self.rest, {"cranium": self.cranium, "mandible": self.mandible},
             reach=float(config.get("animate.skull_guard.reach")) * diag,
             keep=float(config.get("animate.skull_guard.keep")))
+        reach = float(config.get("animate.skull_guard.collision_reach")) * diag
+        self.collision = collision = BoneCollision(
+            self.rest, {"cranium": self.cranium, "mandible": self.mandible}, reach=reach,
+            keep=float(config.get("animate.skull_guard.keep"))) if reach > 0 else None
 
         rounds = int(config.get("animate.orientation_guard.rounds"))
         self.orientation = orientation = OrientationGuard(
@@ -184,6 +190,11 @@ class BoundHead:
                 k = guard.apply_stacked(x, bones, pushed, only)
                 if orientation is None or not orientation.apply(x, None if r == 0 else pushed[:k]):
                     break
+            # skin that slid into a bone beyond the triangle the skull guard holds it above (the
+            # lips onto the other jaw's teeth, the cheek over the cheekbone) is put back out
+            jaw = np.eye(4) if last[1] is None else last[1]
+            if collision is not None and collision.apply(x, {"mandible": jaw}) and orientation is not None:
+                orientation.apply(x)
             return skin.simulated()
 
         def reset():

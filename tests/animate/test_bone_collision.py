@@ -1,0 +1,66 @@
+"""Skin found inside a rigid bone is put back out (anatomy.bone_collision)."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from faceforge.anatomy.animate import points_inside
+from faceforge.anatomy.bone_collision import BoneCollision
+
+
+def box(centre=(0.0, 0.0, 0.0)):
+    b = trimesh.creation.box(extents=(2.0, 2.0, 2.0))
+    return np.asarray(b.vertices) + centre, np.asarray(b.faces)
+
+
+def rigid(angle, shift):
+    """(4, 4): rotation by ``angle`` rad about y, then translation ``shift``."""
+    c, s = np.cos(angle), np.sin(angle)
+    t = np.eye(4)
+    t[:3, :3] = [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]
+    t[:3, 3] = shift
+    return t
+
+
+def test_rest_is_left_alone_and_skin_pushed_in_comes_out_at_its_floor():
+    bv, bf = box()
+    rest = np.array([[0.0, 0.0, 1.2], [0.3, 0.2, 1.4], [0.0, 0.0, 3.0], [0.0, 0.0, 0.5]])
+    col = BoneCollision(rest, {"bone": (bv, bf)}, reach=0.5, keep=0.5)
+    ids, _, floor, _ = col.guarded["bone"]
+    assert ids.tolist() == [0, 1]                      # near and outside; far, and inside at rest, skipped
+    assert np.allclose(floor, [0.1, 0.2])
+    x = rest.copy()
+    assert col.apply(x, {}) == 0 and np.array_equal(x, rest)
+    x = rest + [0.0, 0.0, -0.5]                        # both guarded vertices pushed 0.3 / 0.1 into the top face
+    before = x.copy()
+    assert col.apply(x, {}) == 2
+    assert np.allclose(x[:2], [[0.0, 0.0, 1.1], [0.3, 0.2, 1.2]])   # straight out, to half the rest gap
+    assert np.array_equal(x[2:], before[2:])
+    assert not points_inside(x[:2], bv, bf).any()
+
+
+def test_a_moved_bone_is_tested_where_it_is():
+    bv, bf = box()
+    rest = np.array([[1.3, 0.0, 0.0], [0.0, 1.3, 0.0]])
+    col = BoneCollision(rest, {"mandible": (bv, bf)}, reach=0.5, keep=0.5)
+    t = rigid(0.3, [0.5, -0.2, 0.1])
+    moved_bone = bv @ t[:3, :3].T + t[:3, 3]
+    x = rest.copy()                                    # the skin stays; the bone moved into it
+    inside = points_inside(x, moved_bone, bf)
+    assert inside.any()
+    assert col.apply(x, {"mandible": t}) == int(inside.sum())
+    assert not points_inside(x, moved_bone, bf).any()
+    # the pushed vertex sits keep * d0 = 0.15 from the moved bone
+    d = trimesh.proximity.closest_point(trimesh.Trimesh(moved_bone, bf, process=False), x[inside])[1]
+    assert np.allclose(d, 0.15)
+
+
+def test_two_bones_in_one_query_do_not_see_each_other():
+    a, fa = box()
+    b, fb = box((0.0, -3.0, 0.0))
+    rest = np.array([[0.0, 1.2, 0.0], [0.0, -4.2, 0.0]])   # one above the upper box, one below the lower
+    col = BoneCollision(rest, {"cranium": (a, fa), "mandible": (b, fb)}, reach=0.5, keep=0.5)
+    x = rest + [[0.0, -0.4, 0.0], [0.0, 0.0, 0.0]]         # only the first goes into its bone
+    assert col.apply(x, {}) == 1
+    assert np.allclose(x, [[0.0, 1.1, 0.0], [0.0, -4.2, 0.0]])
