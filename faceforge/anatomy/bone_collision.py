@@ -19,7 +19,10 @@ its rest position went with the bone (``d0`` its rest distance) is still outside
 
 from __future__ import annotations
 
+import numba
 import numpy as np
+
+from faceforge.constants import NUMBA_OPTIONS
 
 __all__ = ["BoneCollision"]
 
@@ -61,6 +64,7 @@ class BoneCollision:
         size = max((float(np.ptp(m.vertices, axis=0).max()) for m in parts), default=0.0)
         self._offset = {n: np.array([0.0, 0.0, 4.0 * size * i]) for i, n in enumerate(self.names)}
         self._meshes = {n: m for n, m in zip(self.names, parts)}
+        self._trees = {n: _TriangleTree(m.triangles) for n, m in zip(self.names, parts)}
         self._all = trimesh.util.concatenate([trimesh.Trimesh(m.vertices + self._offset[n], m.faces, process=False)
                                               for n, m in zip(self.names, parts)]) if parts else None
 
@@ -68,8 +72,6 @@ class BoneCollision:
         """Move the guarded vertices of ``positions`` ((n, 3) float, in place) that are inside a
         bone out of it. ``transforms``: name -> (4, 4) rigid transform of that bone from its rest
         pose (missing: identity). Returns how many moved."""
-        import trimesh
-
         from faceforge.anatomy.animate import points_inside
 
         local, which = [], []
@@ -92,9 +94,91 @@ class BoneCollision:
                 continue
             ids, _, floor, _ = self.guarded[name]
             k = maybe[hit]
-            q, d, _ = trimesh.proximity.closest_point(self._meshes[name], p[hit])
+            q = self._trees[name].closest(p[hit])
+            d = np.linalg.norm(q - p[hit], axis=1)
             out = q + floor[k, None] * (q - p[hit]) / np.maximum(d, 1e-300)[:, None]
             t = np.asarray(transforms.get(name, np.eye(4)), dtype=np.float64)
             positions[ids[k]] = out @ t[:3, :3].T + t[:3, 3]
             moved += len(k)
         return moved
+
+
+class _TriangleTree:
+    """Closest points on a static triangle soup ``triangles (m, 3, 3)``: a k-d tree of the
+    centroids; the triangles that can hold a point's closest point are those whose centroid
+    lies within (distance to the nearest centroid + the largest triangle radius)."""
+
+    def __init__(self, triangles: np.ndarray):
+        from scipy.spatial import cKDTree
+
+        self.triangles = np.asarray(triangles, dtype=np.float64)
+        centre = self.triangles.mean(axis=1)
+        self.reach = float(np.linalg.norm(self.triangles - centre[:, None], axis=2).max())
+        self.tree = cKDTree(centre)
+
+    def closest(self, points: np.ndarray) -> np.ndarray:
+        """(k, 3) closest points of the soup to ``points (k, 3)`` (compiled, :func:`_closest_in`;
+        the tests compare it with trimesh's)."""
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        near, _ = self.tree.query(points)
+        lists = self.tree.query_ball_point(points, near + self.reach)
+        start = np.concatenate([[0], np.cumsum([len(c) for c in lists])]).astype(np.int64)
+        cand = np.concatenate([np.asarray(c, dtype=np.int64) for c in lists]) if len(lists) else np.zeros(0, np.int64)
+        return _closest_in(points, self.triangles, start, cand)
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _closest_in(points, tri, start, cand):  # pragma: no cover - numba
+    """For each point k the closest point of the triangles ``tri[cand[start[k]:start[k + 1]]]``."""
+    out = np.empty_like(points)
+    for k in range(points.shape[0]):
+        px, py, pz = points[k, 0], points[k, 1], points[k, 2]
+        best = np.inf
+        for j in range(start[k], start[k + 1]):
+            t = tri[cand[j]]
+            qx, qy, qz = _closest_on(px, py, pz, t[0, 0], t[0, 1], t[0, 2], t[1, 0], t[1, 1], t[1, 2],
+                                     t[2, 0], t[2, 1], t[2, 2])
+            d = (px - qx) ** 2 + (py - qy) ** 2 + (pz - qz) ** 2
+            if d < best:
+                best = d
+                out[k, 0], out[k, 1], out[k, 2] = qx, qy, qz
+    return out
+
+
+@numba.njit(inline="always", **NUMBA_OPTIONS)
+def _closest_on(px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz):  # pragma: no cover - numba
+    """Closest point of triangle abc to p, by the Voronoi regions of its corners, edges, face."""
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return ax, ay, az
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return bx, by, bz
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        s = d1 / (d1 - d3)
+        return ax + s * abx, ay + s * aby, az + s * abz
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return cx, cy, cz
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        s = d2 / (d2 - d6)
+        return ax + s * acx, ay + s * acy, az + s * acz
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        s = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return bx + s * (cx - bx), by + s * (cy - by), bz + s * (cz - bz)
+    den = va + vb + vc
+    if den == 0.0:   # degenerate triangle
+        return ax, ay, az
+    return ax + abx * (vb / den) + acx * (vc / den), ay + aby * (vb / den) + acy * (vc / den), \
+        az + abz * (vb / den) + acz * (vc / den)
