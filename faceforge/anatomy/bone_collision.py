@@ -48,7 +48,6 @@ class BoneCollision:
 
         rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
         self.names, self.guarded, parts = [], {}, []
-        self._shift = 0.0
         for name, (v, f) in bodies.items():
             mesh = trimesh.Trimesh(np.asarray(v, np.float64), np.asarray(f, np.int64), process=False)
             if not len(rest) or not len(mesh.faces):
@@ -59,11 +58,10 @@ class BoneCollision:
             self.names.append(name)
             self.guarded[name] = (ids, rest[ids], keep * dist[ids], dist[ids])
             parts.append(mesh)
-        # every bone in one intersector, each moved apart along z so that rays along +-x from
-        # one bone's points never meet another: one ray query per pass
+        # every bone in one intersector, each moved apart along z by four times the largest bone
+        # so that rays along +-x from points near one bone never meet another: one query a pass
         size = max((float(np.ptp(m.vertices, axis=0).max()) for m in parts), default=0.0)
         self._offset = {n: np.array([0.0, 0.0, 4.0 * size * i]) for i, n in enumerate(self.names)}
-        self._meshes = {n: m for n, m in zip(self.names, parts)}
         self._trees = {n: _TriangleTree(m.triangles) for n, m in zip(self.names, parts)}
         self._all = trimesh.util.concatenate([trimesh.Trimesh(m.vertices + self._offset[n], m.faces, process=False)
                                               for n, m in zip(self.names, parts)]) if parts else None
