@@ -72,10 +72,10 @@ class BoneCollision:
         pose (missing: identity). Returns how many moved."""
         from faceforge.anatomy.animate import points_inside
 
+        poses = [np.asarray(transforms.get(n, np.eye(4)), dtype=np.float64) for n in self.names]
         local, which = [], []
-        for name in self.names:
+        for name, t in zip(self.names, poses):
             ids, rest, _, slack = self.guarded[name]
-            t = np.asarray(transforms.get(name, np.eye(4)), dtype=np.float64)
             p = (positions[ids] - t[:3, 3]) @ t[:3, :3]          # into the bone's rest frame
             maybe = np.flatnonzero(np.sum((p - rest) ** 2, axis=1) >= slack * slack)
             local.append(p[maybe])
@@ -85,7 +85,7 @@ class BoneCollision:
         probe = np.vstack([p + self._offset[n] for p, n in zip(local, self.names)])
         inside = points_inside(probe, self._all.vertices, self._all.faces, mesh=self._all)
         moved, start = 0, 0
-        for name, p, maybe in zip(self.names, local, which):
+        for name, t, p, maybe in zip(self.names, poses, local, which):
             hit = inside[start:start + len(p)]
             start += len(p)
             if not hit.any():
@@ -95,7 +95,6 @@ class BoneCollision:
             q = self._trees[name].closest(p[hit])
             d = np.linalg.norm(q - p[hit], axis=1)
             out = q + floor[k, None] * (q - p[hit]) / np.maximum(d, 1e-300)[:, None]
-            t = np.asarray(transforms.get(name, np.eye(4)), dtype=np.float64)
             positions[ids[k]] = out @ t[:3, :3].T + t[:3, 3]
             moved += len(k)
         return moved
