@@ -123,6 +123,7 @@ class CalibrationRow:
     achieved_before: float
     achieved: float
     drive: float
+    saturated: bool = False       # every muscle the drive's sign recruits is at full contraction
 
     @property
     def error(self) -> float:
@@ -136,7 +137,18 @@ class CalibrationRow:
         return {"fap": self.fap, "name": self.name, "group": self.group,
                 "requested": self.requested, "achieved_uncalibrated": num(self.achieved_before),
                 "achieved": num(self.achieved), "drive": num(self.drive),
-                "relative_error": num(self.error)}
+                "relative_error": num(self.error), "saturated": self.saturated}
+
+
+def saturated(entry, drive: float, max_contraction: float) -> bool:
+    """True when ``drive`` (FAPU, the entry's control after its response) puts every muscle of
+    its sign (``entry.positive`` for drive > 0, else ``entry.negative``) at ``max_contraction``:
+    more drive cannot move the skin further. Jaw-only entries (no muscles) never saturate here.
+    """
+    muscles = entry.positive if drive > 0 else entry.negative
+    if not muscles or not np.isfinite(drive):
+        return False
+    return all(g * abs(drive) >= max_contraction for g in muscles.values())
 
 
 def _frames(entry_faps, values: np.ndarray) -> np.ndarray:
@@ -148,7 +160,7 @@ def _frames(entry_faps, values: np.ndarray) -> np.ndarray:
 
 def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: dict,
                       requested: dict, refine: int = 2, sample_scale=(0.5, 1.0, 1.5),
-                      max_drive=20.0, progress=None):
+                      max_drive=20.0, tolerance: float = 0.005, progress=None):
     """Fit every entry's response curve so requested and achieved FAPU agree.
 
     Parameters
@@ -161,9 +173,13 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         entry of several FAPs (outer and inner lip twins, driven together) is fitted to the mean
         of its FAPs' probes, and each FAP gets its own report rows
     requested : dict FAP number -> (r,) float requested values (FAPU, nonzero)
-    refine : secant refinements per requested value after the first inversion
+    refine : at most this many secant refinements per requested value after the first
+        inversion; a value stops early once its achieved mean is within ``tolerance`` (relative)
+        of the request, or when its drive no longer changes (held at a saturated curve's knee or
+        at ``max_drive``)
     sample_scale : drives sampled for the first curve, as fractions of max |requested|
     max_drive : cap on |drive| / |requested|
+    tolerance : relative error at which a requested value counts as met (default 0.5 %)
     progress : optional callable wrapping an iterable (e.g. tqdm)
 
     Returns
@@ -201,20 +217,30 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         # 2. invert it, 3. refine each requested value by secant steps on its own samples
         drive = invert_monotone(drives, sampled, req)
         ok = np.isfinite(drive)
+        # an FDP that barely moves would ask for absurd drives: cap them (contractions
+        # and jaw limits saturate long before, so the report shows the shortfall)
+        drive = np.clip(drive, -max_drive * np.abs(req), max_drive * np.abs(req))
         d_all, a_all = list(drives), list(sampled)
+        todo = ok.copy()
+        trial = with_entry(calibrated, idx, response=None)
         for _ in range(refine + 1):
-            if not np.any(ok):
+            if not np.any(todo):
                 break
-            trial = with_entry(calibrated, idx, response=None)
-            got = probe(simulate(trial, _frames(entry.faps, drive[ok])))
-            d_all += list(drive[ok])
+            got = probe(simulate(trial, _frames(entry.faps, drive[todo])))
+            d_all += list(drive[todo])
             a_all += list(got)
-            # secant on the two nearest samples around each requested value
-            drive[ok] = invert_monotone(np.asarray(d_all), np.asarray(a_all), req[ok])
+            # a value within ``tolerance`` of its request keeps its drive; the others take a
+            # secant step on the two nearest samples around them
+            left = np.flatnonzero(todo)[np.abs(got - req[todo]) > tolerance * np.abs(req[todo])]
+            todo[:] = False
+            if len(left) == 0:
+                break
+            step = invert_monotone(np.asarray(d_all), np.asarray(a_all), req[left])
+            step = np.clip(step, -max_drive * np.abs(req[left]), max_drive * np.abs(req[left]))
+            moved = ~np.isclose(step, drive[left], rtol=1e-9, atol=0.0)   # a held drive: saturated
+            drive[left] = step
             ok = np.isfinite(drive)
-            # an FDP that barely moves would ask for absurd drives: cap them (contractions
-            # and jaw limits saturate long before, so the report shows the shortfall)
-            drive = np.clip(drive, -max_drive * np.abs(req), max_drive * np.abs(req))
+            todo[left[moved & np.isfinite(step)]] = True
         knots = np.column_stack([req[ok], drive[ok]]) if np.any(ok) else None
         if knots is not None:
             knots = _monotone_knots(knots)
@@ -228,8 +254,10 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
             final = measure(rest, final_skin, probes[fap])
             first = measure(rest, before_skin, probes[fap])
             for j, r in enumerate(req):
+                d = float(drive[j]) if ok[j] else float("nan")
                 rows.append(CalibrationRow(fap, entry.name, fap_group(fap), float(r), float(first[j]),
-                                           float(final[j]), float(drive[j]) if ok[j] else float("nan")))
+                                           float(final[j]), d,
+                                           saturated(entry, d, calibrated.max_contraction)))
     return calibrated, rows
 
 
@@ -264,8 +292,11 @@ def summarize(rows) -> dict:
     for group in ("jaw", "lip", "cheek", "eyebrow"):
         errs = [r.error for r in rows if r.group == group]
         out[group] = {"count": len(errs), "median_relative_error": float(np.median(errs)) if errs else None}
-    errs = [r.error for r in rows if r.group in ("jaw", "lip", "cheek", "eyebrow")]
-    out["all"] = {"count": len(errs), "median_relative_error": float(np.median(errs)) if errs else None}
+    counted = [r for r in rows if r.group in ("jaw", "lip", "cheek", "eyebrow")]
+    errs = [r.error for r in counted]
+    out["all"] = {"count": len(errs), "median_relative_error": float(np.median(errs)) if errs else None,
+                  "within_10_percent": int(sum(e <= 0.1 for e in errs)),
+                  "saturated": int(sum(r.saturated for r in counted))}
     before = [abs(r.achieved_before - r.requested) / abs(r.requested) for r in rows
               if r.group in ("jaw", "lip", "cheek", "eyebrow")]
     out["all_uncalibrated"] = {"count": len(before),
@@ -274,11 +305,12 @@ def summarize(rows) -> dict:
 
 
 def format_table(rows) -> str:
-    """A short fixed-width table: FAP, name, requested, achieved, relative error."""
+    """A short fixed-width table: FAP, name, requested, achieved, relative error, and "c=max"
+    where the entry's muscles are all at full contraction (the rig can do no more)."""
     lines = [f"{'FAP':>4} {'name':<22} {'requested':>10} {'uncalib.':>10} {'achieved':>10} {'error':>7}"]
     for r in rows:
         lines.append(f"{r.fap:>4} {r.name:<22} {r.requested:>10.1f} {r.achieved_before:>10.1f} "
-                     f"{r.achieved:>10.1f} {100 * r.error:>6.1f}%")
+                     f"{r.achieved:>10.1f} {100 * r.error:>6.1f}%" + ("  c=max" if r.saturated else ""))
     return "\n".join(lines)
 
 

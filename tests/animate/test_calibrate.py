@@ -157,6 +157,46 @@ def test_lip_twins_driven_together_are_fitted_to_their_mean():
 
     probes = {59: Probe(59, 0, -1, UP, FAPU["MNS"]), 12: Probe(12, 5, -1, UP, FAPU["MNS"])}
     m = mapping_from_dict(MAPPING)
-    _, rows = calibrate_mapping(m, head, np.zeros((6, 3)), probes, {59: [60.0]}, refine=3)
+    _, rows = calibrate_mapping(m, head, np.zeros((6, 3)), probes, {59: [60.0]}, refine=3,
+                                tolerance=1e-4)
     err = {r.fap: (r.achieved - r.requested) / r.requested for r in rows}
     assert err[59] == pytest.approx(1 / 9, abs=0.005) and err[12] == pytest.approx(-1 / 9, abs=0.005)
+
+
+def test_refinement_runs_until_met_and_stops_where_held():
+    """A value refines until it is within ``tolerance`` of its request (a strongly concave
+    response, as lip separation under open_jaw, needs more than two secant steps), and no
+    further: a met value and a saturated one (drive held at the knee) cost no more poses."""
+    calls = []
+
+    def head(mapping, faps):
+        calls.append(len(faps))
+        return synthetic_head(mapping, faps)
+
+    m = mapping_from_dict(MAPPING)
+    probes = {31: PROBES[31]}
+    # the brow's tanh response: 150 ENS sits far up the curve, above the sampled drives
+    _, two = calibrate_mapping(m, head, np.zeros((5, 3)), probes, {31: [150.0]}, refine=2,
+                               tolerance=1e-4)
+    calls.clear()
+    _, rows = calibrate_mapping(m, head, np.zeros((5, 3)), probes, {31: [150.0]}, refine=8,
+                                tolerance=1e-4)
+    assert abs(two[0].error) > 1e-4 and rows[0].error <= 1e-4
+    assert 1 + 3 < len(calls) < 1 + 9 + 1        # sampling, more than two steps, verification
+    calls.clear()
+    _, sat = calibrate_mapping(m, head, np.zeros((5, 3)), probes, {31: [2000.0]}, refine=8)
+    assert sat[0].error > 0.1 and len(calls) <= 4  # sampling, one trial, held, verification
+
+
+def test_saturated_rows_are_those_whose_muscles_are_all_at_full_contraction():
+    from faceforge.anatomy.calibrate import CalibrationRow, saturated
+
+    m = mapping_from_dict(MAPPING)
+    corner, jaw = m.entry_of(59), m.entry_of(3)        # zyg 0.002 up, dep 0.004 down
+    assert saturated(corner, 500.0, 1.0) and not saturated(corner, 499.0, 1.0)
+    assert saturated(corner, -250.0, 1.0) and not saturated(corner, -200.0, 1.0)
+    assert not saturated(corner, float("nan"), 1.0) and not saturated(jaw, 1e9, 1.0)
+    rows = [CalibrationRow(59, "c", "lip", 100.0, 0.0, 100.0 * f, 1.0, s)
+            for f, s in ((1.0, False), (0.95, False), (0.5, True))]
+    summary = summarize(rows)["all"]
+    assert (summary["within_10_percent"], summary["saturated"]) == (2, 1)

@@ -487,7 +487,9 @@ def run_calibrate(ctx):
     med = summary["all"]["median_relative_error"]
     (ctx.out_dir / "report.txt").write_text(
         table + f"\n\nmedian relative error (lip, jaw, cheek, eyebrow): "
-        f"{'n/a' if med is None else f'{100 * med:.1f}%'}\n")
+        f"{'n/a' if med is None else f'{100 * med:.1f}%'}; {summary['all']['within_10_percent']} of "
+        f"{summary['all']['count']} rows within 10 %, {summary['all']['saturated']} at full contraction "
+        f"(c=max)\n")
     ctx.log(f"median relative error {'n/a' if med is None else f'{100 * med:.1f}%'} "
             f"(uncalibrated {summary['all_uncalibrated']['median_relative_error']})")
 
