@@ -201,28 +201,18 @@ def inverted_triangles(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     return inverted_faces(rest, frames, faces, tol).sum(axis=1).astype(np.int64)
 
 
-def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, mesh=None) -> np.ndarray:
+def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, grid=None) -> np.ndarray:
     """(k,) bool: which ``points`` (k, 3) lie inside the closed mesh (vertices, faces).
 
-    Ray parity along +X and -X (both must agree, so a ray grazing an edge does not flip
-    the answer); uses trimesh's ray intersector (Embree where installed). ``mesh``: the same
-    mesh as a ``trimesh.Trimesh`` already built, to reuse its ray structures.
+    Ray parity along +X and -X (both must agree), with the top-left rule deciding rays through
+    an edge or a vertex (:mod:`faceforge.geometry.parity`, compiled). ``grid``: the mesh's
+    :class:`~faceforge.geometry.parity.ParityGrid`, already built, to reuse it.
     """
-    import trimesh
+    from faceforge.geometry.parity import ParityGrid
 
-    if mesh is None:
-        mesh = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces, np.int64), process=False)
-    pts = np.asarray(points, dtype=float).reshape(-1, 3)
-    k = len(pts)
-    if not k:
-        return np.zeros(0, dtype=bool)
-    # both directions in one query (one pass of the intersector's per-call work)
-    dirs = np.zeros((2 * k, 3))
-    dirs[:k, 0], dirs[k:, 0] = 1.0, -1.0
-    _, ray_idx = mesh.ray.intersects_id(np.vstack([pts, pts]), dirs, multiple_hits=True,
-                                        return_locations=False)
-    odd = np.bincount(ray_idx, minlength=2 * k) % 2 == 1
-    return odd[:k] & odd[k:]
+    if grid is None:
+        grid = ParityGrid(vertices, faces)
+    return grid.contains(points)
 
 
 def _depth_below(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -4,7 +4,7 @@
 bone triangle under it at rest. A vertex that slides over the bone (the lips onto the other
 jaw's teeth, the cheek over the cheekbone) meets bone that triangle does not describe and can
 end inside it. :class:`BoneCollision` finds such vertices with the same test the animation
-check uses (ray parity, :func:`faceforge.anatomy.animate.points_inside`) and moves each out
+check uses (ray parity, :class:`faceforge.geometry.parity.ParityGrid`) and moves each out
 along the shortest way to ``keep`` times its rest distance above the bone.
 
 Local signs (the closest face's normal, angle-weighted pseudonormals) were tried first and
@@ -12,7 +12,7 @@ misjudge the fitted bone where the fit folds it (MakeHuman's orbits and jaw angl
 pushed skin in. Parity counts crossings of the whole surface and is not misled by a fold.
 
 The bones are rigid: each is tested in its rest pose, the skin brought into the bone's rest
-frame, so the ray-casting structures are built once. Only vertices that may be inside are
+frame, so each bone's parity grid is built once. Only vertices that may be inside are
 cast: the distance to a rigid bone is 1-Lipschitz, so a vertex nearer than ``d0`` to where
 its rest position went with the bone (``d0`` its rest distance) is still outside.
 """
@@ -46,48 +46,38 @@ class BoneCollision:
     def __init__(self, rest: np.ndarray, bodies: dict, reach: float, keep: float = 0.5):
         import trimesh
 
+        from faceforge.geometry.parity import ParityGrid
+
         rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
-        self.names, self.guarded, parts = [], {}, []
+        self.names, self.guarded, self._grids, self._trees = [], {}, {}, {}
         for name, (v, f) in bodies.items():
             mesh = trimesh.Trimesh(np.asarray(v, np.float64), np.asarray(f, np.int64), process=False)
             if not len(rest) or not len(mesh.faces):
                 continue
             _, dist, _ = trimesh.proximity.closest_point(mesh, rest)
-            inside = mesh.contains(rest)
-            ids = np.flatnonzero((dist < reach) & (dist > 0.0) & ~inside)
+            grid = ParityGrid(mesh.vertices, mesh.faces)
+            ids = np.flatnonzero((dist < reach) & (dist > 0.0) & ~grid.contains(rest))
             self.names.append(name)
             self.guarded[name] = (ids, rest[ids], keep * dist[ids], dist[ids])
-            parts.append(mesh)
-        # every bone in one intersector, each moved apart along z by four times the largest bone
-        # so that rays along +-x from points near one bone never meet another: one query a pass
-        size = max((float(np.ptp(m.vertices, axis=0).max()) for m in parts), default=0.0)
-        self._offset = {n: np.array([0.0, 0.0, 4.0 * size * i]) for i, n in enumerate(self.names)}
-        self._trees = {n: _TriangleTree(m.triangles) for n, m in zip(self.names, parts)}
-        self._all = trimesh.util.concatenate([trimesh.Trimesh(m.vertices + self._offset[n], m.faces, process=False)
-                                              for n, m in zip(self.names, parts)]) if parts else None
+            self._grids[name] = grid
+            self._trees[name] = _TriangleTree(mesh.triangles)
 
     def apply(self, positions: np.ndarray, transforms: dict) -> int:
         """Move the guarded vertices of ``positions`` ((n, 3) float, in place) that are inside a
         bone out of it. ``transforms``: name -> (4, 4) rigid transform of that bone from its rest
         pose (missing: identity). Returns how many moved."""
-        from faceforge.anatomy.animate import points_inside
-
-        poses = [np.asarray(transforms.get(n, np.eye(4)), dtype=np.float64) for n in self.names]
-        local, which = [], []
-        for name, t in zip(self.names, poses):
+        # every bone sees the positions as they came in (a vertex pushed out of one bone is not
+        # re-tested against the other in the same pass)
+        passes = []
+        for name in self.names:
+            t = np.asarray(transforms.get(name, np.eye(4)), dtype=np.float64)
             ids, rest, _, slack = self.guarded[name]
             p = (positions[ids] - t[:3, 3]) @ t[:3, :3]          # into the bone's rest frame
             maybe = np.flatnonzero(np.sum((p - rest) ** 2, axis=1) >= slack * slack)
-            local.append(p[maybe])
-            which.append(maybe)
-        if not sum(len(w) for w in which):
-            return 0
-        probe = np.vstack([p + self._offset[n] for p, n in zip(local, self.names)])
-        inside = points_inside(probe, self._all.vertices, self._all.faces, mesh=self._all)
-        moved, start = 0, 0
-        for name, t, p, maybe in zip(self.names, poses, local, which):
-            hit = inside[start:start + len(p)]
-            start += len(p)
+            passes.append((name, t, p[maybe], maybe))
+        moved = 0
+        for name, t, p, maybe in passes:
+            hit = self._grids[name].contains(p)
             if not hit.any():
                 continue
             ids, _, floor, _ = self.guarded[name]
