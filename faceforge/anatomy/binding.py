@@ -22,6 +22,16 @@ skin of the lower lip only to the mandible (``lip_sides`` from
 A lip vertex ignores muscle hits on the other side of the lip line (the lower
 lip never binds to the upper half of the orbicularis oris).
 
+Beyond the paper: some muscles insert into the skin through the muscles above them (the
+corrugator and the depressor supercilii pass through the frontalis and the orbicularis
+oculi into the deep surface of the brow skin). Bound only to the muscle its ray meets
+first, the brow skin followed the frontalis alone, which passes on about half of what a
+deep muscle moves it, and its own anchors held the skin back from the deep muscle's pull
+(MakeHuman, depressor supercilii at c = 1: muscle 122 ENS, brow 20.7). With ``insertions``
+a vertex bound to another muscle whose ray, cast on, meets one of them also gets an anchor
+on it: the vertex then has two anchors, each with the skin's ``k_anchor``, and follows both
+muscles (:func:`bind_skin`).
+
 Beyond the paper: a vertex whose two rays both miss (they look into a hole of
 the skull: eye sockets, nostrils, the gap between the teeth) binds to the
 closest point of the skull within ``max_distance`` (its own jaw's bone near
@@ -91,7 +101,9 @@ class Binding:
     status : (n,) int8
         Per skin vertex: ``UNBOUND`` 0, ``MUSCLE`` 1, ``CRANIUM`` 2, ``MANDIBLE`` 3.
     vertex_ids : (k,) int64
-        Bound skin vertices, increasing.
+        Bound skin vertices, non-decreasing: one anchor each, and a second, right after
+        the first, where a muscle inserts into the skin through the one the ray met first
+        (``insertions`` of :func:`bind_skin`).
     body : (k,) int64
         Index into ``body_names`` of each anchor's body.
     face_ids : (k,) int64
@@ -260,7 +272,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
 
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
-              normals=None, depth_rank=None, side_of=None, fallback=True) -> Binding:
+              normals=None, depth_rank=None, side_of=None, fallback=True, insertions=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -291,6 +303,11 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         Vertices (all, or those of the mask) whose two rays miss bind to the
         closest skull point within ``max_distance`` (:attr:`Binding.closest`);
         False keeps the paper's rays only.
+    insertions : sequence of int, optional
+        Indices into ``bodies`` of muscles that insert into the skin through the
+        muscles above them (module docstring): a vertex bound by its ray to another
+        muscle whose same ray, cast on, also meets one of these gets a second anchor
+        on it (the nearest hit; :attr:`Binding.vertex_ids` then lists the vertex twice).
 
     Returns
     -------
@@ -339,16 +356,35 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
-    bary = np.zeros((len(ids), 3), FLOAT)
-    for b in np.unique(body[ids]):
-        sel = body[ids] == b
-        bary[sel] = barycentric(pts[ids[sel]], bodies[b].vertices, bodies[b].faces, face[ids[sel]])
     status = np.zeros(n, np.int8)
     status[ids] = kinds[body[ids]]
+    out_flag, near = outward[ids], closest[ids]
+    ins = [int(i) for i in (insertions or ()) if kinds[i] == MUSCLE]
+    if ins:   # second anchors: skin over a muscle that inserts into it through the muscles above
+        cand = ids[(kinds[body[ids]] == MUSCLE) & ~np.isin(body[ids], ins) & ~closest[ids]]
+        res = _cast(bodies, ins, np.zeros(nb, INT), v[cand],    # nearest hit, along the same ray
+                    np.where(outward[cand, None], 1.0, -1.0) * nrm[cand], max_distance, allowed[cand],
+                    sides[cand], side_of)
+        hit = res[0] >= 0
+        extra = cand[hit]
+        order = np.argsort(np.concatenate([ids, extra]), kind="stable")
+        a_body = np.concatenate([body[ids], res[0][hit]])[order]
+        a_face = np.concatenate([face[ids], res[1][hit]])[order]
+        a_pts = np.concatenate([pts[ids], res[2][hit]])[order]
+        a_dist = np.concatenate([dist[ids], res[3][hit]])[order]
+        out_flag = np.concatenate([out_flag, outward[extra]])[order]
+        near = np.concatenate([near, np.zeros(len(extra), bool)])[order]
+        ids = np.concatenate([ids, extra])[order]
+    else:
+        a_body, a_face, a_pts, a_dist = body[ids], face[ids], pts[ids], dist[ids]
+    bary = np.zeros((len(ids), 3), FLOAT)
+    for b in np.unique(a_body):
+        sel = a_body == b
+        bary[sel] = barycentric(a_pts[sel], bodies[b].vertices, bodies[b].faces, a_face[sel])
     return Binding(
         body_names=tuple(b.name for b in bodies), status=status, vertex_ids=ids,
-        body=body[ids], face_ids=face[ids], bary=bary, points=pts[ids], distance=dist[ids],
-        outward=outward[ids], normals=nrm, closest=closest[ids],
+        body=a_body, face_ids=a_face, bary=bary, points=a_pts, distance=a_dist,
+        outward=out_flag, normals=nrm, closest=near,
     )
 
 
@@ -446,6 +482,7 @@ def bind_report(binding: Binding, regions: dict, n_user: int | None = None) -> d
     out["closest_point_anchors"] = int(closest.sum())
     out["unbound"] = int((status == UNBOUND).sum())
     out["outward_anchors"] = int(binding.outward.sum())
+    out["second_anchors"] = int(len(binding.vertex_ids) - len(np.unique(binding.vertex_ids)))
     per_body = np.bincount(binding.body, minlength=len(binding.body_names))
     out["anchors_per_body"] = {n: int(c) for n, c in zip(binding.body_names, per_body) if c}
     return out
@@ -549,7 +586,7 @@ def lip_band(cut, width: float | None, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
 
 
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
-              max_ray_fraction: float, up=(0.0, 1.0, 0.0)) -> BoundSkin:
+              max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=()) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -567,6 +604,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     max_ray_fraction : float
         ``bind.max_ray_distance``: longest ray as a fraction of the skin's
         bounding-box diagonal.
+    insertions : sequence of str
+        ``bind.insertions``: muscles that insert into the skin through the muscles above
+        them, by name or by the name of a left/right pair without ``_L`` / ``_R``; skin
+        bound to another muscle gets a second anchor on them (:func:`bind_skin`).
 
     Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): like all the face's front skin,
     inner lip skin whose rays miss gets a closest-point anchor, across the oral vestibule
@@ -608,8 +649,11 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     front, rule = face_front_mask(cut.vertices, pts)
     band_width = lip_band_width(pts)
     lips = lip_band(cut, band_width)
+    inserting = set(insertions)
+    ins = [i for i, b in enumerate(bodies) if b.kind == "muscle" and (
+        b.name in inserting or (b.name[-2:] in ("_L", "_R") and b.name[:-2] in inserting))]
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
-                        depth_rank=rank, side_of=side_of, fallback=front)
+                        depth_rank=rank, side_of=side_of, fallback=front, insertions=ins)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None

@@ -165,3 +165,33 @@ def test_lip_vertices_whose_rays_miss_fall_back_to_their_own_half_of_a_muscle(sk
     assert on_ring.any()
     assert np.all(side_of(b.points[on_ring]) == sides[b.vertex_ids[on_ring]])
     assert np.all(b.body[b.closest & (sides[b.vertex_ids] == 0)] != 0)
+
+
+def test_insertions_add_a_second_anchor_through_the_muscle_above(skin):
+    """Skin bound to a superficial muscle whose ray also meets a deeper muscle listed in
+    ``insertions`` gets a second anchor on it; other vertices keep their one anchor."""
+    v, f = skin
+    top = Body("frontalis", "muscle", *_cap(0.9, 0.3))
+    deep = Body("depressor", "muscle", *_cap(0.85, 0.6))
+    skull = Body("cranium", "cranium", *sphere(0.8, 3))
+    plain = bind_skin(v, f, [top, deep, skull], max_distance=0.5)
+    b = bind_skin(v, f, [top, deep, skull], max_distance=0.5, insertions=[1])
+    np.testing.assert_array_equal(b.status, plain.status)      # the first anchors are the same
+    first = np.r_[True, b.vertex_ids[1:] != b.vertex_ids[:-1]]
+    np.testing.assert_array_equal(b.vertex_ids[first], plain.vertex_ids)
+    np.testing.assert_array_equal(b.body[first], plain.body)
+    assert np.all(np.diff(b.vertex_ids) >= 0)
+    second = ~first
+    over = np.flatnonzero(v[:, 2] > 0.75)            # well inside the deep cap's shadow
+    assert set(over) <= set(b.vertex_ids[second])
+    assert np.all(b.body[second] == 1) and np.all(b.body[first][np.isin(plain.vertex_ids, over)] == 0)
+    assert np.all(v[b.vertex_ids[second], 2] > 0.5)  # only where the deep muscle lies under the skin
+    np.testing.assert_allclose(b.distance[second], 0.15, atol=0.01)
+    np.testing.assert_allclose(np.linalg.norm(b.points[second], axis=1), 0.85, atol=0.01)
+    # the targets of both anchors follow their own bodies
+    shift = np.array([0.0, -0.1, 0.0])
+    moved = b.targets([(top.vertices, top.faces), (deep.vertices + shift, deep.faces),
+                       (skull.vertices, skull.faces)])
+    np.testing.assert_allclose(moved[second] - b.points[second], np.broadcast_to(shift, (second.sum(), 3)),
+                               atol=1e-12)
+    np.testing.assert_allclose(moved[first] - b.points[first], 0.0, atol=1e-12)
