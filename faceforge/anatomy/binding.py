@@ -20,7 +20,8 @@ Lips: skin of the upper lip may bind only to the cranium (upper structures),
 skin of the lower lip only to the mandible (``lip_sides`` from
 :func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
 A lip vertex ignores muscle hits on the other side of the lip line (the lower
-lip never binds to the upper half of the orbicularis oris).
+lip never binds to the upper half of the orbicularis oris), muscle hits far from
+the lips, and the other lip's muscles (:func:`muscle_sides`).
 
 Beyond the paper: a vertex whose two rays both miss (they look into a hole of
 the skull: eye sockets, nostrils, the gap between the teeth) binds to the
@@ -179,11 +180,13 @@ def _merge(bodies: list[Body], ids: list[int]):
     return np.concatenate(verts), np.concatenate(faces), np.concatenate(owner)
 
 
-def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None, side_of=None):
+def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None, side_of=None,
+          strict=None):
     """Best hit per ray among ``bodies[ids]``: smallest ``rank`` then distance.
 
     ``allowed (k, n_bodies) bool`` filters bodies per ray; with ``side_of`` a hit
-    on the other side of the lip line than its ray's ``ray_side`` is dropped. Returns
+    on the other side of the lip line than its ray's ``ray_side`` is dropped, and on the
+    bodies marked ``strict (n_bodies,) bool`` also a hit far from the lips (side 0). Returns
     ``(body (k,), local_face (k,), points (k, 3), dist (k,))``, body -1 on a miss.
     """
     k = len(origins)
@@ -207,7 +210,10 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
         rs = np.asarray(ray_side)[ray]
         check = rs != 0
         ok = np.ones(len(ray), bool)
-        ok[check] = np.asarray(side_of(loc[check])) * rs[check] >= 0
+        agree = np.asarray(side_of(loc[check])) * rs[check]
+        ok[check] = agree >= 0
+        if strict is not None:
+            ok[check] &= ~np.asarray(strict, bool)[b[check]] | (agree > 0)
         ray, tri, loc, t, b = ray[ok], tri[ok], loc[ok], t[ok], b[ok]
     if len(ray) == 0:
         return body, face, pts, dist
@@ -224,7 +230,7 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
 
 
 def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask,
-                      side_of=None) -> np.ndarray:
+                      side_of=None, allowed=None) -> np.ndarray:
     """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
     Rays miss where the skin looks into a hole of the skull (eyelids and eye
@@ -234,8 +240,10 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     lip line, of the mandible below it, of either elsewhere. A lip vertex (``sides``
     +1 / -1, given ``side_of``) may also bind to the closest point of a muscle on its
     own side of the lip line (the orbicularis oris), whichever is nearer: the lips are
-    muscle, and bound to the teeth they did not follow the muscles that move them. Updates the
-    arrays in place; returns the ``(n,) bool`` mask of the vertices bound this way.
+    muscle, and bound to the teeth they did not follow the muscles that move them.
+    ``allowed (n, n_bodies) bool`` (optional) filters bodies per vertex as for the rays
+    (a lip never binds to the other lip's muscles). Updates the arrays in place; returns
+    the ``(n,) bool`` mask of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
 
@@ -250,6 +258,8 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
         for i in own:
             p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
             take = (d < best) & (d <= max_distance)
+            if allowed is not None:
+                take &= allowed[todo, i]
             if kinds[i] == MUSCLE:        # a lip's own half of a muscle around the mouth only
                 take &= side_of(p) == side
             best[take] = d[take]
@@ -257,6 +267,33 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
             body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
             done[t] = True
     return done
+
+
+#: a muscle lies on one side of the lip line when at least this fraction of its vertices
+#: near the lips (within a mouth width of the lip line) are on that side
+MUSCLE_SIDE_FRACTION = 0.75
+
+
+def muscle_sides(bodies, side_of) -> np.ndarray:
+    """(n_bodies,) int: +1 for a muscle of the upper lip, -1 of the lower lip, 0 otherwise.
+
+    A muscle's side is the side of the lip line (``side_of``, see :func:`bind_skin`)
+    where at least :data:`MUSCLE_SIDE_FRACTION` of its vertices near the lips lie (the
+    vertices of its faces): the levators and the zygomatici above, the depressors and
+    the mentalis below (MakeHuman: depressor labii inferioris 8 above / 32 below). The
+    orbicularis oris (45 / 35), muscles far from the mouth and the skull parts are 0.
+    """
+    out = np.zeros(len(bodies), INT)
+    for i, b in enumerate(bodies):
+        if b.kind != "muscle":
+            continue
+        s = np.asarray(side_of(b.vertices[np.unique(b.faces)]))
+        up, low = int((s > 0).sum()), int((s < 0).sum())
+        if up + low and up >= MUSCLE_SIDE_FRACTION * (up + low):
+            out[i] = 1
+        elif up + low and low >= MUSCLE_SIDE_FRACTION * (up + low):
+            out[i] = -1
+    return out
 
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
@@ -286,7 +323,11 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         ``points (k, 3) -> (k,) int`` side of the lip line (+1 above, -1 below,
         0 far; :func:`faceforge.anatomy.mouth.side_of_points`). A lip vertex
         (``lip_sides != 0``) ignores hits on the other side, so the lower lip
-        never binds to the upper part of a muscle around the mouth.
+        never binds to the upper part of a muscle around the mouth; it also ignores
+        muscle hits far from the lips (side 0: a ray up the nose to the brows) and,
+        rays and fallback alike, the muscles of the other lip (:func:`muscle_sides`: an
+        upper-lip vertex never binds to a depressor of the lower lip where its end
+        crosses the line, nor a lower-lip vertex to a levator).
     fallback : bool or (n,) bool
         Vertices (all, or those of the mask) whose two rays miss bind to the
         closest skull point within ``max_distance`` (:attr:`Binding.closest`);
@@ -318,6 +359,12 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     allowed = np.ones((n, max(nb, 1)), bool)
     allowed[np.ix_(sides > 0, kinds == MANDIBLE)] = False
     allowed[np.ix_(sides < 0, kinds == CRANIUM)] = False
+    strict = None
+    if side_of is not None:
+        own = muscle_sides(bodies, side_of)
+        allowed[np.ix_(sides > 0, own < 0)] = False
+        allowed[np.ix_(sides < 0, own > 0)] = False
+        strict = kinds == MUSCLE
 
     body = np.full(n, -1, INT)
     face = np.full(n, -1, INT)
@@ -329,14 +376,15 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     for p, (ids, sign) in enumerate(passes):
         todo = np.flatnonzero((body < 0) & has_dir)
         res = _cast(bodies, ids, rank, v[todo], sign * nrm[todo], max_distance, allowed[todo],
-                    sides[todo], side_of)
+                    sides[todo], side_of, strict)
         hit = res[0] >= 0
         t = todo[hit]
         body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
         outward[t] = sign > 0
 
     mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
-    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of)
+    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of,
+                                allowed)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     bary = np.zeros((len(ids), 3), FLOAT)

@@ -165,3 +165,49 @@ def test_lip_vertices_whose_rays_miss_fall_back_to_their_own_half_of_a_muscle(sk
     assert on_ring.any()
     assert np.all(side_of(b.points[on_ring]) == sides[b.vertex_ids[on_ring]])
     assert np.all(b.body[b.closest & (sides[b.vertex_ids] == 0)] != 0)
+
+
+def _band(radius, ymin, ymax, zmin, subdivisions=3):
+    """The part of a sphere with ymin < y < ymax and z > zmin (times radius): a muscle sheet."""
+    v, f = sphere(radius, subdivisions)
+    c = v[f] / radius
+    keep = ((c[:, :, 1] > ymin) & (c[:, :, 1] < ymax) & (c[:, :, 2] > zmin)).all(axis=1)
+    return v, f[keep]
+
+
+def _lip_line_side(points):
+    """Synthetic lip line y = 0: +1 above, -1 below, 0 farther than 0.5 from it."""
+    y = np.asarray(points)[:, 1]
+    return np.where(np.abs(y) > 0.5, 0, np.where(y >= 0.0, 1, -1))
+
+
+def test_a_lip_never_binds_to_the_other_lips_muscle_or_to_one_far_away(skin):
+    """A lower-lip "depressor" whose end crosses the lip line (y = 0) by a little keeps the
+    upper lip's rays that meet that end; a muscle far up ("brow") keeps no lip vertex."""
+    from faceforge.anatomy.binding import muscle_sides
+
+    v, f = skin
+    dep = Body("dep", "muscle", *_band(0.9, -0.55, 0.1, 0.3))    # mostly below the line
+    lev = Body("lev", "muscle", *_band(0.85, 0.0, 0.45, 0.3))    # deeper, above the line
+    brow = Body("brow", "muscle", *_band(0.9, 0.6, 0.95, 0.0))   # far from the lips
+    skull = Body("cranium", "cranium", *sphere(0.7, 3))
+    bodies = [dep, brow, lev, skull]
+    np.testing.assert_array_equal(muscle_sides(bodies, _lip_line_side), [-1, 0, 1, 0])  # no muscle spans the line here
+    sides = _lip_line_side(v)
+    sides[np.abs(v[:, 1]) > 0.7] = 1                               # lip skin reaching up the "nose"
+    front = v[:, 2] > 0.5
+    # the old rule (only the hit point's side, far hits allowed): upper-lip skin on dep and brow
+    old = bind_skin(v, f, bodies, max_distance=0.5, lip_sides=sides)
+    upper = np.isin(old.vertex_ids, np.flatnonzero((sides > 0) & front))
+    assert (old.body[upper] == 0).any() and (old.body[upper] == 1).any()
+    b = bind_skin(v, f, bodies, max_distance=0.5, lip_sides=sides, side_of=_lip_line_side)
+    up = sides[b.vertex_ids] > 0
+    assert not np.isin(b.body[up], [0, 1]).any()
+    # those that met dep's end above the line now bind deeper: to lev or the skull
+    was_dep = old.vertex_ids[upper & (old.body == 0)]
+    again = b.body[np.isin(b.vertex_ids, was_dep)]
+    assert len(again) == len(was_dep) and np.all(np.isin(again, (2, 3)))
+    # the lower lip still binds to dep
+    low = np.isin(b.vertex_ids, np.flatnonzero(front & (v[:, 1] < -0.1) & (v[:, 1] > -0.35)))
+    assert low.any() and np.all(b.body[low] == 0)
+
