@@ -230,7 +230,7 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
 
 
 def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask,
-                      side_of=None, allowed=None) -> np.ndarray:
+                      side_of=None, allowed=None, around=None) -> np.ndarray:
     """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
     Rays miss where the skin looks into a hole of the skull (eyelids and eye
@@ -242,30 +242,52 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     own side of the lip line (the orbicularis oris), whichever is nearer: the lips are
     muscle, and bound to the teeth they did not follow the muscles that move them.
     ``allowed (n, n_bodies) bool`` (optional) filters bodies per vertex as for the rays
-    (a lip never binds to the other lip's muscles). Updates the arrays in place; returns
-    the ``(n,) bool`` mask of the vertices bound this way.
+    (a lip never binds to the other lip's muscles).
+
+    With ``around (n_bodies,) bool`` (the muscles around the mouth, :func:`muscle_sides`)
+    a lip vertex first looks at the own half of those only -- their faces whose centroid
+    lies on its side: at the inner lips the two halves of the sphincter come within a few
+    mm of each other and the closest point of the whole muscle is often on the other lip
+    (MakeHuman FDPs 2.6 and 2.3), which used to leave the inner lips on the teeth. A lip
+    vertex still unbound then takes the closest point, on its own side, of any other
+    muscle it may bind to. Updates the arrays in place; returns the ``(n,) bool`` mask
+    of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
 
     done = np.zeros(len(v), bool)
     lip = (MUSCLE,) if side_of is not None else ()
-    for side, allowed_kinds in ((1, (CRANIUM,) + lip), (-1, (MANDIBLE,) + lip), (0, (CRANIUM, MANDIBLE))):
-        todo = np.flatnonzero((body < 0) & (sides == side) & mask)
-        own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
-        if len(todo) == 0 or not own:
-            continue
-        best = np.full(len(todo), np.inf)
-        for i in own:
-            p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
-            take = (d < best) & (d <= max_distance)
-            if allowed is not None:
-                take &= allowed[todo, i]
-            if kinds[i] == MUSCLE:        # a lip's own half of a muscle around the mouth only
-                take &= side_of(p) == side
-            best[take] = d[take]
-            t = todo[take]
-            body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
-            done[t] = True
+    tiers = [((1, (CRANIUM,) + lip), (-1, (MANDIBLE,) + lip), (0, (CRANIUM, MANDIBLE)))]
+    if around is not None and side_of is not None:
+        tiers.append(((1, (MUSCLE,)), (-1, (MUSCLE,))))
+    for tier, plan in enumerate(tiers):
+        for side, allowed_kinds in plan:
+            todo = np.flatnonzero((body < 0) & (sides == side) & mask)
+            own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
+            if len(todo) == 0 or not own:
+                continue
+            best = np.full(len(todo), np.inf)
+            for i in own:
+                half = kinds[i] == MUSCLE and around is not None and bool(around[i])
+                if kinds[i] == MUSCLE and around is not None and half != (tier == 0):
+                    continue
+                bv, bf = bodies[i].vertices, bodies[i].faces
+                sub = np.arange(len(bf))
+                if half:    # the faces of the vertex's own half
+                    sub = np.flatnonzero(np.asarray(side_of(bv[bf].mean(axis=1))) == side)
+                    if len(sub) == 0:
+                        continue
+                p, d, tri = closest_points(v[todo], bv, bf[sub])
+                tri = sub[tri]
+                take = (d < best) & (d <= max_distance)
+                if allowed is not None:
+                    take &= allowed[todo, i]
+                if kinds[i] == MUSCLE and not half:   # a muscle's part on the vertex's side only
+                    take &= side_of(p) == side
+                best[take] = d[take]
+                t = todo[take]
+                body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
+                done[t] = True
     return done
 
 
@@ -274,14 +296,20 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
 MUSCLE_SIDE_FRACTION = 0.75
 
 
+#: :func:`muscle_sides` code of a muscle around the mouth (near the lips on both sides)
+AROUND_MOUTH = 2
+
+
 def muscle_sides(bodies, side_of) -> np.ndarray:
-    """(n_bodies,) int: +1 for a muscle of the upper lip, -1 of the lower lip, 0 otherwise.
+    """(n_bodies,) int: +1 for a muscle of the upper lip, -1 of the lower lip,
+    :data:`AROUND_MOUTH` for one around the mouth, 0 otherwise.
 
     A muscle's side is the side of the lip line (``side_of``, see :func:`bind_skin`)
     where at least :data:`MUSCLE_SIDE_FRACTION` of its vertices near the lips lie (the
     vertices of its faces): the levators and the zygomatici above, the depressors and
-    the mentalis below (MakeHuman: depressor labii inferioris 8 above / 32 below). The
-    orbicularis oris (45 / 35), muscles far from the mouth and the skull parts are 0.
+    the mentalis below (MakeHuman: depressor labii inferioris 8 above / 32 below). A
+    muscle near the lips on both sides without such a majority lies around the mouth
+    (the orbicularis oris, 45 / 35); muscles far from the mouth and the skull parts are 0.
     """
     out = np.zeros(len(bodies), INT)
     for i, b in enumerate(bodies):
@@ -293,6 +321,8 @@ def muscle_sides(bodies, side_of) -> np.ndarray:
             out[i] = 1
         elif up + low and low >= MUSCLE_SIDE_FRACTION * (up + low):
             out[i] = -1
+        elif up and low:
+            out[i] = AROUND_MOUTH
     return out
 
 
@@ -359,12 +389,13 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     allowed = np.ones((n, max(nb, 1)), bool)
     allowed[np.ix_(sides > 0, kinds == MANDIBLE)] = False
     allowed[np.ix_(sides < 0, kinds == CRANIUM)] = False
-    strict = None
+    strict = around = None
     if side_of is not None:
         own = muscle_sides(bodies, side_of)
-        allowed[np.ix_(sides > 0, own < 0)] = False
-        allowed[np.ix_(sides < 0, own > 0)] = False
+        allowed[np.ix_(sides > 0, own == -1)] = False
+        allowed[np.ix_(sides < 0, own == 1)] = False
         strict = kinds == MUSCLE
+        around = own == AROUND_MOUTH
 
     body = np.full(n, -1, INT)
     face = np.full(n, -1, INT)
@@ -384,7 +415,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
 
     mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
     closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of,
-                                allowed)
+                                allowed, around)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     bary = np.zeros((len(ids), 3), FLOAT)

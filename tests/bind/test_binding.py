@@ -116,13 +116,20 @@ def test_side_of_drops_hits_across_the_lip_line(skin):
     def side_of(points):  # the "lip line" is y = 0.3: hits above it are "upper"
         return np.where(points[:, 1] >= 0.3, 1, -1)
 
-    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of)
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of, fallback=False)
     bound = b.vertex_ids
     hit_side = side_of(b.points)
     assert np.all(hit_side * sides[bound] >= 0)
-    # vertices in 0 <= y < 0.3 (upper side, hits below the line) are left unbound
+    # vertices in 0 <= y < 0.3 (upper side, hits below the line) are left unbound by the rays
     band = (v[:, 1] >= 0) & (v[:, 1] < 0.3 * 0.9)
     assert band.any() and np.all(b.status[band] == UNBOUND)
+    # the closest-point fallback binds them to the muscle's own (upper) half: its faces
+    # above the line, at their lower edge
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of)
+    sel = np.isin(b.vertex_ids, np.flatnonzero(band))
+    assert np.all(b.status[band] == MUSCLE) and np.all(b.closest[sel])
+    centroids = muscle.vertices[muscle.faces[b.face_ids[sel]]].mean(axis=1)
+    assert np.all(side_of(centroids) == 1)
 
 
 def test_rays_into_a_hole_fall_back_to_the_closest_skull_point(skin):
