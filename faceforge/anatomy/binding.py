@@ -21,7 +21,8 @@ skin of the lower lip only to the mandible (``lip_sides`` from
 :func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
 A lip vertex ignores muscle hits on the other side of the lip line (the lower
 lip never binds to the upper half of the orbicularis oris), muscle hits far from
-the lips, and the other lip's muscles (:func:`muscle_sides`).
+the lips, and the other lip's muscles
+(:func:`faceforge.anatomy.mouth.muscle_lip_side`).
 
 Beyond the paper: a vertex whose two rays both miss (they look into a hole of
 the skull: eye sockets, nostrils, the gap between the teeth) binds to the
@@ -41,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from faceforge.anatomy.mouth import AROUND_MOUTH
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import barycentric, check_mesh, vertex_normals
@@ -244,7 +246,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     ``allowed (n, n_bodies) bool`` (optional) filters bodies per vertex as for the rays
     (a lip never binds to the other lip's muscles).
 
-    With ``around (n_bodies,) bool`` (the muscles around the mouth, :func:`muscle_sides`)
+    With ``around (n_bodies,) bool`` (the muscles around the mouth, ``body_sides``)
     a lip vertex first looks at the own half of those only -- their faces whose centroid
     lies on its side: at the inner lips the two halves of the sphincter come within a few
     mm of each other and the closest point of the whole muscle is often on the other lip
@@ -291,43 +293,8 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     return done
 
 
-#: a muscle lies on one side of the lip line when at least this fraction of its vertices
-#: near the lips (within a mouth width of the lip line) are on that side
-MUSCLE_SIDE_FRACTION = 0.75
-
-
-#: :func:`muscle_sides` code of a muscle around the mouth (near the lips on both sides)
-AROUND_MOUTH = 2
-
-
-def muscle_sides(bodies, side_of) -> np.ndarray:
-    """(n_bodies,) int: +1 for a muscle of the upper lip, -1 of the lower lip,
-    :data:`AROUND_MOUTH` for one around the mouth, 0 otherwise.
-
-    A muscle's side is the side of the lip line (``side_of``, see :func:`bind_skin`)
-    where at least :data:`MUSCLE_SIDE_FRACTION` of its vertices near the lips lie (the
-    vertices of its faces): the levators and the zygomatici above, the depressors and
-    the mentalis below (MakeHuman: depressor labii inferioris 8 above / 32 below). A
-    muscle near the lips on both sides without such a majority lies around the mouth
-    (the orbicularis oris, 45 / 35); muscles far from the mouth and the skull parts are 0.
-    """
-    out = np.zeros(len(bodies), INT)
-    for i, b in enumerate(bodies):
-        if b.kind != "muscle":
-            continue
-        s = np.asarray(side_of(b.vertices[np.unique(b.faces)]))
-        up, low = int((s > 0).sum()), int((s < 0).sum())
-        if up + low and up >= MUSCLE_SIDE_FRACTION * (up + low):
-            out[i] = 1
-        elif up + low and low >= MUSCLE_SIDE_FRACTION * (up + low):
-            out[i] = -1
-        elif up and low:
-            out[i] = AROUND_MOUTH
-    return out
-
-
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
-              normals=None, depth_rank=None, side_of=None, fallback=True) -> Binding:
+              normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -354,14 +321,18 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         0 far; :func:`faceforge.anatomy.mouth.side_of_points`). A lip vertex
         (``lip_sides != 0``) ignores hits on the other side, so the lower lip
         never binds to the upper part of a muscle around the mouth; it also ignores
-        muscle hits far from the lips (side 0: a ray up the nose to the brows) and,
-        rays and fallback alike, the muscles of the other lip (:func:`muscle_sides`: an
-        upper-lip vertex never binds to a depressor of the lower lip where its end
-        crosses the line, nor a lower-lip vertex to a levator).
+        muscle hits far from the lips (side 0: a ray up the nose to the brows).
     fallback : bool or (n,) bool
         Vertices (all, or those of the mask) whose two rays miss bind to the
         closest skull point within ``max_distance`` (:attr:`Binding.closest`);
         False keeps the paper's rays only.
+    body_sides : (len(bodies),) int, optional
+        With ``side_of``: the lip each body acts on (:func:`faceforge.anatomy.mouth.
+        muscle_lip_side`): +1 upper, -1 lower, ``AROUND_MOUTH`` (2), 0 neither (and the
+        skull parts). Rays and fallback of an upper-lip vertex skip the lower lip's
+        muscles and vice versa (an upper-lip vertex never binds to the end of a depressor
+        that crosses the line); a lip vertex whose rays miss takes the closest point of
+        the own half of the muscles around the mouth (see :func:`_closest_fallback`).
 
     Returns
     -------
@@ -391,10 +362,13 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     allowed[np.ix_(sides < 0, kinds == CRANIUM)] = False
     strict = around = None
     if side_of is not None:
-        own = muscle_sides(bodies, side_of)
+        strict = kinds == MUSCLE
+    if side_of is not None and body_sides is not None:
+        own = np.asarray(body_sides, INT).reshape(-1)
+        if len(own) != nb:
+            raise ValueError(f"body_sides {own.shape} must have one entry per body ({nb})")
         allowed[np.ix_(sides > 0, own == -1)] = False
         allowed[np.ix_(sides < 0, own == 1)] = False
-        strict = kinds == MUSCLE
         around = own == AROUND_MOUTH
 
     body = np.full(n, -1, INT)
@@ -661,7 +635,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     BoundSkin
     """
     from faceforge.anatomy.influence import influence_weights
-    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side, side_of_points
+    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side, muscle_lip_side, side_of_points
 
     v, f = check_mesh(vertices, faces)
     pts = {k: np.asarray(p, FLOAT) for k, p in landmarks.items()}
@@ -687,8 +661,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     front, rule = face_front_mask(cut.vertices, pts)
     band_width = lip_band_width(pts)
     lips = lip_band(cut, band_width)
+    body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
+                  for b in bodies]
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
-                        depth_rank=rank, side_of=side_of, fallback=front)
+                        depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None

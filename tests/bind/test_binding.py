@@ -125,7 +125,10 @@ def test_side_of_drops_hits_across_the_lip_line(skin):
     assert band.any() and np.all(b.status[band] == UNBOUND)
     # the closest-point fallback binds them to the muscle's own (upper) half: its faces
     # above the line, at their lower edge
-    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of)
+    from faceforge.anatomy.mouth import AROUND_MOUTH
+
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of,
+                  body_sides=[AROUND_MOUTH])
     sel = np.isin(b.vertex_ids, np.flatnonzero(band))
     assert np.all(b.status[band] == MUSCLE) and np.all(b.closest[sel])
     centroids = muscle.vertices[muscle.faces[b.face_ids[sel]]].mean(axis=1)
@@ -189,17 +192,16 @@ def _lip_line_side(points):
 
 
 def test_a_lip_never_binds_to_the_other_lips_muscle_or_to_one_far_away(skin):
-    """A lower-lip "depressor" whose end crosses the lip line (y = 0) by a little keeps the
-    upper lip's rays that meet that end; a muscle far up ("brow") keeps no lip vertex."""
-    from faceforge.anatomy.binding import muscle_sides
-
+    """A lower-lip "depressor" whose end crosses the lip line (y = 0) by a little no longer
+    takes the upper lip's rays that meet that end; a muscle far up ("brow") keeps no lip
+    vertex."""
     v, f = skin
     dep = Body("dep", "muscle", *_band(0.9, -0.55, 0.1, 0.3))    # mostly below the line
     lev = Body("lev", "muscle", *_band(0.85, 0.0, 0.45, 0.3))    # deeper, above the line
     brow = Body("brow", "muscle", *_band(0.9, 0.6, 0.95, 0.0))   # far from the lips
     skull = Body("cranium", "cranium", *sphere(0.7, 3))
     bodies = [dep, brow, lev, skull]
-    np.testing.assert_array_equal(muscle_sides(bodies, _lip_line_side), [-1, 0, 1, 0])  # no muscle spans the line here
+    body_sides = [-1, 0, 1, 0]      # as faceforge.anatomy.mouth.muscle_lip_side says of them
     sides = _lip_line_side(v)
     sides[np.abs(v[:, 1]) > 0.7] = 1                               # lip skin reaching up the "nose"
     front = v[:, 2] > 0.5
@@ -207,7 +209,8 @@ def test_a_lip_never_binds_to_the_other_lips_muscle_or_to_one_far_away(skin):
     old = bind_skin(v, f, bodies, max_distance=0.5, lip_sides=sides)
     upper = np.isin(old.vertex_ids, np.flatnonzero((sides > 0) & front))
     assert (old.body[upper] == 0).any() and (old.body[upper] == 1).any()
-    b = bind_skin(v, f, bodies, max_distance=0.5, lip_sides=sides, side_of=_lip_line_side)
+    b = bind_skin(v, f, bodies, max_distance=0.5, lip_sides=sides, side_of=_lip_line_side,
+                  body_sides=body_sides)
     up = sides[b.vertex_ids] > 0
     assert not np.isin(b.body[up], [0, 1]).any()
     # those that met dep's end above the line now bind deeper: to lev or the skull
