@@ -20,7 +20,9 @@ Lips: skin of the upper lip may bind only to the cranium (upper structures),
 skin of the lower lip only to the mandible (``lip_sides`` from
 :func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
 A lip vertex ignores muscle hits on the other side of the lip line (the lower
-lip never binds to the upper half of the orbicularis oris).
+lip never binds to the upper half of the orbicularis oris), muscle hits far from
+the lips, and the other lip's muscles
+(:func:`faceforge.anatomy.mouth.muscle_lip_side`).
 
 Beyond the paper: some muscles insert into the skin through the muscles above them (the
 corrugator and the depressor supercilii pass through the frontalis and the orbicularis
@@ -50,6 +52,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from faceforge.anatomy.mouth import AROUND_MOUTH
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import barycentric, check_mesh, vertex_normals
@@ -191,11 +194,13 @@ def _merge(bodies: list[Body], ids: list[int]):
     return np.concatenate(verts), np.concatenate(faces), np.concatenate(owner)
 
 
-def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None, side_of=None):
+def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None, side_of=None,
+          strict=None):
     """Best hit per ray among ``bodies[ids]``: smallest ``rank`` then distance.
 
     ``allowed (k, n_bodies) bool`` filters bodies per ray; with ``side_of`` a hit
-    on the other side of the lip line than its ray's ``ray_side`` is dropped. Returns
+    on the other side of the lip line than its ray's ``ray_side`` is dropped, and on the
+    bodies marked ``strict (n_bodies,) bool`` also a hit far from the lips (side 0). Returns
     ``(body (k,), local_face (k,), points (k, 3), dist (k,))``, body -1 on a miss.
     """
     k = len(origins)
@@ -219,7 +224,10 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
         rs = np.asarray(ray_side)[ray]
         check = rs != 0
         ok = np.ones(len(ray), bool)
-        ok[check] = np.asarray(side_of(loc[check])) * rs[check] >= 0
+        agree = np.asarray(side_of(loc[check])) * rs[check]
+        ok[check] = agree >= 0
+        if strict is not None:
+            ok[check] &= ~np.asarray(strict, bool)[b[check]] | (agree > 0)
         ray, tri, loc, t, b = ray[ok], tri[ok], loc[ok], t[ok], b[ok]
     if len(ray) == 0:
         return body, face, pts, dist
@@ -236,7 +244,7 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
 
 
 def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask,
-                      side_of=None) -> np.ndarray:
+                      side_of=None, allowed=None, around=None) -> np.ndarray:
     """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
     Rays miss where the skin looks into a hole of the skull (eyelids and eye
@@ -246,33 +254,60 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     lip line, of the mandible below it, of either elsewhere. A lip vertex (``sides``
     +1 / -1, given ``side_of``) may also bind to the closest point of a muscle on its
     own side of the lip line (the orbicularis oris), whichever is nearer: the lips are
-    muscle, and bound to the teeth they did not follow the muscles that move them. Updates the
-    arrays in place; returns the ``(n,) bool`` mask of the vertices bound this way.
+    muscle, and bound to the teeth they did not follow the muscles that move them.
+    ``allowed (n, n_bodies) bool`` (optional) filters bodies per vertex as for the rays
+    (a lip never binds to the other lip's muscles).
+
+    With ``around (n_bodies,) bool`` (the muscles around the mouth, ``body_sides``)
+    a lip vertex first looks at the own half of those only -- their faces whose centroid
+    lies on its side: at the inner lips the two halves of the sphincter come within a few
+    mm of each other and the closest point of the whole muscle is often on the other lip
+    (MakeHuman FDPs 2.6 and 2.3), which used to leave the inner lips on the teeth. A lip
+    vertex still unbound then takes the closest point, on its own side, of any other
+    muscle it may bind to. Updates the arrays in place; returns the ``(n,) bool`` mask
+    of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
 
     done = np.zeros(len(v), bool)
     lip = (MUSCLE,) if side_of is not None else ()
-    for side, allowed_kinds in ((1, (CRANIUM,) + lip), (-1, (MANDIBLE,) + lip), (0, (CRANIUM, MANDIBLE))):
-        todo = np.flatnonzero((body < 0) & (sides == side) & mask)
-        own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
-        if len(todo) == 0 or not own:
-            continue
-        best = np.full(len(todo), np.inf)
-        for i in own:
-            p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
-            take = (d < best) & (d <= max_distance)
-            if kinds[i] == MUSCLE:        # a lip's own half of a muscle around the mouth only
-                take &= side_of(p) == side
-            best[take] = d[take]
-            t = todo[take]
-            body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
-            done[t] = True
+    tiers = [((1, (CRANIUM,) + lip), (-1, (MANDIBLE,) + lip), (0, (CRANIUM, MANDIBLE)))]
+    if around is not None and side_of is not None:
+        tiers.append(((1, (MUSCLE,)), (-1, (MUSCLE,))))
+    for tier, plan in enumerate(tiers):
+        for side, allowed_kinds in plan:
+            todo = np.flatnonzero((body < 0) & (sides == side) & mask)
+            own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
+            if len(todo) == 0 or not own:
+                continue
+            best = np.full(len(todo), np.inf)
+            for i in own:
+                half = kinds[i] == MUSCLE and around is not None and bool(around[i])
+                if kinds[i] == MUSCLE and around is not None and half != (tier == 0):
+                    continue
+                bv, bf = bodies[i].vertices, bodies[i].faces
+                sub = np.arange(len(bf))
+                if half:    # the faces of the vertex's own half
+                    sub = np.flatnonzero(np.asarray(side_of(bv[bf].mean(axis=1))) == side)
+                    if len(sub) == 0:
+                        continue
+                p, d, tri = closest_points(v[todo], bv, bf[sub])
+                tri = sub[tri]
+                take = (d < best) & (d <= max_distance)
+                if allowed is not None:
+                    take &= allowed[todo, i]
+                if kinds[i] == MUSCLE and not half:   # a muscle's part on the vertex's side only
+                    take &= side_of(p) == side
+                best[take] = d[take]
+                t = todo[take]
+                body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
+                done[t] = True
     return done
 
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
-              normals=None, depth_rank=None, side_of=None, fallback=True, insertions=None) -> Binding:
+              normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
+              insertions=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -298,11 +333,19 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         ``points (k, 3) -> (k,) int`` side of the lip line (+1 above, -1 below,
         0 far; :func:`faceforge.anatomy.mouth.side_of_points`). A lip vertex
         (``lip_sides != 0``) ignores hits on the other side, so the lower lip
-        never binds to the upper part of a muscle around the mouth.
+        never binds to the upper part of a muscle around the mouth; it also ignores
+        muscle hits far from the lips (side 0: a ray up the nose to the brows).
     fallback : bool or (n,) bool
         Vertices (all, or those of the mask) whose two rays miss bind to the
         closest skull point within ``max_distance`` (:attr:`Binding.closest`);
         False keeps the paper's rays only.
+    body_sides : (len(bodies),) int, optional
+        With ``side_of``: the lip each body acts on (:func:`faceforge.anatomy.mouth.
+        muscle_lip_side`): +1 upper, -1 lower, ``AROUND_MOUTH`` (2), 0 neither (and the
+        skull parts). Rays and fallback of an upper-lip vertex skip the lower lip's
+        muscles and vice versa (an upper-lip vertex never binds to the end of a depressor
+        that crosses the line); a lip vertex whose rays miss takes the closest point of
+        the own half of the muscles around the mouth (see :func:`_closest_fallback`).
     insertions : sequence of int, optional
         Indices into ``bodies`` of muscles that insert into the skin through the
         muscles above them (module docstring): a vertex bound by its ray to another
@@ -335,6 +378,16 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     allowed = np.ones((n, max(nb, 1)), bool)
     allowed[np.ix_(sides > 0, kinds == MANDIBLE)] = False
     allowed[np.ix_(sides < 0, kinds == CRANIUM)] = False
+    strict = around = None
+    if side_of is not None:
+        strict = kinds == MUSCLE
+    if side_of is not None and body_sides is not None:
+        own = np.asarray(body_sides, INT).reshape(-1)
+        if len(own) != nb:
+            raise ValueError(f"body_sides {own.shape} must have one entry per body ({nb})")
+        allowed[np.ix_(sides > 0, own == -1)] = False
+        allowed[np.ix_(sides < 0, own == 1)] = False
+        around = own == AROUND_MOUTH
 
     body = np.full(n, -1, INT)
     face = np.full(n, -1, INT)
@@ -346,14 +399,15 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     for p, (ids, sign) in enumerate(passes):
         todo = np.flatnonzero((body < 0) & has_dir)
         res = _cast(bodies, ids, rank, v[todo], sign * nrm[todo], max_distance, allowed[todo],
-                    sides[todo], side_of)
+                    sides[todo], side_of, strict)
         hit = res[0] >= 0
         t = todo[hit]
         body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
         outward[t] = sign > 0
 
     mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
-    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of)
+    closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of,
+                                allowed, around)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
@@ -364,7 +418,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         cand = ids[(kinds[body[ids]] == MUSCLE) & ~np.isin(body[ids], ins) & ~closest[ids]]
         res = _cast(bodies, ins, np.zeros(nb, INT), v[cand],    # nearest hit, along the same ray
                     np.where(outward[cand, None], 1.0, -1.0) * nrm[cand], max_distance, allowed[cand],
-                    sides[cand], side_of)
+                    sides[cand], side_of, strict)
         hit = res[0] >= 0
         extra = cand[hit]
         order = np.argsort(np.concatenate([ids, extra]), kind="stable")
@@ -623,7 +677,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     BoundSkin
     """
     from faceforge.anatomy.influence import influence_weights
-    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side, side_of_points
+    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side, muscle_lip_side, side_of_points
 
     v, f = check_mesh(vertices, faces)
     pts = {k: np.asarray(p, FLOAT) for k, p in landmarks.items()}
@@ -652,8 +706,11 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     inserting = set(insertions)
     ins = [i for i, b in enumerate(bodies) if b.kind == "muscle" and (
         b.name in inserting or (b.name[-2:] in ("_L", "_R") and b.name[:-2] in inserting))]
+    body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
+                  for b in bodies]
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
-                        depth_rank=rank, side_of=side_of, fallback=front, insertions=ins)
+                        depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
+                        insertions=ins)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None

@@ -116,13 +116,23 @@ def test_side_of_drops_hits_across_the_lip_line(skin):
     def side_of(points):  # the "lip line" is y = 0.3: hits above it are "upper"
         return np.where(points[:, 1] >= 0.3, 1, -1)
 
-    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of)
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of, fallback=False)
     bound = b.vertex_ids
     hit_side = side_of(b.points)
     assert np.all(hit_side * sides[bound] >= 0)
-    # vertices in 0 <= y < 0.3 (upper side, hits below the line) are left unbound
+    # vertices in 0 <= y < 0.3 (upper side, hits below the line) are left unbound by the rays
     band = (v[:, 1] >= 0) & (v[:, 1] < 0.3 * 0.9)
     assert band.any() and np.all(b.status[band] == UNBOUND)
+    # the closest-point fallback binds them to the muscle's own (upper) half: its faces
+    # above the line, at their lower edge
+    from faceforge.anatomy.mouth import AROUND_MOUTH
+
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of,
+                  body_sides=[AROUND_MOUTH])
+    sel = np.isin(b.vertex_ids, np.flatnonzero(band))
+    assert np.all(b.status[band] == MUSCLE) and np.all(b.closest[sel])
+    centroids = muscle.vertices[muscle.faces[b.face_ids[sel]]].mean(axis=1)
+    assert np.all(side_of(centroids) == 1)
 
 
 def test_rays_into_a_hole_fall_back_to_the_closest_skull_point(skin):
@@ -195,3 +205,49 @@ def test_insertions_add_a_second_anchor_through_the_muscle_above(skin):
     np.testing.assert_allclose(moved[second] - b.points[second], np.broadcast_to(shift, (second.sum(), 3)),
                                atol=1e-12)
     np.testing.assert_allclose(moved[first] - b.points[first], 0.0, atol=1e-12)
+
+
+def _band(radius, ymin, ymax, zmin, subdivisions=3):
+    """The part of a sphere with ymin < y < ymax and z > zmin (times radius): a muscle sheet."""
+    v, f = sphere(radius, subdivisions)
+    c = v[f] / radius
+    keep = ((c[:, :, 1] > ymin) & (c[:, :, 1] < ymax) & (c[:, :, 2] > zmin)).all(axis=1)
+    return v, f[keep]
+
+
+def _lip_line_side(points):
+    """Synthetic lip line y = 0: +1 above, -1 below, 0 farther than 0.5 from it."""
+    y = np.asarray(points)[:, 1]
+    return np.where(np.abs(y) > 0.5, 0, np.where(y >= 0.0, 1, -1))
+
+
+def test_a_lip_never_binds_to_the_other_lips_muscle_or_to_one_far_away(skin):
+    """A lower-lip "depressor" whose end crosses the lip line (y = 0) by a little no longer
+    takes the upper lip's rays that meet that end; a muscle far up ("brow") keeps no lip
+    vertex."""
+    v, f = skin
+    dep = Body("dep", "muscle", *_band(0.9, -0.55, 0.1, 0.3))    # mostly below the line
+    lev = Body("lev", "muscle", *_band(0.85, 0.0, 0.45, 0.3))    # deeper, above the line
+    brow = Body("brow", "muscle", *_band(0.9, 0.6, 0.95, 0.0))   # far from the lips
+    skull = Body("cranium", "cranium", *sphere(0.7, 3))
+    bodies = [dep, brow, lev, skull]
+    body_sides = [-1, 0, 1, 0]      # as faceforge.anatomy.mouth.muscle_lip_side says of them
+    sides = _lip_line_side(v)
+    sides[np.abs(v[:, 1]) > 0.7] = 1                               # lip skin reaching up the "nose"
+    front = v[:, 2] > 0.5
+    # the old rule (only the hit point's side, far hits allowed): upper-lip skin on dep and brow
+    old = bind_skin(v, f, bodies, max_distance=0.5, lip_sides=sides)
+    upper = np.isin(old.vertex_ids, np.flatnonzero((sides > 0) & front))
+    assert (old.body[upper] == 0).any() and (old.body[upper] == 1).any()
+    b = bind_skin(v, f, bodies, max_distance=0.5, lip_sides=sides, side_of=_lip_line_side,
+                  body_sides=body_sides)
+    up = sides[b.vertex_ids] > 0
+    assert not np.isin(b.body[up], [0, 1]).any()
+    # those that met dep's end above the line now bind deeper: to lev or the skull
+    was_dep = old.vertex_ids[upper & (old.body == 0)]
+    again = b.body[np.isin(b.vertex_ids, was_dep)]
+    assert len(again) == len(was_dep) and np.all(np.isin(again, (2, 3)))
+    # the lower lip still binds to dep
+    low = np.isin(b.vertex_ids, np.flatnonzero(front & (v[:, 1] < -0.1) & (v[:, 1] > -0.35)))
+    assert low.any() and np.all(b.body[low] == 0)
+

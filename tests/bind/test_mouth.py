@@ -111,3 +111,23 @@ def test_lip_side_follows_the_surface_where_the_lips_roll_in():
     from faceforge.anatomy.mouth import side_of_points
 
     assert np.all(side_of_points(verts[below], rolled) == 1)
+
+
+def test_muscle_lip_side_tells_the_sphincter_from_the_lips_own_muscles():
+    """A ring around the mouth is AROUND_MOUTH even when most of it lies above the line
+    (ICT); a sheet below whose end crosses into the upper lip is a lower-lip muscle; one
+    above is upper; one far away is neither."""
+    from faceforge.anatomy.mouth import AROUND_MOUTH, muscle_lip_side
+
+    v, f, lips = mouth_grid(8)
+    cut = cut_mouth(v, f, lips)                          # lip line y = 0.5, mouth 1/8 .. 7/8
+    t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    ring = np.c_[0.5 + 0.35 * np.cos(t), 0.52 + 0.25 * np.clip(np.sin(t), 0, None)
+                 + 0.1 * np.clip(np.sin(t), None, 0), 0 * t]    # its lower half thin, as on ICT
+    assert ring[:, 1].mean() > 0.5 and muscle_lip_side(ring, cut) == AROUND_MOUTH   # on average above
+    xs, ys = np.meshgrid(np.linspace(0.2, 0.4, 4), np.linspace(0.1, 0.55, 10))
+    dep = np.c_[xs.ravel(), ys.ravel(), 0 * xs.ravel()]
+    assert (dep[:, 1] > 0.5).any() and muscle_lip_side(dep, cut) == -1
+    lev = dep * [1, -1, 1] + [0, 1.05, 0]                # mirrored above the line
+    assert muscle_lip_side(lev, cut) == 1
+    assert muscle_lip_side(lev + [0, 5.0, 0], cut) == 0
