@@ -241,7 +241,7 @@ def _conic_lstsq(x, y):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid):  # pragma: no cover - numba
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry):  # pragma: no cover - numba
     """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
@@ -251,6 +251,10 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid):  # pragma: no cover - 
     w1 = grid.shape[1] - 1
     _loop_samples(p1, seg1, t1, grid, 0)
     _loop_samples(p3, seg3, t3, grid, w1)
+    if carry > 0.0:   # the inner loop follows the outer one's drag (see Muscle.carry_inner)
+        for i in range(h):
+            for j in range(3):
+                grid[i, 0, j] += carry * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
     if not c > 0.0:
         return
     # fit_ellipse of the 2h samples (inner then outer)
@@ -391,6 +395,7 @@ class Muscle:
     max_contraction: float = SPHINCTER_MAX_CONTRACTION
     rest_parameters: dict = field(default_factory=dict)
     interior: object = None
+    carry_inner: float = float(__import__("os").environ.get("FF_CARRY", "0"))
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -492,9 +497,10 @@ class Muscle:
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
             (s1, t1), (s3, t3) = self._loop_parameters
+            r1, r3 = self._loop_rest
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
-                            c * self.max_contraction, grid)
+                            c * self.max_contraction, grid, r1, r3, self.carry_inner)
         else:
             grid = self._grid_targets(c, points)
         return grid[g[:, 0], g[:, 1]]
@@ -509,6 +515,13 @@ class Muscle:
                 (np.ascontiguousarray(self.rest_parameters[k][0], dtype=INT),
                  np.ascontiguousarray(self.rest_parameters[k][1], dtype=FLOAT)) for k in ("A1", "A3"))
         return lp
+
+    @property
+    def _loop_rest(self):
+        """Sphincter: the rest samples of A1 and A3, ``((h, 3), (h, 3))`` (their bottom particles)."""
+        h, w = self.topology.h, self.topology.w
+        i = np.arange(h)
+        return tuple(np.ascontiguousarray(self.rest_positions[self.topology.bottom(i, j)]) for j in (0, w - 1))
 
     @property
     def bound_grid(self) -> np.ndarray:
@@ -546,6 +559,9 @@ class Muscle:
             else:
                 s1 = sample_positions(P["A1"], h, True, 1.0)
                 s3 = sample_positions(P["A3"], h, True, 1.0)
+            if self.carry_inner > 0:
+                r1, r3 = self._loop_rest
+                s1 = s1 + self.carry_inner * ((s3 - r3) - (s1 - r1))
             if c > 0:
                 d = sphincter_displacement(s1, s3, c * self.max_contraction)
                 s1, s3 = s1 + d, s3 + d
