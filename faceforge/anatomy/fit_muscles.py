@@ -133,13 +133,16 @@ def morph_spec(spec, warp):
                             for k in fields})
 
 
-def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None) -> list:
+def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
+                     carry_inner: float = 0.0) -> list:
     """Build every muscle of ``specs`` on the given skull, deepest layer first.
 
     Each muscle's action lines are projected (outermost surface) onto the concatenation of
     the bodies it lies on (cranium, mandible, deeper muscles); thickness is Eq. 5:
     ``spec.thickness * skull_diagonal``. ``stiffness``: ``{"linear": {...}, "sphincter":
-    {...}}`` of the config (empty: geometry only). Returns ``[Muscle]`` in build order.
+    {...}}`` of the config (empty: geometry only); ``carry_inner``: the sphincter's
+    ``carry_inner`` of :func:`build_sphincter_muscle` (``muscle.sphincter.carry_inner``, on
+    the skull's faces; it does not change the rest geometry). Returns ``[Muscle]`` in build order.
     """
     from faceforge.anatomy.action_line import ActionLine
     from faceforge.anatomy.layers import expand_lies_on
@@ -171,8 +174,11 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                                     stiffness.get("linear", {}), **kw)
         else:
             inner, outer = align_loops(spec.inner, spec.outer)
+            bone = np.concatenate([np.full(len(p[1]), n in ("cranium", "mandible"))
+                                   for n, p in zip(expand_lies_on(spec.lies_on), parts)])
             m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h, spec.w,
-                                       t, stiffness.get("sphincter", {}), **kw)
+                                       t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
+                                       carry_faces=bone, **kw)
         bodies[spec.name] = (m.rest_positions, m.faces)
         built.append(m)
     return built

@@ -246,15 +246,17 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry):  # prag
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
     :func:`sphincter_displacement` with ``c`` (already times the maximal closure) when
-    ``c > 0``. Same values as the numpy code to round-off (LAPACK's, summation order)."""
+    ``c > 0``; before that, with ``carry (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each
+    inner sample gets ``carry[i] ((s3 - r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest
+    samples. Same values as the numpy code to round-off (LAPACK's, summation order)."""
     h = grid.shape[0]
     w1 = grid.shape[1] - 1
     _loop_samples(p1, seg1, t1, grid, 0)
     _loop_samples(p3, seg3, t3, grid, w1)
-    if carry > 0.0:   # the inner loop follows the outer one's drag (see Muscle.carry_inner)
+    if carry.shape[0]:   # the inner loop follows the outer one's drag (see Muscle.carry_inner)
         for i in range(h):
             for j in range(3):
-                grid[i, 0, j] += carry * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
+                grid[i, 0, j] += carry[i] * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
     if not c > 0.0:
         return
     # fit_ellipse of the 2h samples (inner then outer)
@@ -372,6 +374,12 @@ class Muscle:
     rest_parameters : dict
         Sphincter material sampling: ``{"A1"|"A3": (segment (h,), t (h,))}``;
         empty for arc-length sampling every frame.
+    carry_inner : (h,) float64 or None
+        Sphincter: per inner sample, the fraction of the outer loop's drag (its sample's
+        displacement from rest minus the inner one's) added to the inner target before the
+        contraction; None: none (the paper). The lips' mucosa slides over the teeth: an
+        inner sample that lies on bone (the skull) would otherwise stay while the lip
+        muscles drag the outer margin (see :func:`build_sphincter_muscle`, ``carry_inner``).
     interior : (h-2, w-2, 3) float64 or None
         Linear: the rest offset of each interior bottom particle (rows ``i = 1..h-2``,
         columns ``j = 1..w-2``) from the blend of its row's side samples, in the row's
@@ -395,7 +403,7 @@ class Muscle:
     max_contraction: float = SPHINCTER_MAX_CONTRACTION
     rest_parameters: dict = field(default_factory=dict)
     interior: object = None
-    carry_inner: float = float(__import__("os").environ.get("FF_CARRY", "0"))
+    carry_inner: object = None
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -497,10 +505,10 @@ class Muscle:
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
             (s1, t1), (s3, t3) = self._loop_parameters
-            r1, r3 = self._loop_rest
+            r1, r3, carry = self._loop_rest
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
-                            c * self.max_contraction, grid, r1, r3, self.carry_inner)
+                            c * self.max_contraction, grid, r1, r3, carry)
         else:
             grid = self._grid_targets(c, points)
         return grid[g[:, 0], g[:, 1]]
@@ -518,10 +526,19 @@ class Muscle:
 
     @property
     def _loop_rest(self):
-        """Sphincter: the rest samples of A1 and A3, ``((h, 3), (h, 3))`` (their bottom particles)."""
-        h, w = self.topology.h, self.topology.w
-        i = np.arange(h)
-        return tuple(np.ascontiguousarray(self.rest_positions[self.topology.bottom(i, j)]) for j in (0, w - 1))
+        """Sphincter: the rest samples of A1 and A3, ``(h, 3)`` each (their bottom particles, which
+        :func:`morph_hex` puts exactly on them), and :attr:`carry_inner` as ``(h,)`` float64,
+        or ``(0,)`` when there is none (for the compiled targets)."""
+        lr = self.__dict__.get("_lr")
+        if lr is None:
+            h, w = self.topology.h, self.topology.w
+            i = np.arange(h)
+            r1, r3 = (np.ascontiguousarray(self.rest_positions[self.topology.bottom(i, j)]) for j in (0, w - 1))
+            carry = np.zeros(0) if self.carry_inner is None else np.ascontiguousarray(self.carry_inner, FLOAT)
+            if carry.shape not in ((0,), (h,)):
+                raise ValueError(f"{self.name}: carry_inner must have {h} rows, got {carry.shape}")
+            lr = self.__dict__["_lr"] = (r1, r3, carry if np.any(carry) else np.zeros(0))
+        return lr
 
     @property
     def bound_grid(self) -> np.ndarray:
@@ -559,9 +576,9 @@ class Muscle:
             else:
                 s1 = sample_positions(P["A1"], h, True, 1.0)
                 s3 = sample_positions(P["A3"], h, True, 1.0)
-            if self.carry_inner > 0:
-                r1, r3 = self._loop_rest
-                s1 = s1 + self.carry_inner * ((s3 - r3) - (s1 - r1))
+            r1, r3, carry = self._loop_rest
+            if len(carry):
+                s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
             if c > 0:
                 d = sphincter_displacement(s1, s3, c * self.max_contraction)
                 s1, s3 = s1 + d, s3 + d
@@ -617,8 +634,9 @@ def add_muscles_to_builder(builder, muscles, positions=None) -> tuple[list[int],
 def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw) -> Muscle:
     v, f = check_mesh(vertices, faces)
     material = kw.pop("material_sampling", False)
+    carry = kw.pop("carry_inner", None)
     proto = Muscle(name, kind, topo, np.zeros((topo.n_particles, 3)), topo.faces, lines,
-                   tuple(kw.pop("lies_on", ())), stiffness, **kw)
+                   tuple(kw.pop("lies_on", ())), stiffness, **kw)   # carry_inner 0: the true rest samples
     kw["material_sampling"] = material
     vn = vertex_normals(v, f)
     samples = proto.sample_targets(0.0, v, f)
@@ -628,6 +646,13 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
     params = {}
     if kw.get("material_sampling", False):
         params = {key: lines[key].parameters(v, f, topo.h) for key in ("A1", "A3")}
+    if carry is not None:   # (beta, mask over f): beta times the inner samples' share of the mask
+        beta, mask = carry
+        carry = None
+        if beta > 0:
+            seg, t = params["A1"] if params else lines["A1"].parameters(v, f, topo.h)
+            on = np.asarray(mask, bool)[lines["A1"].points.face_ids].astype(FLOAT)
+            carry = float(beta) * ((1.0 - t) * on[seg] + t * on[(seg + 1) % len(on)])
     interior = None
     if kind == "linear" and topo.h > 2 and topo.w > 2:  # see the module docstring
         h, w = topo.h, topo.w
@@ -639,7 +664,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
         pos[: h * w].reshape(h, w, 3)[1:-1, 1:-1] = interior_targets(a0, a2, interior)  # round-off
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
                   proto.layer, proto.active, float(thickness), proto.max_contraction, params,
-                  interior)
+                  interior, carry)
 
 
 def _cross(a, b):
@@ -737,7 +762,8 @@ def build_linear_muscle(name, origin, insertion, fibre_a, fibre_b, vertices, fac
 
 def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness, stiffness, *,
                            lies_on=(), layer=0, active=True,
-                           max_contraction=SPHINCTER_MAX_CONTRACTION, material_sampling=True) -> Muscle:
+                           max_contraction=SPHINCTER_MAX_CONTRACTION, material_sampling=True,
+                           carry_inner=0.0, carry_faces=None) -> Muscle:
     """A sphincter (§5.2.2) from its closed inner (A1) and outer (A3) loops.
 
     ``material_sampling`` (default True, a deliberate departure from a literal
@@ -749,6 +775,17 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
     the loops more than the upper half; the cells between them shear until they
     fold (observed from a 5 degree jaw opening on the synthetic head). The
     ellipse displacement of §5.2.2 is applied on top of either.
+
+    ``carry_inner`` (default 0, the paper; ``muscle.sphincter.carry_inner``, a departure): the
+    lips' inner margin (A1, their contact line) lies partly on the teeth, which do not move
+    with the lip muscles, while the outer margin (A3) lies on those muscles; the mucosa
+    slides over the teeth, so an inner sample on them is given ``carry_inner`` times the
+    outer sample's drag relative to it (:attr:`Muscle.carry_inner`). ``carry_faces (m,)
+    bool`` over ``faces`` marks where an inner sample slides (default: everywhere; the builder
+    passes the skull's faces), and each inner sample gets ``carry_inner`` times its share of
+    its two bracketing surface points on those faces. An inner sample on a muscle already
+    moves with it (on the MakeHuman head the levator labii superioris moves the inner loop
+    above it 1.8 times as far as the outer one), and carrying there would hold it back.
 
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
@@ -762,7 +799,8 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
         raise ValueError(f"sphincter {name}: max_contraction must lie in (0, 1), got {max_contraction}")
     return _build(name, "sphincter", topo, lines, vertices, faces, thickness, stiffness,
                   lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
-                  material_sampling=material_sampling)
+                  material_sampling=material_sampling,
+                  carry_inner=(float(carry_inner), np.ones(len(faces), bool) if carry_faces is None else carry_faces))
 
 
 def align_loops(inner, outer) -> tuple[np.ndarray, np.ndarray]:

@@ -9,7 +9,7 @@ from faceforge.anatomy.muscle import (
     STIFFNESS_KEYS, bending_quads, distance_network, fit_ellipse, sphincter_displacement)
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
-from conftest import LINEAR_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
+from conftest import LINEAR_STIFFNESS, SPHINCTER_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
 
 
 @pytest.fixture(scope="module")
@@ -265,9 +265,21 @@ def test_sphincter_displacement_formula():
     np.testing.assert_allclose(d, 0.4 * (0 - ring), atol=1e-9)
 
 
-def test_compiled_sphincter_targets_match_the_numpy_twin(sphincter, sphere):
+@pytest.fixture(scope="module")
+def carried(sphincter):
+    """The ``sphincter`` fixture with a per-row inner-loop carry (``Muscle.carry_inner``)."""
+    from dataclasses import replace
+
+    rows = np.linspace(0.0, 1.0, sphincter.topology.h)
+    return replace(sphincter, carry_inner=rows)
+
+
+@pytest.mark.parametrize("which", ["sphincter", "carried"])
+def test_compiled_sphincter_targets_match_the_numpy_twin(which, request, sphere):
     """Material sampling: ``targets_from_line_points`` runs the compiled ``_sphincter_grid``;
-    its plain twin is ``Muscle._grid_targets`` (numpy, ``fit_ellipse`` by SVD and lstsq)."""
+    its plain twin is ``Muscle._grid_targets`` (numpy, ``fit_ellipse`` by SVD and lstsq);
+    with and without ``carry_inner``."""
+    sphincter = request.getfixturevalue(which)
     v, f = sphere
     assert sphincter.rest_parameters
     rng = np.random.default_rng(4)
@@ -284,6 +296,45 @@ def test_compiled_sphincter_targets_match_the_numpy_twin(sphincter, sphere):
             twin = sphincter._grid_targets(min(c, 1.0), points)[g[:, 0], g[:, 1]]
             assert np.allclose(fast, twin, rtol=0.0, atol=1e-12 * scale)
             assert c > 0 or np.array_equal(fast, twin)    # the samples alone: same arithmetic
+
+
+def test_sphincter_carry_inner_rest_and_drag(carried, sphere):
+    """``carry_inner``: at rest the targets are the rest particles (the carry builds no offset);
+    an inner sample with carry 1 follows its outer sample's displacement, with 0 its own."""
+    v, f = sphere
+    h = carried.topology.h
+    i = np.arange(h)
+    b1, b3 = carried.topology.bottom(i, 0), carried.topology.bottom(i, carried.topology.w - 1)
+    g = carried.bound_grid
+    rest = carried.sample_targets(0.0, v, f)
+    np.testing.assert_allclose(rest, carried.rest_positions[carried.bound], atol=1e-12)
+    points = {k: line.positions(v, f) for k, line in carried.lines.items()}
+    points["A3"] = points["A3"] + [0.0, 0.1, 0.0]           # the outer loop dragged up
+    t = carried.targets_from_line_points(0.0, points)
+    inner = {int(a): k for k, a in enumerate(g[:, 0]) if g[k, 1] == 0}
+    for r in (0, h - 1):
+        np.testing.assert_allclose(t[inner[r]] - carried.rest_positions[b1[r]],
+                                   [0.0, 0.1 * carried.carry_inner[r], 0.0], atol=1e-12)
+    assert np.allclose(t[[k for k in range(len(g)) if g[k, 1] == carried.topology.w - 1]]
+                       - carried.rest_positions[b3][g[g[:, 1] == carried.topology.w - 1, 0]], [0.0, 0.1, 0.0])
+
+
+def test_sphincter_carry_faces_give_per_row_weights(sphere):
+    """``build_sphincter_muscle(carry_inner, carry_faces)``: the rest geometry does not change,
+    and each inner sample's carry is ``carry_inner`` times its share of the marked faces."""
+    v, f = sphere
+    plain = sphincter_on("oris", v, f, (0.0, -0.3), (0.15, 0.07), (0.32, 0.17))
+    assert plain.carry_inner is None
+    from faceforge.anatomy.muscle import build_sphincter_muscle
+
+    mask = v[f].mean(axis=1)[:, 0] > 0.0                      # the faces on the +x half
+    m = build_sphincter_muscle("oris", plain.lines["A1"], plain.lines["A3"], v, f, plain.topology.h,
+                               plain.topology.w, plain.thickness, SPHINCTER_STIFFNESS, lies_on=("skull",),
+                               layer=1, carry_inner=0.8, carry_faces=mask)
+    np.testing.assert_array_equal(m.rest_positions, plain.rest_positions)
+    assert m.carry_inner.shape == (plain.topology.h,)
+    x = m.rest_positions[m.topology.bottom(np.arange(m.topology.h), 0)][:, 0]
+    assert np.all(m.carry_inner[x > 0.05] == 0.8) and np.all(m.carry_inner[x < -0.05] == 0.0)
 
 
 def test_conic_least_squares_matches_lstsq():
@@ -305,5 +356,5 @@ def test_compiled_sphincter_targets_survive_collinear_loops():
     p = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], 1)
     seg, t = np.arange(5), np.full(5, 0.5)
     grid = np.empty((5, 2, 3))
-    _sphincter_grid(p, seg, t, p.copy(), seg, t, 0.3, grid)
+    _sphincter_grid(p, seg, t, p.copy(), seg, t, 0.3, grid, p[:5], p[:5], np.zeros(0))
     assert np.all(np.isfinite(grid))

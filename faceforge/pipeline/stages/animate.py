@@ -298,7 +298,8 @@ def _muscle_system(fit, cranium, mandible, settings, config, log):
     diagonal = float(np.linalg.norm(np.ptp(np.vstack([cranium[0], mandible[0]]), axis=0)))
     stiffness = {"linear": dict(config.get("muscle.linear.stiffness")),
                  "sphincter": dict(config.get("muscle.sphincter.stiffness"))}
-    muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness)
+    muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness,
+                               float(config.get("muscle.sphincter.carry_inner")))
     settings = replace(settings, damping=float(config.get("muscle.damping")))
     return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
 
