@@ -412,7 +412,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
     status[ids] = kinds[body[ids]]
-    out_flag, near = outward[ids], closest[ids]
+    anchors = (ids, body[ids], face[ids], pts[ids], dist[ids], outward[ids], closest[ids])
     ins = [int(i) for i in (insertions or ()) if kinds[i] == MUSCLE]
     if ins:   # second anchors: skin over a muscle that inserts into it through the muscles above
         cand = ids[(kinds[body[ids]] == MUSCLE) & ~np.isin(body[ids], ins) & ~closest[ids]]
@@ -421,16 +421,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
                     sides[cand], side_of, strict)
         hit = res[0] >= 0
         extra = cand[hit]
-        order = np.argsort(np.concatenate([ids, extra]), kind="stable")
-        a_body = np.concatenate([body[ids], res[0][hit]])[order]
-        a_face = np.concatenate([face[ids], res[1][hit]])[order]
-        a_pts = np.concatenate([pts[ids], res[2][hit]])[order]
-        a_dist = np.concatenate([dist[ids], res[3][hit]])[order]
-        out_flag = np.concatenate([out_flag, outward[extra]])[order]
-        near = np.concatenate([near, np.zeros(len(extra), bool)])[order]
-        ids = np.concatenate([ids, extra])[order]
-    else:
-        a_body, a_face, a_pts, a_dist = body[ids], face[ids], pts[ids], dist[ids]
+        order = np.argsort(np.concatenate([ids, extra]), kind="stable")   # each right after its first
+        second = (extra,) + tuple(r[hit] for r in res) + (outward[extra], np.zeros(len(extra), bool))
+        anchors = tuple(np.concatenate([a, b])[order] for a, b in zip(anchors, second))
+    ids, a_body, a_face, a_pts, a_dist, a_out, a_closest = anchors
     bary = np.zeros((len(ids), 3), FLOAT)
     for b in np.unique(a_body):
         sel = a_body == b
@@ -438,7 +432,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     return Binding(
         body_names=tuple(b.name for b in bodies), status=status, vertex_ids=ids,
         body=a_body, face_ids=a_face, bary=bary, points=a_pts, distance=a_dist,
-        outward=out_flag, normals=nrm, closest=near,
+        outward=a_out, normals=nrm, closest=a_closest,
     )
 
 

@@ -453,12 +453,15 @@ class SkullFit:
 
 
 def inside_closed(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Bool (k,): points inside the closed mesh by ray parity along +X and -X (both must agree;
-    rays through an edge or a vertex decided by the top-left rule,
-    :class:`faceforge.geometry.parity.ParityGrid`). Deterministic."""
-    from faceforge.geometry.parity import ParityGrid
-
-    return ParityGrid(vertices, faces).contains(points)
+    """Bool (k,): points inside the closed mesh by ray parity along two fixed directions
+    (both must agree, so a ray grazing an edge cannot flip a point). Deterministic."""
+    caster = RayCaster(vertices, faces)
+    inside = np.ones(len(points), bool)
+    for d in ([0.3129, 0.6214, 0.7183], [-0.5773, 0.2151, -0.7877]):
+        ray, _, _, dist = caster.all_hits(points, np.asarray(d, dtype=np.float64)[None])
+        counts = np.bincount(ray[dist > 0], minlength=len(points))
+        inside &= counts % 2 == 1
+    return inside
 
 
 def skin_inside_bone_pairs(moved: np.ndarray, skull_faces: np.ndarray, aligned: np.ndarray, skin: SkinSurface,
