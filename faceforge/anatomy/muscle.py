@@ -797,6 +797,8 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
     lines = {"A1": inner, "A3": outer}
     if not 0.0 < max_contraction < 1.0:
         raise ValueError(f"sphincter {name}: max_contraction must lie in (0, 1), got {max_contraction}")
+    if not 0.0 <= carry_inner <= 1.0:
+        raise ValueError(f"sphincter {name}: carry_inner must lie in [0, 1], got {carry_inner}")
     return _build(name, "sphincter", topo, lines, vertices, faces, thickness, stiffness,
                   lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
                   material_sampling=material_sampling,
