@@ -78,3 +78,20 @@ def test_compiled_closest_points_match_trimesh():
     want, dist, _ = trimesh.proximity.closest_point(sphere, pts)
     assert np.allclose(np.linalg.norm(got - pts, axis=1), dist, atol=1e-12)
     assert np.allclose(got, want, atol=1e-9)
+
+
+def test_pushed_out_of_one_bone_into_the_other_comes_out_on_the_next_pass():
+    """Two jaws with a thin gap: skin pushed out of the upper one the shortest way (down) lands
+    in the lower one; a second pass (the skin step repeats the collision until it finds
+    nothing) puts it out of that one (forward, its shortest way), and a third finds nothing."""
+    up, fu = box((0.0, 1.03, 0.0))                    # y in [0.03, 2.03]
+    low, fl = box((0.0, -1.03, 0.0))                  # y in [-2.03, -0.03]
+    rest = np.array([[0.0, 0.0, 1.2]])                # in front of the gap, ~0.2 from both: floors ~0.1
+    col = BoneCollision(rest, {"cranium": (up, fu), "mandible": (low, fl)}, reach=0.5, keep=0.5)
+    x = np.array([[0.0, 0.05, 0.97]])                 # 0.02 into the upper bone from below
+    assert points_inside(x, up, fu).all()
+    assert col.apply(x, {}) == 1
+    assert not points_inside(x, up, fu).any() and points_inside(x, low, fl).all()
+    assert col.apply(x, {}) == 1
+    assert not points_inside(x, up, fu).any() and not points_inside(x, low, fl).any()
+    assert col.apply(x, {}) == 0

@@ -191,10 +191,16 @@ class BoundHead:
                 if orientation is None or not orientation.apply(x, None if r == 0 else pushed[:k]):
                     break
             # skin that slid into a bone beyond the triangle the skull guard holds it above (the
-            # lips onto the other jaw's teeth, the cheek over the cheekbone) is put back out
+            # lips onto the other jaw's teeth, the cheek over the cheekbone) is put back out. A
+            # vertex pushed out of one jaw's bone can land in the other's, and the orientation
+            # pass that follows can move one sideways into a bone again: the collision looks
+            # again until it finds nothing (at most ``rounds`` times)
             jaw = np.eye(4) if last[1] is None else last[1]
-            if collision is not None and collision.apply(x, {"mandible": jaw}) and orientation is not None:
-                orientation.apply(x)
+            for _ in range(max(rounds, 1) if collision is not None else 0):
+                if not collision.apply(x, {"mandible": jaw}):
+                    break
+                if orientation is not None:
+                    orientation.apply(x)
             return skin.simulated()
 
         def reset():
@@ -397,7 +403,7 @@ ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
-    version="2", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="3", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- calibrate
@@ -515,7 +521,7 @@ CALIBRATE = register_stage(Stage(
     name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
-    version="2", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
+    version="3", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
 # --------------------------------------------------------------------------- commands
