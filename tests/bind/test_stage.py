@@ -109,3 +109,19 @@ def test_cli_bind_without_fit_is_a_one_line_error(invoke, tmp_path):
 def test_cli_lists_the_bind_command(invoke):
     result = invoke("--help")
     assert result.exit_code == 0 and "bind" in result.output
+
+
+def test_insertions_naming_no_muscle_of_the_map_are_reported_and_ignored(ctx):
+    """The default ``bind.insertions`` names the template's brow depressors; a map without them
+    (this fake fit has a frontalis only) binds as before and the log says which were ignored."""
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.pipeline.stages.bind import run
+
+    said = []
+    ctx.log = said.append
+    _fake_fit(ctx.workdir / "fit")
+    run(ctx)
+    d = load_npz(ctx.out_dir / "bind.npz")
+    assert len(np.unique(d["anchor_vertex_ids"])) == len(d["anchor_vertex_ids"])   # no second anchors
+    warned = [m for m in said if m.startswith("warning: bind.insertions")]
+    assert len(warned) == 1 and "corrugator_supercilii" in warned[0] and "frontalis" in warned[0]

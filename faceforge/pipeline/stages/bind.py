@@ -90,11 +90,16 @@ def run(ctx):
 
     head = load_fit(ctx.input("fit"))
     SkinStiffness.from_config(ctx.config)  # validates the keys this stage hashes
+    insertions = tuple(str(n) for n in ctx.config.get("bind.insertions"))
+    names = {str(m[0]) for m in head["muscles"]}
+    unknown = [n for n in insertions if n not in names and not {n + "_L", n + "_R"} & names]
+    if unknown:   # a map of one's own may lack the template's brow depressors: say so, go on
+        ctx.log(f"warning: bind.insertions: no muscle {', '.join(unknown)} in the fitted map; "
+                f"ignored (muscles: {', '.join(sorted(names))})")
     ctx.log(f"binding {len(head['vertices'])} skin vertices to {len(head['muscles'])} muscles and the skull")
     bound = bind_head(head["vertices"], head["faces"], head["landmarks"], head["cranium"],
                       head["mandible"], head["muscles"],
-                      float(ctx.config.get("bind.max_ray_distance")),
-                      insertions=tuple(ctx.config.get("bind.insertions")))
+                      float(ctx.config.get("bind.max_ray_distance")), insertions=insertions)
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
     save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())
