@@ -222,11 +222,10 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         drive = np.clip(drive, -max_drive * np.abs(req), max_drive * np.abs(req))
         d_all, a_all = list(drives), list(sampled)
         todo = ok.copy()
-        trial = with_entry(calibrated, idx, response=None)
         for _ in range(refine + 1):
             if not np.any(todo):
                 break
-            got = probe(simulate(trial, _frames(entry.faps, drive[todo])))
+            got = probe(simulate(identity, _frames(entry.faps, drive[todo])))
             d_all += list(drive[todo])
             a_all += list(got)
             # a value within ``tolerance`` of its request keeps its drive; the others take a
