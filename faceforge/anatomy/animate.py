@@ -201,18 +201,16 @@ def inverted_triangles(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     return inverted_faces(rest, frames, faces, tol).sum(axis=1).astype(np.int64)
 
 
-def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, grid=None) -> np.ndarray:
+def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(k,) bool: which ``points`` (k, 3) lie inside the closed mesh (vertices, faces).
 
     Ray parity along +X and -X (both must agree), with the top-left rule deciding rays through
-    an edge or a vertex (:mod:`faceforge.geometry.parity`, compiled). ``grid``: the mesh's
-    :class:`~faceforge.geometry.parity.ParityGrid`, already built, to reuse it.
+    an edge or a vertex: a one-shot :class:`faceforge.geometry.parity.ParityGrid` (build it
+    once to query a mesh repeatedly, as bone collision does).
     """
     from faceforge.geometry.parity import ParityGrid
 
-    if grid is None:
-        grid = ParityGrid(vertices, faces)
-    return grid.contains(points)
+    return ParityGrid(vertices, faces).contains(points)
 
 
 def _depth_below(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

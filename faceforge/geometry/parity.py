@@ -30,7 +30,7 @@ import numpy as np
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 from faceforge.geometry.triangles import check_mesh
 
-__all__ = ["ParityGrid", "points_inside_mesh"]
+__all__ = ["ParityGrid"]
 
 
 class ParityGrid:
@@ -91,11 +91,6 @@ class ParityGrid:
             _contains(p, self.vertices, self.faces, self.sign, self.top_left, self.origin, self.size,
                       self.shape, self.cell_start, self.cell_tris, out)
         return out
-
-
-def points_inside_mesh(points, vertices, faces) -> np.ndarray:
-    """(k,) bool, one-shot :meth:`ParityGrid.contains` (builds the grid for this query)."""
-    return ParityGrid(vertices, faces).contains(points)
 
 
 def _orientations(v: np.ndarray, f: np.ndarray):

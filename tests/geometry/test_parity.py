@@ -5,7 +5,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.geometry.parity import ParityGrid, points_inside_mesh
+from faceforge.geometry.parity import ParityGrid
+
+
+def points_inside_mesh(points, vertices, faces):
+    return ParityGrid(vertices, faces).contains(points)
 
 
 def _box(lo=0.0, hi=1.0, divisions=1):
