@@ -633,6 +633,22 @@ def lip_band(cut, width: float | None, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
     return (d <= width) & (vertex_normals(v, f) @ fwd < INNER_LIP_COS)
 
 
+def match_insertions(insertions, names) -> tuple[list[int], list[str]]:
+    """Which of ``names`` (muscle names; None for a body that is no muscle) ``insertions``
+    (``bind.insertions``: a muscle's name, or a left/right pair's name without ``_L`` / ``_R``)
+    selects: ``(indices into names, the insertion names that match none)``."""
+    wanted = set(insertions)
+    hits, used = [], set()
+    for i, n in enumerate(names):
+        if n is None:
+            continue
+        key = n if n in wanted else (n[:-2] if n[-2:] in ("_L", "_R") and n[:-2] in wanted else None)
+        if key is not None:
+            hits.append(i)
+            used.add(key)
+    return hits, [n for n in insertions if n not in used]
+
+
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=()) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
@@ -697,9 +713,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     front, rule = face_front_mask(cut.vertices, pts)
     band_width = lip_band_width(pts)
     lips = lip_band(cut, band_width)
-    inserting = set(insertions)
-    ins = [i for i, b in enumerate(bodies) if b.kind == "muscle" and (
-        b.name in inserting or (b.name[-2:] in ("_L", "_R") and b.name[:-2] in inserting))]
+    ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
     body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
                   for b in bodies]
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,

@@ -83,7 +83,7 @@ def head_from_fit_arrays(d: dict) -> dict:
 
 def run(ctx):
     """Bind the fitted head in ``ctx.input("fit")``; write bind.npz, report.json, influence.png."""
-    from faceforge.anatomy.binding import bind_head
+    from faceforge.anatomy.binding import bind_head, match_insertions
     from faceforge.anatomy.influence import save_influence_png
     from faceforge.anatomy.skin import SkinStiffness
     from faceforge.io.stagefiles import save_json, save_npz
@@ -91,8 +91,8 @@ def run(ctx):
     head = load_fit(ctx.input("fit"))
     SkinStiffness.from_config(ctx.config)  # validates the keys this stage hashes
     insertions = tuple(str(n) for n in ctx.config.get("bind.insertions"))
-    names = {str(m[0]) for m in head["muscles"]}
-    unknown = [n for n in insertions if n not in names and not {n + "_L", n + "_R"} & names]
+    names = [str(m[0]) for m in head["muscles"]]
+    _, unknown = match_insertions(insertions, names)
     if unknown:   # a map of one's own may lack the template's brow depressors: say so, go on
         ctx.log(f"warning: bind.insertions: no muscle {', '.join(unknown)} in the fitted map; "
                 f"ignored (muscles: {', '.join(sorted(names))})")
