@@ -42,8 +42,9 @@ TARGET_MS = 3.0
 PAPER_MESH_D_MS = 50.0
 
 
-def synthetic_head(tmp: Path, count, extra: int):
-    """Fit + bind the synthetic head in ``tmp``; return (BoundHead, mapping)."""
+def synthetic_head(tmp: Path, count, extra: int, sets=()):
+    """Fit + bind the synthetic head in ``tmp``; return (BoundHead, mapping). ``sets``:
+    config overrides (``"solver.partitions=1"``) for the simulation."""
     import yaml
 
     import faceforge.pipeline.stages.animate as stage
@@ -60,26 +61,29 @@ def synthetic_head(tmp: Path, count, extra: int):
     real = stage._muscle_system
     stage._muscle_system = functools.partial(S.muscle_system, extra=extra)
     try:
-        head = stage.BoundHead(tmp / "fit", tmp / "bind", load_config())
+        head = stage.BoundHead(tmp / "fit", tmp / "bind", load_config(sets=sets))
     finally:
         stage._muscle_system = real
     (tmp / "mapping.yaml").write_text(yaml.safe_dump(S.MAPPING))
     return head, mapping_from_dict(S.MAPPING)
 
 
-def real_head(workdir: Path):
+def real_head(workdir: Path, sets=()):
     import faceforge.pipeline.stages.animate as stage
     from faceforge.anatomy.fap_mapping import load_fap_mapping
     from faceforge.io.config import load_config
 
-    config = load_config(remembered=workdir / "config.yaml")
+    config = load_config(remembered=workdir / "config.yaml", sets=sets)
     head = stage.BoundHead(workdir / "fit", workdir / "bind", config)
     cal = stage.calibrated_mapping_path(workdir)
     return head, load_fap_mapping(cal if cal.exists() else stage.mapping_template_path(config))
 
 
-def measure(head, mapping, frames: int, repeats: int) -> dict:
-    """Best-of-``repeats`` per-layer ms per frame over ``frames`` frames of joy.fap."""
+def measure(head, mapping, frames: int, repeats: int, rival=None) -> dict:
+    """Best-of-``repeats`` per-layer ms per frame over ``frames`` frames of joy.fap.
+
+    ``rival``: the same head built with other settings (one partition); its repeats alternate
+    with ``head``'s, and its figures and the ratio go under ``"one_partition"``."""
     import faceforge.pipeline.stages.animate as stage
     from faceforge.anatomy.animate import Timings, play
     from faceforge.mpeg4 import read_fap
@@ -87,19 +91,33 @@ def measure(head, mapping, frames: int, repeats: int) -> dict:
     track = read_fap(ROOT / "samples" / "fap" / "joy.fap")
     c, jaw, _ = stage.track_controls(track, mapping, head)
     c, jaw = c[:frames], jaw[:frames]
-    head.rig.reset()
-    play(head.rig, c[:3], jaw[:3], track.fps)                  # compile / warm caches
-    best = None
-    cpu = []
+    heads = [head] + ([rival] if rival is not None else [])
+    for h in heads:
+        h.rig.reset()
+        play(h.rig, c[:3], jaw[:3], track.fps)                 # compile / warm caches
+    best = [None] * len(heads)
+    cpu = [[] for _ in heads]
+    frames_out = [None] * len(heads)
     for _ in range(repeats):
-        head.rig.reset()
-        t = Timings()
-        c0 = time.process_time()
-        play(head.rig, c, jaw, track.fps, timings=t)
-        cpu.append(1e3 * (time.process_time() - c0) / len(jaw))
-        ms = t.per_frame_ms()
-        if best is None or ms["total"] < best["total"]:
-            best = ms
+        for i, h in enumerate(heads):                           # side by side, alternating
+            h.rig.reset()
+            t = Timings()
+            c0 = time.process_time()
+            frames_out[i] = play(h.rig, c, jaw, track.fps, timings=t)
+            cpu[i].append(1e3 * (time.process_time() - c0) / len(jaw))
+            ms = t.per_frame_ms()
+            if best[i] is None or ms["total"] < best[i]["total"]:
+                best[i] = ms
+    extra = {}
+    if rival is not None:
+        extra["one_partition"] = {
+            "ms_per_frame": {k: round(v, 3) for k, v in best[1].items()},
+            "cpu_ms_per_frame_best": round(min(cpu[1]), 3),
+            "ratio_total": round(best[0]["total"] / best[1]["total"], 3),
+            "max_frame_difference": float(np.abs(np.asarray(frames_out[0])
+                                                 - np.asarray(frames_out[1])).max()),
+        }
+    best, cpu = best[0], cpu[0]
     skin_c = head.skin.model.constraint_count
     return {
         "skin_vertices": int(len(head.rest)), "skin_triangles": int(len(head.faces)),
@@ -110,12 +128,24 @@ def measure(head, mapping, frames: int, repeats: int) -> dict:
         "ms_per_frame": {k: round(v, 3) for k, v in best.items()},
         # CPU time of this process per frame (a busy shared machine inflates the wall clock)
         "cpu_ms_per_frame_best": round(min(cpu), 3),
+        "partitions": int(head.system.settings.partitions), **extra,
     }
 
 
 SAMPLE_HEADS = {"makehuman": "samples/makehuman/mh_head_default.obj",
                 "ict": "samples/ict/ict_face_headneck_neutral.obj",
                 "mediapipe": "samples/mediapipe/face_model_with_iris.obj"}
+
+
+def threads_info() -> dict:
+    """numba's threading layer and thread count, as the partitioned steps use them."""
+    import numba
+
+    from faceforge.pbd.threads import threaded
+
+    on = threaded()
+    return {"threaded": on, "layer": numba.threading_layer() if on else None,
+            "numba_threads": int(numba.get_num_threads())}
 
 
 def sweep(root: Path, heads, faps) -> dict:
@@ -170,14 +200,19 @@ def main(argv=None):
     args = ap.parse_args(argv)
     frames, repeats = (30, 2) if args.quick else (108, 3)
     results = {"target_ms": TARGET_MS, "paper_mesh_d_ms": PAPER_MESH_D_MS, "heads": {}}
+    one = ["solver.partitions=1"]
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()
-        head, mapping = synthetic_head(Path(tmp), (44, 58), 25)
-        results["heads"]["synthetic_mesh_d"] = {"build_s": round(time.perf_counter() - t0, 2),
-                                                **measure(head, mapping, frames, repeats)}
+        head, mapping = synthetic_head(Path(tmp) / "a", (44, 58), 25)
+        build_s = round(time.perf_counter() - t0, 2)
+        rival, _ = synthetic_head(Path(tmp) / "b", (44, 58), 25, one)
+        results["heads"]["synthetic_mesh_d"] = {"build_s": build_s,
+                                                **measure(head, mapping, frames, repeats, rival)}
     if args.workdir is not None:
         head, mapping = real_head(args.workdir)
-        results["heads"][str(args.workdir)] = measure(head, mapping, frames, repeats)
+        rival, _ = real_head(args.workdir, one)
+        results["heads"][str(args.workdir)] = measure(head, mapping, frames, repeats, rival)
+    results["threads"] = threads_info()   # after a threaded step: numba names its layer then
     if args.sweep:
         faps = sorted((ROOT / "samples" / "fap").glob("*.fap"))
         if args.sweep_dir is not None:
@@ -202,6 +237,8 @@ def main(argv=None):
                      "C": r["constraints_skin"] + r["constraints_muscles"], "skull ms": ms["skull"],
                      "muscles ms": ms["muscles"], "skin ms": ms["skin"], "total ms": ms["total"],
                      "cpu ms": r["cpu_ms_per_frame_best"],
+                     "1-part total ms": r["one_partition"]["ms_per_frame"]["total"],
+                     "ratio": r["one_partition"]["ratio_total"],
                      "target ms": TARGET_MS})
     print_table(rows, title=f"per-frame time, {results['heads']['synthetic_mesh_d']['iterations']} iterations")
     out = write_results("animate", results)

@@ -44,6 +44,9 @@ class SolverSettings:
         cross pairs, and an area block right after it with one triangle per quad
         (:mod:`faceforge.pbd.constraints.quad`). About 3.5x faster on the §8 skin; False
         keeps the exact builder order.
+    partitions : project the constraints in this many particle-disjoint parts at once,
+        one thread each, then the constraints joining parts (:mod:`faceforge.pbd.partition`);
+        1 = one sequential sweep. The result depends on this number, not on the threads.
     """
 
     iterations: int = 10
@@ -52,6 +55,7 @@ class SolverSettings:
     stiffness_mode: str = "paper"
     gravity: float = 0.0
     colouring: bool = False
+    partitions: int = 1
 
     def __post_init__(self):
         errors = self.problems()
@@ -60,7 +64,7 @@ class SolverSettings:
 
     def problems(self) -> list[tuple[str, str]]:
         out = []
-        for name in ("iterations", "substeps"):
+        for name in ("iterations", "substeps", "partitions"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 out.append((name, f"expected an integer >= 1, got {v!r}"))

@@ -5,9 +5,8 @@ length ``h = dt / substeps``: damp velocities (``damping`` per step, spread even
 over the substeps), predict ``p = x + h v`` for dynamic particles, move kinematic
 particles linearly toward ``control.kinematic_positions`` (reached exactly at the
 last substep), project all constraints ``iterations`` times in builder order
-(sequential Gauss-Seidel), set ``v = (p - x) / h``. Deterministic: sequential, no
-threads, fastmath limited to arcp/nsz (same bytes run to run), no allocation inside
-the compiled step.
+(sequential Gauss-Seidel), set ``v = (p - x) / h``. Deterministic: fastmath limited to
+arcp/nsz (same bytes run to run), no allocation inside the compiled step.
 
 With ``SolverSettings(colouring=True)`` the distance, bending and area constraints of
 each builder block are visited colour by colour (blocks keep their order, so deeper
@@ -19,6 +18,13 @@ block right after that takes each quad's matched triangle into the same pass (se
 :mod:`faceforge.pbd.constraints.quad`). Distance blocks run in vectorised batches of
 their colour runs too.
 
+With ``SolverSettings(partitions=k)``, ``k > 1``, the model is renumbered and regrouped into
+k particle-disjoint parts and a seam (:mod:`faceforge.pbd.partition`); each iteration
+projects the parts at once on numba's threads, each in block order, then the seam. Without
+usable threads (:mod:`faceforge.pbd.threads`) the same sweep runs on the calling thread: the
+result depends on k, never on the threads. The caller's State and Control keep the model's
+numbering; the step gathers and scatters them.
+
 Note: numba's on-disk cache does not track the constraint modules that ``_step``
 inlines; after editing one, delete ``faceforge/pbd/**/__pycache__/*.nb[ic]``.
 """
@@ -27,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step
+from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step, _take_rows
 from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
@@ -36,6 +42,8 @@ from faceforge.pbd.constraints.quad import (
     area_table, areas_first, match_quad_stretches, match_quad_triangles, stretch_table)
 from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
+from faceforge.pbd.partition import partitioned, row_cuts
+from faceforge.pbd.threads import threaded
 from faceforge.pbd.settings import SolverSettings
 
 
@@ -72,7 +80,8 @@ class Solver:
     def __init__(self, model: Model, settings: SolverSettings | None = None):
         self.model = model
         self.settings = settings or SolverSettings()
-        m, s = model, self.settings
+        s = self.settings
+        m = model
         for name in ("kinematic_indices", "distance_indices", "bending_indices", "area_indices",
                      "volume_triangles", "volume_particles", "position_indices",
                      "attachment_indices", "attachment_triangles"):
@@ -80,6 +89,23 @@ class Solver:
             if ids.size and (ids.min() < 0 or ids.max() >= m.particle_count):
                 raise ValueError(f"model.{name} holds particle ids outside "
                                  f"[0, {m.particle_count})")
+        # with partitions the kernels see the model renumbered and regrouped part by part
+        # (partition.partitioned); _segment: the part of each block row (0 with one part)
+        self._position_order = self._particle_order = None
+        self._segment = np.zeros(len(m.blocks), dtype=np.int64)
+        part = None
+        if s.partitions > 1:
+            split = partitioned(model, s.partitions)
+            m, self._segment, part = split.model, split.segment, split.part
+            order, slots = split.particle_order, split.position_order
+            if not np.array_equal(order, np.arange(len(order))):
+                self._particle_order = order
+                self._old_order = np.argsort(order)   # new id of each old particle
+                self._x = np.zeros((len(order), 3))
+                self._v = np.zeros((len(order), 3))
+            if not np.array_equal(slots, np.arange(len(slots))):
+                self._position_order = slots
+                self._targets = np.zeros((len(slots), 3))
         # every array handed to the compiled step is a private writable copy, so that all
         # models share one compiled signature (read-only arrays would type differently)
         self._w = _own(m.inv_mass)
@@ -93,8 +119,17 @@ class Solver:
         rows = [pair_triangles(m.volume_triangles[ts[j]:ts[j + 1]])
                 for j in range(m.volume_count)]
         row_start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
+        # per body, its rows (absolute) grouped by part, the seam last: a body joining parts
+        # sums its rows part by part at once (volume._solve_volume_parts); one group without
+        cuts = np.repeat(row_start[1:, None], s.partitions + 2, axis=1)
+        cuts[:, 0] = row_start[:-1]
+        if part is not None:
+            for j in range(m.volume_count):
+                order, cuts_j = row_cuts(rows[j], part, s.partitions)
+                rows[j] = rows[j][order]
+                cuts[j] = row_start[j] + cuts_j
         self._volume = tuple(_own(a) for a in (
-            m.volume_particle_start, m.volume_particles, row_start,
+            m.volume_particle_start, m.volume_particles, cuts,
             np.concatenate(rows) if rows else np.zeros((0, 4), dtype=np.int64),
             m.volume_reference_start, ref_global, m.volume_rest_volume))
         self._position = _own(m.position_indices)
@@ -140,7 +175,11 @@ class Solver:
         self._b_rest_t = np.ascontiguousarray(b_rest.T)
         self._a_w = np.ascontiguousarray(m.inv_mass[self._arrays["area"][0]].T)
         self._d_coef_t = np.ascontiguousarray(self._d_coef.T)
-        self._buf = np.zeros(BATCH_ROWS * BATCH)
+        self._bufs = np.zeros((s.partitions, BATCH_ROWS * BATCH))  # one scratch per part
+        self._seg = np.searchsorted(self._segment, np.arange(s.partitions + 2)).astype(np.int64)
+        # the parts on threads when numba can run them well (pbd.threads); else one after
+        # the other in the same order: _project's block order is parts, then the seam
+        self._threaded = s.partitions > 1 and threaded()
 
     def _fuse_quad_stretches(self) -> None:
         """Fold the stretches of each bending quad into a fused sweep (kind ``QUAD``).
@@ -156,7 +195,8 @@ class Solver:
         b_idx = self._arrays["bending"][0]
         drop = np.zeros(len(d_idx), dtype=bool)
         for r in range(1, len(blocks)):
-            if blocks[r, 0] != BENDING or blocks[r - 1, 0] != DISTANCE:
+            if (blocks[r, 0] != BENDING or blocks[r - 1, 0] != DISTANCE
+                    or self._segment[r] != self._segment[r - 1]):
                 continue
             (ds, de), (bs, be) = blocks[r - 1, 1:], blocks[r, 1:]
             match = match_quad_stretches(d_idx[ds:de], b_idx[bs:be])
@@ -178,14 +218,16 @@ class Solver:
             return None
         keep = ~drop
         new_index = np.concatenate([[0], np.cumsum(keep)])
-        rows = []
-        for k, start, stop in self._blocks:
+        rows, segment = [], []
+        for (k, start, stop), part in zip(self._blocks, self._segment):
             if k == code:
                 start, stop = new_index[start], new_index[stop]
                 if start == stop:
                     continue
             rows.append((k, start, stop))
+            segment.append(part)
         self._blocks = np.array(rows, dtype=np.int64).reshape(-1, 3)
+        self._segment = np.array(segment, dtype=np.int64)
         self._arrays[kind] = tuple(np.ascontiguousarray(a[keep]) for a in self._arrays[kind])
         self._runs[kind] = np.unique(new_index[self._runs[kind]])
         return keep
@@ -205,7 +247,8 @@ class Solver:
         drop = np.zeros(len(a_idx), dtype=bool)
         owner = np.full(len(b_idx), -1, dtype=np.int64)  # fused triangle of each quad
         for r in range(len(blocks) - 1):
-            if blocks[r, 0] != QUAD or blocks[r + 1, 0] != AREA:
+            if (blocks[r, 0] != QUAD or blocks[r + 1, 0] != AREA
+                    or self._segment[r] != self._segment[r + 1]):
                 continue
             (bs, be), (a_s, ae) = blocks[r, 1:], blocks[r + 1, 1:]
             match = match_quad_triangles(a_idx[a_s:ae], b_idx[bs:be])
@@ -248,19 +291,29 @@ class Solver:
         if kin.shape != (len(self._kin), 3):
             raise ValueError(f"control.kinematic_positions must have shape ({len(self._kin)}, 3), "
                              f"got {kin.shape}")
+        if self._position_order is not None:  # into the partitioned model's slot order
+            targets = _take_rows(targets, self._position_order, self._targets)
         if not dt > 0:
             raise ValueError(f"dt must be > 0, got {dt!r}")
         s = self.settings
         k = self._k
-        _step(state_in.positions, state_in.velocities, state_out.positions, state_out.velocities,
+        x_in, v_in, x_out, v_out = (state_in.positions, state_in.velocities,
+                                    state_out.positions, state_out.velocities)
+        if self._particle_order is not None:  # stepped in the partitioned model's numbering
+            x_in = x_out = _take_rows(x_in, self._particle_order, self._x)
+            v_in = v_out = _take_rows(v_in, self._particle_order, self._v)
+        _step(x_in, v_in, x_out, v_out,
               self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
               self._damp, dt / s.substeps, s.substeps, s.iterations,
-              s.stiffness_mode == "xpbd", self._blocks, self._lams,
+              s.stiffness_mode == "xpbd", self._blocks, self._seg, self._threaded, self._lams,
               *self._arrays["distance"], self._d_coef, self._runs["distance"], self._d_coef_t,
               *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
               self._q_stretch, self._q_area, self._q_area_stop,
-              *self._arrays["area"], self._runs["area"], self._a_w, self._buf,
+              *self._arrays["area"], self._runs["area"], self._a_w, self._bufs,
               *self._volume, *k["volume"], self._vol_g,
               self._position, targets, *k["position"],
               *self._attachment,
               *k["attachment"])
+        if self._particle_order is not None:
+            _take_rows(self._x, self._old_order, state_out.positions)
+            _take_rows(self._v, self._old_order, state_out.velocities)

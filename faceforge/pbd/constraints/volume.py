@@ -89,27 +89,9 @@ def pair_triangles(triangles: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(inline="always", **PBD_NUMBA)
-def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
-    """Project one volume constraint in place on ``x (n, 3)``.
-
-    particles : (p,) int global ids of the body; tris : (f, 4) int global ids, the rows
-    of :func:`pair_triangles` (pairs ``(a, b, c, d)``, singles ``(a, b, c, -1)``);
-    ref : (r,) int global ids of the reference particles (distinct); g : (n, 3) float
-    scratch indexed by particle, all zero on entry and left all zero (only the body's
-    rows are used). Returns the multiplier increment.
-
-    Passes: reference centroid, one over the triangles (volume and gradient; a pair of
-    triangles sharing an edge needs three cross products and 12 gradient updates instead
-    of six and 18: ``g_a += b x (c - d)``, ``g_b += (c - d) x a``, ``g_c += a x b``,
-    ``g_d -= a x b``, ``6 V += a . (b x (c - d))``, corners relative to r), one over
-    the particles (gradient sum and ``sum w |g|^2``), one over the reference particles
-    (the ``dV/dr`` share and its effect on the denominator), one update that also clears
-    ``g``.
-    """
-    npart = particles.shape[0]
+def _volume_centroid(x, ref):
+    """Centroid ``(rx, ry, rz)`` of the reference particles ``ref (r,)``, ``r > 0``."""
     nref = ref.shape[0]
-    if npart == 0 or nref == 0:
-        return 0.0
     rx = 0.0
     ry = 0.0
     rz = 0.0
@@ -118,9 +100,13 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
         rx += x[i, 0]
         ry += x[i, 1]
         rz += x[i, 2]
-    rx /= nref
-    ry /= nref
-    rz /= nref
+    return rx / nref, ry / nref, rz / nref
+
+
+@numba.njit(inline="always", **PBD_NUMBA)
+def _volume_rows(x, tris, rx, ry, rz, g):
+    """Six times the volume of the triangle rows ``tris (f, 4)`` (see :func:`_solve_volume`)
+    about the reference point ``(rx, ry, rz)``; adds their gradient terms into ``g``."""
     vol = 0.0
     for f in range(tris.shape[0]):
         ia = np.uint64(tris[f, 0])
@@ -164,6 +150,15 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
         g[ib, 0] += ey * az - ez * ay  # e x a (the gradient term of b)
         g[ib, 1] += ez * ax - ex * az
         g[ib, 2] += ex * ay - ey * ax
+    return vol
+
+
+@numba.njit(inline="always", **PBD_NUMBA)
+def _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd):
+    """The rest of :func:`_solve_volume` once ``vol`` (six times the volume) and the
+    triangle terms of ``g`` are summed: the ``dV/dr`` share, the projection, ``g`` cleared."""
+    npart = particles.shape[0]
+    nref = ref.shape[0]
     # dV/dr = -sum of the gradients, shared by the reference particles
     sx = 0.0
     sy = 0.0
@@ -219,15 +214,65 @@ def _solve_volume(x, w, particles, tris, ref, rest, k, c, lam, g, xpbd):
     return s
 
 
+@numba.njit(inline="always", **PBD_NUMBA)
+def _solve_volume(x, w, particles, tris, cuts, ref, rest, k, c, lam, g, xpbd):
+    """Project one volume constraint in place on ``x (n, 3)``.
+
+    particles : (p,) int global ids of the body; tris : (f, 4) int global ids, the rows
+    of :func:`pair_triangles` (pairs ``(a, b, c, d)``, singles ``(a, b, c, -1)``), the
+    body's being ``cuts[0]:cuts[-1]``; cuts : (s + 1,) int, the body's rows in s groups
+    (one, or one per part and the seam, :func:`faceforge.pbd.partition.row_cuts`), whose
+    sums are added in order (as :func:`_solve_volume_parts` adds them);
+    ref : (r,) int global ids of the reference particles (distinct); g : (n, 3) float
+    scratch indexed by particle, all zero on entry and left all zero (only the body's
+    rows are used). Returns the multiplier increment.
+
+    Passes: reference centroid, one over the triangles (volume and gradient; a pair of
+    triangles sharing an edge needs three cross products and 12 gradient updates instead
+    of six and 18: ``g_a += b x (c - d)``, ``g_b += (c - d) x a``, ``g_c += a x b``,
+    ``g_d -= a x b``, ``6 V += a . (b x (c - d))``, corners relative to r), one over
+    the particles (gradient sum and ``sum w |g|^2``), one over the reference particles
+    (the ``dV/dr`` share and its effect on the denominator), one update that also clears
+    ``g``.
+    """
+    if particles.shape[0] == 0 or ref.shape[0] == 0:
+        return 0.0
+    rx, ry, rz = _volume_centroid(x, ref)
+    vol = 0.0
+    for q in range(cuts.shape[0] - 1):
+        vol += _volume_rows(x, tris[cuts[q]:cuts[q + 1]], rx, ry, rz, g)
+    return _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd)
+
+
+@numba.njit(parallel=True, **PBD_NUMBA)
+def _solve_volume_parts(x, w, particles, tris, cuts, ref, rest, k, c, lam, g, xpbd, sums):
+    """:func:`_solve_volume` with the triangle rows grouped by part (:mod:`faceforge.pbd.partition`):
+    rows ``cuts[p]:cuts[p + 1]`` (``p < n``) touch only part ``p``'s particles and are summed
+    at once, one thread each (into ``sums[p, 0]``); the rows joining parts, ``cuts[n]:cuts[n + 1]``,
+    follow. The same projection as :func:`_solve_volume`, to the bit."""
+    if particles.shape[0] == 0 or ref.shape[0] == 0:
+        return 0.0
+    rx, ry, rz = _volume_centroid(x, ref)
+    n = cuts.shape[0] - 2
+    for p in numba.prange(n):
+        sums[p, 0] = _volume_rows(x, tris[cuts[p]:cuts[p + 1]], rx, ry, rz, g)
+    vol = 0.0
+    for p in range(n):
+        vol += sums[p, 0]
+    vol += _volume_rows(x, tris[cuts[n]:cuts[n + 1]], rx, ry, rz, g)
+    return _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd)
+
+
 @numba.njit(**PBD_NUMBA)
-def _project_volume(x, w, pstart, particles, tstart, tris, rstart, ref, rest, k, c, lam,
+def _project_volume(x, w, pstart, particles, cuts, tris, rstart, ref, rest, k, c, lam,
                     g, xpbd, start, stop):
-    """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``tstart``, ``rstart``;
-    all ids global; ``tris (f, 4)``: rows of :func:`pair_triangles`)."""
+    """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``rstart``; body
+    ``j``'s rows of ``tris (f, 4)`` (:func:`pair_triangles`) are ``cuts[j, 0]:cuts[j, -1]``,
+    grouped by ``cuts[j]``; all ids global)."""
     for j in range(start, stop):
-        lam[j] += _solve_volume(x, w, particles[pstart[j]:pstart[j + 1]],
-                                tris[tstart[j]:tstart[j + 1]], ref[rstart[j]:rstart[j + 1]],
-                                rest[j], k[j], c[j], lam[j], g, xpbd)
+        lam[j] += _solve_volume(x, w, particles[pstart[j]:pstart[j + 1]], tris, cuts[j],
+                                ref[rstart[j]:rstart[j + 1]], rest[j], k[j], c[j], lam[j], g,
+                                xpbd)
 
 
 def localize(triangles: np.ndarray):
@@ -253,7 +298,7 @@ def solve_volume(positions, inv_mass, triangles, rest_volume, stiffness) -> np.n
     rows = pair_triangles(tris)
     one = np.ones(1, dtype=np.float64)
     _project_volume(x, np.ascontiguousarray(inv_mass, dtype=np.float64),
-                    np.array([0, len(particles)]), particles, np.array([0, len(rows)]), rows,
+                    np.array([0, len(particles)]), particles, np.array([[0, len(rows)]]), rows,
                     np.array([0, len(ref)]), particles[ref], np.array([float(rest_volume)]),
                     one * float(stiffness), one * 0.0, one * 0.0, np.zeros_like(x), False, 0, 1)
     return x
