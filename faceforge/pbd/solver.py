@@ -179,7 +179,9 @@ class Solver:
         self._seg = np.searchsorted(self._segment, np.arange(s.partitions + 2)).astype(np.int64)
         # the parts on threads when numba can run them well (pbd.threads); else one after
         # the other in the same order: _project's block order is parts, then the seam
-        self._threaded = s.partitions > 1 and threaded()
+        # (not when one part holds every row: a small model, partition.MIN_SLAB_CONSTRAINTS)
+        busy = np.count_nonzero(np.diff(self._seg) > 0)
+        self._threaded = busy > 1 and threaded()
 
     def _fuse_quad_stretches(self) -> None:
         """Fold the stretches of each bending quad into a fused sweep (kind ``QUAD``).

@@ -67,6 +67,20 @@ def test_one_skin_is_cut_into_balanced_slabs_with_a_thin_seam(parts):
     assert 0 < seam < 0.1 * total
 
 
+def test_a_small_model_stays_in_one_part():
+    """Slabs cost a launch per iteration: below MIN_SLAB_CONSTRAINTS per part they do not pay."""
+    from faceforge.pbd.partition import MIN_SLAB_CONSTRAINTS
+
+    model = skin_model(2)
+    assert model.constraint_count < 2 * MIN_SLAB_CONSTRAINTS
+    assert set(particle_parts(model, 2).tolist()) == {-1, 0}
+    solver = Solver(model, SolverSettings(colouring=True, partitions=2))
+    assert not solver._threaded
+    big = skin_model(3)
+    assert big.constraint_count > 2 * MIN_SLAB_CONSTRAINTS
+    assert set(particle_parts(big, 2).tolist()) == {-1, 0, 1}
+
+
 def test_split_blocks_permutes_within_blocks_and_orders_rows_part_by_part():
     rng = np.random.default_rng(4)
     blocks = np.array([[0, 0, 50], [1, 0, 30], [0, 50, 80], [3, 0, 4]])
@@ -87,7 +101,7 @@ def test_split_blocks_permutes_within_blocks_and_orders_rows_part_by_part():
 
 
 def test_partitioned_model_is_the_model_renumbered():
-    model = skin_model(2)
+    model = skin_model(3)
     split = partitioned(model, 2)
     m, order = split.model, split.particle_order
     assert sorted(order) == list(range(model.particle_count))
@@ -145,7 +159,7 @@ def test_threaded_step_equals_the_one_thread_step_to_the_bit(parts, bodies):
 
 @pytest.mark.parametrize("parts", [2, 4])
 def test_partitioned_rest_state_is_a_fixed_point(parts):
-    model = skin_model(2)
+    model = skin_model(3)
     solver = Solver(model, SolverSettings(colouring=True, partitions=parts))
     state, control = model.state(), model.control()
     for _ in range(300):
@@ -174,7 +188,7 @@ def test_partitioned_step_converges_to_the_sequential_solution():
 def test_position_slots_keep_their_meaning():
     """Targets are given in the model's slot order; the partitioned solver regroups the
     position constraints and must pull each particle to its own slot's target."""
-    v, f = sphere(2)
+    v, f = sphere(3)
     b, info = skin_builder(v, f)
     ends = np.concatenate([np.eye(3), -np.eye(3)])[[0, 3, 1, 4, 2, 5, 3, 0, 4, 1, 5, 2]]
     pulled = b.add_particles(1.2 * ends, 1.0)    # +x, -x, ... then -x, +x, ...: whatever
