@@ -62,20 +62,23 @@ class BoneCollision:
             self._grids[name] = grid
             self._trees[name] = _TriangleTree(mesh.triangles)
 
-    def apply(self, positions: np.ndarray, transforms: dict) -> int:
+    def apply(self, positions: np.ndarray, transforms: dict, only=None) -> int:
         """Move the guarded vertices of ``positions`` ((n, 3) float, in place) that are inside a
         bone out of it. ``transforms``: name -> (4, 4) rigid transform of that bone from its rest
-        pose (missing: identity). Returns how many moved."""
+        pose (missing: identity). ``only`` (optional, (p,) int): test just these vertices (the
+        others were found outside with the bones where they are now and have not moved since).
+        Returns how many moved; :attr:`moved` holds their ids ((k,) int, repeats allowed)."""
         # every bone sees the positions as they came in (a vertex pushed out of one bone is not
         # re-tested against the other in the same pass)
         passes = []
         for name in self.names:
             t = np.asarray(transforms.get(name, np.eye(4)), dtype=np.float64)
             ids, rest, _, slack = self.guarded[name]
-            p = (positions[ids] - t[:3, 3]) @ t[:3, :3]          # into the bone's rest frame
-            maybe = np.flatnonzero(np.sum((p - rest) ** 2, axis=1) >= slack * slack)
-            passes.append((name, t, p[maybe], maybe))
-        moved = 0
+            rows = np.arange(len(ids)) if only is None else np.flatnonzero(np.isin(ids, only))
+            p = (positions[ids[rows]] - t[:3, 3]) @ t[:3, :3]    # into the bone's rest frame
+            maybe = rows[np.sum((p - rest[rows]) ** 2, axis=1) >= slack[rows] ** 2]
+            passes.append((name, t, p[np.searchsorted(rows, maybe)], maybe))
+        moved = []
         for name, t, p, maybe in passes:
             hit = self._grids[name].contains(p)
             if not hit.any():
@@ -86,8 +89,9 @@ class BoneCollision:
             d = np.linalg.norm(q - p[hit], axis=1)
             out = q + floor[k, None] * (q - p[hit]) / np.maximum(d, 1e-300)[:, None]
             positions[ids[k]] = out @ t[:3, :3].T + t[:3, 3]
-            moved += len(k)
-        return moved
+            moved.append(ids[k])
+        self.moved = np.concatenate(moved) if moved else np.zeros(0, dtype=np.int64)
+        return len(self.moved)
 
 
 class _TriangleTree:

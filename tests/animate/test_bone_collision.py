@@ -95,3 +95,23 @@ def test_pushed_out_of_one_bone_into_the_other_comes_out_on_the_next_pass():
     assert col.apply(x, {}) == 1
     assert not points_inside(x, up, fu).any() and not points_inside(x, low, fl).any()
     assert col.apply(x, {}) == 0
+
+
+def test_a_repeat_pass_tests_only_what_moved_and_finds_the_same():
+    """``only``: after a pass, a repeat need test just the vertices that moved since (the others
+    were found outside and the bones have not moved); it moves what a full pass moves."""
+    up, fu = box((0.0, 1.03, 0.0))
+    low, fl = box((0.0, -1.03, 0.0))
+    rest = np.array([[0.0, 0.0, 1.2], [0.5, 0.0, 1.2], [-0.5, 0.0, 1.2]])
+    bones = {"cranium": (up, fu), "mandible": (low, fl)}
+    x = np.array([[0.0, 0.05, 0.97], [0.5, 0.0, 1.2], [-0.5, 0.05, 0.97]])
+    full = BoneCollision(rest, bones, reach=0.5, keep=0.5)
+    part = BoneCollision(rest, bones, reach=0.5, keep=0.5)
+    a, b = x.copy(), x.copy()
+    assert full.apply(a, {}) == part.apply(b, {}) == 2
+    assert sorted(part.moved.tolist()) == [0, 2]
+    assert full.apply(a, {}) == part.apply(b, {}, part.moved) == 2   # into the other jaw and out
+    assert a.tobytes() == b.tobytes()
+    b[2] = [-0.5, 0.05, 0.97]                      # moved back in, but not listed: left alone
+    assert part.apply(b, {}, np.array([1])) == 0 and len(part.moved) == 0
+    assert part.apply(b, {}, np.array([2])) == 1 and part.moved.tolist() == [2]

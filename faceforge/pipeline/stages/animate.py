@@ -194,13 +194,16 @@ class BoundHead:
             # lips onto the other jaw's teeth, the cheek over the cheekbone) is put back out. A
             # vertex pushed out of one jaw's bone can land in the other's, and the orientation
             # pass that follows can move one sideways into a bone again: the collision looks
-            # again until it finds nothing (at most ``rounds`` times)
+            # again until it finds nothing (at most ``rounds`` times), after the first pass only
+            # at what the last two passes moved (the rest was outside and has not moved since)
             jaw = np.eye(4) if last[1] is None else last[1]
+            again = None
             for _ in range(max(rounds, 1) if collision is not None else 0):
-                if not collision.apply(x, {"mandible": jaw}):
+                if not collision.apply(x, {"mandible": jaw}, again):
                     break
-                if orientation is not None:
-                    orientation.apply(x)
+                again = collision.moved
+                if orientation is not None and orientation.apply(x, collision.moved):
+                    again = np.concatenate([again, orientation.touched])
             return skin.simulated()
 
         def reset():
