@@ -61,6 +61,7 @@ class BoneCollision:
             self.guarded[name] = (ids, rest[ids], keep * dist[ids], dist[ids])
             self._grids[name] = grid
             self._trees[name] = _TriangleTree(mesh.triangles)
+        self._all = {name: np.arange(len(self.guarded[name][0])) for name in self.names}
 
     def apply(self, positions: np.ndarray, transforms: dict, only=None) -> int:
         """Move the guarded vertices of ``positions`` ((n, 3) float, in place) that are inside a
@@ -72,12 +73,12 @@ class BoneCollision:
         # re-tested against the other in the same pass)
         passes = []
         for name in self.names:
-            t = np.asarray(transforms.get(name, np.eye(4)), dtype=np.float64)
+            t = np.asarray(transforms.get(name, _EYE4), dtype=np.float64)
             ids, rest, _, slack = self.guarded[name]
-            rows = np.arange(len(ids)) if only is None else np.flatnonzero(np.isin(ids, only))
-            p = (positions[ids[rows]] - t[:3, 3]) @ t[:3, :3]    # into the bone's rest frame
-            maybe = rows[np.sum((p - rest[rows]) ** 2, axis=1) >= slack[rows] ** 2]
-            passes.append((name, t, p[np.searchsorted(rows, maybe)], maybe))
+            rows = self._all[name] if only is None else np.flatnonzero(np.isin(ids, only))
+            p, kept = np.empty((len(rows), 3)), np.empty_like(rows)
+            maybe = kept[:_maybe_inside(positions, ids, rows, rest, slack, t, p, kept)]
+            passes.append((name, t, p[:len(maybe)], maybe))
         moved = []
         for name, t, p, maybe in passes:
             hit = self._grids[name].contains(p)
@@ -92,6 +93,37 @@ class BoneCollision:
             moved.append(ids[k])
         self.moved = np.concatenate(moved) if moved else np.zeros(0, dtype=np.int64)
         return len(self.moved)
+
+
+_EYE4 = np.eye(4)
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _maybe_inside(x, ids, rows, rest, slack, t, p, kept):  # pragma: no cover - numba
+    """The guarded ``rows`` whose vertex ``x[ids[row]]``, brought into the bone's rest frame
+    (``R^T (x - t)`` with ``t (4, 4)``), is at least ``slack[row]`` from where its rest position
+    went: writes them in order into ``kept[:k]`` and their rest-frame positions into ``p[:k]``
+    (``kept``, ``p``: as long as ``rows``); returns k."""
+    k = 0
+    for j in range(rows.shape[0]):
+        r = rows[j]
+        i = ids[r]
+        dx = x[i, 0] - t[0, 3]
+        dy = x[i, 1] - t[1, 3]
+        dz = x[i, 2] - t[2, 3]
+        px = dx * t[0, 0] + dy * t[1, 0] + dz * t[2, 0]
+        py = dx * t[0, 1] + dy * t[1, 1] + dz * t[2, 1]
+        pz = dx * t[0, 2] + dy * t[1, 2] + dz * t[2, 2]
+        ex = px - rest[r, 0]
+        ey = py - rest[r, 1]
+        ez = pz - rest[r, 2]
+        if ex * ex + ey * ey + ez * ez >= slack[r] * slack[r]:
+            p[k, 0] = px
+            p[k, 1] = py
+            p[k, 2] = pz
+            kept[k] = r
+            k += 1
+    return k
 
 
 class _TriangleTree:
