@@ -74,10 +74,29 @@ def test_compiled_closest_points_match_trimesh():
     sphere = trimesh.creation.icosphere(3)
     rng = np.random.default_rng(2)
     pts = rng.normal(size=(400, 3)) * rng.uniform(0.2, 1.8, (400, 1))
-    got = _TriangleTree(sphere.triangles).closest(pts)
+    got, face = _TriangleTree(sphere.triangles).closest(pts)
     want, dist, _ = trimesh.proximity.closest_point(sphere, pts)
     assert np.allclose(np.linalg.norm(got - pts, axis=1), dist, atol=1e-12)
     assert np.allclose(got, want, atol=1e-9)
+    # the triangle reported holds the closest point
+    _, on_face, _ = trimesh.proximity.closest_point(trimesh.Trimesh(
+        sphere.triangles[face].reshape(-1, 3), np.arange(3 * len(face)).reshape(-1, 3),
+        process=False), pts)
+    assert np.allclose(on_face, dist, atol=1e-12)
+
+
+def test_push_direction_does_not_amplify_round_off():
+    """Skin just inside a bone is put out along the closest triangle's normal: moving the
+    vertex by 1e-12 moves where it lands by no more than that (along ``q - p``, a vertex
+    1e-6 inside would move 1e-12 * floor / 1e-6, a million times more)."""
+    v, f = box((0.0, 0.0, 0.0))                  # the unit-ish box of the tests above
+    rest = np.array([[0.3, 0.2, 1.5]])
+    col = BoneCollision(rest, {"cranium": (v, f)}, reach=1.0, keep=0.5)
+    x = np.array([[0.3, 0.2, 1.0 - 1e-6]])
+    a, b = x.copy(), x + [1e-12, -1e-12, 0.0]
+    assert col.apply(a, {}) == col.apply(b, {}) == 1
+    assert np.abs(a - b).max() <= 2e-12
+    np.testing.assert_allclose(a[0, 2], 1.0 + 0.5 * 0.5, atol=1e-12)   # floor: keep * d0
 
 
 def test_pushed_out_of_one_bone_into_the_other_comes_out_on_the_next_pass():
