@@ -72,10 +72,13 @@ class BoneCollision:
         # every bone sees the positions as they came in (a vertex pushed out of one bone is not
         # re-tested against the other in the same pass)
         passes = []
+        if only is not None:
+            listed = np.zeros(len(positions), dtype=bool)
+            listed[np.asarray(only, dtype=np.int64)] = True
         for name in self.names:
             t = np.asarray(transforms.get(name, _EYE4), dtype=np.float64)
             ids, rest, _, slack = self.guarded[name]
-            rows = self._all[name] if only is None else np.flatnonzero(np.isin(ids, only))
+            rows = self._all[name] if only is None else np.flatnonzero(listed[ids])
             p, kept = np.empty((len(rows), 3)), np.empty_like(rows)
             maybe = kept[:_maybe_inside(positions, ids, rows, rest, slack, t, p, kept)]
             passes.append((name, t, p[:len(maybe)], maybe))
@@ -163,7 +166,9 @@ class _TriangleTree:
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(q (k, 3), face (k,) int)``: the closest points of the soup to ``points (k, 3)`` and
         the triangles holding them (compiled, :func:`_closest_in`; the tests compare q with
-        trimesh's)."""
+        trimesh's). (Trying each point's 16 nearest centroids first, complete when the 16th is
+        ``reach`` beyond the best, was dropped: on the MakeHuman skull ``reach`` is 0.1 of a
+        2.7-unit head and 1,121 of 1,128 points of a joy playback needed the full search.)"""
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         near, _ = self.tree.query(points)
         lists = self.tree.query_ball_point(points, near + self.reach)
