@@ -200,3 +200,30 @@ def test_saturated_rows_are_those_whose_muscles_are_all_at_full_contraction():
             for f, s in ((1.0, False), (0.95, False), (0.5, True))]
     summary = summarize(rows)["all"]
     assert (summary["within_10_percent"], summary["saturated"]) == (2, 1)
+
+
+def test_a_side_that_moves_the_fdp_the_wrong_way_gets_zero_drive():
+    """Both signs of the entry contract ``dep``, which lowers the corner: negative requests are
+    met, positive ones are unreachable and must leave the skin at rest (drive 0), not take the
+    negative side's slope through (0, 0) and lower the corner they were to raise."""
+    from faceforge.anatomy.fap_mapping import response_curve
+
+    m = mapping_from_dict({**MAPPING, "entries": [
+        {"fap": [59, 12], "name": "raise_l_cornerlip", "fapu": "MNS",
+         "positive": {"dep": 0.004}, "negative": {"dep": 0.004}}]})
+    cal, rows = calibrate_mapping(m, synthetic_head, np.zeros((5, 3)), PROBES, {59: [-60.0, 60.0]})
+    by_req = {r.requested: r for r in rows if r.fap == 59}
+    assert by_req[-60.0].error < 0.01
+    assert np.isnan(by_req[60.0].drive) and by_req[60.0].achieved == pytest.approx(0.0, abs=1e-9)
+    assert response_curve(cal.entries[0].response, np.array([30.0, 60.0, 120.0])) == pytest.approx(0.0)
+
+
+def test_drive_cap_reaches_full_contraction():
+    from faceforge.anatomy.calibrate import drive_cap
+
+    e = mapping_from_dict({**MAPPING, "entries": [
+        {"fap": 39, "name": "puff_l_cheek", "fapu": "ES", "positive": {"zyg": 0.001, "front": 0.0005},
+         "negative": {"dep": 0.01}}]}).entries[0]
+    cap = drive_cap(e, np.array([-80.0, -40.0, 40.0, 80.0]), 20.0, 1.0)
+    # positive: 1 / 0.0005 = 2000 > 20 x 80; negative: 20 x |request| > 1 / 0.01
+    assert cap == pytest.approx([1600.0, 800.0, 2000.0, 2000.0])
