@@ -151,6 +151,27 @@ def saturated(entry, drive: float, max_contraction: float) -> bool:
     return all(g * abs(drive) >= max_contraction for g in muscles.values())
 
 
+def best_sampled(drives: np.ndarray, achieved: np.ndarray, requested: np.ndarray,
+                 current: np.ndarray, tolerance: float = 0.005) -> np.ndarray:
+    """The sampled drive that came closest to each request, among those of ``current``'s sign.
+
+    drives, achieved : (k,) float, every drive tried and the FDP displacement it gave (FAPU)
+    requested, current : (r,) float, the requests and their drives so far (FAPU)
+    Of the samples whose error is within ``tolerance`` x |request| of the smallest, the least
+    |drive| wins (a saturated plateau: no more contraction than needed). A request with no
+    sample of its drive's sign keeps ``current``. Returns (r,) float drives.
+    """
+    out = np.array(current, dtype=float)
+    for j, (r, d) in enumerate(zip(requested, current)):
+        same = np.flatnonzero((np.sign(drives) == np.sign(d)) & (drives != 0.0))
+        if len(same) == 0:
+            continue
+        err = np.abs(achieved[same] - r)
+        near = same[err <= err.min() + tolerance * abs(r)]
+        out[j] = drives[near[np.argmin(np.abs(drives[near]))]]
+    return out
+
+
 def drive_cap(entry, requested: np.ndarray, max_drive: float, max_contraction: float) -> np.ndarray:
     """Largest |drive| (FAPU) calibration may ask of ``entry`` for each of ``requested`` (r,) FAPU.
 
@@ -245,6 +266,7 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         drive = np.clip(drive, -cap, cap)
         d_all, a_all = list(drives), list(sampled)
         todo = ok.copy()
+        met = np.zeros(len(req), dtype=bool)
         for _ in range(refine + 1):
             if not np.any(todo):
                 break
@@ -253,7 +275,8 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
             a_all += list(got)
             # a value within ``tolerance`` of its request keeps its drive; the others take a
             # secant step on the two nearest samples around them
-            left = np.flatnonzero(todo)[np.abs(got - req[todo]) > tolerance * np.abs(req[todo])]
+            met[todo] = np.abs(got - req[todo]) <= tolerance * np.abs(req[todo])
+            left = np.flatnonzero(todo)[~met[todo]]
             todo[:] = False
             if len(left) == 0:
                 break
@@ -263,6 +286,12 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
             drive[left] = step
             ok = np.isfinite(drive)
             todo[left[moved & np.isfinite(step)]] = True
+        # a request left unmet keeps the best drive measured for it rather than the last secant
+        # guess: where the entry's muscles work against each other (an assisting muscle that
+        # moves this FDP the other way and wins once the lead saturates) the curve turns back,
+        # and the guesses run on to the drive cap, past the peak, to a worse pose
+        drive[ok & ~met] = best_sampled(np.asarray(d_all), np.asarray(a_all), req[ok & ~met],
+                                        drive[ok & ~met], tolerance)
         # a request the entry's muscles never move the FDP towards (NaN drive) gets a zero-drive
         # knot: without one, the response would extrapolate the other side's slope through (0, 0)
         # and drive the muscles for that request after all, moving the FDP the wrong way (further
