@@ -227,3 +227,16 @@ def test_drive_cap_reaches_full_contraction():
     cap = drive_cap(e, np.array([-80.0, -40.0, 40.0, 80.0]), 20.0, 1.0)
     # positive: 1 / 0.0005 = 2000 > 20 x 80; negative: 20 x |request| > 1 / 0.01
     assert cap == pytest.approx([1600.0, 800.0, 2000.0, 2000.0])
+
+
+def test_best_sampled_keeps_the_peak_of_a_curve_that_turns_back():
+    from faceforge.anatomy.calibrate import best_sampled
+
+    drives = np.array([-50.0, 100.0, 300.0, 600.0, 1200.0, 1500.0, 1500.0])
+    achieved = np.array([-20.0, 20.0, 40.0, 30.0, 10.0, 10.0, 10.0])   # peaks at 300, then falls
+    out = best_sampled(drives, achieved, np.array([75.0, 150.0, -100.0]),
+                       np.array([1500.0, 1500.0, -80.0]))
+    assert out == pytest.approx([300.0, 300.0, -50.0])
+    # a saturated plateau: the least drive among (near-)equal results
+    assert best_sampled(np.array([500.0, 900.0, 1000.0]), np.array([60.0, 60.0, 60.0]),
+                        np.array([75.0]), np.array([1000.0])) == pytest.approx([500.0])
