@@ -151,6 +151,48 @@ def saturated(entry, drive: float, max_contraction: float) -> bool:
     return all(g * abs(drive) >= max_contraction for g in muscles.values())
 
 
+def best_sampled(drives: np.ndarray, achieved: np.ndarray, requested: np.ndarray,
+                 current: np.ndarray, tolerance: float = 0.005) -> np.ndarray:
+    """The sampled drive that came closest to each request, among those of ``current``'s sign.
+
+    drives, achieved : (k,) float, every drive tried and the FDP displacement it gave (FAPU)
+    requested, current : (r,) float, the requests and their drives so far (FAPU)
+    Of the samples whose error is within ``tolerance`` x |request| of the smallest, the least
+    |drive| wins (a saturated plateau: no more contraction than needed). A request with no
+    sample of its drive's sign keeps ``current``. Returns (r,) float drives.
+    """
+    out = np.array(current, dtype=float)
+    for j, (r, d) in enumerate(zip(requested, current)):
+        same = np.flatnonzero((np.sign(drives) == np.sign(d)) & (drives != 0.0))
+        if len(same) == 0:
+            continue
+        err = np.abs(achieved[same] - r)
+        near = same[err <= err.min() + tolerance * abs(r)]
+        out[j] = drives[near[np.argmin(np.abs(drives[near]))]]
+    return out
+
+
+def drive_cap(entry, requested: np.ndarray, max_drive: float, max_contraction: float) -> np.ndarray:
+    """Largest |drive| (FAPU) calibration may ask of ``entry`` for each of ``requested`` (r,) FAPU.
+
+    ``max_drive * |requested|`` (an FDP that barely moves must not ask for absurd drives), but
+    never less than the drive that puts every muscle of the request's sign (``entry.positive``
+    for requested > 0, else ``entry.negative``) at ``max_contraction``, i.e.
+    ``max_contraction / min(gain)``: with small first-guess gains (e.g. 0.0005 per FAPU) the
+    plain cap stopped the fit with some muscles far below full contraction (c = 0.4), so the
+    report showed a shortfall the rig does not have. Beyond that drive nothing moves
+    (:func:`saturated`), so the larger cap costs no stability. Returns (r,) float.
+    """
+    requested = np.asarray(requested, dtype=float)
+    cap = max_drive * np.abs(requested)
+    for sense, muscles in ((1.0, entry.positive), (-1.0, entry.negative)):
+        if muscles:
+            full = max_contraction / min(muscles.values())
+            sel = np.sign(requested) == sense
+            cap[sel] = np.maximum(cap[sel], full)
+    return cap
+
+
 def _frames(entry_faps, values: np.ndarray) -> np.ndarray:
     f = np.zeros((len(values), N_FAPS))
     for fap in entry_faps:
@@ -178,7 +220,8 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         of the request, or when its drive no longer changes (held at a saturated curve's knee or
         at ``max_drive``)
     sample_scale : drives sampled for the first curve, as fractions of max |requested|
-    max_drive : cap on |drive| / |requested|
+    max_drive : cap on |drive| / |requested|, raised where the entry's muscles need more drive to
+        reach full contraction (:func:`drive_cap`)
     tolerance : relative error at which a requested value counts as met (default 0.5 %)
     progress : optional callable wrapping an iterable (e.g. tqdm)
 
@@ -219,9 +262,11 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         ok = np.isfinite(drive)
         # an FDP that barely moves would ask for absurd drives: cap them (contractions
         # and jaw limits saturate long before, so the report shows the shortfall)
-        drive = np.clip(drive, -max_drive * np.abs(req), max_drive * np.abs(req))
+        cap = drive_cap(entry, req, max_drive, calibrated.max_contraction)
+        drive = np.clip(drive, -cap, cap)
         d_all, a_all = list(drives), list(sampled)
         todo = ok.copy()
+        met = np.zeros(len(req), dtype=bool)
         for _ in range(refine + 1):
             if not np.any(todo):
                 break
@@ -230,19 +275,28 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
             a_all += list(got)
             # a value within ``tolerance`` of its request keeps its drive; the others take a
             # secant step on the two nearest samples around them
-            left = np.flatnonzero(todo)[np.abs(got - req[todo]) > tolerance * np.abs(req[todo])]
+            met[todo] = np.abs(got - req[todo]) <= tolerance * np.abs(req[todo])
+            left = np.flatnonzero(todo)[~met[todo]]
             todo[:] = False
             if len(left) == 0:
                 break
             step = invert_monotone(np.asarray(d_all), np.asarray(a_all), req[left])
-            step = np.clip(step, -max_drive * np.abs(req[left]), max_drive * np.abs(req[left]))
+            step = np.clip(step, -cap[left], cap[left])
             moved = ~np.isclose(step, drive[left], rtol=1e-9, atol=0.0)   # a held drive: saturated
             drive[left] = step
             ok = np.isfinite(drive)
             todo[left[moved & np.isfinite(step)]] = True
-        knots = np.column_stack([req[ok], drive[ok]]) if np.any(ok) else None
-        if knots is not None:
-            knots = _monotone_knots(knots)
+        # a request left unmet keeps the best drive measured for it rather than the last secant
+        # guess: where the entry's muscles work against each other (an assisting muscle that
+        # moves this FDP the other way and wins once the lead saturates) the curve turns back,
+        # and the guesses run on to the drive cap, past the peak, to a worse pose
+        drive[ok & ~met] = best_sampled(np.asarray(d_all), np.asarray(a_all), req[ok & ~met],
+                                        drive[ok & ~met], tolerance)
+        # a request the entry's muscles never move the FDP towards (NaN drive) gets a zero-drive
+        # knot: without one, the response would extrapolate the other side's slope through (0, 0)
+        # and drive the muscles for that request after all, moving the FDP the wrong way (further
+        # than uncalibrated); with it, the FDP stays at rest (100 % error, honestly unreachable)
+        knots = _monotone_knots(np.column_stack([req, np.where(ok, drive, 0.0)]))
         calibrated = with_entry(calibrated, idx, response=knots)
         # 4. verify with the calibrated response, every FAP of the entry on its own probe
         #    (all FAPs of an entry get the same values: one simulation serves every probe)

@@ -200,3 +200,43 @@ def test_saturated_rows_are_those_whose_muscles_are_all_at_full_contraction():
             for f, s in ((1.0, False), (0.95, False), (0.5, True))]
     summary = summarize(rows)["all"]
     assert (summary["within_10_percent"], summary["saturated"]) == (2, 1)
+
+
+def test_a_side_that_moves_the_fdp_the_wrong_way_gets_zero_drive():
+    """Both signs of the entry contract ``dep``, which lowers the corner: negative requests are
+    met, positive ones are unreachable and must leave the skin at rest (drive 0), not take the
+    negative side's slope through (0, 0) and lower the corner they were to raise."""
+    from faceforge.anatomy.fap_mapping import response_curve
+
+    m = mapping_from_dict({**MAPPING, "entries": [
+        {"fap": [59, 12], "name": "raise_l_cornerlip", "fapu": "MNS",
+         "positive": {"dep": 0.004}, "negative": {"dep": 0.004}}]})
+    cal, rows = calibrate_mapping(m, synthetic_head, np.zeros((5, 3)), PROBES, {59: [-60.0, 60.0]})
+    by_req = {r.requested: r for r in rows if r.fap == 59}
+    assert by_req[-60.0].error < 0.01
+    assert np.isnan(by_req[60.0].drive) and by_req[60.0].achieved == pytest.approx(0.0, abs=1e-9)
+    assert response_curve(cal.entries[0].response, np.array([30.0, 60.0, 120.0])) == pytest.approx(0.0)
+
+
+def test_drive_cap_reaches_full_contraction():
+    from faceforge.anatomy.calibrate import drive_cap
+
+    e = mapping_from_dict({**MAPPING, "entries": [
+        {"fap": 39, "name": "puff_l_cheek", "fapu": "ES", "positive": {"zyg": 0.001, "front": 0.0005},
+         "negative": {"dep": 0.01}}]}).entries[0]
+    cap = drive_cap(e, np.array([-80.0, -40.0, 40.0, 80.0]), 20.0, 1.0)
+    # positive: 1 / 0.0005 = 2000 > 20 x 80; negative: 20 x |request| > 1 / 0.01
+    assert cap == pytest.approx([1600.0, 800.0, 2000.0, 2000.0])
+
+
+def test_best_sampled_keeps_the_peak_of_a_curve_that_turns_back():
+    from faceforge.anatomy.calibrate import best_sampled
+
+    drives = np.array([-50.0, 100.0, 300.0, 600.0, 1200.0, 1500.0, 1500.0])
+    achieved = np.array([-20.0, 20.0, 40.0, 30.0, 10.0, 10.0, 10.0])   # peaks at 300, then falls
+    out = best_sampled(drives, achieved, np.array([75.0, 150.0, -100.0]),
+                       np.array([1500.0, 1500.0, -80.0]))
+    assert out == pytest.approx([300.0, 300.0, -50.0])
+    # a saturated plateau: the least drive among (near-)equal results
+    assert best_sampled(np.array([500.0, 900.0, 1000.0]), np.array([60.0, 60.0, 60.0]),
+                        np.array([75.0]), np.array([1000.0])) == pytest.approx([500.0])
