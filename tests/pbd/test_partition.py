@@ -243,3 +243,25 @@ def test_partitions_setting_is_checked():
     with pytest.raises(ConfigError, match="solver.partitions"):
         SolverSettings.from_config({"partitions": 1.5})
     assert SolverSettings.from_config({"partitions": 3}).partitions == 3
+
+
+@pytest.mark.parametrize("env", [{"NUMBA_NUM_THREADS": "1"}, {"NUMBA_THREADING_LAYER": "workqueue"},
+                                 {}])
+def test_threads_are_used_only_where_numba_runs_them_well(env):
+    """One numba thread, or numba's own workqueue (a launch costs more than a part), runs the
+    parts on the calling thread; TBB (installed with faceforge on x86-64) or OpenMP threads."""
+    import os
+    import platform
+    import subprocess
+    import sys
+
+    code = ("from faceforge.pbd.threads import threaded, load_tbb; import numba; "
+            "print(threaded(), load_tbb(), numba.config.NUMBA_NUM_THREADS)")
+    run_env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")} | env
+    out = subprocess.run([sys.executable, "-c", code], env=run_env, capture_output=True,
+                         text=True, check=True).stdout.split()
+    threads = int(out[2])
+    if env or threads < 2:
+        assert out[0] == "False"
+    elif platform.machine() in ("x86_64", "AMD64"):   # pip's tbb wheel, found by load_tbb
+        assert out[0] == out[1] == "True"
