@@ -163,12 +163,16 @@ def constraint_groups(columns: list[np.ndarray], part: np.ndarray, parts: int) -
 
 
 def body_groups(model: Model, part: np.ndarray, parts: int) -> np.ndarray:
-    """Group ``(b,) int64`` of each volume body, as :func:`constraint_groups`."""
+    """Group ``(b,) int64`` of each volume body, as :func:`constraint_groups`, except that a
+    body holding a particle of inverse mass 0 goes to the seam: the volume projection sums a
+    gradient into scratch rows of every particle of the body, so two bodies sharing such a
+    particle in two parts would add into one row at the same time."""
     out = np.zeros(model.volume_count, dtype=np.int64)
     for j in range(model.volume_count):
         p = part[body_particles(model, j)]
-        p = np.unique(p[p >= 0])
-        out[j] = parts if len(p) > 1 else (p[0] if len(p) else 0)
+        moving = np.unique(p[p >= 0])
+        out[j] = parts if len(moving) > 1 or len(moving) < len(np.unique(p)) else (
+            moving[0] if len(moving) else 0)
     return out
 
 
@@ -285,7 +289,9 @@ def row_cuts(rows: np.ndarray, part: np.ndarray, parts: int):
     are part ``p``'s (``p == parts``: the rows joining parts), in their old order.
     """
     rows = np.asarray(rows, dtype=np.int64)
-    labels = np.append(part, -1)          # index -1 (no particle) reads the appended -1
+    # index -1 (no particle) reads the appended -1; a row with a particle of inverse mass 0
+    # (part -1) joins the seam, as in body_groups
+    labels = np.append(np.where(part < 0, parts, part), -1)
     group = constraint_groups(list(rows.T), labels, parts)
     order = np.argsort(group, kind="stable").astype(np.int64)
     return order, np.searchsorted(group[order], np.arange(parts + 2)).astype(np.int64)

@@ -43,8 +43,8 @@ from faceforge.pbd.constraints.quad import (
 from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.partition import partitioned, row_cuts
-from faceforge.pbd.threads import threaded
 from faceforge.pbd.settings import SolverSettings
+from faceforge.pbd.threads import threaded
 
 
 def _own(a: np.ndarray) -> np.ndarray:
@@ -80,8 +80,7 @@ class Solver:
     def __init__(self, model: Model, settings: SolverSettings | None = None):
         self.model = model
         self.settings = settings or SolverSettings()
-        s = self.settings
-        m = model
+        m, s = model, self.settings
         for name in ("kinematic_indices", "distance_indices", "bending_indices", "area_indices",
                      "volume_triangles", "volume_particles", "position_indices",
                      "attachment_indices", "attachment_triangles"):

@@ -265,3 +265,27 @@ def test_threads_are_used_only_where_numba_runs_them_well(env):
         assert out[0] == "False"
     elif platform.machine() in ("x86_64", "AMD64"):   # pip's tbb wheel, found by load_tbb
         assert out[0] == out[1] == "True"
+
+
+def test_bodies_sharing_a_kinematic_particle_are_projected_in_the_seam():
+    """A volume projection sums a gradient for every particle of its body, kinematic ones
+    too: two bodies in two parts sharing one would add into the same row at once."""
+    from faceforge.pbd.partition import body_groups
+
+    b = ModelBuilder()
+    v, f = sphere(3, radius=0.5)
+    pin = b.add_particles(v[:1], 0.0)                    # one kinematic particle, shared
+    for i in range(2):
+        first = b.add_particles(v + [1.5 * i, 0.0, 0.0], 1.0)
+        tri = f + first
+        tri[f == 0] = pin
+        b.add_distance(edges(f) + first, 0.5)
+        b.add_bending(adjacent_quads(f) + first, 0.3)
+        b.add_volume(tri, 1.0)
+    model = b.finalize()
+    part = particle_parts(model, 2)
+    assert len(np.unique(part[part >= 0])) == 2
+    assert body_groups(model, part, 2).tolist() == [2, 2]
+    one = run(solver_for(model, 2, False), model)
+    threaded = run(solver_for(model, 2, True), model)
+    assert threaded.positions.tobytes() == one.positions.tobytes()
