@@ -11,7 +11,9 @@ It is still a sequential Gauss-Seidel sweep, in yet another order (as colouring 
 converged solution is the same, the rounding and the per-iteration progress differ.
 
 Particles of inverse mass 0 are never moved by a projection, so any part may read them;
-they belong to no part and join nothing.
+they belong to no part and join nothing, except in a volume body, which sums a gradient
+for each of its particles into scratch: a body holding one is projected in the seam
+(:func:`body_groups`).
 
 How the parts are cut (:func:`particle_parts`): whole connected bodies when they balance
 (the muscles of a layer: no seam at all), else slabs of the rest shape, bisected

@@ -52,8 +52,9 @@ def _layer_available(name: str) -> bool:
 @functools.cache
 def threaded() -> bool:
     """True when partitioned steps run their parts on threads: more than one thread is
-    allowed (``NUMBA_NUM_THREADS``; ``faceforge batch`` gives each worker its share of the cores) and numba's
-    threading layer (``NUMBA_THREADING_LAYER``, default TBB then OpenMP) is TBB or OpenMP."""
+    allowed (``NUMBA_NUM_THREADS``; ``faceforge batch`` gives each worker its share of the
+    cores) and numba's threading layer (``NUMBA_THREADING_LAYER``, default TBB then OpenMP)
+    is TBB or OpenMP."""
     import numba
 
     if numba.config.NUMBA_NUM_THREADS < 2:
