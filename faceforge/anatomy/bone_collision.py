@@ -108,7 +108,7 @@ def _outward(v: np.ndarray, normal: np.ndarray) -> np.ndarray:
     1e-12 x floor / 1e-6 further off); the normal does not move with p. A degenerate triangle
     falls back to ``v / |v|``. (Calibrated MakeHuman joy still grows 1e-13 of round-off to
     ~1e-2 within 20 frames with either direction: the collision and orientation passes
-    together do that; with either of them off it stays below 1e-7.)"""
+    together do that; with either of them off it stays below 1e-6.)"""
     side = np.einsum("ij,ij->i", normal, v)
     out = np.where(side[:, None] < 0.0, -normal, normal)
     flat = ~np.any(normal != 0.0, axis=1)
