@@ -227,6 +227,11 @@ class MusculoskeletalSystem:
         return dict(self._muscles)
 
     @property
+    def threads(self) -> int:
+        """Most threads any muscle layer's step runs on (``pbd.Solver.threads``)."""
+        return max((layer.solver.threads for layer in self._layers), default=1)
+
+    @property
     def layer_indices(self) -> tuple[int, ...]:
         return tuple(layer.index for layer in self._layers)
 

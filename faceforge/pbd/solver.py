@@ -44,7 +44,7 @@ from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.partition import partitioned, row_cuts
 from faceforge.pbd.settings import SolverSettings
-from faceforge.pbd.threads import threaded
+from faceforge.pbd.threads import threaded, threads_used
 
 
 def _own(a: np.ndarray) -> np.ndarray:
@@ -181,6 +181,12 @@ class Solver:
         # (not when one part holds every row: a small model, partition.MIN_SLAB_CONSTRAINTS)
         busy = np.count_nonzero(np.diff(self._seg) > 0)
         self._threaded = busy > 1 and threaded()
+
+    @property
+    def threads(self) -> int:
+        """How many threads a step runs on (1 without partitions, for a model too small to
+        cut, or without usable threads: :mod:`faceforge.pbd.threads`)."""
+        return threads_used(self.settings.partitions) if self._threaded else 1
 
     def _fuse_quad_stretches(self) -> None:
         """Fold the stretches of each bending quad into a fused sweep (kind ``QUAD``).

@@ -65,3 +65,12 @@ def threaded() -> bool:
     if wanted == "omp":
         return _layer_available("omp")
     return load_tbb() or (wanted != "safe" and _layer_available("omp"))
+
+
+def threads_used(partitions: int) -> int:
+    """How many threads a step with ``partitions`` parts runs on (1: the calling thread)."""
+    if partitions < 2 or not threaded():
+        return 1
+    import numba
+
+    return min(int(partitions), int(numba.get_num_threads()))

@@ -89,6 +89,8 @@ def test_joy_plays_clean_in_user_vertex_order(joy):
     assert report["max_contraction"] > 0.1 and report["max_jaw"][0] > 0.0
     # the Xface joy file carries eyelid/eyeball/head FAPs that this head cannot play
     assert {19, 23, 48} <= set(report["unmapped_faps"])
+    from faceforge.pbd.threads import threads_used
+    assert report["threads"] == threads_used(2)   # solver.partitions: 2; its muscle layers are cut
     # frame 0 of joy.fap is nearly neutral; the peak moves the skin
     assert np.abs(d["frames"][0] - v).max() < 0.02
     assert np.abs(d["frames"] - v).max() > 0.02

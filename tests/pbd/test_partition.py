@@ -255,12 +255,14 @@ def test_threads_are_used_only_where_numba_runs_them_well(env):
     import subprocess
     import sys
 
-    code = ("from faceforge.pbd.threads import threaded, load_tbb; import numba; "
-            "print(threaded(), load_tbb(), numba.config.NUMBA_NUM_THREADS)")
+    code = ("from faceforge.pbd.threads import threaded, threads_used, load_tbb; import numba; "
+            "print(threaded(), load_tbb(), numba.config.NUMBA_NUM_THREADS, threads_used(2), "
+            "threads_used(1))")
     run_env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")} | env
     out = subprocess.run([sys.executable, "-c", code], env=run_env, capture_output=True,
                          text=True, check=True).stdout.split()
     threads = int(out[2])
+    assert out[4] == "1" and out[3] == ("2" if out[0] == "True" else "1")
     if env or threads < 2:
         assert out[0] == "False"
     elif platform.machine() in ("x86_64", "AMD64"):   # pip's tbb wheel, found by load_tbb
@@ -289,3 +291,12 @@ def test_bodies_sharing_a_kinematic_particle_are_projected_in_the_seam():
     one = run(solver_for(model, 2, False), model)
     threaded = run(solver_for(model, 2, True), model)
     assert threaded.positions.tobytes() == one.positions.tobytes()
+
+
+def test_solver_reports_the_threads_its_step_runs_on():
+    from faceforge.pbd.threads import threads_used
+
+    settings = SolverSettings(colouring=True, partitions=2)
+    assert Solver(skin_model(3), settings).threads == threads_used(2)
+    assert Solver(skin_model(2), settings).threads == 1          # too small to cut
+    assert Solver(skin_model(3), SolverSettings(colouring=True)).threads == 1

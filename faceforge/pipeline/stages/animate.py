@@ -388,6 +388,7 @@ def run_animate(ctx):
         raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
                          "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
     checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
+    threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     user = head.to_user(frames).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
              muscle_names=np.asarray(head.muscle_names, dtype=str), jaw=jaw)
@@ -395,11 +396,11 @@ def run_animate(ctx):
         "fap": str(ctx.param("fap")), "frames": track.n_frames, "fps": track.fps,
         "mapping": mapping_path, "unmapped_faps": unmapped,
         "user_vertices": int(user.shape[1]), "working_vertices": int(len(head.rest)),
-        "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict(),
+        "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
         "max_contraction": float(c.max()) if c.size else 0.0,
         "max_jaw": jaw.max(axis=0).tolist() if len(jaw) else [0, 0, 0]})
-    ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame; checks: "
-            f"{'ok' if checks.ok else checks.as_dict()}")
+    ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame on {threads} thread"
+            f"{'s' if threads > 1 else ''}; checks: {'ok' if checks.ok else checks.as_dict()}")
 
 
 ANIMATE = register_stage(Stage(
