@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
-from faceforge.pbd.model import VOLUME
 from faceforge.pbd.partition import (
     constraint_groups, constraint_particles, particle_parts, particle_work, partitioned,
     split_blocks)
@@ -34,10 +33,6 @@ def bodies_model(sizes=(2, 1, 1, 2, 0, 1)):
 def skin_model(sub=3):
     v, f = sphere(sub)
     return skin_builder(v, f)[0].finalize()
-
-
-def seam_rows(split):
-    return int(np.count_nonzero(split.segment == split.segment.max()))
 
 
 def test_separate_bodies_stay_whole_and_nothing_joins_the_parts():

@@ -329,7 +329,7 @@ def track_controls(track, mapping, head):
     """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values)."""
     import numpy as np
 
-    from faceforge.anatomy.fap_mapping import expression_faps, fap_controls
+    from faceforge.anatomy.fap_mapping import expression_faps
 
     faps = np.nan_to_num(np.asarray(track.values, dtype=float))
     faps[:, :2] = 0.0
@@ -455,8 +455,6 @@ def requested_values(mapping, config) -> dict:
 
 def run_calibrate(ctx):
     """Fit the mapping's response curves on the bound head; write the mapping and the report."""
-    import numpy as np
-
     from faceforge.anatomy.animate import static_poses
     from faceforge.anatomy.calibrate import (calibrate_mapping, format_table, measure_coupling,
                                              summarize)
