@@ -89,12 +89,13 @@ class Solver:
                 raise ValueError(f"model.{name} holds particle ids outside "
                                  f"[0, {m.particle_count})")
         # with partitions the kernels see the model renumbered and regrouped part by part
-        # (partition.partitioned); _segment: the part of each block row (0 with one part)
+        # (partition.partitioned); _segment: the part of each block row (0 with one part). A
+        # model left in one part (too small to cut) keeps its numbering: nothing to gather
         self._position_order = self._particle_order = None
         self._segment = np.zeros(len(m.blocks), dtype=np.int64)
         part = None
-        if s.partitions > 1:
-            split = partitioned(model, s.partitions)
+        split = partitioned(model, s.partitions) if s.partitions > 1 else None
+        if split is not None and split.segment.max() > 0:
             m, self._segment, part = split.model, split.segment, split.part
             order, slots = split.particle_order, split.position_order
             if not np.array_equal(order, np.arange(len(order))):

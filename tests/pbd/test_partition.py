@@ -70,7 +70,9 @@ def test_a_small_model_stays_in_one_part():
     assert model.constraint_count < 2 * MIN_SLAB_CONSTRAINTS
     assert set(particle_parts(model, 2).tolist()) == {-1, 0}
     solver = Solver(model, SolverSettings(colouring=True, partitions=2))
-    assert not solver._threaded
+    assert not solver._threaded and solver._particle_order is None     # nothing to gather
+    one = run(Solver(model, SolverSettings(colouring=True)), model)
+    assert run(solver, model).positions.tobytes() == one.positions.tobytes()
     big = skin_model(3)
     assert big.constraint_count > 2 * MIN_SLAB_CONSTRAINTS
     assert set(particle_parts(big, 2).tolist()) == {-1, 0, 1}
