@@ -65,8 +65,23 @@ __all__ = ["MusculoskeletalSystem", "SKULL", "expand_lies_on", "underlying_mesh"
 #: bodies that are not simulated; "skull" in ``lies_on`` means both
 SKULL = ("cranium", "mandible")
 
-_EYE3 = np.eye(3)
-_HOMOGENEOUS = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _is_rigid(t: list) -> bool:
+    """Whether a (4, 4) matrix given as nested lists is a rigid transform: ``np.allclose(R^T R,
+    I, atol=1e-6)``, ``det R > 0`` and ``np.allclose(T[3], (0, 0, 0, 1))``, in Python floats
+    (numpy's per-call overhead on 3 x 3 arrays is several times this; it runs every frame)."""
+    r = [row[:3] for row in t[:3]]
+    for i in range(3):
+        for j in range(3):
+            dot = r[0][i] * r[0][j] + r[1][i] * r[1][j] + r[2][i] * r[2][j]
+            if not abs(dot - (i == j)) <= 1e-6 + 1e-5 * (i == j):
+                return False
+    det = (r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
+           - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
+           + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]))
+    last = t[3]
+    return det > 0 and all(abs(a) <= 1e-8 for a in last[:3]) and abs(last[3] - 1.0) <= 1e-8 + 1e-5
 
 
 def expand_lies_on(names) -> tuple[str, ...]:
@@ -307,18 +322,12 @@ class MusculoskeletalSystem:
             raise ValueError(f"jaw_matrix must be (4, 4), got {T.shape}")
         if np.array_equal(T, self._jaw):  # the mandible is already there
             return
-        R = T[:3, :3]
-        # np.allclose(R.T R, I, atol=1e-6), det R > 0 and np.allclose(T[3], (0, 0, 0, 1)),
-        # without allclose's per-call overhead (this runs every frame)
-        r = R.tolist()
-        det = (r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
-               - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
-               + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]))
-        if not (np.all(np.abs(R.T @ R - _EYE3) <= 1e-6 + 1e-5 * _EYE3) and det > 0
-                and np.all(np.abs(T[3] - _HOMOGENEOUS) <= 1e-8 + 1e-5 * _HOMOGENEOUS)):
+        if not _is_rigid(T.tolist()):
             raise ValueError("jaw_matrix must be a rigid transform (rotation + translation)")
         sl = self._vslice["mandible"]
-        self._world_v[sl] = self._rest[sl] @ T[:3, :3].T + T[:3, 3]
+        out = self._world_v[sl]
+        np.matmul(self._rest[sl], T[:3, :3].T, out=out)
+        out += T[:3, 3]
         self._jaw = T.copy()
 
     def step(self, contractions=None, jaw_matrix=None, dt: float = 1.0 / 25.0) -> None:

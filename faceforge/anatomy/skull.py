@@ -16,6 +16,7 @@ never move.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -99,16 +100,38 @@ class Skull:
 
 
 # ---------------------------------------------------------------------------- rigid math
+def _rigid_about_axis(point, direction, angle: float):
+    """Rotation by ``angle`` (rad, right-handed) about the line point + t*direction as Python
+    floats: (rows of R, translation). A 3 x 3 numpy product costs several times this math."""
+    dx, dy, dz = np.asarray(direction, dtype=np.float64).tolist()
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    dx, dy, dz = dx / n, dy / n, dz / n
+    c, s = math.cos(angle), math.sin(angle)
+    v = 1.0 - c  # Rodrigues: R = c I + s [d]x + (1 - c) d d^T
+    r = ((c + v * dx * dx, v * dx * dy - s * dz, v * dx * dz + s * dy),
+         (v * dy * dx + s * dz, c + v * dy * dy, v * dy * dz - s * dx),
+         (v * dz * dx - s * dy, v * dz * dy + s * dx, c + v * dz * dz))
+    px, py, pz = np.asarray(point, dtype=np.float64).tolist()
+    return r, tuple(p - (a * px + b * py + c * pz) for p, (a, b, c) in zip((px, py, pz), r))
+
+
+def _compose(a, b):
+    """``a @ b`` of two (rows, translation) rigid maps in Python floats."""
+    (ra, ta), (rb, tb) = a, b
+    cols = tuple(zip(*rb))
+    r = tuple(tuple(x * u + y * v + z * w for u, v, w in cols) for x, y, z in ra)
+    t = tuple(x * tb[0] + y * tb[1] + z * tb[2] + s for (x, y, z), s in zip(ra, ta))
+    return r, t
+
+
+def _matrix(rigid) -> np.ndarray:
+    r, t = rigid
+    return np.array([[*r[0], t[0]], [*r[1], t[1]], [*r[2], t[2]], [0.0, 0.0, 0.0, 1.0]])
+
+
 def rotation_about_axis(point: np.ndarray, direction: np.ndarray, angle: float) -> np.ndarray:
     """(4, 4) rotation by ``angle`` (rad, right-handed) about the line point + t*direction."""
-    d = np.asarray(direction, dtype=np.float64)
-    d = d / np.linalg.norm(d)
-    k = np.array([[0.0, -d[2], d[1]], [d[2], 0.0, -d[0]], [-d[1], d[0], 0.0]])
-    r = np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)  # Rodrigues
-    t = np.eye(4)
-    t[:3, :3] = r
-    t[:3, 3] = np.asarray(point, dtype=np.float64) - r @ np.asarray(point, dtype=np.float64)
-    return t
+    return _matrix(_rigid_about_axis(point, direction, float(angle)))
 
 
 def jaw_transform(skull: Skull, pitch: float, yaw: float, protrusion: float) -> np.ndarray:
@@ -118,10 +141,10 @@ def jaw_transform(skull: Skull, pitch: float, yaw: float, protrusion: float) -> 
     pitch, yaw in radians; protrusion in template units. The zero pose is the identity.
     """
     j = skull.jaw
-    t = np.eye(4)
-    t[:3, 3] = float(protrusion) * j.protrusion_dir
-    return t @ rotation_about_axis(j.yaw_point, j.yaw_dir, float(yaw)) @ \
-        rotation_about_axis(j.pitch_point, j.pitch_dir, float(pitch))
+    r, t = _compose(_rigid_about_axis(j.yaw_point, j.yaw_dir, float(yaw)),
+                    _rigid_about_axis(j.pitch_point, j.pitch_dir, float(pitch)))
+    shift = (float(protrusion) * np.asarray(j.protrusion_dir, dtype=np.float64)).tolist()
+    return _matrix((r, tuple(a + b for a, b in zip(t, shift))))
 
 
 def apply_transform(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
