@@ -64,7 +64,13 @@ def _is_watched(x, faces, normal0, floor, cos_watch, t):  # pragma: no cover - n
     cy = e1z * e2x - e1x * e2z
     cz = e1x * e2y - e1y * e2x
     along = cx * normal0[t, 0] + cy * normal0[t, 1] + cz * normal0[t, 2]
-    return along <= cos_watch * np.sqrt(cx * cx + cy * cy + cz * cz) or 0.5 * along < floor[t]
+    if 0.5 * along < floor[t]:
+        return True
+    # along <= cos_watch |c|, squared (no square root: a fifth of this test's time)
+    cc = cos_watch * cos_watch * (cx * cx + cy * cy + cz * cz)
+    if cos_watch >= 0.0:
+        return along <= 0.0 or along * along <= cc
+    return along < 0.0 and along * along >= cc
 
 
 @numba.njit(**NUMBA_OPTIONS)

@@ -154,7 +154,10 @@ class SkinLayer:
     anchor_particles : (k,)
         Particle index of each anchor particle ``q``.
     anchor_slots : (k,)
-        Slots of the q position constraints in ``Control.position_targets``.
+        Row of each anchor's surface point in :meth:`anchor_targets` of a ``Control``.
+    kinematic_anchors : bool
+        The anchor particles are kinematic (``Control.kinematic_positions``; see
+        :func:`add_skin`), else held by position constraints (``Control.position_targets``).
     """
 
     first: int
@@ -162,6 +165,11 @@ class SkinLayer:
     anchor_vertices: np.ndarray
     anchor_particles: np.ndarray
     anchor_slots: np.ndarray
+    kinematic_anchors: bool = False
+
+    def anchor_targets(self, control) -> np.ndarray:
+        """The ``Control`` array whose rows :attr:`anchor_slots` hold the anchors' surface points."""
+        return control.kinematic_positions if self.kinematic_anchors else control.position_targets
 
     def skin_positions(self, state_positions) -> np.ndarray:
         """The skin's rows ``(n_vertices, 3)`` of a PBD positions array."""
@@ -174,7 +182,11 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
 
     Constraints are added in the order: anchors (q position, then p-q stretch),
     edge stretch, cross stretch, bending, area, volume; the builder projects them
-    in that order after the deeper layers added before.
+    in that order after the deeper layers added before. With ``stiffness.position`` 1 (the
+    default) each q is exactly on its surface point when the p-q stretch reads it, so q is
+    kinematic instead (``Control.kinematic_positions``) and the stretch weighs it as a
+    particle of ``inv_mass``: the same projections, without the position constraints and
+    the q's prediction (:attr:`SkinLayer.kinematic_anchors`).
 
     Parameters
     ----------
@@ -206,7 +218,17 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
         raise ValueError(f"anchor_vertices {av.shape} and anchor_points {ap.shape} differ in length")
 
     first = builder.add_particles(v, np.full(len(v), inv_mass, FLOAT))
-    if len(av):
+    held = stiffness.position == 1.0
+    if len(av) and held:
+        # q is exactly on its surface point after its position projection, before the p-q
+        # stretch reads it, every iteration: q kinematic and the stretch a tether weighing it as
+        # the particle it was give the same projection without the position constraints
+        # (pbd.ModelBuilder.add_distance; tests/pbd/test_tether.py)
+        q_first = builder.add_particles(ap, np.zeros(len(ap)))
+        q = q_first + np.arange(len(ap), dtype=INT)
+        slots = builder.kinematic_rows(q)
+        builder.add_distance(np.stack([first + av, q], axis=1), stiffness.anchor, weight=(inv_mass, inv_mass))
+    elif len(av):
         q_first = builder.add_particles(ap, np.full(len(ap), inv_mass, FLOAT))
         q = q_first + np.arange(len(ap), dtype=INT)
         slots = np.asarray(builder.add_position(q, stiffness.position), INT)
@@ -223,7 +245,7 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
         builder.add_area(first + topo.triangles, stiffness.area)
         builder.add_volume(first + topo.triangles, stiffness.volume)
     return SkinLayer(first=int(first), n_vertices=len(v), anchor_vertices=av,
-                     anchor_particles=q, anchor_slots=slots)
+                     anchor_particles=q, anchor_slots=slots, kinematic_anchors=bool(len(av)) and held)
 
 
 class SkinSimulation:
@@ -280,9 +302,9 @@ class SkinSimulation:
         self.control = self.model.control()
         self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)
         slots = self.layer.anchor_slots
+        targets = self.layer.anchor_targets(self.control)
         self._direct = bool(np.array_equal(slots, np.arange(len(slots)))
-                            and self.control.position_targets.shape == (len(slots), 3)
-                            and self.control.position_targets.flags.c_contiguous)
+                            and targets.shape == (len(slots), 3) and targets.flags.c_contiguous)
         self.weights = None if weights is None else np.asarray(weights, FLOAT).reshape(-1)
         if self.weights is not None and len(self.weights) != len(self.rest):
             raise ValueError(f"weights {self.weights.shape} must have one entry per skin vertex")
@@ -334,13 +356,14 @@ class SkinSimulation:
     def step(self, system, dt: float) -> None:
         """One frame: anchor targets from ``system``, then a PBD step of the skin."""
         if len(self.layer.anchor_slots):
-            # when the anchors hold every position slot, in order, they are filled in place
-            t = self.anchor_targets(system, self.control.position_targets if self._direct else None)
+            # when the anchors hold every row of their Control array, in order, it is filled in place
+            targets = self.layer.anchor_targets(self.control)
+            t = self.anchor_targets(system, targets if self._direct else None)
             if self._any_carried:   # t[carried] = carry_targets(system, t), compiled, in place
                 s0, p0 = self._carry_rest(system)
                 _carry(t, self._carried_rows, s0, p0)
             if not self._direct:
-                self.control.position_targets[self.layer.anchor_slots] = t
+                targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
 
     def simulated(self) -> np.ndarray:

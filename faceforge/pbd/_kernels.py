@@ -28,7 +28,7 @@ QUAD_AREA = 7
 
 @numba.njit(**PBD_NUMBA)
 def _project(x, w, blocks, iterations, xpbd,
-             d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t,
+             d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t, d_wt,
              b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
              q_area_stop,
              a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, buf,
@@ -39,7 +39,8 @@ def _project(x, w, blocks, iterations, xpbd,
 
     ``d_runs`` / ``b_runs`` / ``a_runs`` (runs of independent distance / bending / area
     constraints, empty unless colouring in a PBD mode) select the vectorised sweeps
-    (``d_coef_t (3, m)``: ``d_coef`` transposed); ``buf`` is their scratch, ``b_w (4, m)`` /
+    (``d_coef_t (3, m)``: ``d_coef`` transposed; ``d_wt (m, 3)``: the XPBD sweep's weights,
+    ``distance.move_weights``); ``buf`` is their scratch, ``b_w (4, m)`` /
     ``a_w (3, m)`` their per-constraint inverse masses and ``b_rest_t (2, m)`` the rest
     cosines and sines. ``d_coef (m, 3)``: the PBD distance data (see
     ``distance.pbd_coefficients``); ``q_stretch (6, m_bending)``: the stretches fused into
@@ -55,7 +56,7 @@ def _project(x, w, blocks, iterations, xpbd,
             stop = blocks[b, 2]
             if kind == 0:
                 if xpbd:
-                    _project_distance(x, w, d_idx, d_rest, d_k, d_c, d_lam, True, start, stop)
+                    _project_distance(x, d_wt, d_idx, d_rest, d_k, d_c, d_lam, True, start, stop)
                 elif d_runs.shape[0] > 1:  # coloured, PBD modes: vectorised batches
                     _project_distance_batched(x, d_idx, d_coef_t, d_runs, buf, start, stop)
                 else:
@@ -84,7 +85,7 @@ def _project(x, w, blocks, iterations, xpbd,
 
 @numba.njit(parallel=True, **PBD_NUMBA)
 def _project_parts(x, w, blocks, seg, iterations, xpbd,
-                   d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t,
+                   d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t, d_wt,
                    b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
                    q_area_stop,
                    a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, bufs,
@@ -101,7 +102,7 @@ def _project_parts(x, w, blocks, seg, iterations, xpbd,
         reps = 1 if seam else iterations
         for p in numba.prange(n):
             _project(x, w, blocks[seg[p]:seg[p + 1]], reps, xpbd,
-                     d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t,
+                     d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t, d_wt,
                      b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
                      q_area_stop, a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, bufs[p],
                      v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
@@ -116,7 +117,7 @@ def _project_parts(x, w, blocks, seg, iterations, xpbd,
                         v_g, xpbd, bufs)
             else:
                 _project(x, w, blocks[r:r + 1], 1, xpbd,
-                         d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t,
+                         d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t, d_wt,
                          b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch,
                          q_area, q_area_stop, a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w,
                          bufs[0], v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest,
@@ -165,7 +166,7 @@ def _velocities(x, v, prev, inv_h):
 @numba.njit(**PBD_NUMBA)
 def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
           substeps, iterations, xpbd, blocks, seg, threaded, lams,
-          d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t,
+          d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t, d_wt,
           b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch, q_area, q_area_stop,
           a_idx, a_rest, a_k, a_c, a_runs, a_w, bufs,
           v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
@@ -212,7 +213,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
             lams[:] = 0.0
         if threaded:   # several parts, on threads (else the same sweeps in one thread)
             _project_parts(x_out, w, blocks, seg, iterations, xpbd,
-                           d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t,
+                           d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
                            b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t,
                            q_stretch, q_area, q_area_stop,
                            a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs,
@@ -222,7 +223,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
                            t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
         else:
             _project(x_out, w, blocks, iterations, xpbd,
-                     d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t,
+                     d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
                      b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
                      q_area, q_area_stop,
                      a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs[0],

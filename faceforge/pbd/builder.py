@@ -51,6 +51,15 @@ class ModelBuilder:
         self._count += len(p)
         return first
 
+    def kinematic_rows(self, particles) -> np.ndarray:
+        """Rows ``(m,) int64`` of ``Control.kinematic_positions`` holding ``particles (m,)``
+        (added so far, of inverse mass 0)."""
+        idx = self._indices("particles", particles, 0)
+        w = np.concatenate(self._inv_mass)
+        if np.any(w[idx] != 0.0):
+            raise ValueError("kinematic_rows: particles of nonzero inverse mass have no row")
+        return np.cumsum(w == 0.0)[idx] - 1
+
     def _all_positions(self) -> np.ndarray:
         return np.concatenate(self._positions) if self._positions else np.zeros((0, 3))
 
@@ -95,12 +104,29 @@ class ModelBuilder:
             self._blocks.append([kind, start, start + m])
 
     # -- constraints -----------------------------------------------------------------
-    def add_distance(self, pairs, stiffness, rest_length=None) -> None:
-        """Distance constraints on ``pairs (m, 2)``; ``rest_length (m,)`` defaults to current."""
+    def add_distance(self, pairs, stiffness, rest_length=None, weight=None) -> None:
+        """Distance constraints on ``pairs (m, 2)``; ``rest_length (m,)`` defaults to current.
+
+        ``weight (m, 2) | (2,)`` (optional, >= 0, not both 0): the inverse masses by which a
+        constraint shares its correction between its ends, instead of the particles' own. A
+        kinematic end (inverse mass 0) still never moves, but takes its share: a *tether* to
+        a particle that the caller holds on a target (``Control.kinematic_positions``) moves
+        the other end exactly as the same distance constraint to a particle of that inverse
+        mass which a stiffness-1 position constraint put back on the target before it.
+        """
         idx = self._indices("pairs", pairs, 2)
         rest = init_distance(self._all_positions(), idx) if rest_length is None \
             else self._per("rest_length", rest_length, len(idx))
-        self._append(DISTANCE, len(idx), (idx, rest, self._stiffness(stiffness, len(idx))))
+        if weight is None:
+            wt = np.concatenate(self._inv_mass)[idx] if len(idx) else np.zeros((0, 2))
+        else:
+            wt = np.broadcast_to(np.asarray(weight, dtype=np.float64), idx.shape).copy() \
+                if np.shape(weight) in ((2,), idx.shape) else None
+            if wt is None:
+                raise ValueError(f"weight must have shape (2,) or ({len(idx)}, 2), got {np.shape(weight)}")
+            if not np.all(np.isfinite(wt)) or np.any(wt < 0) or np.any(wt.sum(axis=1) <= 0):
+                raise ValueError("weight must be finite, >= 0 and not 0 at both ends")
+        self._append(DISTANCE, len(idx), (idx, rest, self._stiffness(stiffness, len(idx)), wt))
 
     def add_bending(self, quads, stiffness, rest_angle=None) -> None:
         """Dihedral constraints on ``quads (m, 4)``: ``(p0, p1)`` shared edge, ``p2``/``p3`` opposite.
@@ -178,6 +204,7 @@ class ModelBuilder:
             distance_indices=self._cat(DISTANCE, 0, (0, 2)).astype(i64),
             distance_rest_length=self._cat(DISTANCE, 1, 0),
             distance_stiffness=self._cat(DISTANCE, 2, 0),
+            distance_weight=self._cat(DISTANCE, 3, (0, 2)),
             bending_indices=self._cat(BENDING, 0, (0, 4)).astype(i64),
             bending_rest_angle=self._cat(BENDING, 1, 0),
             bending_stiffness=self._cat(BENDING, 2, 0),

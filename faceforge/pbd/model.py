@@ -58,7 +58,12 @@ class Model:
 
     Kinds (``m_kind`` constraints each, stiffness in [0, 1], the paper's k):
 
-    * ``distance_indices (m, 2) int64``, ``distance_rest_length (m,)``, ``distance_stiffness (m,)``
+    * ``distance_indices (m, 2) int64``, ``distance_rest_length (m,)``, ``distance_stiffness (m,)``,
+      ``distance_weight (m, 2) float64``: the inverse masses by which each constraint shares its
+      correction between its two ends (default: the particles' ``inv_mass``). An end of
+      inverse mass 0 in the model never moves; given a weight here, it still takes its share
+      of the denominator: a particle the caller moves itself, e.g. to a target, before each
+      iteration (the end of a tether: ``ModelBuilder.add_distance``)
     * ``bending_indices (m, 4) int64`` (shared edge first), ``bending_rest_angle (m,)`` rad,
       ``bending_stiffness (m,)``
     * ``area_indices (m, 3) int64``, ``area_rest_area (m,)``, ``area_stiffness (m,)``
@@ -104,8 +109,11 @@ class Model:
     attachment_bary: np.ndarray
     attachment_stiffness: np.ndarray
     blocks: np.ndarray
+    distance_weight: np.ndarray | None = None
 
     def __post_init__(self):
+        if self.distance_weight is None:
+            object.__setattr__(self, "distance_weight", self.inv_mass[self.distance_indices].reshape(-1, 2))
         for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, np.ndarray):

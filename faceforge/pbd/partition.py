@@ -237,7 +237,7 @@ def partitioned(model: Model, parts: int):
     perm, rows, segment = split_blocks(model.blocks, groups, parts)
     m = model
     changes = {"blocks": rows}
-    for kind, names in ((DISTANCE, ("indices", "rest_length", "stiffness")),
+    for kind, names in ((DISTANCE, ("indices", "rest_length", "stiffness", "weight")),
                         (BENDING, ("indices", "rest_angle", "stiffness")),
                         (AREA, ("indices", "rest_area", "stiffness")),
                         (POSITION, ("indices", "rest_target", "stiffness")),

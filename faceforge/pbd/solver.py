@@ -37,7 +37,7 @@ from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step, _take_rows
 from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
-from faceforge.pbd.constraints.distance import pbd_coefficients
+from faceforge.pbd.constraints.distance import move_weights, pbd_coefficients
 from faceforge.pbd.constraints.quad import (
     area_table, areas_first, match_quad_stretches, match_quad_triangles, stretch_table)
 from faceforge.pbd.constraints.volume import pair_triangles
@@ -150,6 +150,7 @@ class Solver:
         }
         # runs of independent constraints for the vectorised sweeps; empty: the scalar sweep
         self._runs = {kind: np.zeros(0, dtype=np.int64) for kind in ("distance", "bending", "area")}
+        d_weight = m.distance_weight
         for code, kind in ((DISTANCE, "distance"), (BENDING, "bending"), (AREA, "area")):
             idx, rest = self._arrays[kind]
             kk, c = self._k[kind]
@@ -157,12 +158,16 @@ class Solver:
                 order, runs = colour_order(idx, m.particle_count,
                                            m.blocks[m.blocks[:, 0] == code, 1:])
                 idx, rest, kk, c = (np.ascontiguousarray(a[order]) for a in (idx, rest, kk, c))
+                if kind == "distance":
+                    d_weight = d_weight[order]
                 if kind in self._runs and s.stiffness_mode != "xpbd":
                     self._runs[kind] = runs
             self._arrays[kind] = (idx, rest, kk, c)
-        # per-constraint data of the PBD sweeps (inverse masses are frozen in the Model)
+        # per-constraint data of the PBD sweeps (inverse masses are frozen in the Model) and
+        # the XPBD sweep's weights
         d_idx, d_rest, d_k, _ = self._arrays["distance"]
-        self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass)
+        self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass, d_weight)
+        self._d_wt = move_weights(d_idx, m.inv_mass, d_weight)
         self._q_stretch = np.zeros((6, m.bending_count))  # transposed: rows are vectors
         self._q_area = np.zeros((3, m.bending_count))
         # per bending run, the end of its quads with a fused area (all of them by default)
@@ -217,6 +222,7 @@ class Solver:
         keep = self._drop_constraints(DISTANCE, "distance", drop)
         if keep is not None:
             self._d_coef = np.ascontiguousarray(self._d_coef[keep])
+            self._d_wt = np.ascontiguousarray(self._d_wt[keep])
 
     def _drop_constraints(self, code: int, kind: str, drop: np.ndarray):
         """Remove the constraints ``drop (m,) bool`` of ``kind`` (taken over by a fused sweep):
@@ -315,6 +321,7 @@ class Solver:
               self._damp, dt / s.substeps, s.substeps, s.iterations,
               s.stiffness_mode == "xpbd", self._blocks, self._seg, self._threaded, self._lams,
               *self._arrays["distance"], self._d_coef, self._runs["distance"], self._d_coef_t,
+              self._d_wt,
               *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
               self._q_stretch, self._q_area, self._q_area_stop,
               *self._arrays["area"], self._runs["area"], self._a_w, self._bufs,

@@ -54,11 +54,13 @@ def test_kernel_matches_its_python_twin():
     assert len(free) and np.array_equal(a[free], x[free])
 
 
-def test_watched_kernel_matches_the_numpy_test():
+@pytest.mark.parametrize("watch_angle, min_area", [(60.0, 0.2), (30.0, 0.0), (120.0, 0.0), (90.0, 0.1)])
+def test_watched_kernel_matches_the_numpy_test(watch_angle, min_area):
+    # the kernel compares squares (no square root), both signs of cos(watch_angle)
     rng = np.random.default_rng(5)
     rest, faces = grid(7)
-    guard = OrientationGuard(rest, faces, min_area=0.2)
-    for scale in (0.02, 0.1, 0.3):
+    guard = OrientationGuard(rest, faces, min_area=min_area, watch_angle=watch_angle)
+    for scale in (0.02, 0.1, 0.3, 0.6):
         pos = np.ascontiguousarray(rest + rng.normal(scale=scale, size=rest.shape))
         rows = _watched(pos, guard.faces, guard.normal0, guard.floor, guard.cos_watch, guard.active)
         assert rows.tolist() == np.flatnonzero(guard.watched(pos)).tolist()

@@ -24,17 +24,23 @@ def bound_sphere():
     return v, f, upper, b
 
 
-def test_constraint_counts(bound_sphere):
+@pytest.mark.parametrize("position", [1.0, 0.9])
+def test_constraint_counts(bound_sphere, position):
     v, f, _, b = bound_sphere
-    model, layer = _model(v, f, b)
+    model, layer = _model(v, f, b, SkinStiffness(position=position))
     topo = skin_topology(f)
     k = len(b.vertex_ids)
     assert model.particle_count == len(v) + k
     assert model.distance_count == k + len(topo.edges) + len(topo.cross_pairs)
     assert model.bending_count == len(topo.bending_quads)
     assert model.area_count == len(f) and model.volume_count == 1
-    assert model.position_count == k
     np.testing.assert_array_equal(layer.anchor_particles, len(v) + np.arange(k))
+    # held exactly (1): the anchors are kinematic, tethered; softer: position constraints
+    kinematic = position == 1.0
+    assert layer.kinematic_anchors == kinematic
+    assert model.position_count == (0 if kinematic else k)
+    np.testing.assert_array_equal(model.kinematic_indices, layer.anchor_particles if kinematic else [])
+    assert layer.anchor_targets(model.control()).shape == (k, 3)
 
 
 def test_rest_state_is_a_fixed_point_over_1000_frames(bound_sphere):
@@ -43,7 +49,7 @@ def test_rest_state_is_a_fixed_point_over_1000_frames(bound_sphere):
     solver = Solver(model, SolverSettings(iterations=10, substeps=1, damping=0.1))
     state = model.state()
     control = model.control()
-    control.position_targets[layer.anchor_slots] = b.targets([(upper.vertices, upper.faces)])
+    layer.anchor_targets(control)[layer.anchor_slots] = b.targets([(upper.vertices, upper.faces)])
     for _ in range(1000):
         solver.step(state, state, control, 1 / 25)
     drift = np.abs(layer.skin_positions(state.positions) - v).max()
@@ -64,7 +70,7 @@ def test_moving_anchors_drag_the_bound_skin():
     # along the anchor rays: a distance constraint keeps |p - q|, so a sideways
     # translation of parallel anchors is a free (pendulum) mode; a normal one is not
     shift = np.array([0.0, 0.0, -0.05])
-    control.position_targets[layer.anchor_slots] = b.targets([(lower.vertices + shift, lower.faces)])
+    layer.anchor_targets(control)[layer.anchor_slots] = b.targets([(lower.vertices + shift, lower.faces)])
     for _ in range(200):
         solver.step(state, state, control, 1 / 25)
     moved = layer.skin_positions(state.positions) - v

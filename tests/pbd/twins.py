@@ -22,7 +22,9 @@ def _apply(x, w, ids, grads, value, k, c, lam):
     return s
 
 
-def distance(x, w, pairs, rest, k, c=None, lam=None):
+def distance(x, w, pairs, rest, k, c=None, lam=None, weight=None):
+    """``weight (m, 2)``: the inverse masses each constraint shares its correction by (default
+    ``w``); an end with ``w`` 0 does not move."""
     x = x.copy()
     m = len(pairs)
     c = np.zeros(m) if c is None else c
@@ -30,9 +32,13 @@ def distance(x, w, pairs, rest, k, c=None, lam=None):
     for j, (a, b) in enumerate(pairs):
         d = x[a] - x[b]
         n = float(np.linalg.norm(d))
-        if n == 0.0 or w[a] + w[b] == 0.0:
+        wa, wb = (w[a], w[b]) if weight is None else weight[j]
+        if n == 0.0 or wa + wb == 0.0:
             continue
-        lam[j] += _apply(x, w, (a, b), (d / n, -d / n), n - rest[j], k[j], c[j], lam[j])
+        s = (-k[j] * (n - rest[j]) - c[j] * (wa + wb) * lam[j]) / ((wa + wb) * (1.0 + c[j]))
+        lam[j] += s
+        x[a] = x[a] + s * (wa if w[a] > 0 else 0.0) * d / n
+        x[b] = x[b] - s * (wb if w[b] > 0 else 0.0) * d / n
     return x, lam
 
 
@@ -164,7 +170,7 @@ def step(model, x_in, v_in, control, dt, iterations, substeps, damping, gravity=
                 sl = slice(a, b)
                 if kind == 0:
                     x, _ = distance(x, w, m.distance_indices[sl], m.distance_rest_length[sl],
-                                    m.distance_stiffness[sl])
+                                    m.distance_stiffness[sl], weight=m.distance_weight[sl])
                 elif kind == 1:
                     x, _ = bending(x, w, m.bending_indices[sl], m.bending_rest_angle[sl],
                                    m.bending_stiffness[sl])

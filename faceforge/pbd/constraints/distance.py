@@ -28,11 +28,12 @@ def residual_distance(positions, indices, rest_length) -> np.ndarray:
 
 
 @numba.njit(inline="always", **PBD_NUMBA)
-def _solve_distance(x, w, i0, i1, rest, k, c, lam, xpbd):
-    """Project one distance constraint in place on ``x (n, 3)``; return the multiplier increment."""
-    w0 = w[i0]
-    w1 = w[i1]
-    denom = w0 + w1
+def _solve_distance(x, w0, w1, denom, i0, i1, rest, k, c, lam, xpbd):
+    """Project one distance constraint in place on ``x (n, 3)``; return the multiplier increment.
+
+    ``w0``, ``w1``: how far each end moves per unit of correction (its inverse mass, 0 when
+    kinematic); ``denom``: the constraint's sum of inverse masses (see :func:`move_weights`).
+    """
     if denom == 0.0:
         return 0.0
     dx = x[i0, 0] - x[i1, 0]
@@ -56,29 +57,48 @@ def _solve_distance(x, w, i0, i1, rest, k, c, lam, xpbd):
 
 
 @numba.njit(**PBD_NUMBA)
-def _project_distance(x, w, idx, rest, k, c, lam, xpbd, start, stop):
-    """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``)."""
+def _project_distance(x, wt, idx, rest, k, c, lam, xpbd, start, stop):
+    """Gauss-Seidel sweep over constraints ``start:stop`` in order (``xpbd``: accumulate ``lam``).
+
+    wt : (m, 3) float rows ``(move0, move1, denominator)`` of :func:`move_weights`.
+    """
     if xpbd:
         for j in range(start, stop):
-            lam[j] += _solve_distance(x, w, idx[j, 0], idx[j, 1], rest[j], k[j], c[j], lam[j], True)
+            lam[j] += _solve_distance(x, wt[j, 0], wt[j, 1], wt[j, 2], idx[j, 0], idx[j, 1],
+                                      rest[j], k[j], c[j], lam[j], True)
     else:
         for j in range(start, stop):
-            _solve_distance(x, w, idx[j, 0], idx[j, 1], rest[j], k[j], 0.0, 0.0, False)
+            _solve_distance(x, wt[j, 0], wt[j, 1], wt[j, 2], idx[j, 0], idx[j, 1], rest[j], k[j],
+                            0.0, 0.0, False)
 
 
-def pbd_coefficients(indices, rest_length, stiffness, inv_mass) -> np.ndarray:
-    """Per-constraint data of the PBD sweep ``_project_distance_pbd``, ``(m, 3) float64``.
+def move_weights(indices, inv_mass, weight=None) -> np.ndarray:
+    """Per-constraint ``(m, 3) float64`` rows ``(move0, move1, denominator)`` of the sweeps.
 
-    Rows ``(l0, k w0 / (w0 + w1), k w1 / (w0 + w1))``: the rest length and each end's share
-    of the correction (0 for both when both particles are kinematic). The inverse masses
-    of a frozen Model never change, so the division by ``w0 + w1`` is done once here.
+    ``weight (m, 2)`` (``Model.distance_weight``; default the particles' ``inv_mass``) shares
+    the correction; ``move`` is that weight, or 0 for an end of inverse mass 0 (it never
+    moves); the denominator is the weights' sum.
     """
     i = np.asarray(indices, dtype=np.int64).reshape(-1, 2)
     w = np.asarray(inv_mass, dtype=np.float64)[i]
+    wt = w if weight is None else np.asarray(weight, dtype=np.float64).reshape(-1, 2)
+    return np.ascontiguousarray(np.c_[np.where(w > 0.0, wt, 0.0), wt.sum(axis=1)])
+
+
+def pbd_coefficients(indices, rest_length, stiffness, inv_mass, weight=None) -> np.ndarray:
+    """Per-constraint data of the PBD sweep ``_project_distance_pbd``, ``(m, 3) float64``.
+
+    Rows ``(l0, k m0 / (w0 + w1), k m1 / (w0 + w1))``: the rest length and each end's share
+    of the correction, with ``w`` the constraint's weights (``weight (m, 2)``, default the
+    particles' ``inv_mass``) and ``m`` the moving ones (:func:`move_weights`); 0 for both
+    when both weights are 0. The inverse masses of a frozen Model never change, so the
+    division is done once here.
+    """
+    wt = move_weights(indices, inv_mass, weight)
     k = np.asarray(stiffness, dtype=np.float64).reshape(-1)
-    total = w.sum(axis=1)
+    total = wt[:, 2]
     share = np.where(total[:, None] > 0.0,
-                     k[:, None] * w / np.where(total > 0.0, total, 1.0)[:, None], 0.0)
+                     k[:, None] * wt[:, :2] / np.where(total > 0.0, total, 1.0)[:, None], 0.0)
     return np.ascontiguousarray(np.c_[np.asarray(rest_length, dtype=np.float64), share])
 
 
