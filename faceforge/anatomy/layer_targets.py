@@ -39,20 +39,30 @@ LINE_KEYS = ("A0", "A1", "A2", "A3")
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _linear_targets(pts, lines, hw, kappa, cells, cell_start, offsets, c, out):
-    """Fill ``out (t, 3)`` with every muscle's targets (see the module docstring)."""
+def _linear_targets(pts, lines, hw, kappa, cells, cell_start, offsets, c, active, scratch, out):
+    """Fill ``out (t, 3)`` with every muscle's targets (see the module docstring).
+
+    ``c (q,)``: contractions, clipped here to [0, 1] (as ``np.clip``: NaN stays NaN), 0 where
+    ``active (q,)`` is False; ``scratch (4, >= max(h, w), 3)``: the four sampled lines."""
     for m in range(len(kappa)):
         h, w = hw[m, 0], hw[m, 1]
-        scale = 1.0 - c[m] * kappa[m]
-        a0 = np.empty((h, 3))
-        a2 = np.empty((h, 3))
-        a1 = np.empty((w, 3))
-        a3 = np.empty((w, 3))
+        cm = c[m]
+        if not active[m]:
+            cm = 0.0
+        elif cm < 0.0:
+            cm = 0.0
+        elif cm > 1.0:
+            cm = 1.0
+        scale = 1.0 - cm * kappa[m]
+        a0 = scratch[0, :h]
+        a2 = scratch[1, :h]
+        a1 = scratch[2, :w]
+        a3 = scratch[3, :w]
         _polyline_samples(pts[lines[m, 0, 0]:lines[m, 0, 1]], h, False, scale, a0)
         _polyline_samples(pts[lines[m, 2, 0]:lines[m, 2, 1]], h, False, scale, a2)
         _polyline_samples(pts[lines[m, 3, 0]:lines[m, 3, 1]], w, False, 1.0, a3)
         _polyline_samples(pts[lines[m, 1, 0]:lines[m, 1, 1]], w, False, 1.0, a1)
-        if c[m] > 0.0:  # the insertion travels with the ends of the two fibres
+        if cm > 0.0:  # the insertion travels with the ends of the two fibres
             e0 = lines[m, 0, 1] - 1
             e2 = lines[m, 2, 1] - 1
             step = 1.0 / (w - 1)
@@ -156,12 +166,14 @@ class LinearTargets:
         if len(self.slots) != len(self.cells):
             raise ValueError(f"{len(self.slots)} position slots for {len(self.cells)} targets")
         self._out = np.empty((len(self.cells), 3))
+        self._scratch = np.empty((4, int(self.hw.max()) if q else 0, 3))
 
-    def __call__(self, pts: np.ndarray, contractions: dict) -> np.ndarray:
+    def __call__(self, pts: np.ndarray, contractions: dict, out: np.ndarray | None = None) -> np.ndarray:
         """Targets ``(t, 3)`` (rows as :attr:`slots`) from the gathered points ``pts (k, 3)`` and
-        ``{muscle: c}`` (clipped to [0, 1]; passive muscles and absent names at 0)."""
+        ``{muscle: c}`` (clipped to [0, 1]; passive muscles and absent names at 0). ``out``
+        (t, 3) float64 C-contiguous, filled and returned when given."""
         c = np.array([contractions.get(n, 0.0) for n in self.names], dtype=FLOAT)
-        c = np.where(self.active, np.clip(c, 0.0, 1.0), 0.0)
+        out = self._out if out is None else out
         _linear_targets(np.ascontiguousarray(pts, dtype=FLOAT), self.lines, self.hw, self.kappa,
-                        self.cells, self.cell_start, self.offsets, c, self._out)
-        return self._out
+                        self.cells, self.cell_start, self.offsets, c, self.active, self._scratch, out)
+        return out

@@ -108,6 +108,7 @@ class _Layer:
     bary: np.ndarray = None    # (k, 3)
     pieces: list = None        # per muscle: {line key: slice into the k points}
     linear: object = None      # LinearTargets of the layer's linear muscles (compiled)
+    linear_direct: bool = False  # its slots are every position slot of the layer, in order
     pts: np.ndarray = None     # (k, 3) scratch: the gathered surface points
     copies: list = None        # (world slice, layer state slice) pairs written back each step
 
@@ -129,6 +130,9 @@ class _Layer:
         lin = [i for i, m in enumerate(self.muscles) if m.kind == "linear" and len(self.slots[i])]
         self.linear = LinearTargets([self.muscles[i] for i in lin], [pieces[i] for i in lin],
                                     [self.slots[i] for i in lin]) if lin else None
+        targets = self.control.position_targets
+        self.linear_direct = bool(self.linear is not None and targets.flags.c_contiguous
+                                  and np.array_equal(self.linear.slots, np.arange(len(targets))))
         self.pts = np.empty((len(self.vids), 3))
 
     def plan_copies(self, vslice: dict) -> None:
@@ -361,7 +365,11 @@ class MusculoskeletalSystem:
         # every surface point of every line of the layer in one gather
         pts = bary_points(layer.bary, layer.vids, self._world_v, layer.pts)
         if layer.linear is not None:   # every linear muscle in one compiled call
-            layer.control.position_targets[layer.linear.slots] = layer.linear(pts, contractions)
+            targets = layer.control.position_targets
+            if layer.linear_direct:    # its slots are every row of the targets, in order
+                layer.linear(pts, contractions, out=targets)
+            else:
+                targets[layer.linear.slots] = layer.linear(pts, contractions)
         for m, s, own in zip(layer.muscles, layer.slots, layer.pieces):
             if len(s) and m.kind != "linear":          # the sphincter, in numpy
                 lp = {key: pts[sl] for key, sl in own.items()}
