@@ -215,10 +215,9 @@ def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -
 
 def _depth_below(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(k,) distance from each point (inside the mesh) to the mesh surface."""
-    import trimesh
+    from faceforge.geometry.surface_points import closest_points
 
-    mesh = trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces, np.int64), process=False)
-    return trimesh.proximity.closest_point(mesh, np.asarray(points, float))[1]
+    return closest_points(np.asarray(points, float), vertices, faces)[1]
 
 
 @dataclass
@@ -321,13 +320,15 @@ class SkullGuard:
     def __init__(self, rest: np.ndarray, bodies: dict, reach: float, keep: float = 0.5):
         import trimesh
 
+        from faceforge.geometry.surface_points import closest_points
+
         self.names = list(bodies)
         verts = [np.asarray(bodies[n][0], dtype=float) for n in self.names]
         faces = [np.asarray(bodies[n][1], dtype=np.int64) for n in self.names]
         offs = np.cumsum([0] + [len(v) for v in verts])
         foffs = np.cumsum([0] + [len(f) for f in faces])
         mesh = trimesh.Trimesh(np.vstack(verts), np.vstack([f + o for f, o in zip(faces, offs)]), process=False)
-        points, dist, tri = trimesh.proximity.closest_point(mesh, np.asarray(rest, dtype=float))
+        points, dist, tri = closest_points(np.asarray(rest, dtype=float), mesh.vertices, mesh.faces)
         body = np.searchsorted(foffs, tri, side="right") - 1
         local = tri - foffs[body]
         t = mesh.triangles[tri]

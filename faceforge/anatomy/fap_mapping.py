@@ -262,13 +262,15 @@ def load_fap_mapping(path) -> FapMapping:
     """Read and validate a FAP mapping YAML file (errors name the file and the entry)."""
     import yaml
 
+    from faceforge.io.stagefiles import yaml_safe_load
+
     path = Path(path)
     try:
         text = path.read_text()
     except OSError as exc:
         raise TemplateError(f"cannot read FAP mapping: {exc.strerror}", path) from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml_safe_load(text)
     except yaml.YAMLError as exc:
         line = getattr(getattr(exc, "problem_mark", None), "line", None)
         raise TemplateError(f"invalid YAML: {getattr(exc, 'problem', exc)}", path,

@@ -28,6 +28,7 @@ import numpy as np
 import yaml
 
 from faceforge.exceptions import TemplateError
+from faceforge.io.stagefiles import yaml_safe_load
 
 TYPES = ("linear", "sphincter")
 COMMON_KEYS = {"name", "type", "layer", "lies_on", "active", "h", "w", "thickness"}
@@ -109,21 +110,19 @@ class SkullProjector:
     """Closest points on the rest skull (cranium + mandible); built once per skull."""
 
     def __init__(self, skull):
-        import trimesh
+        from faceforge.geometry.surface_points import SurfaceProjector
 
         v, f, bone = skull.combined()
-        self.mesh = trimesh.Trimesh(v, f, process=False)
+        self.projector = SurfaceProjector(v, f)
         self.face_bone = bone
 
     def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(projected (k, 3), bone (k,) int8: 0 cranium, 1 mandible) of points (k, 3)."""
-        import trimesh
-
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if len(p) == 0:
             return p.copy(), np.zeros(0, np.int8)
-        closest, _, tri = trimesh.proximity.closest_point(self.mesh, p)
-        return np.asarray(closest), self.face_bone[tri]
+        closest, _, tri = self.projector.closest(p)
+        return closest, self.face_bone[tri]
 
 
 # ------------------------------------------------------------------------------- loading
@@ -271,7 +270,7 @@ def load_muscle_map(path: str | Path, skull) -> list[MuscleSpec]:
         ctx.fail("muscle map not found")
     text = path.read_text()
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml_safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         ctx.fail(f"invalid YAML ({getattr(exc, 'problem', exc)})", None if mark is None else mark.line + 1)

@@ -24,6 +24,7 @@ import numpy as np
 import yaml
 
 from faceforge.exceptions import TemplateError
+from faceforge.io.stagefiles import yaml_safe_load
 
 BONES = ("cranium", "mandible")
 
@@ -198,7 +199,7 @@ def _read_yaml(path: Path) -> dict:
     if not path.is_file():
         raise TemplateError("missing file", path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = yaml_safe_load(path.read_text())
     except yaml.YAMLError as exc:
         line = getattr(getattr(exc, "problem_mark", None), "line", None)
         raise TemplateError(f"invalid YAML ({getattr(exc, 'problem', exc)})", path,

@@ -229,8 +229,10 @@ def _line_map(text: str, source: str) -> dict[str, int]:
 def _parse_yaml(text: str, source: str) -> tuple[Any, dict[str, int]]:
     import yaml
 
+    from faceforge.io.stagefiles import yaml_safe_load
+
     try:
-        data = yaml.safe_load(text)
+        data = yaml_safe_load(text)
         lines = _line_map(text, source)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)

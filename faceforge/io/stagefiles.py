@@ -91,6 +91,14 @@ def save_yaml(path: str | Path, data: Any, header: str = "") -> Path:
     return atomic_write_bytes(path, text.encode("utf-8"))
 
 
+def yaml_safe_load(text: str) -> Any:
+    """``yaml.safe_load`` through libyaml's C parser when PyYAML has it (the muscle map parses
+    ten times faster); the same documents, the same errors (``yaml.YAMLError`` with marks)."""
+    import yaml
+
+    return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+
+
 def load_yaml(path: str | Path) -> Any:
     """Read a YAML file with the safe loader; errors name the file and line."""
     import yaml
@@ -103,7 +111,7 @@ def load_yaml(path: str | Path) -> Any:
     except (OSError, UnicodeDecodeError) as exc:
         raise StageError(f"cannot read: {exc}", path) from None
     try:
-        return yaml.safe_load(text)
+        return yaml_safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = None if mark is None else mark.line + 1

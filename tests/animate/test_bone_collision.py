@@ -66,25 +66,6 @@ def test_two_bones_in_one_query_do_not_see_each_other():
     assert np.allclose(x, [[0.0, 1.1, 0.0], [0.0, -4.2, 0.0]])
 
 
-def test_compiled_closest_points_match_trimesh():
-    """The compiled closest-point search (k-d tree of centroids + Voronoi regions) against
-    trimesh's, on a sphere, for points inside, outside and on it."""
-    from faceforge.anatomy.bone_collision import _TriangleTree
-
-    sphere = trimesh.creation.icosphere(3)
-    rng = np.random.default_rng(2)
-    pts = rng.normal(size=(400, 3)) * rng.uniform(0.2, 1.8, (400, 1))
-    got, face = _TriangleTree(sphere.triangles).closest(pts)
-    want, dist, _ = trimesh.proximity.closest_point(sphere, pts)
-    assert np.allclose(np.linalg.norm(got - pts, axis=1), dist, atol=1e-12)
-    assert np.allclose(got, want, atol=1e-9)
-    # the triangle reported holds the closest point
-    _, on_face, _ = trimesh.proximity.closest_point(trimesh.Trimesh(
-        sphere.triangles[face].reshape(-1, 3), np.arange(3 * len(face)).reshape(-1, 3),
-        process=False), pts)
-    assert np.allclose(on_face, dist, atol=1e-12)
-
-
 def test_push_direction_does_not_amplify_round_off():
     """Skin just inside a bone is put out along the closest triangle's normal: moving the
     vertex by 1e-12 moves where it lands by no more than that (along ``q - p``, a vertex
