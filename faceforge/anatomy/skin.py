@@ -220,9 +220,9 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
     first = builder.add_particles(v, np.full(len(v), inv_mass, FLOAT))
     held = stiffness.position == 1.0
     if len(av) and held:
-        # q is exactly on its surface point after its position projection, before the p-q
-        # stretch reads it, every iteration: q kinematic and the stretch a tether weighing it as
-        # the particle it was give the same projection without the position constraints
+        # every iteration q is exactly on its surface point (its position projection) when
+        # the p-q stretch reads it: a kinematic q, with the stretch a tether weighing it as the
+        # particle it was, gives the same projection without the position constraints
         # (pbd.ModelBuilder.add_distance; tests/pbd/test_tether.py)
         q_first = builder.add_particles(ap, np.zeros(len(ap)))
         q = q_first + np.arange(len(ap), dtype=INT)
