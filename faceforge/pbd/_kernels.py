@@ -18,7 +18,7 @@ from faceforge.pbd.constraints.distance import (
     _project_distance, _project_distance_batched, _project_distance_pbd)
 from faceforge.pbd.constraints.position import _project_position
 from faceforge.pbd.constraints.quad import _project_quads_batched
-from faceforge.pbd.constraints.volume import _project_volume, _solve_volume_parts
+from faceforge.pbd.constraints.volume import _project_volume, _solve_volume_parts, _volume_apply
 
 #: solver-only block kinds: a bending block fused with its quads' stretches (PBD, coloured),
 #: and such a block that also projects one area constraint per quad
@@ -32,7 +32,7 @@ def _project(x, w, blocks, iterations, xpbd,
              b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
              q_area_stop,
              a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, buf,
-             v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
+             v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_lam, v_g,
              p_idx, p_target, p_k, p_c, p_lam,
              t_idx, t_tri, t_bary, t_k, t_c, t_lam):
     """``iterations`` Gauss-Seidel sweeps over ``blocks (nb, 3)`` rows (kind, start, stop).
@@ -72,7 +72,7 @@ def _project(x, w, blocks, iterations, xpbd,
                 else:
                     _project_area(x, w, a_idx, a_rest, a_k, a_c, a_lam, xpbd, start, stop)
             elif kind == 3:
-                _project_volume(x, w, v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref,
+                _project_volume(x, w, v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref,
                                 v_rest, v_k, v_c, v_lam, v_g, xpbd, start, stop)
             elif kind == 4:
                 _project_position(x, w, p_idx, p_target, p_k, p_c, p_lam, xpbd, start, stop)
@@ -89,40 +89,66 @@ def _project_parts(x, w, blocks, seg, iterations, xpbd,
                    b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
                    q_area_stop,
                    a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, bufs,
-                   v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
+                   v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                    v_lam, v_g, p_idx, p_target, p_k, p_c, p_lam,
                    t_idx, t_tri, t_bary, t_k, t_c, t_lam):
     """:func:`_project` over particle-disjoint parts (:mod:`faceforge.pbd.partition`): per
     iteration, the block rows ``seg[p]:seg[p + 1]`` of every part ``p < n`` at once (one
     thread each, scratch ``bufs[p]``), then the seam's rows ``seg[n]:seg[n + 1]``. Without a
-    seam the parts never meet, so each runs all its iterations in one go (the same result)."""
+    seam the parts never meet, so each runs all its iterations in one go (the same result).
+
+    A volume body projected last in the seam leaves its update (``x += f w g``, its gradient
+    cleared) to the next iteration's launch, each part applying it to its own particles before
+    projecting them (nothing reads them in between: the same bytes as updating at once), and
+    to the end of the step after the last iteration."""
     n = seg.shape[0] - 2
     seam = seg[n + 1] > seg[n]
+    last = seg[n + 1] - 1
+    pend = -1     # a seam body's volume update left to the next parts' launch (see below)
+    pend_f = 0.0
+    pend_moved = False
     for _ in range(iterations if seam else 1):
         reps = 1 if seam else iterations
         for p in numba.prange(n):
+            if pend >= 0:  # the last iteration's update of the body, on this part's particles
+                ps = v_pstart[pend]
+                _volume_apply(x, w, v_part[ps + v_pcuts[pend, p]:ps + v_pcuts[pend, p + 1]], v_g,
+                              pend_f, pend_moved)
             _project(x, w, blocks[seg[p]:seg[p + 1]], reps, xpbd,
                      d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t, d_wt,
                      b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch, q_area,
                      q_area_stop, a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w, bufs[p],
-                     v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
+                     v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                      v_lam, v_g, p_idx, p_target, p_k, p_c, p_lam,
                      t_idx, t_tri, t_bary, t_k, t_c, t_lam)
+        if pend >= 0:  # and on its particles of no part
+            ps = v_pstart[pend]
+            _volume_apply(x, w, v_part[ps + v_pcuts[pend, n]:ps + v_pcuts[pend, n + 1]], v_g,
+                          pend_f, pend_moved)
+            pend = -1
         for r in range(seg[n], seg[n + 1]):
-            if blocks[r, 0] == 3:  # a body joining parts: its triangle rows part by part at once
+            if blocks[r, 0] == 3:  # a body joining parts: its rows and sums part by part at once
                 for j in range(blocks[r, 1], blocks[r, 2]):
-                    v_lam[j] += _solve_volume_parts(
-                        x, w, v_part[v_pstart[j]:v_pstart[j + 1]], v_tris, v_cuts[j],
+                    # the seam's last projection: nothing reads the body's particles before the
+                    # next iteration's parts, which apply its update on their own particles
+                    defer = r == last and j == blocks[r, 2] - 1
+                    s, f6, moved = _solve_volume_parts(
+                        x, w, v_part[v_pstart[j]:v_pstart[j + 1]], v_pcuts[j], v_tris, v_cuts[j],
                         v_ref[v_rstart[j]:v_rstart[j + 1]], v_rest[j], v_k[j], v_c[j], v_lam[j],
-                        v_g, xpbd, bufs)
+                        v_g, xpbd, bufs, defer)
+                    v_lam[j] += s
+                    if defer:
+                        pend, pend_f, pend_moved = j, f6, moved
             else:
                 _project(x, w, blocks[r:r + 1], 1, xpbd,
                          d_idx, d_rest, d_k, d_c, d_lam, d_coef, d_runs, d_coef_t, d_wt,
                          b_idx, b_rest, b_k, b_c, b_lam, b_runs, b_w, b_rest_t, q_stretch,
                          q_area, q_area_stop, a_idx, a_rest, a_k, a_c, a_lam, a_runs, a_w,
-                         bufs[0], v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest,
+                         bufs[0], v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest,
                          v_k, v_c, v_lam, v_g, p_idx, p_target, p_k, p_c, p_lam,
                          t_idx, t_tri, t_bary, t_k, t_c, t_lam)
+    if pend >= 0:  # the last iteration's update
+        _volume_apply(x, w, v_part[v_pstart[pend]:v_pstart[pend + 1]], v_g, pend_f, pend_moved)
 
 
 @numba.njit(**PBD_NUMBA)
@@ -169,7 +195,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
           d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t, d_wt,
           b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch, q_area, q_area_stop,
           a_idx, a_rest, a_k, a_c, a_runs, a_w, bufs,
-          v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
+          v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
           p_idx, p_target, p_k, p_c,
           t_idx, t_tri, t_bary, t_k, t_c):
     """A whole step of ``substeps`` substeps of length ``h``; ``x_out``/``v_out`` may be the
@@ -217,7 +243,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
                            b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t,
                            q_stretch, q_area, q_area_stop,
                            a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs,
-                           v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k,
+                           v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k,
                            v_c, lams[o3:o4], v_g,
                            p_idx, p_target, p_k, p_c, lams[o4:o5],
                            t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
@@ -227,7 +253,7 @@ def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity
                      b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
                      q_area, q_area_stop,
                      a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs[0],
-                     v_pstart, v_part, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
+                     v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
                      lams[o3:o4], v_g,
                      p_idx, p_target, p_k, p_c, lams[o4:o5],
                      t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])

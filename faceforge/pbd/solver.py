@@ -123,13 +123,24 @@ class Solver:
         # sums its rows part by part at once (volume._solve_volume_parts); one group without
         cuts = np.repeat(row_start[1:, None], s.partitions + 2, axis=1)
         cuts[:, 0] = row_start[:-1]
+        # and its particles grouped by part, those of no part last (offsets in its slice), for
+        # the sums over them at once; one group without
+        ps = m.volume_particle_start
+        particles = np.array(m.volume_particles)
+        pcuts = np.repeat(np.diff(ps)[:, None], s.partitions + 2, axis=1)
+        pcuts[:, 0] = 0
         if part is not None:
             for j in range(m.volume_count):
                 order, cuts_j = row_cuts(rows[j], part, s.partitions)
                 rows[j] = rows[j][order]
                 cuts[j] = row_start[j] + cuts_j
+                own = particles[ps[j]:ps[j + 1]]
+                label = np.where(part[own] < 0, s.partitions, part[own])
+                order = np.argsort(label, kind="stable")
+                particles[ps[j]:ps[j + 1]] = own[order]
+                pcuts[j] = np.searchsorted(label[order], np.arange(s.partitions + 2))
         self._volume = tuple(_own(a) for a in (
-            m.volume_particle_start, m.volume_particles, cuts,
+            m.volume_particle_start, particles, pcuts, cuts,
             np.concatenate(rows) if rows else np.zeros((0, 4), dtype=np.int64),
             m.volume_reference_start, ref_global, m.volume_rest_volume))
         self._position = _own(m.position_indices)

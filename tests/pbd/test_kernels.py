@@ -175,7 +175,8 @@ def test_volume_matches_twin(mesh, open_surface):
     g = np.zeros_like(x)
     again = x.copy()
     one = np.ones(1)
-    _project_volume(again, w, np.array([0, len(particles)]), particles, np.array([[0, len(rows)]]),
+    _project_volume(again, w, np.array([0, len(particles)]), particles, np.array([[0, len(particles)]]),
+                    np.array([[0, len(rows)]]),
                     rows, np.array([0, len(local_ref)]), particles[local_ref], np.array([v0]),
                     one * 0.7, one * 0.0, one * 0.0, g, False, 0, 1)
     np.testing.assert_array_equal(again, got)

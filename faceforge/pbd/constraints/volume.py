@@ -154,17 +154,13 @@ def _volume_rows(x, tris, rx, ry, rz, g):
 
 
 @numba.njit(inline="always", **PBD_NUMBA)
-def _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd):
-    """The rest of :func:`_solve_volume` once ``vol`` (six times the volume) and the
-    triangle terms of ``g`` are summed: the ``dV/dr`` share, the projection, ``g`` cleared."""
-    npart = particles.shape[0]
-    nref = ref.shape[0]
-    # dV/dr = -sum of the gradients, shared by the reference particles
+def _group_sums(w, particles, g):
+    """``(sum g_x, sum g_y, sum g_z, sum w |g|^2)`` over the particles ``particles (p,)``."""
     sx = 0.0
     sy = 0.0
     sz = 0.0
     denom = 0.0
-    for q in range(npart):
+    for q in range(particles.shape[0]):
         i = np.uint64(particles[q])
         gx = g[i, 0]
         gy = g[i, 1]
@@ -173,6 +169,17 @@ def _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd):
         sy += gy
         sz += gz
         denom += w[i] * (gx * gx + gy * gy + gz * gz)
+    return sx, sy, sz, denom
+
+
+@numba.njit(inline="always", **PBD_NUMBA)
+def _volume_scale(w, ref, vol, sx, sy, sz, denom, rest, k, c, lam, g, xpbd):
+    """The projection's scale once ``vol`` (six times the volume), the triangle terms of ``g``
+    and their sums (:func:`_group_sums` over the body) are known: the ``dV/dr`` share of the
+    reference particles ``ref (r,)`` goes into their ``g``. Returns ``(s, s / 6, moved)``:
+    the multiplier increment, the update's factor and whether the body moves (see
+    :func:`_volume_apply`)."""
+    nref = ref.shape[0]
     sx /= nref
     sy /= nref
     sz /= nref
@@ -192,11 +199,18 @@ def _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd):
         g[i, 1] = gy
         g[i, 2] = gz
     denom = (denom - before + after) / 36.0
-    s = 0.0
     if denom > 0.0:
         s = _multiplier(vol / 6.0 - rest, denom, k, c, lam, xpbd)
-        f6 = s / 6.0
-        for q in range(npart):
+        return s, s / 6.0, True
+    return 0.0, 0.0, False
+
+
+@numba.njit(inline="always", **PBD_NUMBA)
+def _volume_apply(x, w, particles, g, f6, moved):
+    """The update of :func:`_volume_scale` on ``particles (p,)``, ``x += f6 w g`` when
+    ``moved``; their ``g`` cleared either way."""
+    if moved:
+        for q in range(particles.shape[0]):
             i = np.uint64(particles[q])
             f = f6 * w[i]
             x[i, 0] += f * g[i, 0]
@@ -206,26 +220,26 @@ def _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd):
             g[i, 1] = 0.0
             g[i, 2] = 0.0
     else:
-        for q in range(npart):
+        for q in range(particles.shape[0]):
             i = np.uint64(particles[q])
             g[i, 0] = 0.0
             g[i, 1] = 0.0
             g[i, 2] = 0.0
-    return s
 
 
 @numba.njit(inline="always", **PBD_NUMBA)
-def _solve_volume(x, w, particles, tris, cuts, ref, rest, k, c, lam, g, xpbd):
+def _solve_volume(x, w, particles, pcuts, tris, cuts, ref, rest, k, c, lam, g, xpbd):
     """Project one volume constraint in place on ``x (n, 3)``.
 
-    particles : (p,) int global ids of the body; tris : (f, 4) int global ids, the rows
-    of :func:`pair_triangles` (pairs ``(a, b, c, d)``, singles ``(a, b, c, -1)``), the
-    body's being ``cuts[0]:cuts[-1]``; cuts : (s + 1,) int, the body's rows in s groups
-    (one, or one per part and the seam, :func:`faceforge.pbd.partition.row_cuts`), whose
-    sums are added in order (as :func:`_solve_volume_parts` adds them);
-    ref : (r,) int global ids of the reference particles (distinct); g : (n, 3) float
-    scratch indexed by particle, all zero on entry and left all zero (only the body's
-    rows are used). Returns the multiplier increment.
+    particles : (p,) int global ids of the body, in ``s + 1`` groups ``pcuts (s + 2,)`` (one, or
+    one per part and those of no part, :mod:`faceforge.pbd.partition`); tris : (f, 4) int global
+    ids, the rows of :func:`pair_triangles` (pairs ``(a, b, c, d)``, singles ``(a, b, c, -1)``),
+    the body's being ``cuts[0]:cuts[-1]``; cuts : (s + 2,) int, the body's rows in groups:
+    one per part, the last joining parts (empty without parts); ref : (r,) int global ids of
+    the reference particles (distinct); g : (n, 3) float scratch indexed by particle, all zero
+    on entry and left all zero (only the body's rows are used). Sums are added group by
+    group, the rows joining parts first, as :func:`_solve_volume_parts` adds them. Returns the
+    multiplier increment.
 
     Passes: reference centroid, one over the triangles (volume and gradient; a pair of
     triangles sharing an edge needs three cross products and 12 gradient updates instead
@@ -238,39 +252,79 @@ def _solve_volume(x, w, particles, tris, cuts, ref, rest, k, c, lam, g, xpbd):
     if particles.shape[0] == 0 or ref.shape[0] == 0:
         return 0.0
     rx, ry, rz = _volume_centroid(x, ref)
-    vol = 0.0
-    for q in range(cuts.shape[0] - 1):
+    n = cuts.shape[0] - 2
+    vol = _volume_rows(x, tris[cuts[n]:cuts[n + 1]], rx, ry, rz, g)
+    for q in range(n):
         vol += _volume_rows(x, tris[cuts[q]:cuts[q + 1]], rx, ry, rz, g)
-    return _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd)
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    denom = 0.0
+    for q in range(pcuts.shape[0] - 1):
+        ax, ay, az, ad = _group_sums(w, particles[pcuts[q]:pcuts[q + 1]], g)
+        sx += ax
+        sy += ay
+        sz += az
+        denom += ad
+    s, f6, moved = _volume_scale(w, ref, vol, sx, sy, sz, denom, rest, k, c, lam, g, xpbd)
+    _volume_apply(x, w, particles, g, f6, moved)
+    return s
 
 
 @numba.njit(parallel=True, **PBD_NUMBA)
-def _solve_volume_parts(x, w, particles, tris, cuts, ref, rest, k, c, lam, g, xpbd, sums):
-    """:func:`_solve_volume` with the triangle rows grouped by part (:mod:`faceforge.pbd.partition`):
-    rows ``cuts[p]:cuts[p + 1]`` (``p < n``) touch only part ``p``'s particles and are summed
-    at once, one thread each (into ``sums[p, 0]``); the rows joining parts, ``cuts[n]:cuts[n + 1]``,
-    follow. The same projection as :func:`_solve_volume`, to the bit."""
+def _solve_volume_parts(x, w, particles, pcuts, tris, cuts, ref, rest, k, c, lam, g, xpbd,
+                        sums, defer):
+    """:func:`_solve_volume` of a body whose rows and particles are grouped by part
+    (:mod:`faceforge.pbd.partition`): the rows joining parts first, then each part ``p < n``
+    at once, one thread each: its rows ``cuts[p]:cuts[p + 1]`` (they touch only its particles)
+    and then its particles' sums ``pcuts[p]:pcuts[p + 1]`` (into ``sums[p, :5]``); the
+    particles of no part last. The same projection as :func:`_solve_volume`, to the bit.
+
+    With ``defer`` the update is left to the caller (:func:`_volume_apply` with the returned
+    factor, part by part: nothing may read the body's positions before). Returns ``(s, s / 6,
+    moved)`` (:func:`_volume_scale`)."""
     if particles.shape[0] == 0 or ref.shape[0] == 0:
-        return 0.0
+        return 0.0, 0.0, False
     rx, ry, rz = _volume_centroid(x, ref)
     n = cuts.shape[0] - 2
+    vol = _volume_rows(x, tris[cuts[n]:cuts[n + 1]], rx, ry, rz, g)
     for p in numba.prange(n):
         sums[p, 0] = _volume_rows(x, tris[cuts[p]:cuts[p + 1]], rx, ry, rz, g)
-    vol = 0.0
+        ax, ay, az, ad = _group_sums(w, particles[pcuts[p]:pcuts[p + 1]], g)
+        sums[p, 1] = ax
+        sums[p, 2] = ay
+        sums[p, 3] = az
+        sums[p, 4] = ad
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    denom = 0.0
     for p in range(n):
         vol += sums[p, 0]
-    vol += _volume_rows(x, tris[cuts[n]:cuts[n + 1]], rx, ry, rz, g)
-    return _volume_finish(x, w, particles, ref, vol, rest, k, c, lam, g, xpbd)
+        sx += sums[p, 1]
+        sy += sums[p, 2]
+        sz += sums[p, 3]
+        denom += sums[p, 4]
+    ax, ay, az, ad = _group_sums(w, particles[pcuts[n]:pcuts[n + 1]], g)
+    sx += ax
+    sy += ay
+    sz += az
+    denom += ad
+    s, f6, moved = _volume_scale(w, ref, vol, sx, sy, sz, denom, rest, k, c, lam, g, xpbd)
+    if not defer:
+        _volume_apply(x, w, particles, g, f6, moved)
+    return s, f6, moved
 
 
 @numba.njit(**PBD_NUMBA)
-def _project_volume(x, w, pstart, particles, cuts, tris, rstart, ref, rest, k, c, lam,
+def _project_volume(x, w, pstart, particles, pcuts, cuts, tris, rstart, ref, rest, k, c, lam,
                     g, xpbd, start, stop):
     """Sweep over bodies ``start:stop`` in order (CSR starts ``pstart``, ``rstart``; body
-    ``j``'s rows of ``tris (f, 4)`` (:func:`pair_triangles`) are ``cuts[j, 0]:cuts[j, -1]``,
-    grouped by ``cuts[j]``; all ids global)."""
+    ``j``'s particles ``particles[pstart[j]:pstart[j + 1]]`` grouped by ``pcuts[j]`` (offsets
+    in that slice), its rows of ``tris (f, 4)`` (:func:`pair_triangles`)
+    ``cuts[j, 0]:cuts[j, -1]`` grouped by ``cuts[j]``; all ids global)."""
     for j in range(start, stop):
-        lam[j] += _solve_volume(x, w, particles[pstart[j]:pstart[j + 1]], tris, cuts[j],
+        lam[j] += _solve_volume(x, w, particles[pstart[j]:pstart[j + 1]], pcuts[j], tris, cuts[j],
                                 ref[rstart[j]:rstart[j + 1]], rest[j], k[j], c[j], lam[j], g,
                                 xpbd)
 
@@ -298,7 +352,8 @@ def solve_volume(positions, inv_mass, triangles, rest_volume, stiffness) -> np.n
     rows = pair_triangles(tris)
     one = np.ones(1, dtype=np.float64)
     _project_volume(x, np.ascontiguousarray(inv_mass, dtype=np.float64),
-                    np.array([0, len(particles)]), particles, np.array([[0, len(rows)]]), rows,
+                    np.array([0, len(particles)]), particles, np.array([[0, len(particles)]]),
+                    np.array([[0, len(rows)]]), rows,
                     np.array([0, len(ref)]), particles[ref], np.array([float(rest_volume)]),
                     one * float(stiffness), one * 0.0, one * 0.0, np.zeros_like(x), False, 0, 1)
     return x
