@@ -86,8 +86,8 @@ class SurfacePoints:
 class SurfaceProjector:
     """Closest-point queries (and rays) on one mesh, with the search trees kept.
 
-    The closest points come from a :class:`~faceforge.geometry.closest.TriangleTree` (a k-d
-    tree of the centroids and a compiled search, several times faster than
+    The closest points come from a :class:`~faceforge.geometry.closest.TriangleTree` (a uniform
+    grid of the triangles and a compiled search, several times faster than
     ``trimesh.proximity.closest_point``, which also rebuilds an r-tree of the triangles'
     boxes for every fresh mesh); this object builds its trees once. The one-shot twins are :func:`closest_points`
     and :func:`project_to_surface`, which reuse a projector from a small cache
@@ -165,8 +165,8 @@ def projector(vertices, faces) -> SurfaceProjector:
 def closest_points(points, vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest point of the mesh to each query point.
 
-    Uses a :class:`~faceforge.geometry.closest.TriangleTree` (a k-d tree of the triangle
-    centroids plus the exact point-triangle distance), through :func:`projector`. Returns
+    Uses a :class:`~faceforge.geometry.closest.TriangleTree` (a uniform grid of the
+    triangles plus the exact point-triangle distance), through :func:`projector`. Returns
     ``(closest (k, 3), distance (k,), face_ids (k,))``.
     """
     return projector(vertices, faces).closest(points)

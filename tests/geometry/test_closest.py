@@ -51,3 +51,27 @@ def test_projector_matches_trimesh_on_the_template_skull(bone):
     got, dist, face = SurfaceProjector(v, f).closest(pts)
     assert dist.max() > 0.05 * scale and dist.min() < 1e-3 * scale   # far and near points
     _check(v, f, pts, got, dist, face)
+
+
+def test_tree_far_points_ties_and_bad_input():
+    """Points far outside the grid (the search walks out to the triangles), a single
+    triangle, the lowest index among equally near triangles, and non-finite input."""
+    sphere = trimesh.creation.icosphere(2)
+    tree = TriangleTree(sphere.triangles)
+    rng = np.random.default_rng(5)
+    far = rng.normal(size=(50, 3)) * 10.0
+    got, face = tree.closest(far)
+    _check(sphere.vertices, sphere.faces, far, got, np.linalg.norm(got - far, axis=1), face)
+    # at a vertex every triangle around it is at distance 0: the lowest index is reported
+    got, face = tree.closest(sphere.vertices)
+    for v in range(len(sphere.vertices)):
+        assert face[v] == np.flatnonzero((sphere.faces == v).any(axis=1)).min()
+    np.testing.assert_array_equal(got, sphere.vertices)
+    one = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    q, face = TriangleTree(one).closest(np.array([[0.2, 0.2, 5.0], [-3.0, -3.0, 0.0]]))
+    np.testing.assert_allclose(q, [[0.2, 0.2, 0.0], [0.0, 0.0, 0.0]], atol=1e-15)
+    assert face.tolist() == [0, 0]
+    with pytest.raises(ValueError, match="finite"):
+        tree.closest(np.array([[0.0, np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="at least one triangle"):
+        TriangleTree(np.zeros((0, 3, 3)))
