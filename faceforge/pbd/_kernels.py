@@ -190,16 +190,20 @@ def _velocities(x, v, prev, inv_h):
 
 
 @numba.njit(**PBD_NUMBA)
-def _step(x_in, v_in, x_out, v_out, w, kin, kin_target, kin_start, prev, gravity, damp, h,
-          substeps, iterations, xpbd, blocks, seg, threaded, lams,
+def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
+          w, kin, kin_start, prev, gravity, damp,
+          substeps, iterations, xpbd, blocks, seg, lams,
           d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t, d_wt,
           b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch, q_area, q_area_stop,
           a_idx, a_rest, a_k, a_c, a_runs, a_w, bufs,
           v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
-          p_idx, p_target, p_k, p_c,
+          p_idx, p_k, p_c,
           t_idx, t_tri, t_bary, t_k, t_c):
     """A whole step of ``substeps`` substeps of length ``h``; ``x_out``/``v_out`` may be the
     inputs (the same array: then they are not copied onto themselves) or share no memory.
+
+    The arguments that change from step to step come first (states, controls, ``h``,
+    ``threaded``); the rest are the solver's frozen arrays, passed as one prepared tuple.
 
     ``seg (k + 2,)``: the block rows of each part and of the seam (:func:`_project_parts`);
     ``threaded``: project the parts on threads (else all rows in order, the same result);

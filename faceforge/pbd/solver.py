@@ -198,6 +198,22 @@ class Solver:
         # (not when one part holds every row: a small model, partition.MIN_SLAB_CONSTRAINTS)
         busy = np.count_nonzero(np.diff(self._seg) > 0)
         self._threaded = busy > 1 and threaded()
+        # the compiled step's arguments that never change, gathered once (a step's Python
+        # side then costs a few microseconds, which the small muscle layers notice)
+        k = self._k
+        self._frozen = (
+            self._w, self._kin, self._kin_start, self._prev, float(s.gravity), self._damp,
+            s.substeps, s.iterations, s.stiffness_mode == "xpbd", self._blocks, self._seg,
+            self._lams,
+            *self._arrays["distance"], self._d_coef, self._runs["distance"], self._d_coef_t,
+            self._d_wt,
+            *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
+            self._q_stretch, self._q_area, self._q_area_stop,
+            *self._arrays["area"], self._runs["area"], self._a_w, self._bufs,
+            *self._volume, *k["volume"], self._vol_g,
+            self._position, *k["position"],
+            *self._attachment,
+            *k["attachment"])
 
     @property
     def threads(self) -> int:
@@ -321,25 +337,13 @@ class Solver:
         if not dt > 0:
             raise ValueError(f"dt must be > 0, got {dt!r}")
         s = self.settings
-        k = self._k
         x_in, v_in, x_out, v_out = (state_in.positions, state_in.velocities,
                                     state_out.positions, state_out.velocities)
         if self._particle_order is not None:  # stepped in the partitioned model's numbering
             x_in = x_out = _take_rows(x_in, self._particle_order, self._x)
             v_in = v_out = _take_rows(v_in, self._particle_order, self._v)
-        _step(x_in, v_in, x_out, v_out,
-              self._w, self._kin, kin, self._kin_start, self._prev, float(s.gravity),
-              self._damp, dt / s.substeps, s.substeps, s.iterations,
-              s.stiffness_mode == "xpbd", self._blocks, self._seg, self._threaded, self._lams,
-              *self._arrays["distance"], self._d_coef, self._runs["distance"], self._d_coef_t,
-              self._d_wt,
-              *self._arrays["bending"], self._runs["bending"], self._b_w, self._b_rest_t,
-              self._q_stretch, self._q_area, self._q_area_stop,
-              *self._arrays["area"], self._runs["area"], self._a_w, self._bufs,
-              *self._volume, *k["volume"], self._vol_g,
-              self._position, targets, *k["position"],
-              *self._attachment,
-              *k["attachment"])
+        _step(x_in, v_in, x_out, v_out, kin, targets, dt / s.substeps, self._threaded,
+              *self._frozen)
         if self._particle_order is not None:
             _take_rows(self._x, self._old_order, state_out.positions)
             _take_rows(self._v, self._old_order, state_out.velocities)
