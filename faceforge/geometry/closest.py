@@ -103,11 +103,16 @@ def _closest_in(points, tri, origin, cell, dims, start, items, face):  # pragma:
     out = np.empty_like(points)
     seen = np.full(tri.shape[0], -1, dtype=np.int64)  # the last point that measured each
     c = np.empty(3, dtype=np.int64)
+    gap2 = np.empty(3)
     for k in range(points.shape[0]):
         p0, p1, p2 = points[k, 0], points[k, 1], points[k, 2]
         for a in range(3):
             v = np.floor((points[k, a] - origin[a]) / cell)
             c[a] = min(max(v, 0.0), dims[a] - 1.0)
+            # how far the point lies outside the grid's box along this axis: every cell is at
+            # least that far along it (a far point's search then stops after a few shells)
+            g = max(origin[a] - points[k, a], points[k, a] - (origin[a] + dims[a] * cell), 0.0)
+            gap2[a] = g * g
         best = np.inf
         r = 0
         while True:
@@ -132,15 +137,19 @@ def _closest_in(points, tri, origin, cell, dims, start, items, face):  # pragma:
                                 best = d
                                 out[k, 0], out[k, 1], out[k, 2] = qx, qy, qz
                                 face[k] = t
-            # the nearest a cell beyond the visited cube can be: its faces that are not
-            # the grid's own
+            # the nearest (squared) an unvisited cell can be: beyond one of the visited cube's
+            # faces that are not the grid's own, and outside the box along the other axes
             bound = np.inf
             for a in range(3):
+                rest = gap2[0] + gap2[1] + gap2[2] - gap2[a]
                 if c[a] - r > 0:
-                    bound = min(bound, points[k, a] - (origin[a] + (c[a] - r) * cell))
+                    d = max(points[k, a] - (origin[a] + (c[a] - r) * cell), 0.0)
+                    bound = min(bound, d * d + rest)
                 if c[a] + r < dims[a] - 1:
-                    bound = min(bound, origin[a] + (c[a] + r + 1) * cell - points[k, a])
-            if bound == np.inf or (bound > 0.0 and best <= bound * bound):
+                    d = max(origin[a] + (c[a] + r + 1) * cell - points[k, a], 0.0)
+                    bound = min(bound, d * d + rest)
+            # strictly nearer: an equally near triangle beyond may have a lower index
+            if bound == np.inf or best < bound:
                 break
             r += 1
     return out
