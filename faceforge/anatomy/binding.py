@@ -195,12 +195,14 @@ def _merge(bodies: list[Body], ids: list[int]):
 
 
 def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None, side_of=None,
-          strict=None):
+          strict=None, face_sides=None):
     """Best hit per ray among ``bodies[ids]``: smallest ``rank`` then distance.
 
     ``allowed (k, n_bodies) bool`` filters bodies per ray; with ``side_of`` a hit
     on the other side of the lip line than its ray's ``ray_side`` is dropped, and on the
-    bodies marked ``strict (n_bodies,) bool`` also a hit far from the lips (side 0). Returns
+    bodies marked ``strict (n_bodies,) bool`` also a hit far from the lips (side 0); on a body
+    with ``face_sides[i] (f_i,)`` (a ring around the mouth, :func:`mouth.ring_face_sides`) the
+    hit face's side is used instead of the hit point's. Returns
     ``(body (k,), local_face (k,), points (k, 3), dist (k,))``, body -1 on a miss.
     """
     k = len(origins)
@@ -224,7 +226,17 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
         rs = np.asarray(ray_side)[ray]
         check = rs != 0
         ok = np.ones(len(ray), bool)
-        agree = np.asarray(side_of(loc[check])) * rs[check]
+        side = np.asarray(side_of(loc[check]))
+        if face_sides is not None:   # rings around the mouth: the side of the face's rows
+            label = np.zeros(len(f), np.int8)
+            labelled = np.zeros(len(f), bool)
+            for i in ids:
+                if face_sides[i] is not None:
+                    label[first_face[i]:first_face[i] + len(bodies[i].faces)] = face_sides[i]
+                    labelled[first_face[i]:first_face[i] + len(bodies[i].faces)] = True
+            t_check = tri[check]
+            side = np.where(labelled[t_check], label[t_check], side)
+        agree = side * rs[check]
         ok[check] = agree >= 0
         if strict is not None:
             ok[check] &= ~np.asarray(strict, bool)[b[check]] | (agree > 0)
@@ -244,7 +256,7 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
 
 
 def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask,
-                      side_of=None, allowed=None, around=None) -> np.ndarray:
+                      side_of=None, allowed=None, around=None, face_sides=None) -> np.ndarray:
     """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
     Rays miss where the skin looks into a hole of the skull (eyelids and eye
@@ -259,8 +271,9 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     (a lip never binds to the other lip's muscles).
 
     With ``around (n_bodies,) bool`` (the muscles around the mouth, ``body_sides``)
-    a lip vertex first looks at the own half of those only -- their faces whose centroid
-    lies on its side: at the inner lips the two halves of the sphincter come within a few
+    a lip vertex first looks at the own half of those only -- their faces on its side
+    (``face_sides[i]``, a ring's rows, where given; else the faces whose centroid lies on its
+    side): at the inner lips the two halves of the sphincter come within a few
     mm of each other and the closest point of the whole muscle is often on the other lip
     (MakeHuman FDPs 2.6 and 2.3), which used to leave the inner lips on the teeth. A lip
     vertex still unbound then takes the closest point, on its own side, of any other
@@ -287,8 +300,10 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
                     continue
                 bv, bf = bodies[i].vertices, bodies[i].faces
                 sub = np.arange(len(bf))
-                if half:    # the faces of the vertex's own half
-                    sub = np.flatnonzero(np.asarray(side_of(bv[bf].mean(axis=1))) == side)
+                if half:    # the faces of the vertex's own half: by the ring's rows, else by place
+                    rows = None if face_sides is None else face_sides[i]
+                    sub = np.flatnonzero((np.asarray(side_of(bv[bf].mean(axis=1))) if rows is None
+                                          else rows) == side)
                     if len(sub) == 0:
                         continue
                 p, d, tri = closest_points(v[todo], bv, bf[sub])
@@ -307,7 +322,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
-              insertions=None) -> Binding:
+              insertions=None, face_sides=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -351,6 +366,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         muscles above them (module docstring): a vertex bound by its ray to another
         muscle whose same ray, cast on, also meets one of these gets a second anchor
         on it (the nearest hit; :attr:`Binding.vertex_ids` then lists the vertex twice).
+    face_sides : sequence, optional
+        Per body, None or ``(f_i,) int8``: the lip side of each face of a ring around the
+        mouth by its rows (:func:`faceforge.anatomy.mouth.ring_face_sides`), used for that
+        body in place of the side of the lip line its hits and faces lie on.
 
     Returns
     -------
@@ -399,7 +418,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     for p, (ids, sign) in enumerate(passes):
         todo = np.flatnonzero((body < 0) & has_dir)
         res = _cast(bodies, ids, rank, v[todo], sign * nrm[todo], max_distance, allowed[todo],
-                    sides[todo], side_of, strict)
+                    sides[todo], side_of, strict, face_sides)
         hit = res[0] >= 0
         t = todo[hit]
         body[t], face[t], pts[t], dist[t] = (r[hit] for r in res)
@@ -407,7 +426,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
 
     mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
     closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of,
-                                allowed, around)
+                                allowed, around, face_sides)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
@@ -418,7 +437,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         cand = ids[(kinds[body[ids]] == MUSCLE) & ~np.isin(body[ids], ins) & ~closest[ids]]
         res = _cast(bodies, ins, np.zeros(nb, INT), v[cand],    # nearest hit, along the same ray
                     np.where(outward[cand, None], 1.0, -1.0) * nrm[cand], max_distance, allowed[cand],
-                    sides[cand], side_of, strict)
+                    sides[cand], side_of, strict, face_sides)
         hit = res[0] >= 0
         extra = cand[hit]
         order = np.argsort(np.concatenate([ids, extra]), kind="stable")   # each right after its first
@@ -687,7 +706,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     BoundSkin
     """
     from faceforge.anatomy.influence import influence_weights
-    from faceforge.anatomy.mouth import LIP_FDPS, cut_mouth, lip_side, muscle_lip_side, side_of_points
+    from faceforge.anatomy.mouth import (LIP_FDPS, cut_mouth, lip_side, muscle_lip_side,
+                                         ring_face_sides, side_of_points)
 
     v, f = check_mesh(vertices, faces)
     pts = {k: np.asarray(p, FLOAT) for k, p in landmarks.items()}
@@ -716,9 +736,11 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
     body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
                   for b in bodies]
+    face_sides = [ring_face_sides(b.vertices, b.faces, cut, up=up) if s == AROUND_MOUTH else None
+                  for b, s in zip(bodies, body_sides)]
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
-                        insertions=ins)
+                        insertions=ins, face_sides=face_sides)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None

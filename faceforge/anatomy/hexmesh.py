@@ -149,6 +149,32 @@ def _faces(h: int, w: int, closed: bool, flip=None) -> np.ndarray:
     return np.concatenate([bottom, top, walls]).astype(INT)
 
 
+def grid_layout(n_vertices: int, faces, closed: bool = True):
+    """``(h, w)`` of a two-sheet muscle mesh of ``n_vertices`` laid out as :class:`HexTopology`
+    (``bottom(i, j) = i w + j``, ``top(i, j) = h w + i w + j``), found from its ``faces (m, 3)``:
+    the smallest ``w >= 2`` for which the face count is that of :func:`hex_topology` and every
+    face joins nodes at most one row (cyclically when ``closed``) and one column apart; None
+    when no ``(h, w)`` fits (a mesh of another origin)."""
+    f = np.asarray(faces, dtype=INT).reshape(-1, 3)
+    half = n_vertices // 2
+    if n_vertices % 2 or len(f) == 0:
+        return None
+    for w in range(2, half + 1):
+        if half % w:
+            continue
+        h = half // w
+        if h < (3 if closed else 2) or len(f) != len(_faces(h, w, closed)):
+            continue
+        node = f % half
+        row, col = node // w, node % w
+        if closed:   # rows relative to the face's first: h - 1 is the row before
+            row = (row - row[:, :1]) % h
+            row = np.where(row == h - 1, -1, row)
+        if (np.ptp(row, axis=1) <= 1).all() and (np.ptp(col, axis=1) <= 1).all():
+            return h, w
+    return None
+
+
 def hex_topology(h: int, w: int, closed: bool = False) -> HexTopology:
     """Connectivity of the template mesh (Fig. 4), see :class:`HexTopology`."""
     if w < 2 or h < (3 if closed else 2):

@@ -37,7 +37,7 @@ import numpy as np
 from faceforge.constants import FLOAT, INT
 
 __all__ = ["MouthCut", "LIP_FDPS", "lip_contours", "cut_mouth", "lip_side", "side_of_points",
-           "muscle_lip_side", "AROUND_MOUTH"]
+           "muscle_lip_side", "ring_face_sides", "AROUND_MOUTH"]
 
 #: FDPs of the inner lip contour, corner to corner
 UPPER_FDPS = ("2.4", "2.6", "2.2", "2.7", "2.5")
@@ -357,6 +357,51 @@ def muscle_lip_side(vertices, cut: MouthCut, up=(0.0, 1.0, 0.0), forward=(0.0, 0
         return AROUND_MOUTH
     h = float(np.mean((p[near] - line[idx[near]]) @ u))
     return int(np.sign(h))
+
+
+def ring_face_sides(vertices, faces, cut: MouthCut, up=(0.0, 1.0, 0.0)):
+    """Lip side of each face of a muscle ring around the mouth, by the ring's rows rather
+    than where the face lies: ``(m,) int8``, +1 the upper lip's arc, -1 the lower's (0: a face
+    touching neither arc); None when the mesh is not a closed muscle grid
+    (:func:`faceforge.anatomy.hexmesh.grid_layout`) or the cut has no corners.
+
+    The two rows whose outer samples (column ``w - 1`` of the bottom sheet: the loop around
+    the lips) lie nearest the mouth corners split the ring into two arcs; the arc whose outer
+    samples lie higher along ``up`` is the upper lip's. A face belongs to an arc when its
+    rows are that arc's or a corner row. The fit may place a sphincter well off the lip line (ICT: 66 of its 80
+    vertices above it, its lower arc under the upper lip's outer contour): the side of the
+    lip line a face lies on then gives the upper lip the arc that the lower lip's muscles
+    pull.
+    """
+    from faceforge.anatomy.hexmesh import grid_layout
+
+    v = np.asarray(vertices, FLOAT).reshape(-1, 3)
+    f = np.asarray(faces, INT).reshape(-1, 3)
+    layout = grid_layout(len(v), f, closed=True)
+    if layout is None or len(cut.upper) < 2:
+        return None
+    h, w = layout
+    outer = v[np.arange(h) * w + (w - 1)]
+    corners = np.asarray(cut.vertices, FLOAT)[[cut.upper[0], cut.upper[-1]]]
+    c0, c1 = (int(np.argmin(np.linalg.norm(outer - c, axis=1))) for c in corners)
+    if c0 == c1:
+        return None
+    first = np.zeros(h, bool)     # the rows strictly between the corners going forward
+    first[(c0 + 1 + np.arange((c1 - c0 - 1) % h)) % h] = True
+    second = ~first
+    second[[c0, c1]] = False
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    if not first.any() or not second.any():
+        return None
+    upper = first if (outer[first] @ u).mean() > (outer[second] @ u).mean() else second
+    lower = ~upper
+    lower[[c0, c1]] = False
+    corner = ~(upper | lower)
+    row = (f % (h * w)) // w
+    out = np.zeros(len(f), np.int8)
+    out[(upper | corner)[row].all(axis=1) & upper[row].any(axis=1)] = 1
+    out[(lower | corner)[row].all(axis=1) & lower[row].any(axis=1)] = -1
+    return out
 
 
 def _surface_side(cut: MouthCut, side: np.ndarray) -> np.ndarray:

@@ -135,6 +135,38 @@ def test_side_of_drops_hits_across_the_lip_line(skin):
     assert np.all(side_of(centroids) == 1)
 
 
+def test_face_sides_decide_a_rings_half_instead_of_the_lip_line(skin):
+    """With ``face_sides`` (a ring's rows, mouth.ring_face_sides) a lip vertex binds only to
+    the faces labelled with its own lip, by ray or by closest point, wherever they lie."""
+    from faceforge.anatomy.mouth import AROUND_MOUTH
+
+    v, f = skin
+    muscle = Body("ring", "muscle", *sphere(0.9, 3))
+    sides = np.where(v[:, 1] >= 0, 1, -1)
+
+    def side_of(points):  # the "lip line" is y = 0.3
+        return np.where(points[:, 1] >= 0.3, 1, -1)
+
+    centroids = muscle.vertices[muscle.faces].mean(axis=1)
+    # the rows' labels disagree with the line: the band 0 <= y < 0.3 belongs to the upper lip
+    labels = np.where(centroids[:, 1] >= 0.0, 1, -1).astype(np.int8)
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of,
+                  body_sides=[AROUND_MOUTH], face_sides=[labels])
+    on = b.body == 0
+    assert on.any()
+    assert np.all(labels[b.face_ids[on]] == sides[b.vertex_ids[on]])
+    band = (v[:, 1] >= 0) & (v[:, 1] < 0.25)       # unbound by their rays under the line rule
+    sel = np.isin(b.vertex_ids, np.flatnonzero(band))
+    assert band.any() and np.all(b.status[band] == MUSCLE)
+    assert np.mean(b.closest[sel]) < 0.5               # mostly by their own rays now
+    # all faces labelled lower: no upper-lip vertex binds to the ring at all
+    lower = np.full(len(muscle.faces), -1, np.int8)
+    b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of,
+                  body_sides=[AROUND_MOUTH], face_sides=[lower])
+    assert not np.any(sides[b.vertex_ids[b.body == 0]] == 1)
+    assert np.any(sides[b.vertex_ids[b.body == 0]] == -1)
+
+
 def test_rays_into_a_hole_fall_back_to_the_closest_skull_point(skin):
     v, f = skin
     sv, sf = sphere(0.8, 3)

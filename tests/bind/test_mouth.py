@@ -131,3 +131,62 @@ def test_muscle_lip_side_tells_the_sphincter_from_the_lips_own_muscles():
     lev = dep * [1, -1, 1] + [0, 1.05, 0]                # mirrored above the line
     assert muscle_lip_side(lev, cut) == 1
     assert muscle_lip_side(lev + [0, 5.0, 0], cut) == 0
+
+
+def _ring(h, w, centre, radii, lift):
+    """A closed two-sheet muscle ring laid out as hexmesh's (rows around the mouth starting at
+    the right corner, counter-clockwise; column 0 inner, w - 1 outer), its lower arc lifted by
+    ``lift`` towards the centre line (most of it above the lip line, as ICT's sphincter)."""
+    from faceforge.anatomy.hexmesh import hex_topology
+
+    topo = hex_topology(h, w, closed=True)
+    t = 2 * np.pi * np.arange(h) / h
+    r = np.linspace(radii[0], radii[1], w)
+    x = centre[0] + np.cos(t)[:, None] * r
+    y = centre[1] + np.sin(t)[:, None] * r * np.where(np.sin(t) < 0, lift, 1.0)[:, None]
+    bottom = np.stack([x, y, np.zeros_like(x)], -1).reshape(-1, 3)
+    return np.concatenate([bottom, bottom + [0, 0, 0.02]]), topo.faces
+
+
+def test_grid_layout_finds_the_muscle_grids_and_nothing_else():
+    from faceforge.anatomy.hexmesh import _faces, grid_layout, hex_topology
+
+    for h, w, closed in ((20, 2, True), (7, 3, True), (5, 4, False), (12, 6, False)):
+        assert grid_layout(2 * h * w, hex_topology(h, w, closed).faces, closed) == (h, w)
+    flip = np.zeros(2 * 20 - 20, bool)
+    flip[::3] = True                                   # cells split along the other diagonal
+    assert grid_layout(80, _faces(20, 2, True, flip), True) == (20, 2)
+    import trimesh
+
+    ico = trimesh.creation.icosphere(2)                # not a muscle grid
+    assert grid_layout(len(ico.vertices), ico.faces) is None
+    assert grid_layout(80, hex_topology(20, 2, True).faces[::-1][:-2], True) is None
+
+
+def test_ring_face_sides_follow_the_rows_not_the_lip_line():
+    """A sphincter fitted above the lip line (its lower arc mostly above it too): the faces
+    of its lower arc still belong to the lower lip, those of the upper arc to the upper one,
+    whichever side of the line they lie on."""
+    from faceforge.anatomy.mouth import MouthCut, ring_face_sides, side_of_points
+
+    v, f, lips = mouth_grid(8)
+    cut = cut_mouth(v, f, lips)                          # lip line y = 0.5, corners x = 1/8, 7/8
+    h, w = 20, 2
+    ring, rf = _ring(h, w, (0.5, 0.5 + 0.02), (0.25, 0.375), lift=0.05)
+    sides = ring_face_sides(ring, rf, cut)
+    row = (rf % (h * w)) // w                          # rows 0 and h/2 lie at the corners
+    top_arc = (row <= h // 2).all(axis=1) & ((row > 0) & (row < h // 2)).any(axis=1)
+    bottom_arc = ((row == 0) | (row >= h // 2)).all(axis=1) & (row > h // 2).any(axis=1)
+    assert np.all(sides[top_arc] == 1) and np.all(sides[bottom_arc] == -1)
+    assert np.count_nonzero(sides == 1) == np.count_nonzero(sides == -1) == len(rf) // 2
+    geometric = side_of_points(ring[rf].mean(axis=1), cut)
+    assert np.count_nonzero((sides == -1) & (geometric == 1)) > len(rf) // 4   # the old rule's upper
+    # the same ring upside down in its numbering: the arcs are found by height, not by index
+    flipped = ring.copy()
+    flipped[:, 1] = 1.0 - flipped[:, 1]
+    assert np.array_equal(ring_face_sides(flipped, rf, cut), -sides)
+    # not a muscle grid, or no corners: no labels (the caller keeps the lip-line rule)
+    assert ring_face_sides(ring, rf[:-2], cut) is None
+    no_corners = MouthCut(cut.case, cut.vertices, cut.faces, cut.n_user, cut.source,
+                          cut.removed_faces, cut.upper[:1], cut.lower)
+    assert ring_face_sides(ring, rf, no_corners) is None
