@@ -17,13 +17,13 @@ import numpy as np
 
 from faceforge.constants import NUMBA_OPTIONS
 
-__all__ = ["TriangleTree"]
+__all__ = ["TriangleGrid"]
 
 #: grid cells per axis at most (a skull: ~40 at two triangle diameters a cell)
 MAX_CELLS = 96
 
 
-class TriangleTree:
+class TriangleGrid:
     """Closest points on a static triangle soup ``triangles (m, 3, 3)``, ``m >= 1``, finite.
 
     The grid's cells are cubes of about two triangle diameters (the median triangle's;
@@ -34,7 +34,7 @@ class TriangleTree:
         self.triangles = np.ascontiguousarray(triangles, dtype=np.float64).reshape(-1, 3, 3)
         t = self.triangles
         if not len(t) or not np.isfinite(t).all():
-            raise ValueError(f"TriangleTree needs at least one triangle, all finite "
+            raise ValueError(f"TriangleGrid needs at least one triangle, all finite "
                              f"(got {len(t)})")
         n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
         length = np.linalg.norm(n, axis=1)
@@ -63,7 +63,7 @@ class TriangleTree:
         index). Compiled: :func:`_closest_in`; the tests compare q with trimesh's."""
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if not np.isfinite(points).all():
-            raise ValueError("TriangleTree.closest: points must be finite")
+            raise ValueError("TriangleGrid.closest: points must be finite")
         face = np.zeros(len(points), dtype=np.int64)
         q = _closest_in(points, self.triangles, self.origin, self.cell, self.dims,
                         self.start, self.items, face)
@@ -97,7 +97,7 @@ def _fill_cells(first, last, dims):  # pragma: no cover - numba
 @numba.njit(**NUMBA_OPTIONS)
 def _closest_in(points, tri, origin, cell, dims, start, items, face):  # pragma: no cover
     """For each point k the closest point of the triangles ``tri``, searching the grid
-    ``(origin (3,), cell, dims (3,), start, items)`` of :class:`TriangleTree` shell by shell
+    ``(origin (3,), cell, dims (3,), start, items)`` of :class:`TriangleGrid` shell by shell
     around the point's (clamped) cell; ``face[k]`` is set to the triangle holding it (the
     lowest index of equally near ones)."""
     out = np.empty_like(points)

@@ -86,7 +86,7 @@ class SurfacePoints:
 class SurfaceProjector:
     """Closest-point queries (and rays) on one mesh, with the search trees kept.
 
-    The closest points come from a :class:`~faceforge.geometry.closest.TriangleTree` (a uniform
+    The closest points come from a :class:`~faceforge.geometry.closest.TriangleGrid` (a uniform
     grid of the triangles and a compiled search, several times faster than
     ``trimesh.proximity.closest_point``, which also rebuilds an r-tree of the triangles'
     boxes for every fresh mesh); this object builds its trees once. The one-shot twins are :func:`closest_points`
@@ -117,11 +117,11 @@ class SurfaceProjector:
 
     @property
     def tree(self):
-        """A :class:`~faceforge.geometry.closest.TriangleTree` of the mesh (built on first use)."""
+        """A :class:`~faceforge.geometry.closest.TriangleGrid` of the mesh (built on first use)."""
         if self._tree is None:
-            from faceforge.geometry.closest import TriangleTree
+            from faceforge.geometry.closest import TriangleGrid
 
-            self._tree = TriangleTree(self.vertices[self.faces])
+            self._tree = TriangleGrid(self.vertices[self.faces])
         return self._tree
 
     def closest(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,7 +165,7 @@ def projector(vertices, faces) -> SurfaceProjector:
 def closest_points(points, vertices, faces) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Closest point of the mesh to each query point.
 
-    Uses a :class:`~faceforge.geometry.closest.TriangleTree` (a uniform grid of the
+    Uses a :class:`~faceforge.geometry.closest.TriangleGrid` (a uniform grid of the
     triangles plus the exact point-triangle distance), through :func:`projector`. Returns
     ``(closest (k, 3), distance (k,), face_ids (k,))``.
     """

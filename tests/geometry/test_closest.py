@@ -1,4 +1,4 @@
-"""Closest points on meshes (geometry.closest.TriangleTree, SurfaceProjector.closest) against
+"""Closest points on meshes (geometry.closest.TriangleGrid, SurfaceProjector.closest) against
 trimesh's r-tree search, which they replace."""
 
 from pathlib import Path
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.geometry.closest import TriangleTree
+from faceforge.geometry.closest import TriangleGrid
 from faceforge.geometry.surface_points import SurfaceProjector
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -33,7 +33,7 @@ def test_tree_matches_trimesh_on_a_sphere():
     rng = np.random.default_rng(2)
     pts = rng.normal(size=(400, 3)) * rng.uniform(0.2, 1.8, (400, 1))
     pts[:20] = sphere.vertices[:20]                      # on it (at a vertex: ties)
-    got, face = TriangleTree(sphere.triangles).closest(pts)
+    got, face = TriangleGrid(sphere.triangles).closest(pts)
     want = _check(sphere.vertices, sphere.faces, pts, got, np.linalg.norm(got - pts, axis=1), face)
     np.testing.assert_allclose(got[20:], want[20:], atol=1e-9)
 
@@ -57,7 +57,7 @@ def test_tree_far_points_ties_and_bad_input():
     """Points far outside the grid (the search walks out to the triangles), a single
     triangle, the lowest index among equally near triangles, and non-finite input."""
     sphere = trimesh.creation.icosphere(2)
-    tree = TriangleTree(sphere.triangles)
+    tree = TriangleGrid(sphere.triangles)
     rng = np.random.default_rng(5)
     far = rng.normal(size=(50, 3)) * 10.0
     got, face = tree.closest(far)
@@ -68,10 +68,10 @@ def test_tree_far_points_ties_and_bad_input():
         assert face[v] == np.flatnonzero((sphere.faces == v).any(axis=1)).min()
     np.testing.assert_array_equal(got, sphere.vertices)
     one = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
-    q, face = TriangleTree(one).closest(np.array([[0.2, 0.2, 5.0], [-3.0, -3.0, 0.0]]))
+    q, face = TriangleGrid(one).closest(np.array([[0.2, 0.2, 5.0], [-3.0, -3.0, 0.0]]))
     np.testing.assert_allclose(q, [[0.2, 0.2, 0.0], [0.0, 0.0, 0.0]], atol=1e-15)
     assert face.tolist() == [0, 0]
     with pytest.raises(ValueError, match="finite"):
         tree.closest(np.array([[0.0, np.nan, 0.0]]))
     with pytest.raises(ValueError, match="at least one triangle"):
-        TriangleTree(np.zeros((0, 3, 3)))
+        TriangleGrid(np.zeros((0, 3, 3)))
