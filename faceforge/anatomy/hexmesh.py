@@ -157,13 +157,14 @@ def grid_layout(n_vertices: int, faces, closed: bool = True):
     when no ``(h, w)`` fits (a mesh of another origin)."""
     f = np.asarray(faces, dtype=INT).reshape(-1, 3)
     half = n_vertices // 2
-    if n_vertices % 2 or len(f) == 0:
+    # :func:`_faces` makes 4 h w triangles for a ring, 4 h w - 4 for a sheet
+    if n_vertices % 2 or len(f) != 2 * n_vertices - (0 if closed else 4):
         return None
     for w in range(2, half + 1):
         if half % w:
             continue
         h = half // w
-        if h < (3 if closed else 2) or len(f) != len(_faces(h, w, closed)):
+        if h < (3 if closed else 2):
             continue
         node = f % half
         row, col = node // w, node % w
