@@ -152,9 +152,9 @@ def _faces(h: int, w: int, closed: bool, flip=None) -> np.ndarray:
 def grid_layout(n_vertices: int, faces, closed: bool = True):
     """``(h, w)`` of a two-sheet muscle mesh of ``n_vertices`` laid out as :class:`HexTopology`
     (``bottom(i, j) = i w + j``, ``top(i, j) = h w + i w + j``), found from its ``faces (m, 3)``:
-    the smallest ``w >= 2`` for which the face count is that of :func:`hex_topology` and every
-    face joins nodes at most one row (cyclically when ``closed``) and one column apart; None
-    when no ``(h, w)`` fits (a mesh of another origin)."""
+    with :func:`hex_topology`'s face count, the smallest ``w >= 2`` for which every face joins
+    nodes at most one row (cyclically when ``closed``) and one column apart; None when no
+    ``(h, w)`` fits (a mesh of another origin)."""
     f = np.asarray(faces, dtype=INT).reshape(-1, 3)
     half = n_vertices // 2
     # :func:`_faces` makes 4 h w triangles for a ring, 4 h w - 4 for a sheet

@@ -368,10 +368,10 @@ def ring_face_sides(vertices, faces, cut: MouthCut, up=(0.0, 1.0, 0.0)):
     The two rows whose outer samples (column ``w - 1`` of the bottom sheet: the loop around
     the lips) lie nearest the mouth corners split the ring into two arcs; the arc whose outer
     samples lie higher along ``up`` is the upper lip's. A face belongs to an arc when its
-    rows are that arc's or a corner row. The fit may place a sphincter well off the lip line (ICT: 66 of its 80
-    vertices above it, its lower arc under the upper lip's outer contour): the side of the
-    lip line a face lies on then gives the upper lip the arc that the lower lip's muscles
-    pull.
+    rows are that arc's or a corner row. The fit may place a sphincter well off the lip
+    line (ICT: 66 of its 80 vertices above it, its lower arc under the upper lip's outer
+    contour): the side of the lip line a face lies on then gives the upper lip the arc that
+    the lower lip's muscles pull.
     """
     from faceforge.anatomy.hexmesh import grid_layout
 
