@@ -66,7 +66,6 @@ __all__ = ["MusculoskeletalSystem", "SKULL", "expand_lies_on", "underlying_mesh"
 SKULL = ("cranium", "mandible")
 
 
-
 def _is_rigid(t: list) -> bool:
     """Whether a (4, 4) matrix given as nested lists is a rigid transform: ``np.allclose(R^T R,
     I, atol=1e-6)``, ``det R > 0`` and ``np.allclose(T[3], (0, 0, 0, 1))``, in Python floats

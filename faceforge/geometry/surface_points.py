@@ -89,20 +89,17 @@ class SurfaceProjector:
     The closest points come from a :class:`~faceforge.geometry.closest.TriangleGrid` (a uniform
     grid of the triangles and a compiled search, several times faster than
     ``trimesh.proximity.closest_point``, which also rebuilds an r-tree of the triangles'
-    boxes for every fresh mesh); this object builds its trees once. The one-shot twins are :func:`closest_points`
-    and :func:`project_to_surface`, which reuse a projector from a small cache
-    keyed by the mesh's *content* (so equal arrays share one, edited arrays
-    never see a stale tree).
+    boxes for every fresh mesh); this object builds its grid and ray caster once. The one-shot
+    twins are :func:`closest_points` and :func:`project_to_surface`, which reuse a projector
+    from a small cache keyed by the mesh's *content* (so equal arrays share one, edited
+    arrays never see a stale grid).
     """
 
     def __init__(self, vertices, faces):
-        import trimesh
-
         v, f = check_mesh(vertices, faces)
         if len(f) == 0:
             raise ValueError("cannot project onto a mesh without faces")
         self.vertices, self.faces = v, f
-        self.mesh = trimesh.Trimesh(v, f, process=False, validate=False)
         self._caster = None
         self._tree = None
 
