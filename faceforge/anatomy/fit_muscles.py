@@ -134,7 +134,7 @@ def morph_spec(spec, warp):
 
 
 def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
-                     carry_inner: float = 0.0) -> list:
+                     carry_inner: float = 0.0, protrusion: float = 0.0) -> list:
     """Build every muscle of ``specs`` on the given skull, deepest layer first.
 
     Each muscle's action lines are projected (outermost surface) onto the concatenation of
@@ -142,7 +142,8 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     ``spec.thickness * skull_diagonal``. ``stiffness``: ``{"linear": {...}, "sphincter":
     {...}}`` of the config (empty: geometry only); ``carry_inner``: the sphincter's
     ``carry_inner`` of :func:`build_sphincter_muscle` (``muscle.sphincter.carry_inner``, on
-    the skull's faces; it does not change the rest geometry). Returns ``[Muscle]`` in build order.
+    the skull's faces; it does not change the rest geometry); ``protrusion``: the sphincter's
+    ``protrusion`` (``muscle.sphincter.protrusion``). Returns ``[Muscle]`` in build order.
     """
     from faceforge.anatomy.action_line import ActionLine
     from faceforge.anatomy.layers import expand_lies_on
@@ -178,7 +179,7 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                                    for n, p in zip(expand_lies_on(spec.lies_on), parts)])
             m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h, spec.w,
                                        t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
-                                       carry_faces=bone, **kw)
+                                       carry_faces=bone, protrusion=protrusion, **kw)
         bodies[spec.name] = (m.rest_positions, m.faces)
         built.append(m)
     return built

@@ -54,7 +54,7 @@ import numpy as np
 
 from faceforge.anatomy.action_line import ActionLine
 from faceforge.anatomy.layer_targets import LinearTargets, bary_points
-from faceforge.anatomy.muscle import Muscle, add_muscles_to_builder
+from faceforge.anatomy.muscle import PROTRUSION_SUFFIX, Muscle, add_muscles_to_builder, protrusion_control
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
 from faceforge.geometry.surface_points import SurfacePoints
@@ -245,6 +245,13 @@ class MusculoskeletalSystem:
         return dict(self._muscles)
 
     @property
+    def controls(self) -> tuple[str, ...]:
+        """What :meth:`step` drives: every muscle by name, then each sphincter's protrusion
+        (:func:`faceforge.anatomy.muscle.protrusion_control`)."""
+        return tuple(self._muscles) + tuple(protrusion_control(n) for n, m in self._muscles.items()
+                                            if m.kind == "sphincter")
+
+    @property
     def threads(self) -> int:
         """Most threads any muscle layer's step runs on (``pbd.Solver.threads``)."""
         return max((layer.solver.threads for layer in self._layers), default=1)
@@ -339,17 +346,19 @@ class MusculoskeletalSystem:
         Parameters
         ----------
         contractions : dict[str, float], optional
-            Muscle name -> c in [0, 1] (Eq. 4); missing muscles are at rest (0).
-            Unknown names raise ``KeyError`` listing the muscles.
+            Control (:attr:`controls`: a muscle's name, or a sphincter's protrusion) -> c in
+            [0, 1] (Eq. 4); missing ones are at rest (0). Unknown names raise ``KeyError``
+            listing the controls.
         jaw_matrix : (4, 4) float, optional
             Rigid transform of the mandible from its rest pose; None keeps the last.
         dt : float
             Frame time in seconds.
         """
         contractions = dict(contractions or {})
-        unknown = sorted(set(contractions) - set(self._muscles))
+        unknown = set(contractions).difference(self._muscles)   # the protrusions, or a mistake
+        unknown = sorted(unknown.difference(self.controls)) if unknown else []
         if unknown:
-            raise KeyError(f"unknown muscle(s) {unknown}; muscles: {', '.join(self._muscles)}")
+            raise KeyError(f"unknown muscle(s) {unknown}; controls: {', '.join(self.controls)}")
         if jaw_matrix is not None:
             self.set_jaw(jaw_matrix)
         for layer in self._layers:
@@ -373,7 +382,8 @@ class MusculoskeletalSystem:
             if len(s) and m.kind != "linear":          # the sphincter, in numpy
                 lp = {key: pts[sl] for key, sl in own.items()}
                 c = contractions.get(m.name, 0.0)
-                layer.control.position_targets[s] = m.targets_from_line_points(c, lp)
+                p = contractions.get(m.name + PROTRUSION_SUFFIX, 0.0)
+                layer.control.position_targets[s] = m.targets_from_line_points(c, lp, p)
 
     def reset(self) -> None:
         """Back to the rest state (jaw closed, muscles at rest, zero velocities)."""

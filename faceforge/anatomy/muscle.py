@@ -107,6 +107,7 @@ __all__ = [
     "bending_quads",
     "fit_ellipse",
     "sphincter_displacement",
+    "protrusion_control",
     "align_loops",
     "SPHINCTER_MAX_CONTRACTION",
     "LINEAR_MAX_CONTRACTION",
@@ -241,14 +242,15 @@ def _conic_lstsq(x, y):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry):  # pragma: no cover - numba
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd):  # pragma: no cover - numba
     """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
-    :func:`sphincter_displacement` with ``c`` (already times the maximal closure) when
-    ``c > 0``; before that, with ``carry (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each
+    :func:`sphincter_displacement` with ``c`` (already times the maximal closure) and ``lift``
+    when either is > 0; before that, with ``carry (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each
     inner sample gets ``carry[i] ((s3 - r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest
-    samples. Same values as the numpy code to round-off (LAPACK's, summation order)."""
+    samples; ``fwd (3,)``: :attr:`Muscle.forward`. Same values as the numpy code to round-off (LAPACK's, summation
+    order)."""
     h = grid.shape[0]
     w1 = grid.shape[1] - 1
     _loop_samples(p1, seg1, t1, grid, 0)
@@ -257,7 +259,7 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry):  # prag
         for i in range(h):
             for j in range(3):
                 grid[i, 0, j] += carry[i] * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
-    if not c > 0.0:
+    if not (c > 0.0 or lift > 0.0):
         return
     # fit_ellipse of the 2h samples (inner then outer)
     k = 2 * h
@@ -299,7 +301,16 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry):  # prag
         ua0, ua1, ub0, ub1 = 1.0, 0.0, 0.0, 1.0
     da = ua0 * e1 + ua1 * e2
     db = ub0 * e1 + ub1 * e2
-    # sphincter_displacement: delta = c P (o - s1) cos(pi/2 (1 - r)), r of the outer sample
+    # sphincter_displacement: delta = (c P (o - s1) + lift b n) cos(pi/2 (1 - r)), r of the
+    # outer sample, n the plane's normal on the side of fwd
+    nrm = np.empty(3)
+    nrm[0] = da[1] * db[2] - da[2] * db[1]
+    nrm[1] = da[2] * db[0] - da[0] * db[2]
+    nrm[2] = da[0] * db[1] - da[1] * db[0]
+    if nrm[0] * fwd[0] + nrm[1] * fwd[1] + nrm[2] * fwd[2] < 0.0:
+        for j in range(3):
+            nrm[j] = -nrm[j]
+    lift = lift * b
     for i in range(h):
         xo = 0.0
         yo = 0.0
@@ -313,9 +324,20 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry):  # prag
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
         for j in range(3):
-            dj = c * (ta * da[j] + tb * db[j]) * fall
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * nrm[j]) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
+
+
+#: suffix of a sphincter's protrusion control (:func:`protrusion_control`)
+PROTRUSION_SUFFIX = ".protrude"
+
+
+def protrusion_control(name: str) -> str:
+    """The control name of sphincter ``name``'s protrusion drive (``orbicularis_oris.protrude``):
+    a contraction-like value in [0, 1] that FAP mappings and ``MusculoskeletalSystem.step`` take
+    alongside the muscles' own (:attr:`Muscle.protrusion`)."""
+    return name + PROTRUSION_SUFFIX
 
 
 #: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
@@ -324,12 +346,15 @@ SPHINCTER_MAX_CONTRACTION = 0.5
 LINEAR_MAX_CONTRACTION = 0.5
 
 
-def sphincter_displacement(inner, outer, c: float) -> np.ndarray:
+def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None) -> np.ndarray:
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
-    multiplied by the maximal closure. ``delta = c P (o - s1) cos(pi/2 (1 - r))``, ``P`` the
-    projection onto the ellipse's plane.
+    multiplied by the maximal closure. ``delta = (c P (o - s1) + lift b n) cos(pi/2 (1 -
+    r))``, ``P`` the projection onto the ellipse's plane, ``b`` its semi-minor axis and ``n``
+    its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
+    ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
+    maximal closure.
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -339,8 +364,13 @@ def sphincter_displacement(inner, outer, c: float) -> np.ndarray:
     r = np.sqrt(x * x * b * b + y * y * a * a) / (a * b)
     fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
     to = o - s1
-    to = np.outer(to @ da, da) + np.outer(to @ db, db)      # in the ellipse's plane
-    return float(c) * to * fall[:, None]
+    d = float(c) * (np.outer(to @ da, da) + np.outer(to @ db, db))      # in the ellipse's plane
+    if lift:
+        n = np.cross(da, db)
+        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
+            n = -n
+        d = d + lift * b * n
+    return d * fall[:, None]
 
 
 @dataclass
@@ -380,6 +410,10 @@ class Muscle:
         contraction; None: none (the paper). The lips' mucosa slides over the teeth: an
         inner sample that lies on bone (the skull) would otherwise stay while the lip
         muscles drag the outer margin (see :func:`build_sphincter_muscle`, ``carry_inner``).
+    protrusion : float
+        Sphincter: how far a full protrusion drive moves the loops out of their plane, forward
+        (away from what they lie on), as a fraction of the ellipse's semi-minor axis times
+        ``max_contraction``; 0: never (the paper). See :func:`build_sphincter_muscle`.
     interior : (h-2, w-2, 3) float64 or None
         Linear: the rest offset of each interior bottom particle (rows ``i = 1..h-2``,
         columns ``j = 1..w-2``) from the blend of its row's side samples, in the row's
@@ -404,6 +438,7 @@ class Muscle:
     rest_parameters: dict = field(default_factory=dict)
     interior: object = None
     carry_inner: object = None
+    protrusion: float = 0.0
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -494,13 +529,16 @@ class Muscle:
         v, f = check_mesh(vertices, faces)
         return self.targets_from_line_points(c, {k: line.positions(v, f) for k, line in self.lines.items()})
 
-    def targets_from_line_points(self, c: float, points: dict) -> np.ndarray:
+    def targets_from_line_points(self, c: float, points: dict, protrude: float = 0.0) -> np.ndarray:
         """:meth:`sample_targets` from the current positions of the lines' surface points.
 
         ``points``: ``{line key: (p, 3)}`` as :meth:`ActionLine.positions` gives
-        them (a caller that evaluates many lines at once gathers them itself).
+        them (a caller that evaluates many lines at once gathers them itself). ``protrude``
+        in [0, 1]: a sphincter's protrusion drive (its control :func:`protrusion_control`;
+        :attr:`protrusion`), clipped like ``c``.
         """
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
+        lift = self._lift(protrude)
         g = self.bound_grid
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
@@ -508,9 +546,9 @@ class Muscle:
             r1, r3, carry = self._loop_rest
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
-                            c * self.max_contraction, grid, r1, r3, carry)
+                            c * self.max_contraction, grid, r1, r3, carry, lift, self.forward)
         else:
-            grid = self._grid_targets(c, points)
+            grid = self._grid_targets(c, points, lift)
         return grid[g[:, 0], g[:, 1]]
 
     @property
@@ -540,6 +578,24 @@ class Muscle:
             lr = self.__dict__["_lr"] = (r1, r3, carry if np.any(carry) else np.zeros(0))
         return lr
 
+    def _lift(self, protrude: float) -> float:
+        """The forward drive of :func:`sphincter_displacement`: ``protrude`` clipped to [0, 1]
+        (0 when passive) times :attr:`protrusion` and :attr:`max_contraction`."""
+        if not (self.active and self.protrusion):
+            return 0.0
+        return float(np.clip(protrude, 0.0, 1.0)) * self.protrusion * self.max_contraction
+
+    @property
+    def forward(self) -> np.ndarray:
+        """``(3,)`` unit vector from the mean of the bottom sheet to the mean of the top one at
+        rest: the side of the sheet away from what it lies on (a sphincter's protrusion)."""
+        fw = self.__dict__.get("_fw")
+        if fw is None:
+            hw = self.topology.h * self.topology.w
+            d = self.rest_positions[hw:].mean(axis=0) - self.rest_positions[:hw].mean(axis=0)
+            fw = self.__dict__["_fw"] = d / max(float(np.linalg.norm(d)), 1e-300)
+        return fw
+
     @property
     def bound_grid(self) -> np.ndarray:
         """``(k, 2)`` grid cells ``(i, j)`` of :attr:`bound`, in order (the targets' rows)."""
@@ -551,7 +607,7 @@ class Muscle:
             g = self.__dict__["_cg"] = g
         return g
 
-    def _grid_targets(self, c, P) -> np.ndarray:
+    def _grid_targets(self, c, P, lift: float = 0.0) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
         grid = np.empty((h, w, 3))
         if self.kind == "linear":
@@ -579,8 +635,8 @@ class Muscle:
             r1, r3, carry = self._loop_rest
             if len(carry):
                 s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
-            if c > 0:
-                d = sphincter_displacement(s1, s3, c * self.max_contraction)
+            if c > 0 or lift > 0:
+                d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3
@@ -635,6 +691,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
     v, f = check_mesh(vertices, faces)
     material = kw.pop("material_sampling", False)
     carry = kw.pop("carry_inner", None)
+    protrusion = float(kw.pop("protrusion", 0.0))
     proto = Muscle(name, kind, topo, np.zeros((topo.n_particles, 3)), topo.faces, lines,
                    tuple(kw.pop("lies_on", ())), stiffness, **kw)   # carry_inner 0: the true rest samples
     kw["material_sampling"] = material
@@ -664,7 +721,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
         pos[: h * w].reshape(h, w, 3)[1:-1, 1:-1] = interior_targets(a0, a2, interior)  # round-off
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
                   proto.layer, proto.active, float(thickness), proto.max_contraction, params,
-                  interior, carry)
+                  interior, carry, protrusion)
 
 
 def _cross(a, b):
@@ -763,7 +820,7 @@ def build_linear_muscle(name, origin, insertion, fibre_a, fibre_b, vertices, fac
 def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness, stiffness, *,
                            lies_on=(), layer=0, active=True,
                            max_contraction=SPHINCTER_MAX_CONTRACTION, material_sampling=True,
-                           carry_inner=0.0, carry_faces=None) -> Muscle:
+                           carry_inner=0.0, carry_faces=None, protrusion=0.0) -> Muscle:
     """A sphincter (§5.2.2) from its closed inner (A1) and outer (A3) loops.
 
     ``material_sampling`` (default True, a deliberate departure from a literal
@@ -787,6 +844,18 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
     moves with it (on the MakeHuman head the levator labii superioris moves the inner loop
     above it 1.8 times as far as the outer one), and carrying there would hold it back.
 
+    ``protrusion`` (default 0, the paper; ``muscle.sphincter.protrusion``, a departure): the
+    paper contracts the loops in their plane, so no lip moves forward, while a real mouth
+    pushes its lips out (the MakeHuman pursing unit: FDP 8.1 forward 359 MNS for 118 up;
+    the protrusion unit: 257 forward). Anatomy gives the orbicularis oris two parts: the pars
+    marginalis closes and presses the lips (the paper's in-plane contraction) and the pars
+    peripheralis protrudes them. The second has its own drive ``p`` in [0, 1] (the control
+    :func:`protrusion_control`), which moves every sample pair ``p kappa protrusion b``
+    along the ellipse plane's normal, away from what the loops lie on
+    (:attr:`Muscle.forward`), with the contraction's fall-off; ``b`` is the ellipse's
+    semi-minor axis. One drive for both, scaled, pushed the lower lip down as it went
+    forward and cost the lower-lip raises it assists (calibrated MakeHuman, ICT).
+
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
     :func:`faceforge.anatomy.muscle.align_loops` arranges that for raw points.
@@ -799,9 +868,11 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
         raise ValueError(f"sphincter {name}: max_contraction must lie in (0, 1), got {max_contraction}")
     if not 0.0 <= carry_inner <= 1.0:
         raise ValueError(f"sphincter {name}: carry_inner must lie in [0, 1], got {carry_inner}")
+    if not (np.isfinite(protrusion) and protrusion >= 0.0):
+        raise ValueError(f"sphincter {name}: protrusion must be a finite number >= 0, got {protrusion}")
     return _build(name, "sphincter", topo, lines, vertices, faces, thickness, stiffness,
                   lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
-                  material_sampling=material_sampling,
+                  material_sampling=material_sampling, protrusion=float(protrusion),
                   carry_inner=(float(carry_inner), np.ones(len(faces), bool) if carry_faces is None else carry_faces))
 
 

@@ -147,6 +147,7 @@ RULES: list[tuple[str, Rule]] = [
     ("*.stiffness.*", Number(0.0, 1.0)),
     ("solver.damping", Number(0.0, 1.0)),
     ("muscle.sphincter.carry_inner", Number(0.0, 1.0)),
+    ("muscle.sphincter.protrusion", Number(0.0)),
     ("solver.stiffness_mode", Choice(("paper", "iteration_independent", "xpbd"))),
     ("solver.gravity", Number()),
     ("fit.rbf_kernel", Choice(("multiquadric", "inverse_multiquadric", "thin_plate_spline", "gaussian"))),

@@ -183,8 +183,34 @@ def test_invalid_assemblies_are_template_errors(head):
     system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles)
     with pytest.raises(KeyError, match="frontalis"):
         system.step({"frontalus": 0.5})
+    with pytest.raises(KeyError, match="oris.protrude"):
+        system.step({"oris.protrude": 0.5, "frontalis.protrude": 0.5})
     with pytest.raises(ValueError, match="rigid"):
         system.step({}, np.diag([1.0, 2.0, 1.0, 1.0]))
+
+
+def test_the_protrusion_control_moves_the_sphincter_forward(head):
+    """``controls`` lists the muscles, then the sphincter's protrusion drive; with a
+    protrusion the drive moves the sphincter along its forward direction and leaves the
+    bones in place; a zero drive steps as no drive, to the bit."""
+    from dataclasses import replace
+
+    cranium, mandible, muscles = head
+    muscles = [replace(m, protrusion=0.5) if m.kind == "sphincter" else m for m in muscles]
+    system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles)
+    assert system.controls == tuple(system.muscles) + ("oris.protrude",)
+    rest = snapshot(system)
+    twin = MusculoskeletalSystem.from_parts(cranium, mandible, muscles)
+    system.step({"oris.protrude": 0.0})
+    twin.step({})
+    assert all(np.array_equal(system.positions(n), twin.positions(n)) for n in system.names)
+    for _ in range(20):
+        system.step({"oris.protrude": 1.0})
+    fw = system.muscles["oris"].forward
+    d = (system.positions("oris") - rest["oris"]) @ fw
+    assert d.mean() > 0.01 * np.ptp(rest["oris"], axis=0).max()
+    for bone in ("cranium", "mandible"):
+        assert np.array_equal(system.positions(bone), rest[bone])
 
 
 def test_split_skull_parts_are_disjoint():

@@ -265,6 +265,51 @@ def test_sphincter_displacement_formula():
     np.testing.assert_allclose(d, 0.4 * (0 - ring), atol=1e-9)
 
 
+def test_sphincter_protrusion_moves_the_loops_along_the_normal():
+    """The protrusion drive moves every pair along the ellipse plane's normal, on the side of
+    ``forward``, by ``lift b`` times the fall-off (1 on the ellipse), and adds to the in-plane
+    contraction unchanged; without a lift the contraction has no normal component."""
+    ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
+    ring = np.stack([2 * np.cos(ang), np.sin(ang), np.zeros(16)], 1)     # b = 1, in z = 0
+    up = np.array([0.0, 0.0, 1.0])
+    lift = sphincter_displacement(ring, ring, 0.0, 0.3, up)
+    np.testing.assert_allclose(lift, np.tile([0.0, 0.0, 0.3], (16, 1)), atol=1e-9)
+    np.testing.assert_allclose(sphincter_displacement(ring, ring, 0.0, 0.3, -up), -lift, atol=1e-12)
+    both = sphincter_displacement(ring, ring, 0.4, 0.3, up)
+    np.testing.assert_allclose(both, sphincter_displacement(ring, ring, 0.4) + lift, atol=1e-12)
+    assert np.array_equal(sphincter_displacement(ring, ring, 0.4, 0.0, None),
+                          sphincter_displacement(ring, ring, 0.4))
+
+
+@pytest.fixture(scope="module")
+def protruding(sphincter):
+    """The ``sphincter`` fixture with a protrusion (``Muscle.protrusion``)."""
+    from dataclasses import replace
+
+    return replace(sphincter, protrusion=0.6)
+
+
+def test_sphincter_forward_points_away_from_what_it_lies_on(protruding, sphere):
+    """``Muscle.forward`` is the unit bottom -> top direction: on the sphere, outward (along
+    the sphere's normal at the ring's centre); a full protrusion drive moves every bound
+    target along it, and a passive sphincter or a zero ``protrusion`` ignores the drive."""
+    from dataclasses import replace
+
+    v, f = sphere
+    fw = protruding.forward
+    centre = protruding.rest_positions.mean(axis=0)
+    assert np.linalg.norm(fw) == pytest.approx(1.0) and fw @ centre / np.linalg.norm(centre) > 0.95
+    points = {k: line.positions(v, f) for k, line in protruding.lines.items()}
+    rest = protruding.targets_from_line_points(0.0, points)
+    moved = protruding.targets_from_line_points(0.0, points, 1.0) - rest
+    assert np.all(moved @ fw > 0.5 * np.linalg.norm(moved, axis=1))
+    assert np.array_equal(protruding.targets_from_line_points(0.0, points, 2.0) - rest, moved)   # clipped
+    for inert in (replace(protruding, active=False), replace(protruding, protrusion=0.0)):
+        assert np.array_equal(inert.targets_from_line_points(0.0, points, 1.0), rest)
+        assert np.array_equal(inert.targets_from_line_points(0.5, points, 1.0),
+                              inert.targets_from_line_points(0.5, points))
+
+
 @pytest.fixture(scope="module")
 def carried(sphincter):
     """The ``sphincter`` fixture with a per-row inner-loop carry (``Muscle.carry_inner``)."""
@@ -274,11 +319,11 @@ def carried(sphincter):
     return replace(sphincter, carry_inner=rows)
 
 
-@pytest.mark.parametrize("which", ["sphincter", "carried"])
+@pytest.mark.parametrize("which", ["sphincter", "carried", "protruding"])
 def test_compiled_sphincter_targets_match_the_numpy_twin(which, request, sphere):
     """Material sampling: ``targets_from_line_points`` runs the compiled ``_sphincter_grid``;
     its plain twin is ``Muscle._grid_targets`` (numpy, ``fit_ellipse`` by SVD and lstsq);
-    with and without ``carry_inner``."""
+    with and without ``carry_inner``, and with a protrusion drive."""
     sphincter = request.getfixturevalue(which)
     v, f = sphere
     assert sphincter.rest_parameters
@@ -291,11 +336,13 @@ def test_compiled_sphincter_targets_match_the_numpy_twin(which, request, sphere)
         now = v @ rot.T * rng.uniform(0.5, 2.0) + rng.normal(size=3)
         now = now + rng.normal(scale=0.01 * trial, size=v.shape)   # and no longer rigid
         points = {k: line.positions(now, f) for k, line in sphincter.lines.items()}
-        for c in (0.0, 0.2, 0.7, 1.0):
-            fast = sphincter.targets_from_line_points(c, points)
-            twin = sphincter._grid_targets(min(c, 1.0), points)[g[:, 0], g[:, 1]]
+        for c, p in ((0.0, 0.0), (0.2, 0.0), (0.7, 0.0), (1.0, 0.0), (0.0, 0.5), (0.7, 1.0)):
+            fast = sphincter.targets_from_line_points(c, points, p)
+            twin = sphincter._grid_targets(min(c, 1.0), points, sphincter._lift(p))[g[:, 0], g[:, 1]]
             assert np.allclose(fast, twin, rtol=0.0, atol=1e-12 * scale)
-            assert c > 0 or np.array_equal(fast, twin)    # the samples alone: same arithmetic
+            if p and sphincter.protrusion:
+                assert not np.allclose(fast, sphincter.targets_from_line_points(c, points))
+            assert c > 0 or p > 0 or np.array_equal(fast, twin)    # the samples alone: same arithmetic
 
 
 def test_sphincter_carry_inner_rest_and_drag(carried, sphere):
@@ -355,6 +402,8 @@ def test_compiled_sphincter_targets_survive_collinear_loops():
 
     p = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], 1)
     seg, t = np.arange(5), np.full(5, 0.5)
-    grid = np.empty((5, 2, 3))
-    _sphincter_grid(p, seg, t, p.copy(), seg, t, 0.3, grid, p[:5], p[:5], np.zeros(0))
-    assert np.all(np.isfinite(grid))
+    for lift in (0.0, 0.2):
+        grid = np.empty((5, 2, 3))
+        _sphincter_grid(p, seg, t, p.copy(), seg, t, 0.3, grid, p[:5], p[:5], np.zeros(0), lift,
+                        np.array([0.0, 0.0, 1.0]))
+        assert np.all(np.isfinite(grid))

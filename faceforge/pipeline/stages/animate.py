@@ -6,7 +6,8 @@ plays an MPEG-4 FAP track on the head bound in the workdir and writes ``<workdir
 animation.npz
     ``frames (F, n_user, 3) float32``: skin positions per frame in the **user's** vertex
     order and count (the mouth cut's appended vertices dropped, the fit's merged vertices
-    expanded); ``fps``; ``contractions (F, m)``, ``muscle_names (m,)``, ``jaw (F, 3)``.
+    expanded); ``fps``; ``contractions (F, m)``, ``controls (m,)`` (the contractions' columns:
+    the muscles, then the sphincter's protrusion drive), ``jaw (F, 3)``.
 report.json
     frames, fps, the mapping used (template or calibrated), FAPs with values but no mapping,
     per-layer time per frame, and the physical checks (NaN, inverted triangles, skin inside
@@ -68,7 +69,9 @@ class BoundHead:
     Attributes
     ----------
     rig : faceforge.anatomy.animate.Rig (working skin)
-    muscle_names : tuple of str, column order of the contractions
+    muscle_names : tuple of str, the muscles
+    controls : tuple of str, column order of the contractions: the muscles, then the
+        sphincter's protrusion drive (``MusculoskeletalSystem.controls``)
     skull : faceforge.anatomy.skull.Skull (fitted; jaw_transform); levers : JawLevers
     fapu : faceforge.mpeg4.Fapu
     rest : (n, 3) working skin at rest; faces : (m, 3) working faces
@@ -127,6 +130,7 @@ class BoundHead:
         settings = SolverSettings.from_config(config.get("solver"))
         self.system = system = _muscle_system(fit, self.cranium, self.mandible, settings, config, log)
         self.muscle_names = tuple(system.muscles)
+        self.controls = system.controls
         binding = Binding.from_arrays(bind)
         missing = [n for n in binding.body_names if n not in system.names]
         if missing:
@@ -153,7 +157,7 @@ class BoundHead:
             system.set_jaw(last[1])  # returns at once when the mandible is already there
 
         def muscles(c, _bones, dt):
-            system.step(dict(zip(self.muscle_names, c)), None, dt)
+            system.step(dict(zip(self.controls, c)), None, dt)
 
         diag = float(np.linalg.norm(np.ptp(self.rest, axis=0)))
         self.guard = guard = SkullGuard(
@@ -308,7 +312,8 @@ def _muscle_system(fit, cranium, mandible, settings, config, log):
     stiffness = {"linear": dict(config.get("muscle.linear.stiffness")),
                  "sphincter": dict(config.get("muscle.sphincter.stiffness"))}
     muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness,
-                               float(config.get("muscle.sphincter.carry_inner")))
+                               float(config.get("muscle.sphincter.carry_inner")),
+                               float(config.get("muscle.sphincter.protrusion")))
     settings = replace(settings, damping=float(config.get("muscle.damping")))
     return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
 
@@ -341,7 +346,7 @@ def track_controls(track, mapping, head):
 
 
 def controls(mapping, faps, head):
-    """Contractions in ``head.muscle_names`` order (F, m) and jaw DOFs (F, 3) for FAPs (F, 68).
+    """Contractions in ``head.controls`` order (F, m) and jaw DOFs (F, 3) for FAPs (F, 68).
 
     With muscles, every muscle the mapping names must exist (TemplateError otherwise);
     without (a jaw-only head), the muscle part is dropped.
@@ -350,9 +355,9 @@ def controls(mapping, faps, head):
 
     from faceforge.anatomy.fap_mapping import fap_controls
 
-    names = head.muscle_names if head.muscle_names else mapping.muscles
+    names = head.controls if head.controls else mapping.muscles
     c, jaw = fap_controls(mapping, faps, names, head.fapu.as_dict(), head.levers)
-    return (c if head.muscle_names else np.zeros((len(c), 0))), jaw
+    return (c if head.controls else np.zeros((len(c), 0))), jaw
 
 
 def _mapping(ctx):
@@ -391,7 +396,7 @@ def run_animate(ctx):
     threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     user = head.to_user(frames).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
-             muscle_names=np.asarray(head.muscle_names, dtype=str), jaw=jaw)
+             controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", {
         "fap": str(ctx.param("fap")), "frames": track.n_frames, "fps": track.fps,
         "mapping": mapping_path, "unmapped_faps": unmapped,
