@@ -49,7 +49,11 @@ Functions on arrays. The construction, in order:
    skull) are morphed by the same map, thickness rescaled by Eq. 5; skull landmarks
    covered by muscles are brought onto the muscle surface by cylindrical projection and
    the fit is run again (the refit), so the muscles lie at least ``muscle_gap_mm``
-   beneath the skin there.
+   beneath the skin there. Before that, with ``mouth_follows_lips`` (experimental, off by
+   default), the muscle map (not the skull) around the mouth is shifted so that the lips'
+   bone counterparts come in front of the skin's lips (:mod:`faceforge.anatomy.fit_mouth`):
+   the lips are no skull targets, and the orbicularis oris otherwise lands where the
+   template's mouth sits on its teeth.
 6. **Eye sockets** (:mod:`faceforge.anatomy.fit_orbits`): where the skin models the closed
    eye socket (a pocket behind the lids), the bone inside the pocket moves out along rays
    from the pocket's centre, by a one-to-one map that cannot fold the thin orbital walls
@@ -100,6 +104,7 @@ class FitSettings:
     clearance_rounds: int = 6          # at most this many bump fields (fit_clearance)
     orbit_hollow: bool = True          # clear bone out of modelled eye sockets (fit_orbits)
     orbit_blend: float = 0.5           # the orbit map fades out over this fraction of the socket radius
+    mouth_follows_lips: bool = False   # the muscle map around the mouth follows the skin's lips (fit_mouth)
 
     @classmethod
     def from_config(cls, cfg: dict | None) -> "FitSettings":
@@ -570,6 +575,8 @@ class FitTemplate:
     landmarks : {fdp: (3,) float64} points on the bone
     jaw_axes : {name: (point (3,), direction (3,))} e.g. pitch, yaw, protrusion
     muscle_points : {muscle name: (k, 3) float64} every point of the muscle map
+    muscle_weights : {muscle name: (k,) float64} how much of the mouth's shift each of those
+        points takes (:func:`faceforge.anatomy.fit_mouth.point_weights`; missing: all)
     """
 
     cranium: tuple
@@ -577,6 +584,7 @@ class FitTemplate:
     landmarks: dict
     jaw_axes: dict = field(default_factory=dict)
     muscle_points: dict = field(default_factory=dict)
+    muscle_weights: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -606,9 +614,10 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
 
     skin_ids (n,) FDP ids, skin_points (n, 3): the validated skin landmarks
     (:class:`faceforge.io.landmarks.Landmarks`); normals are taken where each lies on ``skin``.
-    ``build_muscles(cranium (v, f), mandible (v, f), warp) -> [(name, vertices, faces)]``
-    builds the muscles on the fitted skull (Eq. 5 thickness); without it the muscle map
-    points are morphed only and there is no refit.
+    ``build_muscles(cranium (v, f), mandible (v, f), warp, shift) -> [(name, vertices, faces)]``
+    builds the muscles on the fitted skull (Eq. 5 thickness), ``shift`` the mouth's
+    (:class:`faceforge.anatomy.fit_mouth.MouthField` or None, weighted per muscle particle);
+    without it the muscle map points are morphed only and there is no refit.
     """
     from faceforge.anatomy import fit_muscles
 
@@ -629,8 +638,18 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
             "enhancement_landmarks": int(len(sk.sources) - sk.n_landmarks - len(pairs.anchors)),
             "covered_landmarks": [],
             "refit": False}
+    mouth = None
+    if settings.mouth_follows_lips:
+        from faceforge.anatomy.fit_mouth import mouth_field
+
+        names = list(template.landmarks)
+        placed = warp(np.array([template.landmarks[f] for f in names], dtype=np.float64).reshape(-1, 3))
+        mouth = mouth_field(dict(zip(names, placed)), skin_lm)
+        if mouth is not None:
+            info["mouth_shift_max_rel"] = float(np.linalg.norm(mouth.shifts, axis=1).max() / skin.diagonal)
+
     if build_muscles is not None:
-        muscles = build_muscles((skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf), warp)
+        muscles = build_muscles((skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf), warp, mouth)
         if settings.refit and muscles:
             diag = float(np.linalg.norm(np.ptp(skull_fit, axis=0)))
             fitted = warp(pairs.source)
@@ -697,9 +716,19 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         jaw[name] = (warp(np.asarray(point, dtype=np.float64)[None])[0], d / np.linalg.norm(d))
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
     enhancement = sk.reached[sk.n_landmarks + len(pairs.anchors):]
-    for g in warp.rbfs[len(sk.warp.rbfs):]:  # the refit, orbit and clearance maps carry them on
+    later = warp.rbfs[len(sk.warp.rbfs):]   # the refit, orbit and clearance maps carry them on
+    for g in later:
         enhancement = g(enhancement)
     reached = np.array([fitted_lm[f] for f in pairs.fdps])
+
+    def muscle_map(name, points):   # the skull's map, the mouth's shift (muscles only), the rest
+        out = sk.warp(points)
+        if mouth is not None:
+            out = mouth(out, template.muscle_weights.get(name))
+        for g in later:
+            out = g(out)
+        return out
+
     return FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
-                     {n: warp(p) for n, p in template.muscle_points.items()}, muscles, warp, info,
+                     {n: muscle_map(n, p) for n, p in template.muscle_points.items()}, muscles, warp, info,
                      np.asarray(cf), np.asarray(mf), pairs.target, enhancement)

@@ -123,6 +123,15 @@ def refit_rbf(refit: Refit, landmarks_fitted: np.ndarray, fixed_points: np.ndarr
     return hardy_rbf(src, dst, epsilon=epsilon)
 
 
+def _with_points(spec, pts):
+    """``spec`` with its fields taken, in ``spec.points()`` order, from ``pts (k, 3)``."""
+    from dataclasses import replace
+
+    fields = ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer")
+    ends = np.cumsum([0] + [len(getattr(spec, k)) for k in fields])
+    return replace(spec, **{k: pts[ends[i]:ends[i + 1]] for i, k in enumerate(fields)})
+
+
 def morph_spec(spec, warp):
     """A :class:`faceforge.anatomy.muscle_map.MuscleSpec` with every point mapped by ``warp``
     ((k, 3) -> (k, 3)); thickness stays a fraction (Eq. 5 applies when building)."""
@@ -185,7 +194,7 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     return built
 
 
-def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float) -> list:
+def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float, shift=None, weights=None) -> list:
     """Muscles built on the template skull, carried into the head by ``warp`` (Eq. 5).
 
     The bottom sheet of each muscle (first ``h w`` particles) is mapped by ``warp``; the
@@ -194,11 +203,15 @@ def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float) -> list:
     thickness follows the fitted skull (Eq. 5) rather than the local stretch of the map.
 
     template_muscles : [(name, rest_positions (2hw, 3), faces, hw, thickness fraction)]
+    shift, weights : optional ``(points, weights) -> points`` applied after ``warp`` (the mouth's
+    :class:`faceforge.anatomy.fit_mouth.MouthField`) with ``weights[name] (2hw,)``
     Returns ``[(name, vertices (2hw, 3), faces)]``.
     """
     out = []
     for name, rest, faces, hw, fraction in template_muscles:
         p = warp(rest)
+        if shift is not None:
+            p = shift(p, weights[name])
         bottom = p[:hw]
         up = p[hw:] - bottom
         up /= np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-300)
@@ -206,11 +219,13 @@ def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float) -> list:
     return out
 
 
-def fitted_muscle_map(specs, warp) -> dict:
+def fitted_muscle_map(specs, warp, points: dict | None = None) -> dict:
     """The muscle map carried into the head, in the muscle-map YAML structure.
 
     Every point of every :class:`~faceforge.anatomy.muscle_map.MuscleSpec` is mapped by
-    ``warp``; mirrored muscles are written out in full. Thickness stays a fraction of the
+    ``warp``, or taken from ``points`` (``{name: (k, 3)}`` in ``spec.points()`` order, e.g.
+    :attr:`faceforge.anatomy.fit.FitResult.muscle_points`); mirrored muscles are written out
+    in full. Thickness stays a fraction of the
     skull diagonal (Eq. 5 then applies with the fitted skull). Loadable with
     ``load_muscle_map(path, fitted_skull)`` (its ``units: template`` means "the skull it
     is loaded with").
@@ -219,7 +234,7 @@ def fitted_muscle_map(specs, warp) -> dict:
     fields_sphincter = ("inner", "outer")
     muscles = []
     for spec in specs:
-        m = morph_spec(spec, warp)
+        m = morph_spec(spec, warp) if points is None else _with_points(spec, points[spec.name])
         entry = {"name": m.name, "type": m.type, "layer": int(m.layer), "lies_on": list(m.lies_on),
                  "active": bool(m.active), "h": int(m.h), "w": int(m.w), "thickness": float(m.thickness)}
         for key in (fields_linear if m.type == "linear" else fields_sphincter):

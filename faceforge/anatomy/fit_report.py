@@ -129,6 +129,8 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
         },
         "skull": skull_stats,
         "muscles": muscle_stats,
+        "mouth": {"follows_lips": "mouth_shift_max_rel" in result.info,      # fit_mouth
+                  "max_shift_rel": result.info.get("mouth_shift_max_rel")},
         "skin_inside_bone": {"count": int(swallowed.sum()), "fraction": float(swallowed.mean())},
         "checks": {   # the acceptance criteria of issue 5
             "landmarks_within_1pct": bool(max(residuals.values(), default=0.0) < 0.01),

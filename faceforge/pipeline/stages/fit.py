@@ -94,6 +94,7 @@ class Template:
 
     def __init__(self, skull, specs, muscles):
         from faceforge.anatomy.fit import FitTemplate
+        from faceforge.anatomy.fit_mouth import point_weights, sheet_weights
 
         self.skull, self.specs, self.muscles = skull, specs, muscles
         self.layers = {s.name: s.layer for s in specs}
@@ -102,16 +103,19 @@ class Template:
             skull.cranium, skull.mandible, skull.landmarks,
             {"pitch": (jaw.pitch_point, jaw.pitch_dir), "yaw": (jaw.yaw_point, jaw.yaw_dir),
              "protrusion": (jaw.pitch_point, jaw.protrusion_dir)},
-            {s.name: s.points() for s in specs})
+            {s.name: s.points() for s in specs}, {s.name: point_weights(s) for s in specs})
+        self.sheet_weights = {s.name: sheet_weights(s.type, s.h, s.w) for s in specs}
 
-    def build_muscles(self, cranium, mandible, warp):
-        """The template muscles carried by ``warp`` with Eq. 5 thickness (fitted skull diagonal)."""
+    def build_muscles(self, cranium, mandible, warp, shift=None):
+        """The template muscles carried by ``warp``, then ``shift`` (the mouth's, weighted per
+        particle), with Eq. 5 thickness (fitted skull diagonal)."""
         import numpy as np
 
         from faceforge.anatomy.fit_muscles import morph_muscle_meshes
 
         v = np.vstack([cranium[0], mandible[0]])
-        return morph_muscle_meshes(self.muscles, warp, float(np.linalg.norm(np.ptp(v, axis=0))))
+        return morph_muscle_meshes(self.muscles, warp, float(np.linalg.norm(np.ptp(v, axis=0))),
+                                   shift, self.sheet_weights)
 
 
 _TEMPLATES: dict = {}
@@ -367,7 +371,7 @@ def write_outputs(out_dir, result, report, extra) -> None:
     from faceforge.anatomy.fit_muscles import fitted_muscle_map
     from faceforge.io.stagefiles import save_yaml
 
-    save_yaml(out_dir / "muscle_map.yaml", fitted_muscle_map(extra["template"].specs, result.warp),
+    save_yaml(out_dir / "muscle_map.yaml", fitted_muscle_map(extra["template"].specs, result.warp, result.muscle_points),
               header="the template muscle map carried into this head by the fit (points in head units);\n"
                      "load with faceforge.anatomy.muscle_map.load_muscle_map(path, fitted skull)")
     layers = [("cranium", result.cranium, result.cranium_faces, (0.93, 0.91, 0.84)),
