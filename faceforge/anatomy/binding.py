@@ -256,7 +256,8 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
 
 
 def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask,
-                      side_of=None, allowed=None, around=None, face_sides=None) -> np.ndarray:
+                      side_of=None, allowed=None, around=None, face_sides=None,
+                      lips_to_ring=False) -> np.ndarray:
     """Vertices whose two rays found nothing: the closest skull point, if near enough.
 
     Rays miss where the skin looks into a hole of the skull (eyelids and eye
@@ -275,19 +276,27 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     (``face_sides[i]``, a ring's rows, where given; else the faces whose centroid lies on its
     side): at the inner lips the two halves of the sphincter come within a few
     mm of each other and the closest point of the whole muscle is often on the other lip
-    (MakeHuman FDPs 2.6 and 2.3), which used to leave the inner lips on the teeth. A lip
-    vertex still unbound then takes the closest point, on its own side, of any other
-    muscle it may bind to. Updates the arrays in place; returns the ``(n,) bool`` mask
+    (MakeHuman FDPs 2.6 and 2.3), which used to leave the inner lips on the teeth. With
+    ``lips_to_ring`` a lip vertex takes its own half of those muscles whenever one lies
+    within ``max_distance``, nearer than the bone or not: on ICT the upper lip's outer
+    contour lies over the ring's lower arc, its own arc 1.66 cm away and the teeth 1.59, and
+    bound to the teeth FDP 8.1 followed no muscle. A lip vertex still unbound then takes the
+    closest point, on its own side, of any other muscle it may bind to. Updates the arrays in place; returns the ``(n,) bool`` mask
     of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
 
     done = np.zeros(len(v), bool)
     lip = (MUSCLE,) if side_of is not None else ()
-    tiers = [((1, (CRANIUM,) + lip), (-1, (MANDIBLE,) + lip), (0, (CRANIUM, MANDIBLE)))]
-    if around is not None and side_of is not None:
-        tiers.append(((1, (MUSCLE,)), (-1, (MUSCLE,))))
-    for tier, plan in enumerate(tiers):
+    ring = around is not None and side_of is not None
+    # (plan, ring): a plan lists (lip side, body kinds); on a ring tier the muscles around the
+    # mouth (their own half) are the only muscles taken, on the others every other muscle
+    tiers = [(((1, (CRANIUM,) + lip), (-1, (MANDIBLE,) + lip), (0, (CRANIUM, MANDIBLE))), True)]
+    if ring:
+        tiers.append((((1, (MUSCLE,)), (-1, (MUSCLE,))), False))
+        if lips_to_ring:
+            tiers.insert(0, (((1, (MUSCLE,)), (-1, (MUSCLE,))), True))
+    for plan, ring_tier in tiers:
         for side, allowed_kinds in plan:
             todo = np.flatnonzero((body < 0) & (sides == side) & mask)
             own = [i for i in range(len(bodies)) if kinds[i] in allowed_kinds]
@@ -296,7 +305,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
             best = np.full(len(todo), np.inf)
             for i in own:
                 half = kinds[i] == MUSCLE and around is not None and bool(around[i])
-                if kinds[i] == MUSCLE and around is not None and half != (tier == 0):
+                if kinds[i] == MUSCLE and around is not None and half != ring_tier:
                     continue
                 bv, bf = bodies[i].vertices, bodies[i].faces
                 sub = np.arange(len(bf))
@@ -322,7 +331,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
-              insertions=None, face_sides=None) -> Binding:
+              insertions=None, face_sides=None, lips_to_ring=False) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -370,6 +379,9 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         Per body, None or ``(f_i,) int8``: the lip side of each face of a ring around the
         mouth by its rows (:func:`faceforge.anatomy.mouth.ring_face_sides`), used for that
         body in place of the side of the lip line its hits and faces lie on.
+    lips_to_ring : bool
+        A lip vertex whose rays miss binds to its own half of the muscles around the mouth
+        when one is within ``max_distance``, before the bone (:func:`_closest_fallback`).
 
     Returns
     -------
@@ -426,7 +438,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
 
     mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
     closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of,
-                                allowed, around, face_sides)
+                                allowed, around, face_sides, lips_to_ring)
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
@@ -669,7 +681,7 @@ def match_insertions(insertions, names) -> tuple[list[int], list[str]]:
 
 
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
-              max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=()) -> BoundSkin:
+              max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -691,6 +703,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.insertions``: muscles that insert into the skin through the muscles above
         them, by name or by the name of a left/right pair without ``_L`` / ``_R``; skin
         bound to another muscle gets a second anchor on them (:func:`bind_skin`).
+    lips_to_ring : bool
+        ``bind.lips_to_ring``: lip skin whose rays miss binds to its own arc of the orbicularis
+        oris before the teeth (:func:`bind_skin`).
 
     Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): like all the face's front skin,
     inner lip skin whose rays miss gets a closest-point anchor, across the oral vestibule
@@ -740,7 +755,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                   for b, s in zip(bodies, body_sides)]
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
-                        insertions=ins, face_sides=face_sides)
+                        insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None

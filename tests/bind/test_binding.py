@@ -283,3 +283,36 @@ def test_a_lip_never_binds_to_the_other_lips_muscle_or_to_one_far_away(skin):
     low = np.isin(b.vertex_ids, np.flatnonzero(front & (v[:, 1] < -0.1) & (v[:, 1] > -0.35)))
     assert low.any() and np.all(b.body[low] == 0)
 
+
+
+def test_lips_to_ring_puts_a_missed_lip_on_its_arc_before_the_teeth(skin):
+    """A lip vertex whose rays miss takes the nearer of its own arc of the ring and the bone,
+    and with ``lips_to_ring`` its own arc whenever one is within reach (ICT's FDP 8.1: its arc
+    1.66 cm away, the teeth 1.59). Out of reach it still takes the bone."""
+    from faceforge.anatomy.mouth import AROUND_MOUTH
+
+    v, f = skin
+    sv, sf = sphere(0.8, 3)
+    skull = Body("cranium", "cranium", sv, sf[~(sv[sf][:, :, 2] > 0.6).any(axis=1)])   # a hole in front
+    rv, rf = sphere(0.9, 3)
+    ring = Body("ring", "muscle", rv, rf[(rv[rf][:, :, 1] > 0.6).all(axis=1)])          # its arc, high up
+    sides = np.where(v[:, 1] >= 0, 1, -1)
+
+    def side_of(points):
+        return np.where(points[:, 1] >= 0, 1, -1)
+
+    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0],
+              face_sides=[np.ones(len(ring.faces), np.int8), None])
+    lip = np.flatnonzero((v[:, 2] > 0.9) & (v[:, 1] >= 0) & (v[:, 1] < 0.15))
+    assert len(lip)
+    near = bind_skin(v, f, [ring, skull], max_distance=0.8, **kw)
+    first = bind_skin(v, f, [ring, skull], max_distance=0.8, lips_to_ring=True, **kw)
+    for b in (near, first):
+        assert np.all(b.closest[np.isin(b.vertex_ids, lip)])            # their rays missed
+    assert np.all(near.status[lip] == CRANIUM)                           # the bone is nearer
+    assert np.all(first.status[lip] == MUSCLE)
+    sel = np.isin(first.vertex_ids, lip)
+    assert np.all(first.distance[sel] <= 0.8)
+    assert np.all(first.distance[sel] > near.distance[np.isin(near.vertex_ids, lip)])
+    short = bind_skin(v, f, [ring, skull], max_distance=0.72, lips_to_ring=True, **kw)   # bone 0.71, arc 0.73
+    assert np.all(short.status[lip] == CRANIUM)                          # the arc is out of reach

@@ -99,7 +99,8 @@ def run(ctx):
     ctx.log(f"binding {len(head['vertices'])} skin vertices to {len(head['muscles'])} muscles and the skull")
     bound = bind_head(head["vertices"], head["faces"], head["landmarks"], head["cranium"],
                       head["mandible"], head["muscles"],
-                      float(ctx.config.get("bind.max_ray_distance")), insertions=insertions)
+                      float(ctx.config.get("bind.max_ray_distance")), insertions=insertions,
+                      lips_to_ring=bool(ctx.config.get("bind.lips_to_ring")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
     save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())
