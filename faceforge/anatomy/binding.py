@@ -281,8 +281,8 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     within ``max_distance``, nearer than the bone or not: on ICT the upper lip's outer
     contour lies over the ring's lower arc, its own arc 1.66 cm away and the teeth 1.59, and
     bound to the teeth FDP 8.1 followed no muscle. A lip vertex still unbound then takes the
-    closest point, on its own side, of any other muscle it may bind to. Updates the arrays in place; returns the ``(n,) bool`` mask
-    of the vertices bound this way.
+    closest point, on its own side, of any other muscle it may bind to. Updates the arrays in
+    place; returns the ``(n,) bool`` mask of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
 

@@ -225,8 +225,8 @@ def fitted_muscle_map(specs, warp, points: dict | None = None) -> dict:
     Every point of every :class:`~faceforge.anatomy.muscle_map.MuscleSpec` is mapped by
     ``warp``, or taken from ``points`` (``{name: (k, 3)}`` in ``spec.points()`` order, e.g.
     :attr:`faceforge.anatomy.fit.FitResult.muscle_points`); mirrored muscles are written out
-    in full. Thickness stays a fraction of the
-    skull diagonal (Eq. 5 then applies with the fitted skull). Loadable with
+    in full. Thickness stays a fraction of the skull diagonal (Eq. 5 then applies with the
+    fitted skull). Loadable with
     ``load_muscle_map(path, fitted_skull)`` (its ``units: template`` means "the skull it
     is loaded with").
     """

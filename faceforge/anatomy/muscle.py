@@ -79,7 +79,8 @@ swaps a and b, which would give r != 1 on the ellipse itself), clipped so that
 (``q11 x^2 + 2 q12 x y + q22 y^2 = 1`` about the centre ``o`` = mean of all
 inner and outer samples) in the plane of best fit (PCA) of those samples,
 recomputed every frame from the current, uncontracted samples. The same delta
-moves the pair's inner and outer samples; the interior (``0 < j < w-1``)
+moves the pair's inner and outer samples (with a protrusion drive it also has a part along
+the plane's normal: :func:`build_sphincter_muscle`, ``protrusion``); the interior (``0 < j < w-1``)
 bottom particles are not bound, as in the linear muscle. With material sampling the
 per-frame targets are compiled (:func:`_sphincter_grid`: the plane from the eigenvectors of
 the 3 x 3 scatter matrix, the conic by Gram-Schmidt); :meth:`Muscle._grid_targets` is its
@@ -247,10 +248,10 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
     :func:`sphincter_displacement` with ``c`` (already times the maximal closure) and ``lift``
-    when either is > 0; before that, with ``carry (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each
-    inner sample gets ``carry[i] ((s3 - r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest
-    samples; ``fwd (3,)``: :attr:`Muscle.forward`. Same values as the numpy code to round-off (LAPACK's, summation
-    order)."""
+    (``fwd (3,)``: :attr:`Muscle.forward`) when either is > 0; before that, with ``carry
+    (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
+    r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples. Same values as the numpy code to
+    round-off (LAPACK's, summation order)."""
     h = grid.shape[0]
     w1 = grid.shape[1] - 1
     _loop_samples(p1, seg1, t1, grid, 0)
