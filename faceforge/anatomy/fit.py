@@ -159,13 +159,12 @@ class SkinSurface:
 
     def closest(self, points: np.ndarray):
         """Closest skin points ``(closest (q, 3), distance (q,), face_ids (q,))`` (exact;
-        trimesh's r-tree over the triangles, built once per skin)."""
-        import trimesh
+        :class:`faceforge.geometry.closest.TriangleGrid`, built once per skin)."""
+        from faceforge.geometry.surface_points import SurfaceProjector
 
-        if getattr(self, "_mesh", None) is None:
-            self._mesh = trimesh.Trimesh(self.vertices, self.faces, process=False, validate=False)
-        c, d, t = trimesh.proximity.closest_point(self._mesh, np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        return np.asarray(c, dtype=np.float64), np.asarray(d, dtype=np.float64), np.asarray(t, dtype=np.int64)
+        if getattr(self, "_projector", None) is None:
+            self._projector = SurfaceProjector(self.vertices, self.faces)
+        return self._projector.closest(np.asarray(points, dtype=np.float64).reshape(-1, 3))
 
     def normal_near(self, points: np.ndarray) -> np.ndarray:
         """Unit smooth skin normals (k, 3) at the closest skin points of ``points`` (k, 3)."""
@@ -480,7 +479,7 @@ def skin_inside_bone_pairs(moved: np.ndarray, skull_faces: np.ndarray, aligned: 
     bone normal until the skin lies ``clearance`` outside. Returns ``(sources (k, 3)
     aligned, targets (k, 3) head space)``.
     """
-    import trimesh
+    from faceforge.geometry.surface_points import closest_points
 
     used = np.unique(skin.faces)
     sv = skin.vertices[used[used < skin.n_real]] if skin.n_real >= 0 else skin.vertices[used]
@@ -490,8 +489,7 @@ def skin_inside_bone_pairs(moved: np.ndarray, skull_faces: np.ndarray, aligned: 
     if not inside.any() or k <= 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
     s = sv[inside]
-    bone = trimesh.Trimesh(moved, skull_faces, process=False, validate=False)
-    b, d, tri = trimesh.proximity.closest_point(bone, s)
+    b, d, tri = closest_points(s, moved, skull_faces)
     corner = skull_faces[tri]
     j = corner[np.arange(len(s)), np.argmin(np.linalg.norm(moved[corner] - b[:, None], axis=2), axis=1)]
     n = vertex_normals(moved, skull_faces)[j]

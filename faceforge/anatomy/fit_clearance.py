@@ -121,7 +121,8 @@ def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: f
     -------
     [BumpField], to be applied in order to every bone (and muscle, landmark) point.
     """
-    import trimesh
+    from faceforge.geometry.surface_points import closest_points
+    from faceforge.geometry.triangles import face_normals
 
     fields: list[BumpField] = []
     bones = [(np.asarray(v, dtype=np.float64), np.asarray(f)) for v, f in bones if len(f)]
@@ -137,9 +138,8 @@ def clearance_fields(bones, skin_points: np.ndarray, clearance: float, radius: f
             # opposite normals) are no way out, since the field moves both bones alike and a
             # point on such a seam pushed out of one bone ends inside the other
             open_f = f[~covered_faces(v, f, [b for j, b in enumerate(bones) if j != i])]
-            mesh = trimesh.Trimesh(v, open_f, process=False, validate=False)
-            b, _, tri = trimesh.proximity.closest_point(mesh, s)
-            n = mesh.face_normals[tri]
+            b, _, tri = closest_points(s, v, open_f)
+            n = face_normals(v, open_f[tri])
             below = np.einsum("ij,ij->i", s - b, n)
             # only skin that lies beneath its closest bone face is pushed out; a point the
             # parity test calls inside but that lies above its closest face sits where the

@@ -296,15 +296,14 @@ def load_skull(folder: str | Path) -> Skull:
 
 
 def _check_on_bone(skull: Skull, path: Path, tol: float) -> None:
-    import trimesh
+    from faceforge.geometry.surface_points import closest_points
 
     for bone in BONES:
         keys = [k for k, b in skull.bones.items() if b == bone]
         if not keys:
             continue
         v, f = getattr(skull, bone)
-        mesh = trimesh.Trimesh(v, f, process=False)
-        _, dist, _ = trimesh.proximity.closest_point(mesh, np.array([skull.landmarks[k] for k in keys]))
+        _, dist, _ = closest_points(np.array([skull.landmarks[k] for k in keys]), v, f)
         bad = np.flatnonzero(dist > tol)
         if len(bad):
             k = keys[bad[0]]

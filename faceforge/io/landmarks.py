@@ -296,15 +296,6 @@ def _to_raw(entries: list, path) -> RawLandmarks:
 # ----------------------------------------------------------------------------- meeting the mesh
 
 
-def _closest_points(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray):
-    """Closest surface points: ``(points (k,3), distance (k,), face_ids (k,))``."""
-    import trimesh
-
-    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
-    closest, distance, face_ids = trimesh.proximity.closest_point(mesh, points)
-    return np.asarray(closest, dtype=np.float64), np.asarray(distance), np.asarray(face_ids, dtype=np.int64)
-
-
 def _barycentric(points, vertices, faces, face_ids) -> np.ndarray:
     """Barycentric coordinates (k, 3) of points in triangles ``faces[face_ids]``."""
     tri = vertices[faces[face_ids]]
@@ -344,7 +335,9 @@ def snap_landmarks(raw: RawLandmarks, vertices: np.ndarray, faces: np.ndarray) -
                  for i, g in zip(np.flatnonzero(both)[off], gap[off])]
         raise LandmarkError("vertex and position disagree for FDP " + "; ".join(names), path)
     target = np.where(has_v[:, None], vertices[np.maximum(raw.vertex, 0)], raw.position)
-    closest, distance, face_ids = _closest_points(target, vertices, faces)
+    from faceforge.geometry.surface_points import closest_points
+
+    closest, distance, face_ids = closest_points(target, vertices, faces)
     far = distance > MAX_SNAP_DISTANCE * diag
     if np.any(far):
         names = [f"{ids[i]} ({distance[i] / diag:.1%})" for i in np.flatnonzero(far)]

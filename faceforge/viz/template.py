@@ -117,26 +117,24 @@ class _PosedSkull:
     """Skull at a jaw pose + surface-point lookups of template-space points."""
 
     def __init__(self, skull, jaw):
-        import trimesh
-
         from faceforge.anatomy.skull import apply_transform, jaw_transform
+        from faceforge.geometry.surface_points import SurfaceProjector
 
         self.rest_v, self.f, self.bone = skull.combined()
-        self.rest = trimesh.Trimesh(self.rest_v, self.f, process=False)
+        self.rest = SurfaceProjector(self.rest_v, self.f)
         self.t = jaw_transform(skull, *jaw)
         self.v, _, _ = skull.combined(*jaw)
-        self.posed = trimesh.Trimesh(self.v, self.f, process=False)
         self.apply = apply_transform
 
     def place(self, points: np.ndarray, lift: float, with_normals: bool = False):
         """Project rest-space points onto the rest skull, carry them to the pose, lift along normals."""
-        import trimesh
+        from faceforge.geometry.triangles import barycentric, face_normals
 
         p = points.reshape(-1, 3)
-        closest, _, tri = trimesh.proximity.closest_point(self.rest, p)
-        bary = trimesh.triangles.points_to_barycentric(self.rest_v[self.f[tri]], closest)
+        closest, _, tri = self.rest.closest(p)
+        bary = barycentric(closest, self.rest_v, self.f, tri)
         posed = np.einsum("kj,kjd->kd", bary, self.v[self.f[tri]])
-        normals = self.posed.face_normals[tri]
+        normals = face_normals(self.v, self.f[tri])
         out = (posed + lift * normals).reshape(points.shape)
         return (out, normals.reshape(points.shape)) if with_normals else out
 
