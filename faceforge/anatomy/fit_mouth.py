@@ -27,10 +27,10 @@ stopped moving the lower lip and the corners.
 Experimental, off by default (``fit.mouth_follows_lips``). It puts the ring around the mouth
 opening on all three sample heads and calibrates MakeHuman to a 9.1 % median (69 rows within
 10 %) and MediaPipe to 6.3 % (78), but ICT to 14.2 % (8.0 % without it), and calibrated ICT
-joy.fap diverges (all with ``bind.lips_to_ring``): the
-fitted teeth sit 1.9-2.4 cm above the samples' lips (the skull fit has no target at the lips),
-so the ring's upper inner arc, now at the lip line, lies on the lower teeth and follows the
-jaw down. The teeth, not only the muscles, need to come to the lips first.
+joy.fap diverges (all with ``bind.lips_to_ring``): the fitted teeth sit 1.9-2.4 cm above the
+samples' lips (the skull fit has no target at the lips), so the ring's upper inner arc, now
+at the lip line, lies on the lower teeth and follows the jaw down. The teeth, not only the
+muscles, need to come to the lips first.
 
 Functions on arrays; the frame is the fit's (+Y up, +Z forward).
 """
