@@ -169,6 +169,8 @@ class MusculoskeletalSystem:
         self._world_v = self._rest.copy()
         self._layers: list[_Layer] = layers
         self._muscles = {m.name: m for layer in layers for m in layer.muscles}
+        self._controls = tuple(self._muscles) + tuple(protrusion_control(n) for n, m in self._muscles.items()
+                                                      if m.kind == "sphincter")
         self.settings = settings
         self._extra: list = []
         self._jaw = np.eye(4)
@@ -248,8 +250,7 @@ class MusculoskeletalSystem:
     def controls(self) -> tuple[str, ...]:
         """What :meth:`step` drives: every muscle by name, then each sphincter's protrusion
         (:func:`faceforge.anatomy.muscle.protrusion_control`)."""
-        return tuple(self._muscles) + tuple(protrusion_control(n) for n, m in self._muscles.items()
-                                            if m.kind == "sphincter")
+        return self._controls
 
     @property
     def threads(self) -> int:
@@ -355,8 +356,7 @@ class MusculoskeletalSystem:
             Frame time in seconds.
         """
         contractions = dict(contractions or {})
-        unknown = set(contractions).difference(self._muscles)   # the protrusions, or a mistake
-        unknown = sorted(unknown.difference(self.controls)) if unknown else []
+        unknown = sorted(set(contractions).difference(self._controls))
         if unknown:
             raise KeyError(f"unknown muscle(s) {unknown}; controls: {', '.join(self.controls)}")
         if jaw_matrix is not None:
