@@ -123,25 +123,6 @@ def refit_rbf(refit: Refit, landmarks_fitted: np.ndarray, fixed_points: np.ndarr
     return hardy_rbf(src, dst, epsilon=epsilon)
 
 
-def _with_points(spec, pts):
-    """``spec`` with its fields taken, in ``spec.points()`` order, from ``pts (k, 3)``."""
-    from dataclasses import replace
-
-    fields = ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer")
-    ends = np.cumsum([0] + [len(getattr(spec, k)) for k in fields])
-    return replace(spec, **{k: pts[ends[i]:ends[i + 1]] for i, k in enumerate(fields)})
-
-
-def morph_spec(spec, warp):
-    """A :class:`faceforge.anatomy.muscle_map.MuscleSpec` with every point mapped by ``warp``
-    ((k, 3) -> (k, 3)); thickness stays a fraction (Eq. 5 applies when building)."""
-    from dataclasses import replace
-
-    fields = ("origin", "insertion", "fibre_a", "fibre_b", "inner", "outer")
-    return replace(spec, **{k: (warp(getattr(spec, k)) if len(getattr(spec, k)) else getattr(spec, k))
-                            for k in fields})
-
-
 def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
                      carry_inner: float = 0.0, protrusion: float = 0.0) -> list:
     """Build every muscle of ``specs`` on the given skull, deepest layer first.
@@ -219,14 +200,14 @@ def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float, shift=Non
     return out
 
 
-def fitted_muscle_map(specs, warp, points: dict | None = None) -> dict:
+def fitted_muscle_map(specs, points: dict) -> dict:
     """The muscle map carried into the head, in the muscle-map YAML structure.
 
-    Every point of every :class:`~faceforge.anatomy.muscle_map.MuscleSpec` is mapped by
-    ``warp``, or taken from ``points`` (``{name: (k, 3)}`` in ``spec.points()`` order, e.g.
-    :attr:`faceforge.anatomy.fit.FitResult.muscle_points`); mirrored muscles are written out
-    in full. Thickness stays a fraction of the skull diagonal (Eq. 5 then applies with the
-    fitted skull). Loadable with
+    Every point of every :class:`~faceforge.anatomy.muscle_map.MuscleSpec` is taken from
+    ``points`` (``{name: (k, 3)}`` in ``spec.points()`` order:
+    :attr:`faceforge.anatomy.fit.FitResult.muscle_points`, the map as the fit carried it);
+    mirrored muscles are written out in full. Thickness stays a fraction of the skull
+    diagonal (Eq. 5 then applies with the fitted skull). Loadable with
     ``load_muscle_map(path, fitted_skull)`` (its ``units: template`` means "the skull it
     is loaded with").
     """
@@ -234,7 +215,7 @@ def fitted_muscle_map(specs, warp, points: dict | None = None) -> dict:
     fields_sphincter = ("inner", "outer")
     muscles = []
     for spec in specs:
-        m = morph_spec(spec, warp) if points is None else _with_points(spec, points[spec.name])
+        m = spec.with_points(points[spec.name])
         entry = {"name": m.name, "type": m.type, "layer": int(m.layer), "lies_on": list(m.lies_on),
                  "active": bool(m.active), "h": int(m.h), "w": int(m.w), "thickness": float(m.thickness)}
         for key in (fields_linear if m.type == "linear" else fields_sphincter):

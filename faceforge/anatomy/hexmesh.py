@@ -160,13 +160,13 @@ def grid_layout(n_vertices: int, faces, closed: bool = True):
     # :func:`_faces` makes 4 h w triangles for a ring, 4 h w - 4 for a sheet
     if n_vertices % 2 or len(f) != 2 * n_vertices - (0 if closed else 4):
         return None
+    node = f % half
     for w in range(2, half + 1):
         if half % w:
             continue
         h = half // w
         if h < (3 if closed else 2):
             continue
-        node = f % half
         row, col = node // w, node % w
         if closed:   # rows relative to the face's first: h - 1 is the row before
             row = (row - row[:, :1]) % h

@@ -41,6 +41,10 @@ SKULL = "skull"
 BONES = (SKULL, "cranium", "mandible")
 
 
+#: the order of a spec's point fields in :meth:`MuscleSpec.points`
+_POINTS_ORDER = ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer")
+
+
 @dataclass(frozen=True)
 class MuscleSpec:
     """One muscle of the map, resolved to template space and projected onto the skull.
@@ -89,7 +93,18 @@ class MuscleSpec:
 
     def points(self) -> np.ndarray:
         """Every contour point, (k, 3)."""
-        return np.vstack([self.origin, self.fibre_a, self.fibre_b, self.insertion, self.inner, self.outer])
+        return np.vstack([getattr(self, k) for k in _POINTS_ORDER])
+
+    def with_points(self, points) -> "MuscleSpec":
+        """This spec with its contour points taken from ``points (k, 3)`` in :meth:`points`
+        order (the inverse of :meth:`points`; e.g. a fitted map's points)."""
+        from dataclasses import replace
+
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        ends = np.cumsum([0] + [len(getattr(self, k)) for k in _POINTS_ORDER])
+        if ends[-1] != len(p):
+            raise ValueError(f"muscle {self.name}: {len(p)} points for a spec of {ends[-1]}")
+        return replace(self, **{k: p[ends[i]:ends[i + 1]] for i, k in enumerate(_POINTS_ORDER)})
 
     def absolute_thickness(self, diagonal: float) -> float:
         """Thickness in template units for a skull of bounding-box ``diagonal``."""

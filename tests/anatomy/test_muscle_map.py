@@ -220,3 +220,16 @@ def test_bad_yaml_and_missing_file(tmp_path, skull):
         load_muscle_map(write(tmp_path, "muscles: [\n  - {name: a\n"), skull)
     with pytest.raises(TemplateError, match="not found"):
         load_muscle_map(tmp_path / "nope.yaml", skull)
+
+
+def test_with_points_is_the_inverse_of_points(muscles):
+    """``MuscleSpec.with_points`` puts ``points()`` back into the fields they came from, for
+    every template muscle (linear and sphincter), and refuses a wrong count."""
+    for spec in muscles:
+        moved = spec.points() * 2.0 + 1.0
+        again = spec.with_points(moved)
+        assert np.array_equal(again.points(), moved)
+        for key in ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer"):
+            assert np.array_equal(getattr(again, key), getattr(spec, key) * 2.0 + 1.0), (spec.name, key)
+        with pytest.raises(ValueError, match=spec.name):
+            spec.with_points(moved[:-1])

@@ -299,15 +299,13 @@ def _muscle_system(fit, cranium, mandible, settings, config, log):
     start = fit["muscle_map_start"]
     points = {str(n): fit["muscle_map_points"][start[i]:start[i + 1]]
               for i, n in enumerate(fit["muscle_map_names"])}
-    fields = ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer")
     fitted = []
     for spec in specs:
         p = points.get(spec.name)
         if p is None or len(p) != len(spec.points()):
             raise StageError(f"fit.npz has no fitted points for muscle {spec.name!r} of the muscle map; "
                              "rerun `faceforge fit`")
-        ends = np.cumsum([0] + [len(getattr(spec, k)) for k in fields])
-        fitted.append(replace(spec, **{k: p[ends[j]:ends[j + 1]] for j, k in enumerate(fields)}))
+        fitted.append(spec.with_points(p))
     diagonal = float(np.linalg.norm(np.ptp(np.vstack([cranium[0], mandible[0]]), axis=0)))
     stiffness = {"linear": dict(config.get("muscle.linear.stiffness")),
                  "sphincter": dict(config.get("muscle.sphincter.stiffness"))}

@@ -372,7 +372,7 @@ def write_outputs(out_dir, result, report, extra) -> None:
     from faceforge.io.stagefiles import save_yaml
 
     save_yaml(out_dir / "muscle_map.yaml",
-              fitted_muscle_map(extra["template"].specs, result.warp, result.muscle_points),
+              fitted_muscle_map(extra["template"].specs, result.muscle_points),
               header="the template muscle map carried into this head by the fit (points in head units);\n"
                      "load with faceforge.anatomy.muscle_map.load_muscle_map(path, fitted skull)")
     layers = [("cranium", result.cranium, result.cranium_faces, (0.93, 0.91, 0.84)),
