@@ -168,3 +168,23 @@ def test_a_diverging_simulation_is_a_one_line_stage_error_naming_the_track(workd
     with pytest.raises(StageError, match=r"joy\.fap.*frame 3.*diverged") as err:
         run_stage("animate", workdir, {"fap": str(JOY), "animate_mapping": str(workdir / "mapping.yaml")})
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("ran", [True, False])
+def test_calibrate_command_says_wrote_only_when_the_stage_ran(tmp_path, ran):
+    """An up-to-date `faceforge calibrate` prints the kept report, not "wrote"."""
+    from types import SimpleNamespace
+
+    from click.testing import CliRunner
+
+    from faceforge.pipeline.stages.animate import calibrate_command
+
+    (tmp_path / "report.txt").write_text("median relative error 0.05\n")
+    lines = []
+    app = SimpleNamespace(
+        run_stage=lambda name, force: [SimpleNamespace(ran=ran, stage=SimpleNamespace(name=name))],
+        workspace=SimpleNamespace(stage_dir=lambda name: tmp_path), log=lines.append)
+    result = CliRunner().invoke(calibrate_command, [], obj=app)
+    assert result.exit_code == 0, result.output
+    assert lines[0].startswith("median relative error")
+    assert lines[1].startswith("calibrate: wrote " if ran else "calibrate: kept ")

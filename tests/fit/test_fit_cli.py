@@ -19,6 +19,7 @@ def test_fit_command_writes_the_stage_and_reuses_it(invoke, tmp_path, template):
     assert report["mesh"]["n_vertices"] == 478 and report["landmarks"]["count"] == 46
     again = invoke("-w", work, "--no-progress", "fit", mesh)
     assert again.exit_code == 0 and "up to date" in again.stderr
+    assert "fit: wrote" in first.stderr and "fit: wrote" not in again.stderr   # it wrote nothing
 
 
 def test_landmark_problems_are_one_line_errors(invoke, tmp_path, template):

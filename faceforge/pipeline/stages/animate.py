@@ -620,10 +620,11 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
 @click.option("--force", is_flag=True, help="Rerun even if up to date.")
 @click.pass_obj
 def calibrate_command(app, force):
-    app.run_stage("calibrate", force=force)
+    statuses = app.run_stage("calibrate", force=force)
     out = app.workspace.stage_dir("calibrate")
     app.log((out / "report.txt").read_text())
-    app.log(f"calibrate: wrote {out / 'fap_mapping.yaml'} (used by `faceforge animate`)")
+    ran = any(s.ran and s.stage.name == "calibrate" for s in statuses)
+    app.log(f"calibrate: {'wrote' if ran else 'kept'} {out / 'fap_mapping.yaml'} (used by `faceforge animate`)")
 
 
 register_command(animate_command)

@@ -409,8 +409,9 @@ def command(app, mesh, landmarks, orientation, force):
         landmarks = str(default_landmark_path(mesh))
     if orientation is not None:
         app.add_sets(f"fit.orientation={orientation}")
-    app.run_stage("fit", params={"mesh": mesh, "landmarks": landmarks}, force=force)
-    app.log(f"fit: wrote {app.workspace.stage_dir('fit')}")
+    statuses = app.run_stage("fit", params={"mesh": mesh, "landmarks": landmarks}, force=force)
+    if any(s.ran and s.stage.name == "fit" for s in statuses):
+        app.log(f"fit: wrote {app.workspace.stage_dir('fit')}")
 
 
 register_command(command)
