@@ -134,6 +134,7 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     ``carry_inner`` of :func:`build_sphincter_muscle` (``muscle.sphincter.carry_inner``, on
     the skull's faces; it does not change the rest geometry); ``protrusion``: the sphincter's
     ``protrusion`` (``muscle.sphincter.protrusion``). Returns ``[Muscle]`` in build order.
+    Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
     """
     from faceforge.anatomy.action_line import ActionLine
     from faceforge.anatomy.layers import expand_lies_on
@@ -159,17 +160,20 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
         def line(points, closed=False):
             return ActionLine.from_points(points, v, f, closed=closed, project="outermost")
 
-        if spec.type == "linear":
-            m = build_linear_muscle(spec.name, line(lines["A3"]), line(lines["A1"]), line(lines["A0"]),
-                                    line(lines["A2"]), v, f, spec.h, spec.w, t,
-                                    stiffness.get("linear", {}), **kw)
-        else:
-            inner, outer = align_loops(spec.inner, spec.outer)
-            bone = np.concatenate([np.full(len(p[1]), n in ("cranium", "mandible"))
-                                   for n, p in zip(expand_lies_on(spec.lies_on), parts)])
-            m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h, spec.w,
-                                       t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
-                                       carry_faces=bone, protrusion=protrusion, **kw)
+        try:
+            if spec.type == "linear":
+                m = build_linear_muscle(spec.name, line(lines["A3"]), line(lines["A1"]), line(lines["A0"]),
+                                        line(lines["A2"]), v, f, spec.h, spec.w, t,
+                                        stiffness.get("linear", {}), **kw)
+            else:
+                inner, outer = align_loops(spec.inner, spec.outer)
+                bone = np.concatenate([np.full(len(p[1]), n in ("cranium", "mandible"))
+                                       for n, p in zip(expand_lies_on(spec.lies_on), parts)])
+                m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h,
+                                           spec.w, t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
+                                           carry_faces=bone, protrusion=protrusion, **kw)
+        except ValueError as exc:   # e.g. an action line collapsing to one point on these surfaces
+            raise TemplateError(f"muscle {spec.name!r} cannot be built on this skull: {exc}") from exc
         bodies[spec.name] = (m.rest_positions, m.faces)
         built.append(m)
     return built

@@ -281,3 +281,23 @@ def test_a_layer_built_kind_by_kind_steps_like_its_muscles_one_by_one(template):
             solver.step(state, state, control, 1.0 / 25.0)
         states.append(state.positions.copy())
     assert np.array_equal(states[0], states[1])
+
+
+def test_a_muscle_that_cannot_be_built_is_a_one_line_error_naming_it(template):
+    """A fit whose muscle collapsed (every point of the mentalis on one spot): the build names
+    the muscle (TemplateError), and the animate stage turns that into a StageError on fit.npz."""
+    from faceforge.exceptions import StageError, TemplateError
+    from faceforge.io.config import load_config
+    from faceforge.pipeline.stages.animate import _muscle_system
+
+    skull, specs, _, system = template
+    points = [s.points() for s in specs]
+    k = [s.name for s in specs].index("mentalis")
+    points[k] = np.repeat(points[k][:1], len(points[k]), axis=0)
+    with pytest.raises(TemplateError, match="muscle 'mentalis' cannot be built"):
+        build_muscles_on([specs[k].with_points(points[k])], skull.cranium, skull.mandible, skull.diagonal)
+    fit = {"muscle_map_names": np.array([s.name for s in specs]),
+           "muscle_map_start": np.cumsum([0] + [len(p) for p in points]),
+           "muscle_map_points": np.vstack(points)}
+    with pytest.raises(StageError, match=r"^fit\.npz: muscle 'mentalis' cannot be built .*rerun `faceforge fit`"):
+        _muscle_system(fit, skull.cranium, skull.mandible, system.settings, load_config(), lambda m: None)

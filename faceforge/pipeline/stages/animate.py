@@ -289,7 +289,7 @@ def _muscle_system(fit, cranium, mandible, settings, config, log):
     from faceforge.anatomy.layers import MusculoskeletalSystem
     from faceforge.anatomy.muscle_map import load_muscle_map
     from faceforge.anatomy.skull import load_skull
-    from faceforge.exceptions import StageError
+    from faceforge.exceptions import StageError, TemplateError
 
     if "muscle_map_names" not in fit or not len(fit["muscle_map_names"]):
         log("fit.npz has no muscles: animating the skull alone")
@@ -309,9 +309,13 @@ def _muscle_system(fit, cranium, mandible, settings, config, log):
     diagonal = float(np.linalg.norm(np.ptp(np.vstack([cranium[0], mandible[0]]), axis=0)))
     stiffness = {"linear": dict(config.get("muscle.linear.stiffness")),
                  "sphincter": dict(config.get("muscle.sphincter.stiffness"))}
-    muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness,
-                               float(config.get("muscle.sphincter.carry_inner")),
-                               float(config.get("muscle.sphincter.protrusion")))
+    try:
+        muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness,
+                                   float(config.get("muscle.sphincter.carry_inner")),
+                                   float(config.get("muscle.sphincter.protrusion")))
+    except TemplateError as exc:
+        raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
+                         "another muscle map)") from None
     settings = replace(settings, damping=float(config.get("muscle.damping")))
     return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
 
