@@ -28,6 +28,9 @@ Steps
    skin points moved inward along the skin normal by the soft-tissue depth of
    ``tissue-depth/`` (Rhine 1983). The template therefore lives in the ICT head's frame:
    **centimetres, life size**, +Y up, face +Z, subject's left +X, midsagittal plane x = 0.
+   Optionally (``--dental-warp``, experimental, off for the committed template) the dental
+   region is then moved down onto the lips' contact line (:func:`dental_warp`): a similarity
+   leaves the incisal edge 1.6 cm above ICT's stomion.
 4. **Landmarks.** For each chosen FDP of the ICT head a ray is cast from the skin point
    inward (against the smoothed skin normal) and the first hit on the prescribed bone is
    the landmark (closest bone point when the ray misses or exits through an opening,
@@ -351,6 +354,55 @@ def fit_into_head(v: np.ndarray, head_v: np.ndarray, head_n: np.ndarray,
     return least_squares(residual, x0).x
 
 
+# ------------------------------------------------------------------------ dental warp
+#: extent (template cm) of the dental warp: full drop at the occlusal line in front of
+#: z = 8.5 (canines to incisors), none behind z = 4.5 (ramus, condyles); above the occlusal
+#: line it fades out within 0.6 cm (the nose base, 9.15 on the bone, is 0.55 cm above the
+#: incisal edge), below it within 4.2 cm (down to the chin boss, 2.10)
+DENTAL_Z = (4.5, 8.5)
+DENTAL_UP, DENTAL_DOWN = 0.6, 4.2
+
+
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def dental_warp(points: np.ndarray, front: np.ndarray, slope: float, drop: float) -> np.ndarray:
+    """Move the dental region of the placed skull down by ``drop`` cm at the incisors: (n,3) -> (n,3).
+
+    A similarity cannot fix the source skull's proportions: placed in the ICT head, its
+    upper incisal edge sits 0.55 cm below the nasal floor and 1.6 cm above the lips'
+    contact line (in real skulls the maxilla from the nasal spine to the incisal edge is
+    about 2.2-2.5 cm, and the incisal edge lies at the stomion). The warp is vertical,
+    ``y' = y - drop * a(z) * b(u)`` with ``u = y - y_occ(z)`` the height above the
+    occlusal line ``y_occ(z) = front_y + slope * (z - front_z)`` (``front`` = (3,) incisal
+    point, ``slope`` = dy/dz of the occlusal plane in the midsagittal plane):
+
+    - ``a`` rises smoothly from 0 behind ``DENTAL_Z[0]`` to 1 in front of ``DENTAL_Z[1]``,
+      so the condyles, rami and the jaw's pitch axis stay;
+    - ``b`` is 1 on the occlusal line and falls to 0 at ``DENTAL_UP`` above it
+      (smoothstep: the maxilla's alveolar process stretches, the nose stays) and linearly
+      at ``DENTAL_DOWN`` below it (the symphysis shortens uniformly, the chin stays).
+
+    Each vertical line maps one-to-one onto itself (``dy'/dy > 0`` whenever
+    ``drop < DENTAL_DOWN``), so the bones stay closed, unfolded and apart.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    a = _smoothstep((p[:, 2] - DENTAL_Z[0]) / (DENTAL_Z[1] - DENTAL_Z[0]))
+    u = p[:, 1] - (front[1] + slope * (p[:, 2] - front[2]))
+    b = np.where(u >= 0.0, 1.0 - _smoothstep(u / DENTAL_UP), np.clip(1.0 + u / DENTAL_DOWN, 0.0, 1.0))
+    out = p.copy()
+    out[:, 1] -= drop * a * b
+    return out
+
+
+def incisal_point(dental_loop: np.ndarray) -> np.ndarray:
+    """The front-most point (3,) of the dental cut loop near the midline (the incisal edge)."""
+    front = dental_loop[np.abs(dental_loop[:, 0]) < 0.5]
+    return front[np.argmax(front[:, 2])]
+
+
 # ----------------------------------------------------------------------------- landmarks
 def _smoothed_normals(mesh: trimesh.Trimesh, rounds: int = 3) -> np.ndarray:
     """Vertex normals averaged over the 1-ring ``rounds`` times (less noise at the lips)."""
@@ -535,8 +587,13 @@ limits:
     path.write_text(text)
 
 
-def build(assets: Path, out: Path) -> dict:
-    """Run every step; write the four files into ``out``; return a summary dict."""
+def build(assets: Path, out: Path, dental: bool = False) -> dict:
+    """Run every step; write the four files into ``out``; return a summary dict.
+
+    ``dental``: also apply :func:`dental_warp` after the placement (experimental, off for
+    the committed template; the summary's ``dental_warp`` is the map, for moving points
+    such as the muscle map's, and ``dental_drop`` its drop in cm, 0 when off).
+    """
     v, f = load_welded(assets / "anatomy/skull-yahoojapan/skull_low_resolution.obj")
     v[:, 0] -= mirror_plane_offset(v)
     v = symmetrise(v, f)
@@ -551,10 +608,19 @@ def build(assets: Path, out: Path) -> dict:
     cranium = (apply_similarity(params, cranium[0]), cranium[1])
     mandible = (apply_similarity(params, mandible[0]), mandible[1])
     loops = {k: apply_similarity(params, l) for k, l in loops.items()}
+    # optional dental registration (experimental): the incisal edge onto the lips' contact line
+    fwd = jaw_axes(loops)["protrusion_dir"]
+    front = incisal_point(max(loops.values(), key=len))
+    drop = float(front[1] - (fdp["2.2"][1] + fdp["2.3"][1]) / 2.0) if dental else 0.0
+
+    def warp(p):
+        return dental_warp(p, front, fwd[1] / fwd[2], drop)
+
+    if dental:
+        cranium, mandible = (warp(cranium[0]), cranium[1]), (warp(mandible[0]), mandible[1])
+        loops = {k: warp(l) for k, l in loops.items()}
     axes = jaw_axes(loops)
-    dental = max(loops.values(), key=len)
-    front = dental[np.abs(dental[:, 0]) < 0.5]
-    occlusal_y = float(front[np.argmax(front[:, 2]), 1])
+    occlusal_y = float(incisal_point(max(loops.values(), key=len))[1])
     marks = place_landmarks(cranium, mandible, head, fdp, occlusal_y)
 
     table = {}
@@ -569,7 +635,7 @@ def build(assets: Path, out: Path) -> dict:
     write_landmarks(out / "landmarks.yaml", marks, table)
     write_jaw(out / "jaw.yaml", axes)
     return {"params": params, "cranium": cranium, "mandible": mandible, "landmarks": marks,
-            "axes": axes}
+            "axes": axes, "dental_drop": drop, "dental_warp": warp}
 
 
 #: FDP -> (tissue-depth code, Rhine 1983 depth in cm) for the build's plausibility check
@@ -581,10 +647,14 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--assets", type=Path, default=Path("/work/shared/assets"))
     ap.add_argument("--out", type=Path, default=ROOT / "templates" / "skull")
+    ap.add_argument("--dental-warp", action="store_true",
+                    help="experimental: move the dental region down onto the lips (dental_warp)")
     args = ap.parse_args(argv)
-    s = build(args.assets, args.out)
+    s = build(args.assets, args.out, args.dental_warp)
     print(f"scale {s['params'][0]:.4f}, pitch {s['params'][1]:.4f} rad; cranium {len(s['cranium'][0])} v, "
           f"mandible {len(s['mandible'][0])} v, {len(s['landmarks'])} landmarks -> {args.out}")
+    if args.dental_warp:
+        print(f"dental warp: incisal edge moved down {s['dental_drop']:.2f} cm onto the lips' contact line")
     print("skin-to-bone distance at the landmarks vs. the soft-tissue depth table (cm):")
     for k, (code, depth) in DEPTH_CHECK.items():
         print(f"  {k:>5} {code:>4}: template {s['landmarks'][k][3]:.2f}, table {depth:.2f}")

@@ -1,0 +1,86 @@
+"""tools/build_template.py: the committed template is its output, and the dental warp is one-to-one.
+
+The build reads the shared assets (``/work/shared/assets``); without them the build tests
+skip. The warp's own properties are checked on synthetic points and need no assets.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+ASSETS = Path("/work/shared/assets")
+FILES = ("cranium.obj", "mandible.obj", "landmarks.yaml", "jaw.yaml")
+
+
+@pytest.fixture(scope="module")
+def bt():
+    spec = importlib.util.spec_from_file_location("build_template", ROOT / "tools" / "build_template.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+needs_assets = pytest.mark.skipif(not (ASSETS / "anatomy").is_dir(), reason="shared assets not on this machine")
+
+
+@needs_assets
+def test_the_build_reproduces_the_committed_template_byte_for_byte(bt, tmp_path):
+    summary = bt.build(ASSETS, tmp_path)
+    assert summary["dental_drop"] == 0.0
+    for name in FILES:
+        assert (tmp_path / name).read_bytes() == (ROOT / "templates" / "skull" / name).read_bytes(), name
+
+
+def _turned(v0, v1, f):
+    def normals(v):
+        t = v[f]
+        return np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    return int((np.einsum("ij,ij->i", normals(v0), normals(v1)) <= 0).sum())
+
+
+@needs_assets
+def test_the_dental_warp_puts_the_incisal_edge_on_the_lips_and_folds_nothing(bt, tmp_path):
+    plain = bt.build(ASSETS, tmp_path / "plain")
+    warped = bt.build(ASSETS, tmp_path / "dental", dental=True)
+    fdp = yaml.safe_load((ASSETS / "heads/ict/ict_face_headneck_neutral.fdp.yaml").read_text())["landmarks"]
+    stomion = (fdp["2.2"]["position"][1] + fdp["2.3"]["position"][1]) / 2.0
+    assert 1.0 < warped["dental_drop"] < bt.DENTAL_DOWN
+    for bone in ("cranium", "mandible"):
+        v0, f = plain[bone]
+        v1, f1 = warped[bone]
+        assert np.array_equal(f, f1)
+        assert _turned(v0, v1, f) == 0, bone                     # one-to-one: no triangle turns over
+        assert np.array_equal(v0[:, [0, 2]], v1[:, [0, 2]])      # vertical only
+    jaw = yaml.safe_load((tmp_path / "dental" / "jaw.yaml").read_text())
+    assert jaw["pitch_axis"] == yaml.safe_load((tmp_path / "plain" / "jaw.yaml").read_text())["pitch_axis"]
+    # the incisal edge (front of the dental cut) lands on the lips' contact line, and the
+    # lip landmarks then sit at the skin's own heights (no occlusal shift left)
+    marks = warped["landmarks"]
+    assert abs(marks["2.2"][0][1] - marks["2.3"][0][1]) < 1.0
+    assert abs((marks["2.2"][0][1] + marks["2.3"][0][1]) / 2.0 - stomion) < 0.1
+    # the nose base, the chin and everything above the mouth stay
+    for key in ("9.15", "2.1", "4.1", "5.3", "3.7"):
+        assert np.allclose(marks[key][0], plain["landmarks"][key][0], atol=0.02), key
+
+
+def test_dental_warp_moves_only_its_region_and_keeps_each_vertical_line_one_to_one(bt):
+    front, slope, drop = np.array([0.0, -1.8, 10.3]), 0.2, 1.6
+    y = np.linspace(-9.0, 4.0, 2001)
+    for z in (3.0, 4.5, 6.0, 8.0, 10.3, 12.0):
+        p = np.c_[np.zeros_like(y), y, np.full_like(y, z)]
+        q = bt.dental_warp(p, front, slope, drop)
+        assert np.all(np.diff(q[:, 1]) > 0), z                   # strictly increasing along y
+        assert np.array_equal(q[:, [0, 2]], p[:, [0, 2]])
+        y_occ = front[1] + slope * (z - front[2])
+        far = (y > y_occ + bt.DENTAL_UP) | (y < y_occ - bt.DENTAL_DOWN)
+        assert np.array_equal(q[far], p[far]), z                 # nose and chin untouched
+        if z <= bt.DENTAL_Z[0]:
+            assert np.array_equal(q, p)                          # rami and condyles untouched
+    edge = bt.dental_warp(front[None], front, slope, drop)[0]
+    assert np.allclose(edge, front - [0.0, drop, 0.0])           # the full drop at the incisal edge
