@@ -24,7 +24,7 @@ Functions on arrays. The construction, in order:
    ``enhancement_spacing`` apart from the others and from every existing source; each
    pair (skull point -> closest skin point - ``t*`` along the skin normal) is a ray from
    the skin inward to the bone (the red dots of Fig. 8); ``enhancement_rounds`` rounds or
-   until nothing is bad. With ``enhancement_flow_steps`` > 0 each round's pairs are met by a
+   until nothing is bad. With ``enhancement_flow_steps`` > 0 (the default, 8) each round's pairs are met by a
    *flow* (:func:`enhancement_field`, :class:`Flow`): a smooth displacement field, zero at
    every earlier pair's target (the FDP landmarks lie on theirs, exactly) and the correction
    at each new pair, integrated in that many midpoint steps. A flow is one-to-one in the
@@ -35,7 +35,9 @@ Functions on arrays. The construction, in order:
    from the FDP RBF). A flow moves each new pair most of the way to its target (~70 %), not
    onto it, and stops short of a landmark in its way; enhancement targets are a depth
    ratio, and the next round tests again. With 0 the RBF through all pairs is rebuilt each
-   round with the landmarks' shape parameter (the paper's construction).
+   round with the landmarks' shape parameter (the paper's construction; it can also run
+   away: with a template whose teeth sit at the lips, one round moved the inside of
+   MediaPipe's orbit by 40 % of the skin diagonal).
    Points in pockets (teeth in a modelled mouth) and points no skin covers (beyond a
    mask's rim, below the neck) are left alone: the back need not fit (§7). The other way
    round, skin of the face that the bone swallows (a deep modelled eye socket, a nostril
@@ -95,7 +97,7 @@ class FitSettings:
     enhancement_spacing: float = 0.035  # min distance between RBF sources, fraction of skin diagonal
     enhancement_min_ratio: float = 0.7  # add a pair where thickness < ratio * expected depth
     enhancement_cell: float = 0.015    # candidates: one skull vertex per cell of this size (x skin diagonal)
-    enhancement_flow_steps: int = 0    # >0: each enhancement round is a flow of this many midpoint steps; 0: exact RBF
+    enhancement_flow_steps: int = 8    # >0: each enhancement round is a flow of this many midpoint steps; 0: exact RBF
     skin_clearance_mm: float = 1.0     # skin found inside the bone is cleared by this much (mm); 0: off
     skin_clearance_samples: int = 16   # bone pairs per round for skin inside the bone
     front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0
