@@ -41,6 +41,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from faceforge.anatomy.muscle_map import POINTS_ORDER
+
 #: FDPs of the lip contours (MPEG-4 groups 2 and 8) whose bone counterparts carry the shift
 LIP_FDPS = ("2.2", "2.3", "2.4", "2.5", "2.6", "2.7", "2.8", "2.9",
             "8.1", "8.2", "8.3", "8.4", "8.5", "8.6", "8.7", "8.8")
@@ -97,9 +99,11 @@ def point_weights(spec) -> np.ndarray:
     if spec.type != "linear":
         return np.ones(len(spec.points()))
     lines = spec.action_lines()
-    fibres = [_fraction_along(lines[key])[1:-1] for key in ("A0", "A2")]
-    return np.concatenate([np.zeros(len(spec.origin)), *fibres, np.ones(len(spec.insertion)),
-                           np.ones(len(spec.inner)), np.ones(len(spec.outer))])
+    weights = {k: np.ones(len(getattr(spec, k))) for k in POINTS_ORDER}
+    weights["origin"] = np.zeros(len(spec.origin))
+    weights["fibre_a"] = _fraction_along(lines["A0"])[1:-1]
+    weights["fibre_b"] = _fraction_along(lines["A2"])[1:-1]
+    return np.concatenate([weights[k] for k in POINTS_ORDER])
 
 
 def sheet_weights(kind: str, h: int, w: int) -> np.ndarray:

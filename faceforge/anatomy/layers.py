@@ -54,7 +54,7 @@ import numpy as np
 
 from faceforge.anatomy.action_line import ActionLine
 from faceforge.anatomy.layer_targets import LinearTargets, bary_points
-from faceforge.anatomy.muscle import PROTRUSION_SUFFIX, Muscle, add_muscles_to_builder, protrusion_control
+from faceforge.anatomy.muscle import Muscle, add_muscles_to_builder, protrusion_control
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
 from faceforge.geometry.surface_points import SurfacePoints
@@ -382,7 +382,7 @@ class MusculoskeletalSystem:
             if len(s) and m.kind != "linear":          # the sphincter, in numpy
                 lp = {key: pts[sl] for key, sl in own.items()}
                 c = contractions.get(m.name, 0.0)
-                p = contractions.get(m.name + PROTRUSION_SUFFIX, 0.0)
+                p = contractions.get(protrusion_control(m.name), 0.0)
                 layer.control.position_targets[s] = m.targets_from_line_points(c, lp, p)
 
     def reset(self) -> None:

@@ -42,7 +42,7 @@ BONES = (SKULL, "cranium", "mandible")
 
 
 #: the order of a spec's point fields in :meth:`MuscleSpec.points`
-_POINTS_ORDER = ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer")
+POINTS_ORDER = ("origin", "fibre_a", "fibre_b", "insertion", "inner", "outer")
 
 
 @dataclass(frozen=True)
@@ -93,7 +93,7 @@ class MuscleSpec:
 
     def points(self) -> np.ndarray:
         """Every contour point, (k, 3)."""
-        return np.vstack([getattr(self, k) for k in _POINTS_ORDER])
+        return np.vstack([getattr(self, k) for k in POINTS_ORDER])
 
     def with_points(self, points) -> "MuscleSpec":
         """This spec with its contour points taken from ``points (k, 3)`` in :meth:`points`
@@ -101,10 +101,10 @@ class MuscleSpec:
         from dataclasses import replace
 
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        ends = np.cumsum([0] + [len(getattr(self, k)) for k in _POINTS_ORDER])
+        ends = np.cumsum([0] + [len(getattr(self, k)) for k in POINTS_ORDER])
         if ends[-1] != len(p):
             raise ValueError(f"muscle {self.name}: {len(p)} points for a spec of {ends[-1]}")
-        return replace(self, **{k: p[ends[i]:ends[i + 1]] for i, k in enumerate(_POINTS_ORDER)})
+        return replace(self, **{k: p[ends[i]:ends[i + 1]] for i, k in enumerate(POINTS_ORDER)})
 
     def absolute_thickness(self, diagonal: float) -> float:
         """Thickness in template units for a skull of bounding-box ``diagonal``."""
