@@ -34,6 +34,21 @@ a vertex bound to another muscle whose ray, cast on, meets one of them also gets
 on it: the vertex then has two anchors, each with the skin's ``k_anchor``, and follows both
 muscles (:func:`bind_skin`).
 
+Beyond the paper, the modiolus: at each mouth corner the zygomaticus, risorius, depressor
+anguli, the lip elevators and the orbicularis oris meet in a knot of fibres tied to the
+skin, and the corner moves with the knot whichever of them pulls. In the layered map the
+orbicularis oris lies on top of all of them and each moves it, so its corners are the knot.
+By its ray the corner skin bound to whichever muscle the ray met first: on MakeHuman the
+outer corner (FDP 8.3) to the risorius, the inner one (2.4) to the ring. The risorius at
+c = 1 then moved 8.3 twice as far as 2.4, the zygomaticus (which the risorius does not lie
+on) 2.4 twice as far as 8.3, and the outer and inner lip FAPs of a corner, which MPEG-4
+files give alike, could not both be met. The skin within ``modiolus_radius`` x MW0 of a
+corner FDP (:func:`modiolus_mask`) that its ray bound to another muscle binds to the closest
+point of the orbicularis oris instead, a lip vertex to its own arc (``modiolus`` of
+:func:`bind_skin`). Corner skin on the bone (inner lips on the teeth) stays there: moved to
+the ring as well, MediaPipe's inner corners (on the mandible) came to outrun the outer ones
+and its calibration lost 5 rows (median 6.8 -> 9.4 %; MakeHuman 73 -> 72 rows, ICT 92 -> 96).
+
 Beyond the paper: a vertex whose two rays both miss (they look into a hole of
 the skull: eye sockets, nostrils, the gap between the teeth) binds to the
 closest point of the skull within ``max_distance`` (its own jaw's bone near
@@ -255,6 +270,45 @@ def _cast(bodies, ids, rank, origins, dirs, max_distance, allowed, ray_side=None
     return body, face, pts, dist
 
 
+def _own_arc(body: Body, side: int, face_sides, i: int, side_of) -> np.ndarray:
+    """Faces ``(k,) int`` of a muscle around the mouth (``bodies[i]``) on lip side ``side``:
+    by the ring's rows (``face_sides[i]``) where given, else by where their centroids lie;
+    every face for ``side`` 0 (the mouth corners, where the two arcs meet)."""
+    if side == 0:
+        return np.arange(len(body.faces))
+    rows = None if face_sides is None else face_sides[i]
+    if rows is None:
+        rows = side_of(body.vertices[body.faces].mean(axis=1))
+    return np.flatnonzero(np.asarray(rows) == side)
+
+
+def _modiolus_anchors(v, bodies, around, sides, mask, max_distance, allowed, body, face, pts, dist,
+                      side_of=None, face_sides=None) -> np.ndarray:
+    """Rebind the skin at the mouth corners (``mask (n,) bool``) to the closest point of the
+    muscles around the mouth (``around (n_bodies,) bool``) within ``max_distance``: a lip
+    vertex (``sides`` +1 / -1) on its own arc (:func:`_own_arc`), a vertex of neither lip
+    anywhere on them. Updates the arrays in place (a vertex with nothing in reach keeps its
+    anchor) and returns the ``(n,) bool`` mask of the vertices rebound. See the module
+    docstring, the modiolus."""
+    from faceforge.geometry.surface_points import closest_points
+
+    done = np.zeros(len(v), bool)
+    for side in (1, -1, 0):
+        todo = np.flatnonzero(mask & (sides == side))
+        best = np.full(len(todo), np.inf)
+        for i in np.flatnonzero(around) if len(todo) else ():
+            sub = _own_arc(bodies[i], side, face_sides, i, side_of)
+            if len(sub) == 0:
+                continue
+            p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces[sub])
+            take = (d < best) & (d <= max_distance) & allowed[todo, i]
+            best[take] = d[take]
+            t = todo[take]
+            body[t], face[t], pts[t], dist[t] = i, sub[tri[take]], p[take], d[take]
+            done[t] = True
+    return done
+
+
 def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask,
                       side_of=None, allowed=None, around=None, face_sides=None,
                       lips_to_ring=False) -> np.ndarray:
@@ -308,13 +362,9 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
                 if kinds[i] == MUSCLE and around is not None and half != ring_tier:
                     continue
                 bv, bf = bodies[i].vertices, bodies[i].faces
-                sub = np.arange(len(bf))
-                if half:    # the faces of the vertex's own half: by the ring's rows, else by place
-                    rows = None if face_sides is None else face_sides[i]
-                    sub = np.flatnonzero((np.asarray(side_of(bv[bf].mean(axis=1))) if rows is None
-                                          else rows) == side)
-                    if len(sub) == 0:
-                        continue
+                sub = _own_arc(bodies[i], side, face_sides, i, side_of) if half else np.arange(len(bf))
+                if len(sub) == 0:
+                    continue
                 p, d, tri = closest_points(v[todo], bv, bf[sub])
                 tri = sub[tri]
                 take = (d < best) & (d <= max_distance)
@@ -331,7 +381,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
-              insertions=None, face_sides=None, lips_to_ring=False) -> Binding:
+              insertions=None, face_sides=None, lips_to_ring=False, modiolus=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -382,6 +432,12 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     lips_to_ring : bool
         A lip vertex whose rays miss binds to its own half of the muscles around the mouth
         when one is within ``max_distance``, before the bone (:func:`_closest_fallback`).
+    modiolus : (n,) bool, optional
+        The skin at the mouth corners (with ``side_of`` and ``body_sides``): a vertex of it
+        that its rays (or the fallback) bound to a muscle not around the mouth binds instead
+        to the closest point of the muscles around the mouth within ``max_distance``, a lip
+        vertex to its own arc (:func:`_modiolus_anchors`; module docstring), and gets no
+        second anchor. Skin on the bone stays there.
 
     Returns
     -------
@@ -426,6 +482,9 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     dist = np.full(n, np.inf)
     outward = np.zeros(n, bool)
     has_dir = np.linalg.norm(nrm, axis=1) > 0
+    corner = np.zeros(n, bool) if modiolus is None else np.array(modiolus, bool).reshape(-1)  # a copy
+    if len(corner) != n:
+        raise ValueError(f"modiolus {corner.shape} must have one entry per vertex ({n})")
     passes = ((muscles, +1.0), (muscles, -1.0), (skull, -1.0))
     for p, (ids, sign) in enumerate(passes):
         todo = np.flatnonzero((body < 0) & has_dir)
@@ -439,6 +498,13 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     mask = np.broadcast_to(np.asarray(fallback, bool), (n,))
     closest = _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, dist, mask, side_of,
                                 allowed, around, face_sides, lips_to_ring)
+    if around is not None:   # the modiolus: corner skin on another muscle moves to the ring
+        corner &= (body >= 0) & (kinds[np.maximum(body, 0)] == MUSCLE) & ~around[np.maximum(body, 0)]
+        corner = _modiolus_anchors(v, bodies, around, sides, corner, max_distance, allowed, body, face,
+                                   pts, dist, side_of, face_sides)
+        outward[corner] = closest[corner] = False
+    else:
+        corner[:] = False
 
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
@@ -446,7 +512,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     anchors = (ids, body[ids], face[ids], pts[ids], dist[ids], outward[ids], closest[ids])
     ins = [int(i) for i in (insertions or ()) if kinds[i] == MUSCLE]
     if ins:   # second anchors: skin over a muscle that inserts into it through the muscles above
-        cand = ids[(kinds[body[ids]] == MUSCLE) & ~np.isin(body[ids], ins) & ~closest[ids]]
+        cand = ids[(kinds[body[ids]] == MUSCLE) & ~np.isin(body[ids], ins) & ~closest[ids] & ~corner[ids]]
         res = _cast(bodies, ins, np.zeros(nb, INT), v[cand],    # nearest hit, along the same ray
                     np.where(outward[cand, None], 1.0, -1.0) * nrm[cand], max_distance, allowed[cand],
                     sides[cand], side_of, strict, face_sides)
@@ -680,8 +746,29 @@ def match_insertions(insertions, names) -> tuple[list[int], list[str]]:
     return hits, [n for n in insertions if n not in used]
 
 
+#: FDPs of the mouth corners: outer lip contour (8.3 left, 8.4 right), inner (2.4, 2.5)
+CORNER_FDPS = ("8.3", "8.4", "2.4", "2.5")
+
+#: ``bind.modiolus_radius``: the skin within this fraction of MW0 (the mouth width, FDP 8.3 to
+#: 8.4) of a mouth corner binds to the orbicularis oris (module docstring, the modiolus)
+MODIOLUS_RADIUS = 0.12
+
+
+def modiolus_mask(vertices, landmarks: dict, radius: float = MODIOLUS_RADIUS) -> np.ndarray:
+    """(n,) bool: the vertices within ``radius`` x MW0 of one of the mouth corners'
+    FDPs (:data:`CORNER_FDPS`, those given); MW0 = |FDP 8.3 - FDP 8.4|. No vertex
+    without 8.3 and 8.4 or with ``radius`` 0."""
+    v = np.asarray(vertices, FLOAT)
+    if radius <= 0.0 or "8.3" not in landmarks or "8.4" not in landmarks:
+        return np.zeros(len(v), bool)
+    reach = radius * float(np.linalg.norm(np.subtract(landmarks["8.3"], landmarks["8.4"])))
+    corners = np.array([landmarks[k] for k in CORNER_FDPS if k in landmarks], FLOAT)
+    return (np.linalg.norm(v[:, None, :] - corners[None], axis=2) <= reach).any(axis=1)
+
+
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
-              max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True) -> BoundSkin:
+              max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
+              modiolus_radius: float = MODIOLUS_RADIUS) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -706,6 +793,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     lips_to_ring : bool
         ``bind.lips_to_ring``: lip skin whose rays miss binds to its own arc of the orbicularis
         oris before the teeth (:func:`bind_skin`).
+    modiolus_radius : float
+        ``bind.modiolus_radius``: the skin within this fraction of MW0 of a mouth corner
+        binds to the orbicularis oris (:func:`modiolus_mask`; 0: by its rays, as the paper).
 
     Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): like all the face's front skin,
     inner lip skin whose rays miss gets a closest-point anchor, across the oral vestibule
@@ -749,13 +839,15 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     band_width = lip_band_width(pts)
     lips = lip_band(cut, band_width)
     ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
+    corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
     body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
                   for b in bodies]
     face_sides = [ring_face_sides(b.vertices, b.faces, cut, up=up) if s == AROUND_MOUTH else None
                   for b, s in zip(bodies, body_sides)]
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
-                        insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring)
+                        insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
+                        modiolus=corner)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None
@@ -766,6 +858,14 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     report["region_rules"] = rule
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
+    first = np.r_[True, binding.vertex_ids[1:] != binding.vertex_ids[:-1]]
+    at_corner = np.isin(binding.vertex_ids, np.flatnonzero(corner)) & first
+    on_ring = np.isin(binding.body, [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH])
+    on_bone = np.isin(binding.body, [i for i, b in enumerate(bodies) if b.kind != "muscle"])
+    report["modiolus"] = {"radius_mw0": float(modiolus_radius), "vertices": int(corner.sum()),
+                          "on_the_ring": int((at_corner & on_ring).sum()),
+                          "on_bone": int((at_corner & on_bone).sum()),
+                          "on_other_muscles": int((at_corner & ~on_ring & ~on_bone).sum())}
     report["mouth"] = cut.report()
     report["influence"] = {
         "sources": int(len(sources)), "normalisation": float(scale),

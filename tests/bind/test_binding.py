@@ -316,3 +316,73 @@ def test_lips_to_ring_puts_a_missed_lip_on_its_arc_before_the_teeth(skin):
     assert np.all(first.distance[sel] > near.distance[np.isin(near.vertex_ids, lip)])
     short = bind_skin(v, f, [ring, skull], max_distance=0.72, lips_to_ring=True, **kw)   # bone 0.71, arc 0.73
     assert np.all(short.status[lip] == CRANIUM)                          # the arc is out of reach
+
+
+def test_modiolus_moves_corner_skin_from_another_muscle_to_its_arc_of_the_ring(skin):
+    """Skin in the ``modiolus`` mask that its ray bound to another muscle binds instead to the
+    closest point of the muscles around the mouth within reach -- a lip vertex on its own arc,
+    a corner vertex anywhere -- with no second anchor; corner skin on the bone stays there,
+    the rest of the skin binds as before, and out of reach the rays decide."""
+    from faceforge.anatomy.mouth import AROUND_MOUTH
+    from faceforge.geometry.surface_points import closest_points
+
+    v, f = skin
+    ov, of = _cap(0.95, 0.3)
+    over = Body("risorius", "muscle", ov, of[(ov[of][:, :, 0] > 0.0).all(axis=1)])   # x > 0 only
+    ring = Body("ring", "muscle", *_cap(0.85, 0.9, 4))
+    skull = Body("cranium", "cranium", *sphere(0.8, 3))
+    labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0, 1, -1).astype(np.int8)
+    sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] > 0.1, 1, np.where(v[:, 1] < -0.1, -1, 0)), 0)
+
+    def side_of(points):
+        return np.where(points[:, 1] >= 0, 1, -1)
+
+    corner = v[:, 2] > 0.75
+    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[0, AROUND_MOUTH, 0],
+              face_sides=[None, labels, None], insertions=[0])
+    rays = bind_skin(v, f, [over, ring, skull], max_distance=0.5, **kw)
+    b = bind_skin(v, f, [over, ring, skull], max_distance=0.5, modiolus=corner, **kw)
+
+    def first(bb, ids):   # the body of each vertex's (first) anchor
+        return bb.body[np.searchsorted(bb.vertex_ids, ids)]
+
+    ids = np.flatnonzero(corner)
+    moved = ids[first(rays, ids) == 0]                         # by their rays: the risorius
+    bone = ids[first(rays, ids) == 2]                          # by their rays: the cranium
+    assert {1, -1, 0} <= set(sides[moved]) and len(bone)
+    assert np.all(first(b, moved) == 1)                        # the modiolus: the ring
+    assert np.all(first(b, bone) == 2)                         # bone stays bone
+    sel = np.isin(b.vertex_ids, moved)
+    assert len(np.unique(b.vertex_ids[sel])) == sel.sum()     # no second anchor on the risorius
+    assert not b.outward[sel].any() and not b.closest[sel].any()
+    for s in (1, -1, 0):                                       # the closest point of the own arc
+        mine = np.flatnonzero(sel & (sides[b.vertex_ids] == s))
+        faces = ring.faces if s == 0 else ring.faces[labels == s]
+        _, d, _ = closest_points(v[b.vertex_ids[mine]], ring.vertices, faces)
+        np.testing.assert_allclose(b.distance[mine], d, atol=1e-12)
+        if s:
+            assert np.all(labels[b.face_ids[mine]] == s)
+    rest = ~np.isin(rays.vertex_ids, moved)
+    keep = ~np.isin(b.vertex_ids, moved)
+    np.testing.assert_array_equal(rays.vertex_ids[rest], b.vertex_ids[keep])
+    np.testing.assert_array_equal(rays.body[rest], b.body[keep])
+    np.testing.assert_array_equal(rays.points[rest], b.points[keep])
+    far = bind_skin(v, f, [over, ring, skull], max_distance=0.06, modiolus=corner, **kw)
+    near = bind_skin(v, f, [over, ring, skull], max_distance=0.06, **kw)
+    assert np.any(far.body[np.isin(far.vertex_ids, ids)] == 0)   # the risorius, 0.05 away
+    np.testing.assert_array_equal(far.body, near.body)        # no ring point within 0.06
+    with pytest.raises(ValueError, match="modiolus"):
+        bind_skin(v, f, [over, ring, skull], max_distance=0.5, modiolus=corner[:-1], **kw)
+
+
+def test_modiolus_mask_is_the_skin_near_the_corner_fdps():
+    from faceforge.anatomy.binding import modiolus_mask
+
+    lm = {"8.3": np.array([1.0, 0.0, 0.0]), "8.4": np.array([-1.0, 0.0, 0.0]),
+          "2.4": np.array([0.9, 0.0, 0.0])}
+    pts = np.array([[1.2, 0.0, 0.0], [1.25, 0.0, 0.0], [0.65, 0.0, 0.0], [0.67, 0.0, 0.0],
+                    [-1.0, 0.23, 0.0], [-1.0, 0.25, 0.0], [0.0, 0.0, 0.0]])
+    np.testing.assert_array_equal(modiolus_mask(pts, lm, 0.12),      # reach 0.24 (MW0 = 2)
+                                  [True, False, False, True, True, False, False])
+    assert not modiolus_mask(pts, lm, 0.0).any()
+    assert not modiolus_mask(pts, {k: lm[k] for k in ("8.3", "2.4")}, 0.12).any()   # no MW0

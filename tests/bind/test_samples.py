@@ -225,3 +225,28 @@ def test_anchor_targets_gather_is_the_per_body_evaluation(bound):
     assert np.abs(per_body - sk.binding.points).max() > 1e-3 * _diag(head.rest)   # they did move
     assert np.array_equal(sk.anchor_targets(head.system), per_body), name
     head.rig.reset()
+
+
+def test_the_mouth_corners_bind_to_the_orbicularis_oris(bound, config):
+    """The modiolus: the skin within bind.modiolus_radius MW0 of the corner FDPs (8.3, 8.4
+    outer, 2.4, 2.5 inner) that is bound to a muscle has its one anchor on the ring, the outer
+    corners' FDPs among it (bind_head's default radius, which these heads are bound with, is
+    the config's). Their rays bound MakeHuman's 8.3 to the risorius."""
+    from faceforge.anatomy.binding import MODIOLUS_RADIUS, MUSCLE, modiolus_mask
+    from faceforge.io.stagefiles import load_npz
+
+    assert config.get("bind.modiolus_radius") == MODIOLUS_RADIUS
+    name, work, report, head = bound
+    fit = load_npz(work / "fit" / "fit.npz")
+    landmarks = {str(k): p for k, p in zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"])}
+    b = head.skin.binding
+    ring = b.body_names.index("orbicularis_oris")
+    corner = np.flatnonzero(modiolus_mask(head.rest, landmarks, MODIOLUS_RADIUS))
+    mod = report["modiolus"]
+    assert mod["vertices"] == len(corner) > 0 and mod["on_other_muscles"] == 0
+    assert mod["on_the_ring"] + mod["on_bone"] == len(corner) and mod["on_the_ring"] > 0
+    on_muscle = corner[b.status[corner] == MUSCLE]
+    k = np.searchsorted(b.vertex_ids, on_muscle)
+    assert len(on_muscle) == mod["on_the_ring"] and np.all(b.body[k] == ring), name
+    assert not np.any(np.isin(on_muscle, b.vertex_ids[np.flatnonzero(np.diff(b.vertex_ids) == 0)]))
+    assert {head.fdp_vertex["8.3"], head.fdp_vertex["8.4"]} <= set(on_muscle.tolist())

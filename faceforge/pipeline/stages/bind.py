@@ -100,7 +100,8 @@ def run(ctx):
     bound = bind_head(head["vertices"], head["faces"], head["landmarks"], head["cranium"],
                       head["mandible"], head["muscles"],
                       float(ctx.config.get("bind.max_ray_distance")), insertions=insertions,
-                      lips_to_ring=bool(ctx.config.get("bind.lips_to_ring")))
+                      lips_to_ring=bool(ctx.config.get("bind.lips_to_ring")),
+                      modiolus_radius=float(ctx.config.get("bind.modiolus_radius")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
     save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())
@@ -111,7 +112,7 @@ def run(ctx):
 
 STAGE = register_stage(Stage(
     name="bind", deps=("fit",), config_keys=("bind",),
-    outputs=("bind.npz", "report.json", "influence.png"), version="5", run=run,
+    outputs=("bind.npz", "report.json", "influence.png"), version="6", run=run,
     description="bind the skin to muscles and bone, influence map (§8)"))
 
 
