@@ -90,6 +90,29 @@ def test_the_outer_and_inner_lip_corner_move_as_one(head, muscle, side, outer, i
     assert np.linalg.norm(a - b) < 0.3 * size, (a / h.fapu.unit("MW"), b / h.fapu.unit("MW"))
 
 
+def test_lifting_the_cheek_leaves_the_nose_wing_and_the_upper_lip(head):
+    """lift_l_cheek (FAP 41) with every muscle of its template entry at full contraction: the
+    cheek (FDP 5.3) rises, the nose wing (9.1) and the middle of the upper lip (8.1) far less
+    than a levator labii moves them. With the levator labii outer in the entry (until this
+    session) they rose 438 and 378 MNS (the cheek 44 ENS), and calibrated Xface files, which
+    all lift the cheeks, crumpled the upper lip under the nose; the zygomaticus alone raises
+    them 85 and 118 MNS (the cheek 27 ENS)."""
+    from faceforge.anatomy.animate import static_poses
+    from faceforge.anatomy.fap_mapping import load_fap_mapping
+
+    h, _ = head
+    entry = next(e for e in load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml").entries
+                 if 41 in e.faps)
+    names = list(h.muscle_names)
+    ctr = np.zeros((1, len(names)))
+    for m in entry.positive:
+        ctr[0, names.index(m)] = 1.0
+    d = static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest
+    assert d[h.fdp_vertex["5.3"], 1] / h.fapu.unit("ENS") > 15.0
+    assert d[h.fdp_vertex["9.1"], 1] / h.fapu.unit("MNS") < 150.0
+    assert d[h.fdp_vertex["8.1"], 1] / h.fapu.unit("MNS") < 200.0
+
+
 @pytest.mark.parametrize("muscle, fdp, axis, sign, unit, least", [
     ("frontalis_inner_L", "4.1", 1, +1, "ENS", 80.0),
     ("frontalis_outer_L", "4.5", 1, +1, "ENS", 80.0),
