@@ -201,6 +201,34 @@ def inverted_triangles(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     return inverted_faces(rest, frames, faces, tol).sum(axis=1).astype(np.int64)
 
 
+#: an edge is folded when its two triangles turn more than FOLD_DEG from each other where at
+#: rest they turned less than FLAT_DEG (:func:`folded_edges`)
+FOLD_DEG, FLAT_DEG = 90.0, 60.0
+
+
+def folded_edges(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
+                 fold_deg: float = FOLD_DEG, flat_deg: float = FLAT_DEG) -> np.ndarray:
+    """Which interior skin edges are folded in each frame: creases the skin did not have.
+
+    An edge (of :func:`faceforge.anatomy.skin.skin_topology`'s bending quads) is folded when the
+    normals of its two triangles turn more than ``fold_deg`` from each other while at rest they
+    turned less than ``flat_deg`` -- the upper lip crumpled under the nose, say, with no
+    triangle turned over (:func:`inverted_faces` sees none). Real skin wrinkles too (the
+    forehead raising the brows), so this is a measure, not a failure. rest (n, 3), frames
+    (F, n, 3), faces (m, 3) -> (F, q) bool.
+    """
+    from faceforge.anatomy.skin import skin_topology
+    from faceforge.pbd.constraints.bending import dihedral_angle
+
+    quads = skin_topology(faces).bending_quads
+    flat = np.abs(dihedral_angle(rest, quads)) < np.radians(flat_deg)
+    limit = np.radians(fold_deg)
+    out = np.zeros((len(frames), len(quads)), dtype=bool)
+    for i, p in enumerate(np.asarray(frames)):
+        out[i] = flat & (np.abs(dihedral_angle(p, quads)) > limit)
+    return out
+
+
 def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(k,) bool: which ``points`` (k, 3) lie inside the closed mesh (vertices, faces).
 
@@ -234,6 +262,10 @@ class FrameReport:
     #: distinct triangles turned over in at least one frame, and the most in one frame
     inverted_faces: int = 0
     inverted_max_per_frame: int = 0
+    #: distinct skin edges folded in at least one frame, and the most in one frame
+    #: (:func:`folded_edges`; a measure, not part of :attr:`ok`)
+    folded_edges: int = 0
+    folded_max_per_frame: int = 0
 
     @property
     def ok(self) -> bool:
@@ -244,6 +276,7 @@ class FrameReport:
                 "inverted_triangles": self.inverted_triangles,
                 "inverted_faces": self.inverted_faces,
                 "inverted_max_per_frame": self.inverted_max_per_frame,
+                "folded_edges": self.folded_edges, "folded_max_per_frame": self.folded_max_per_frame,
                 "skin_inside_skull": self.skin_inside_skull,
                 "max_displacement": self.max_displacement, "worst_frame": self.worst_frame,
                 "ok": self.ok, "notes": list(self.notes)}
@@ -256,6 +289,7 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
 
     ``inverted_triangles`` is the sum over frames of the triangles turned over
     (:func:`inverted_faces`); ``inverted_faces`` how many distinct triangles that is.
+    ``folded_edges`` / ``folded_max_per_frame``: the skin's new creases (:func:`folded_edges`).
 
     rest (n, 3), frames (F, n, 3), faces (m, 3) of the skin; ``skull`` optionally a list of
     closed meshes (vertices, faces) **per checked frame** is expensive, so it is a callable
@@ -272,6 +306,7 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     worst = int(np.argmax(disp)) if len(disp) else -1
     flips = inverted_faces(rest, np.nan_to_num(frames), faces)
     inv = flips.sum(axis=1)
+    folds = folded_edges(rest, np.nan_to_num(frames), faces)
     inside_total = 0
     if skull is not None and len(frames):
         idx = sorted(set(np.linspace(0, len(frames) - 1, min(sample, len(frames))).astype(int)) | {worst})
@@ -293,7 +328,9 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
                        inverted_triangles=int(inv.sum()), skin_inside_skull=inside_total,
                        max_displacement=float(disp.max()) if len(disp) else 0.0, worst_frame=worst,
                        inverted_faces=int(flips.any(axis=0).sum()),
-                       inverted_max_per_frame=int(inv.max()) if len(inv) else 0)
+                       inverted_max_per_frame=int(inv.max()) if len(inv) else 0,
+                       folded_edges=int(folds.any(axis=0).sum()),
+                       folded_max_per_frame=int(folds.sum(axis=1).max()) if len(folds) else 0)
 
 
 # --------------------------------------------------------------------------- skin vs skull

@@ -144,6 +144,31 @@ def test_small_triangles_count_and_only_degenerate_ones_are_skipped():
     assert not rep.ok
 
 
+def test_folded_edges_are_new_creases_only():
+    """A hinge of two triangles folded past 90 degrees is one folded edge; the same fold from a
+    hinge already creased 70 degrees at rest is not counted (it was no new crease), nor is a
+    rigid motion; check_animation counts distinct folded edges and the most in one frame,
+    without failing the animation for them."""
+    import math
+
+    from faceforge.anatomy.animate import folded_edges
+
+    def hinge(deg):   # triangles (0, 1, 2) and (1, 0, 3) on the edge 0-1, each wing lifted deg / 2
+        h = math.radians(deg) / 2.0
+        return np.array([[0.0, 0, 0], [1, 0, 0], [0.5, math.cos(h), math.sin(h)],
+                         [0.5, -math.cos(h), math.sin(h)]])
+
+    faces = np.array([[0, 1, 2], [1, 0, 3]])
+    flat, bent, folded = hinge(0.0), hinge(70.0), hinge(120.0)
+    turned = flat @ np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]).T + 3.0     # rigid
+    assert folded_edges(flat, np.stack([flat, bent, folded, turned]), faces)[:, 0].tolist() == \
+        [False, False, True, False]
+    assert not folded_edges(bent, folded[None], faces).any()        # creased 70 at rest already
+    rep = check_animation(flat, np.stack([flat, folded, folded]), faces)
+    assert rep.inverted_triangles == 0                              # each wing turned 60 degrees
+    assert rep.folded_edges == 1 and rep.folded_max_per_frame == 1 and rep.ok
+
+
 def test_points_inside_box_and_check_animation():
     bv, bf = box()
     pts = np.array([[0.0, 0.0, 0.0], [0.2, 0.1, -0.3], [0.9, 0.0, 0.0], [0.0, 0.0, 0.51]])
