@@ -125,7 +125,7 @@ def boundary_loops(faces: np.ndarray) -> list:
         a, b = unused.pop()
         loop = [a, b]
         while True:
-            cur, prev = loop[-1], loop[-2]
+            cur = loop[-1]
             nxt = next((c for c in neighbours[cur] if (min(cur, c), max(cur, c)) in unused), None)
             if nxt is None:
                 break

@@ -5,7 +5,7 @@ import pytest
 
 from faceforge.anatomy.calibrate import (Probe, calibrate_mapping, invert_monotone, measure,
                                          measure_coupling, summarize)
-from faceforge.anatomy.fap_mapping import (N_FAPS, JawLevers, fap_controls, mapping_from_dict)
+from faceforge.anatomy.fap_mapping import JawLevers, fap_controls, mapping_from_dict
 
 FAPU = {k: v / 1024 for k, v in {"MNS": 0.2, "MW": 0.5, "ENS": 0.45, "ES": 0.6, "IRISD": 0.1}.items()}
 FAPU["AU"] = 1e-5

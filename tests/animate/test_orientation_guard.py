@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 
 from faceforge.anatomy.animate import Rig, inverted_faces, play
-from faceforge.anatomy.orientation_guard import (OrientationGuard, _project_signed_areas, _rewatched,
-                                                 _watched)
+from faceforge.anatomy.orientation_guard import OrientationGuard, _project_signed_areas, _watched
 
 from .test_loop import grid
 

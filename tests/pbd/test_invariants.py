@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings, max_abs_residuals
-from tests.pbd.meshes import adjacent_quads, edges, skin_builder, sphere
+from tests.pbd.meshes import edges, skin_builder, sphere
 
 DT = 1.0 / 25.0
 
