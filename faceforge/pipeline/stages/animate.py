@@ -407,14 +407,16 @@ def run_animate(ctx):
         "max_contraction": float(c.max()) if c.size else 0.0,
         "max_jaw": jaw.max(axis=0).tolist() if len(jaw) else [0, 0, 0]})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame on {threads} thread"
-            f"{'s' if threads > 1 else ''}; checks: {'ok' if checks.ok else checks.as_dict()}")
+            f"{'s' if threads > 1 else ''}; checks: {'ok' if checks.ok else checks.as_dict()}; "
+            f"{checks.folded_edges} skin edges folded (new creases; at most "
+            f"{checks.folded_max_per_frame} in one frame)")
 
 
 ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
-    version="3", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="4", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- calibrate
