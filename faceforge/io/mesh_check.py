@@ -133,7 +133,6 @@ def boundary_loops(faces: np.ndarray) -> list:
             if nxt == loop[0]:
                 break
             loop.append(nxt)
-            del prev
         loops.append(np.asarray(loop, dtype=np.int64))
     return sorted(loops, key=len, reverse=True)
 
