@@ -42,14 +42,14 @@ By its ray the corner skin bound to whichever muscle the ray met first: on MakeH
 outer corner (FDP 8.3) to the risorius, the inner one (2.4) to the ring. The risorius at
 c = 1 then moved 8.3 twice as far as 2.4 (by 265 against 138 MW), the zygomaticus (which the
 risorius does not lie on) 2.4 1.4 times as far as 8.3, and the outer and inner lip FAPs of
-a corner, which MPEG-4 files give alike, could not both be met. The skin within ``modiolus_radius`` x MW0 of a
-corner FDP (:func:`modiolus_mask`) that its ray bound to another muscle binds to the closest
-point of the orbicularis oris instead, a lip vertex to its own arc (``modiolus`` of
-:func:`bind_skin`). Corner skin on the bone (inner lips on the teeth) stays there: moved to
-the ring as well, MediaPipe's inner corners (on the mandible) came to outrun the outer ones
-and its calibration lost 7 rows within 10 % (median 6.6 -> 9.4 %; MakeHuman 73 -> 72 rows,
-ICT 92 -> 96). With the modiolus the calibration medians went from 13.5 / 6.2 / 6.9 % to
-5.9 / 3.0 / 6.6 % (MakeHuman / ICT / MediaPipe).
+a corner, which MPEG-4 files give alike, could not both be met. The skin within
+``modiolus_radius`` x MW0 of a corner FDP (:func:`modiolus_mask`) that its ray bound to
+another muscle binds to the closest point of the orbicularis oris instead, a lip vertex to
+its own arc (``modiolus`` of :func:`bind_skin`). Corner skin on the bone (inner lips on the
+teeth) stays there: moved to the ring as well, MediaPipe's inner corners (on the mandible)
+came to outrun the outer ones and its calibration lost 7 rows within 10 % (median 6.6 ->
+9.4 %; MakeHuman 73 -> 72 rows, ICT 92 -> 96). With the modiolus the calibration medians
+went from 13.5 / 6.2 / 6.9 % to 5.9 / 3.0 / 6.6 % (MakeHuman / ICT / MediaPipe).
 
 Beyond the paper: a vertex whose two rays both miss (they look into a hole of
 the skull: eye sockets, nostrils, the gap between the teeth) binds to the
