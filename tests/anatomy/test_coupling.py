@@ -113,6 +113,28 @@ def test_lifting_the_cheek_leaves_the_nose_wing_and_the_upper_lip(head):
     assert d[h.fdp_vertex["8.1"], 1] / h.fapu.unit("MNS") < 200.0
 
 
+def test_raising_the_upper_lip_moves_its_outer_and_inner_middle_alike(head):
+    """lower_t_midlip raised (FAPs 51 and 4 negative, given alike by MPEG-4 files) with its
+    template entry's muscles at 0.5: the outer contour (FDP 8.1) and the inner edge (2.2) of
+    the upper lip's middle rise by about the same amount (a real face raises the inner edge
+    further, the MakeHuman units' mouth-elevation 1.6x). With the levator labii inner alone,
+    as before, 8.1 rose 121 MNS and 2.2 71; with both levators 287 and 230."""
+    from faceforge.anatomy.animate import static_poses
+    from faceforge.anatomy.fap_mapping import load_fap_mapping
+
+    h, _ = head
+    entry = next(e for e in load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml").entries
+                 if 51 in e.faps)
+    names = list(h.muscle_names)
+    ctr = np.zeros((1, len(names)))
+    for m in entry.negative:
+        ctr[0, names.index(m)] = 0.5
+    d = static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest
+    outer, inner = (d[h.fdp_vertex[f], 1] / h.fapu.unit("MNS") for f in ("8.1", "2.2"))
+    assert outer > 20.0 and inner > 20.0, (outer, inner)
+    assert abs(outer - inner) < 0.25 * max(outer, inner), (outer, inner)
+
+
 @pytest.mark.parametrize("muscle, fdp, axis, sign, unit, least", [
     ("frontalis_inner_L", "4.1", 1, +1, "ENS", 80.0),
     ("frontalis_outer_L", "4.5", 1, +1, "ENS", 80.0),
