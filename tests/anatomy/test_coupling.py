@@ -93,8 +93,8 @@ def test_the_outer_and_inner_lip_corner_move_as_one(head, muscle, side, outer, i
 def test_lifting_the_cheek_leaves_the_nose_wing_and_the_upper_lip(head):
     """lift_l_cheek (FAP 41) with every muscle of its template entry at full contraction: the
     cheek (FDP 5.3) rises, the nose wing (9.1) and the middle of the upper lip (8.1) far less
-    than a levator labii moves them. With the levator labii outer in the entry (until this
-    session) they rose 438 and 378 MNS (the cheek 44 ENS), and calibrated Xface files, which
+    than a levator labii moves them. With the levator labii outer in the entry (as before)
+    they rose 438 and 378 MNS (the cheek 44 ENS), and calibrated Xface files, which
     all lift the cheeks, crumpled the upper lip under the nose; the zygomaticus alone raises
     them 85 and 118 MNS (the cheek 27 ENS)."""
     from faceforge.anatomy.animate import static_poses
