@@ -36,14 +36,29 @@ def head(tmp_path_factory):
     return BoundHead(wd / "fit", wd / "bind", load_config()), report
 
 
-def moved(head, muscle: str, c: float = 0.5) -> np.ndarray:
-    """Skin displacement ``(n, 3)`` of the settled pose with ``muscle`` at ``c``."""
+def posed(head, contractions: dict) -> np.ndarray:
+    """Skin displacement ``(n, 3)`` of the settled pose with the muscles of ``contractions``
+    (name -> c) contracted, the others at rest."""
     from faceforge.anatomy.animate import static_poses
 
     names = list(head.muscle_names)
     ctr = np.zeros((1, len(names)))
-    ctr[0, names.index(muscle)] = c
+    for muscle, c in contractions.items():
+        ctr[0, names.index(muscle)] = c
     return static_poses(head.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - head.rest
+
+
+def moved(head, muscle: str, c: float = 0.5) -> np.ndarray:
+    """Skin displacement ``(n, 3)`` of the settled pose with ``muscle`` at ``c``."""
+    return posed(head, {muscle: c})
+
+
+def template_entry(fap: int):
+    """The entry of ``templates/fap_mapping.yaml`` that maps FAP ``fap``."""
+    from faceforge.anatomy.fap_mapping import load_fap_mapping
+
+    return next(e for e in load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml").entries
+                if fap in e.faps)
 
 
 def test_muscles_cover_a_large_part_of_the_face_front(head):
@@ -97,17 +112,8 @@ def test_lifting_the_cheek_leaves_the_nose_wing_and_the_upper_lip(head):
     they rose 438 and 378 MNS (the cheek 44 ENS), and calibrated Xface files, which
     all lift the cheeks, crumpled the upper lip under the nose; the zygomaticus alone raises
     them 85 and 118 MNS (the cheek 27 ENS)."""
-    from faceforge.anatomy.animate import static_poses
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
-
     h, _ = head
-    entry = next(e for e in load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml").entries
-                 if 41 in e.faps)
-    names = list(h.muscle_names)
-    ctr = np.zeros((1, len(names)))
-    for m in entry.positive:
-        ctr[0, names.index(m)] = 1.0
-    d = static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest
+    d = posed(h, dict.fromkeys(template_entry(41).positive, 1.0))
     assert d[h.fdp_vertex["5.3"], 1] / h.fapu.unit("ENS") > 15.0
     assert d[h.fdp_vertex["9.1"], 1] / h.fapu.unit("MNS") < 150.0
     assert d[h.fdp_vertex["8.1"], 1] / h.fapu.unit("MNS") < 200.0
@@ -119,17 +125,8 @@ def test_raising_the_upper_lip_moves_its_outer_and_inner_middle_alike(head):
     the upper lip's middle rise by about the same amount (a real face raises the inner edge
     further, the MakeHuman units' mouth-elevation 1.6x). With the levator labii inner alone,
     as before, 8.1 rose 121 MNS and 2.2 71; with both levators 287 and 230."""
-    from faceforge.anatomy.animate import static_poses
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
-
     h, _ = head
-    entry = next(e for e in load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml").entries
-                 if 51 in e.faps)
-    names = list(h.muscle_names)
-    ctr = np.zeros((1, len(names)))
-    for m in entry.negative:
-        ctr[0, names.index(m)] = 0.5
-    d = static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest
+    d = posed(h, dict.fromkeys(template_entry(51).negative, 0.5))
     outer, inner = (d[h.fdp_vertex[f], 1] / h.fapu.unit("MNS") for f in ("8.1", "2.2"))
     assert outer > 20.0 and inner > 20.0, (outer, inner)
     assert abs(outer - inner) < 0.25 * max(outer, inner), (outer, inner)
