@@ -860,14 +860,14 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     report["region_rules"] = rule
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
+    kind = binding.status[corner]   # the kind of each corner vertex's (first) anchor
     first = np.r_[True, binding.vertex_ids[1:] != binding.vertex_ids[:-1]]
-    at_corner = np.isin(binding.vertex_ids, np.flatnonzero(corner)) & first
-    on_ring = np.isin(binding.body, [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH])
-    on_bone = np.isin(binding.body, [i for i, b in enumerate(bodies) if b.kind != "muscle"])
+    on_ring = int((np.isin(binding.vertex_ids[first], np.flatnonzero(corner)) & np.isin(
+        binding.body[first], [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH])).sum())
     report["modiolus"] = {"radius_mw0": float(modiolus_radius), "vertices": int(corner.sum()),
-                          "on_the_ring": int((at_corner & on_ring).sum()),
-                          "on_bone": int((at_corner & on_bone).sum()),
-                          "on_other_muscles": int((at_corner & ~on_ring & ~on_bone).sum())}
+                          "on_the_ring": on_ring,
+                          "on_bone": int(np.isin(kind, (CRANIUM, MANDIBLE)).sum()),
+                          "on_other_muscles": int((kind == MUSCLE).sum()) - on_ring}
     report["mouth"] = cut.report()
     report["influence"] = {
         "sources": int(len(sources)), "normalisation": float(scale),
