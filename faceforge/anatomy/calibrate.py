@@ -140,15 +140,27 @@ class CalibrationRow:
                 "relative_error": num(self.error), "saturated": self.saturated}
 
 
+def full_drive(entry, sense: float, max_contraction: float) -> float:
+    """The |drive| (FAPU) at which every muscle ``entry`` recruits on the side ``sense`` (> 0:
+    ``entry.positive``, else ``entry.negative``) is at ``max_contraction``: ``max_contraction /
+    min(gain)``. Any larger drive gives the same contractions, hence the same pose. ``inf`` for
+    a side without muscles or an entry that also moves the jaw (more drive moves it further).
+    """
+    muscles = entry.positive if sense > 0 else entry.negative
+    if not muscles or entry.jaw is not None:
+        return float("inf")
+    return max_contraction / min(muscles.values())
+
+
 def saturated(entry, drive: float, max_contraction: float) -> bool:
     """True when ``drive`` (FAPU, the entry's control after its response) puts every muscle of
     its sign (``entry.positive`` for drive > 0, else ``entry.negative``) at ``max_contraction``:
-    more drive cannot move the skin further. Jaw-only entries (no muscles) never saturate here.
+    more drive cannot move the skin further (:func:`full_drive`). Jaw-only entries (no muscles)
+    never saturate here.
     """
-    muscles = entry.positive if drive > 0 else entry.negative
-    if not muscles or not np.isfinite(drive):
+    if not np.isfinite(drive) or drive == 0.0:
         return False
-    return all(g * abs(drive) >= max_contraction for g in muscles.values())
+    return abs(drive) >= full_drive(entry, drive, max_contraction)
 
 
 def best_sampled(drives: np.ndarray, achieved: np.ndarray, requested: np.ndarray,
@@ -185,9 +197,9 @@ def drive_cap(entry, requested: np.ndarray, max_drive: float, max_contraction: f
     """
     requested = np.asarray(requested, dtype=float)
     cap = max_drive * np.abs(requested)
-    for sense, muscles in ((1.0, entry.positive), (-1.0, entry.negative)):
-        if muscles:
-            full = max_contraction / min(muscles.values())
+    for sense in (1.0, -1.0):
+        full = full_drive(entry, sense, max_contraction)
+        if np.isfinite(full):
             sel = np.sign(requested) == sense
             cap[sel] = np.maximum(cap[sel], full)
     return cap
@@ -292,6 +304,13 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
         # and the guesses run on to the drive cap, past the peak, to a worse pose
         drive[ok & ~met] = best_sampled(np.asarray(d_all), np.asarray(a_all), req[ok & ~met],
                                         drive[ok & ~met], tolerance)
+        # beyond the drive that saturates every muscle of its side the pose no longer changes:
+        # a knot past it (the secant ran on to the cap) is the same pose as at the knee, but the
+        # curve through it would drive smaller requests of playback to full contraction as well
+        # (MakeHuman's left upper lip lowered 55 MNS by Xface fear: orbicularis oris c = 1, at
+        # the knee 0.74)
+        knee = np.array([full_drive(entry, d, calibrated.max_contraction) for d in drive])
+        drive = np.clip(drive, -knee, knee)
         # a request the entry's muscles never move the FDP towards (NaN drive) gets a zero-drive
         # knot: without one, the response would extrapolate the other side's slope through (0, 0)
         # and drive the muscles for that request after all, moving the FDP the wrong way (further

@@ -240,3 +240,19 @@ def test_best_sampled_keeps_the_peak_of_a_curve_that_turns_back():
     # a saturated plateau: the least drive among (near-)equal results
     assert best_sampled(np.array([500.0, 900.0, 1000.0]), np.array([60.0, 60.0, 60.0]),
                         np.array([75.0]), np.array([1000.0])) == pytest.approx([500.0])
+
+
+def test_an_unreachable_request_is_held_at_the_knee():
+    """A request past what the muscles can do (400 ENS; the brow reaches 183 at full contraction)
+    keeps a knot at the drive that puts them at full contraction (``front``: 1 / 0.001), not
+    past it where the secant ran on to the cap (20 x 400: the same pose): playback of half the
+    request then contracts the muscle half-way, not fully."""
+    m = mapping_from_dict(MAPPING)
+    cal, rows = calibrate_mapping(m, synthetic_head, np.zeros((5, 3)), {31: PROBES[31]},
+                                  {31: [400.0]}, refine=8)
+    assert rows[0].saturated and rows[0].drive == pytest.approx(1000.0)
+    assert rows[0].achieved == pytest.approx(0.12 * 0.7 * np.tanh(2.0) / FAPU["ENS"])
+    faps = np.zeros((1, 68))
+    faps[0, 30] = 200.0
+    c, _ = fap_controls(cal, faps, MUSCLES, FAPU, LEVERS)
+    assert c[0, MUSCLES.index("front")] == pytest.approx(0.5)

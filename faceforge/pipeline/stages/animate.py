@@ -532,7 +532,7 @@ CALIBRATE = register_stage(Stage(
     name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
-    version="3", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
+    version="4", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
 # --------------------------------------------------------------------------- commands
