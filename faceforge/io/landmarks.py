@@ -296,19 +296,6 @@ def _to_raw(entries: list, path) -> RawLandmarks:
 # ----------------------------------------------------------------------------- meeting the mesh
 
 
-def _barycentric(points, vertices, faces, face_ids) -> np.ndarray:
-    """Barycentric coordinates (k, 3) of points in triangles ``faces[face_ids]``."""
-    tri = vertices[faces[face_ids]]
-    e0, e1, d = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], points - tri[:, 0]
-    d00, d01, d11 = (e0 * e0).sum(1), (e0 * e1).sum(1), (e1 * e1).sum(1)
-    d20, d21 = (d * e0).sum(1), (d * e1).sum(1)
-    den = d00 * d11 - d01 * d01
-    den = np.where(np.abs(den) > 0, den, 1.0)
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    return np.stack([1.0 - v - w, v, w], axis=1)
-
-
 def snap_landmarks(raw: RawLandmarks, vertices: np.ndarray, faces: np.ndarray) -> Landmarks:
     """Put every landmark on the surface of ``(vertices (n,3) float, faces (m,3) int)``.
 
@@ -336,6 +323,7 @@ def snap_landmarks(raw: RawLandmarks, vertices: np.ndarray, faces: np.ndarray) -
         raise LandmarkError("vertex and position disagree for FDP " + "; ".join(names), path)
     target = np.where(has_v[:, None], vertices[np.maximum(raw.vertex, 0)], raw.position)
     from faceforge.geometry.surface_points import closest_points
+    from faceforge.geometry.triangles import barycentric
 
     closest, distance, face_ids = closest_points(target, vertices, faces)
     far = distance > MAX_SNAP_DISTANCE * diag
@@ -344,7 +332,7 @@ def snap_landmarks(raw: RawLandmarks, vertices: np.ndarray, faces: np.ndarray) -
         raise LandmarkError(f"FDP {', '.join(names)} lie far from the mesh (fraction of the diagonal; "
                             f"limit {MAX_SNAP_DISTANCE:.0%}): wrong mesh or wrong units?", path)
     positions = np.where(has_v[:, None], target, closest)
-    bary = _barycentric(positions, vertices, faces, face_ids)
+    bary = barycentric(positions, vertices, faces, face_ids)
     return Landmarks(path, ids, positions, face_ids, bary, raw.vertex.copy(),
                      np.where(has_v, 0.0, distance))
 

@@ -40,7 +40,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "5"
+VERSION = "6"
 
 
 def _check_orientation(value, base):
