@@ -87,8 +87,10 @@ def test_joy_plays_clean_in_user_vertex_order(joy):
     assert checks["non_finite"] == 0 and checks["inverted_triangles"] == 0
     assert checks["skin_inside_skull"] == 0
     assert report["max_contraction"] > 0.1 and report["max_jaw"][0] > 0.0
-    # the Xface joy file carries eyelid/eyeball/head FAPs that this head cannot play
-    assert {19, 23, 48} <= set(report["unmapped_faps"])
+    # the Xface joy file carries eyelid and eyeball FAPs that this head cannot play; its head
+    # FAPs turn the whole head
+    assert {19, 23} <= set(report["unmapped_faps"]) and not {48, 49, 50} & set(report["unmapped_faps"])
+    assert 0.5 < max(report["max_head_rotation_deg"]) < 5.0
     from faceforge.pbd.threads import threads_used
     assert report["threads"] == threads_used(2)   # solver.partitions: 2; its muscle layers are cut
     # frame 0 of joy.fap is nearly neutral; the peak moves the skin
@@ -124,6 +126,38 @@ def test_neutral_track_is_a_fixed_point(workdir, patched, tmp_path):
     frames = load_npz(out / "animation.npz")["frames"]
     v, _ = S.skin_mesh()
     assert np.abs(frames - v.astype(np.float32)).max() < 1e-5
+
+
+@pytest.mark.parametrize("turn", [True, False])
+def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
+    """A neutral face under FAPs 48-50 alone: every frame is the rest skin turned rigidly about
+    the midpoint of the jaw's condyles (the simulation's rest state is a fixed point); with
+    ``animate.head_rotation`` off the FAPs are reported unmapped and the skin stays at rest."""
+    from faceforge.anatomy.head_motion import head_angles, head_rotations
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import FapTrack, write_fap
+
+    n = 5
+    values = np.zeros((n, 68))
+    values[:, 47:50] = np.linspace(0.0, 1.0, n)[:, None] * [4000.0, -6000.0, 3000.0]
+    write_fap(tmp_path / "head.fap", FapTrack.from_given(25.0, np.ones((n, 68), bool), values))
+    out = run_stage("animate", workdir, {"fap": str(tmp_path / "head.fap"),
+                                         "animate_mapping": str(workdir / "mapping.yaml")},
+                    sets=(*SETS, f"animate.head_rotation={str(turn).lower()}"))
+    frames = load_npz(out / "animation.npz")["frames"]
+    report = json.loads((out / "report.json").read_text())
+    v, _ = S.skin_mesh()
+    if not turn:
+        assert report["unmapped_faps"] == [48, 49, 50]
+        assert np.abs(frames - v).max() < 1e-5
+        return
+    pivot = load_npz(workdir / "fit" / "fit.npz")["jaw_yaw_point"]
+    expected = np.einsum("fij,nj->fni", head_rotations(head_angles(values)), v - pivot) + pivot
+    assert report["unmapped_faps"] == []
+    assert np.degrees(0.06) == pytest.approx(max(report["max_head_rotation_deg"]))
+    assert np.abs(frames - expected).max() < 1e-5
+    assert np.abs(frames[-1] - v).max() > 0.01          # it did turn (head ~2 units across)
+    assert report["checks"]["skin_inside_skull"] == 0    # checked in the skull's own frame
 
 
 def test_calibration_report_meets_the_acceptance(calibrated):

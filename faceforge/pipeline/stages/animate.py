@@ -332,15 +332,23 @@ def _template_path(raw) -> Path:
 
 # --------------------------------------------------------------------------- FAPs -> controls
 
-def track_controls(track, mapping, head):
-    """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values)."""
+def track_faps(track, mapping):
+    """Low-level FAP frames ``(F, 68)`` of a track: its own values (absent ones 0) plus those
+    of its FAP 2 expressions (the mapping's table)."""
     import numpy as np
 
     from faceforge.anatomy.fap_mapping import expression_faps
 
     faps = np.nan_to_num(np.asarray(track.values, dtype=float))
     faps[:, :2] = 0.0
-    faps = faps + expression_faps(mapping, track.expression)
+    return faps + expression_faps(mapping, track.expression)
+
+
+def track_controls(track, mapping, head):
+    """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values)."""
+    import numpy as np
+
+    faps = track_faps(track, mapping)
     mapped = set(mapping.mapped_faps().tolist())
     unmapped = sorted(int(k + 1) for k in np.flatnonzero(np.abs(faps).max(axis=0) > 0) if k + 1 not in mapped)
     c, jaw = controls(mapping, faps, head)
@@ -375,6 +383,7 @@ def run_animate(ctx):
     import numpy as np
 
     from faceforge.anatomy.animate import Timings, check_animation, play
+    from faceforge.anatomy.head_motion import HEAD_FAPS, head_angles, turn_head
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.mpeg4 import read_fap
 
@@ -382,6 +391,12 @@ def run_animate(ctx):
     mapping, mapping_path = _mapping(ctx)
     track = read_fap(ctx.param("fap"))
     c, jaw, unmapped = track_controls(track, mapping, head)
+    turn = bool(ctx.config.get("animate.head_rotation"))
+    angles = head_angles(track_faps(track, mapping)) if turn else np.zeros((track.n_frames, 3))
+    if turn:
+        unmapped = [f for f in unmapped if f not in HEAD_FAPS]
+        if np.any(angles):
+            ctx.log(f"head rotation (FAPs 48-50): up to {np.degrees(np.abs(angles).max()):.1f} deg")
     if unmapped:
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
@@ -396,7 +411,9 @@ def run_animate(ctx):
                          "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
     checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
     threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
-    user = head.to_user(frames).astype(np.float32)
+    # the head turns as a whole about the top of the spine (approximated by the midpoint of the
+    # jaw's condyles), after the checks, which look at the skin in the skull's own frame
+    user = head.to_user(turn_head(frames, angles, head.skull.jaw.yaw_point)).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
              controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", {
@@ -405,6 +422,7 @@ def run_animate(ctx):
         "user_vertices": int(user.shape[1]), "working_vertices": int(len(head.rest)),
         "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
         "max_contraction": float(c.max()) if c.size else 0.0,
+        "max_head_rotation_deg": np.degrees(np.abs(angles).max(axis=0)).tolist() if len(angles) else [0, 0, 0],
         "max_jaw": jaw.max(axis=0).tolist() if len(jaw) else [0, 0, 0]})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame on {threads} thread"
             f"{'s' if threads > 1 else ''}; checks: {'ok' if checks.ok else checks.as_dict()}; "
@@ -416,7 +434,7 @@ ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
-    version="4", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="5", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- calibrate
