@@ -160,6 +160,24 @@ def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
     assert report["checks"]["skin_inside_skull"] == 0    # checked in the skull's own frame
 
 
+def test_a_viseme_track_says_fap_1_is_not_played(workdir, patched, tmp_path):
+    """Visemes (FAP 1) are read but there is no viseme table: the report lists FAP 1 as unmapped
+    (rather than dropping it silently) and the face stays at rest."""
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import FapTrack, write_fap
+
+    n = 3
+    mask = np.zeros((n, 68), bool)
+    mask[:, 0] = True
+    track = FapTrack.from_given(25.0, mask, np.zeros((n, 68)), viseme=np.tile([3.0, 5.0, 40.0, 0.0], (n, 1)))
+    write_fap(tmp_path / "visemes.fap", track)
+    out = run_stage("animate", workdir, {"fap": str(tmp_path / "visemes.fap"),
+                                         "animate_mapping": str(workdir / "mapping.yaml")})
+    assert json.loads((out / "report.json").read_text())["unmapped_faps"] == [1]
+    v, _ = S.skin_mesh()
+    assert np.abs(load_npz(out / "animation.npz")["frames"] - v).max() < 1e-5
+
+
 def test_calibration_report_meets_the_acceptance(calibrated):
     report = json.loads((calibrated / "report.json").read_text())
     s = report["summary"]

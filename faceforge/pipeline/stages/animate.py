@@ -345,12 +345,16 @@ def track_faps(track, mapping):
 
 
 def track_controls(track, mapping, head):
-    """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values)."""
+    """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values). FAP 1 counts
+    as unmapped when the track selects a viseme: there is no viseme table (FAP 2's
+    expressions have one, the mapping's ``expressions``)."""
     import numpy as np
 
     faps = track_faps(track, mapping)
     mapped = set(mapping.mapped_faps().tolist())
     unmapped = sorted(int(k + 1) for k in np.flatnonzero(np.abs(faps).max(axis=0) > 0) if k + 1 not in mapped)
+    if np.any(np.asarray(track.viseme)[np.asarray(track.mask)[:, 0], :2] != 0):
+        unmapped = [1, *unmapped]
     c, jaw = controls(mapping, faps, head)
     return c, jaw, unmapped
 
