@@ -10,6 +10,10 @@ The three FAPs turn the whole head about the top of the spine (FDP 7.1), in angl
 They compose in the usual yaw-pitch-roll (Tait-Bryan) order, ``R = R_yaw @ R_pitch @ R_roll``:
 roll in the head's own frame, then pitch, then yaw. The simulation runs in the head's frame;
 the turn is applied to the finished frames, so skull, muscles and skin are turned as one.
+
+Skin below the skull (a neck, a bust's shoulders) is not part of the head: :func:`neck_weights`
+fades the turn out below the skull's lowest point, so the base of a neck stays where it is and
+a face that ends at the chin turns rigidly.
 """
 
 from __future__ import annotations
@@ -49,18 +53,37 @@ def head_rotations(angles: np.ndarray) -> np.ndarray:
     return yaw @ pitch @ roll
 
 
-def turn_head(frames: np.ndarray, angles: np.ndarray, pivot: np.ndarray) -> np.ndarray:
-    """Frames ``(F, n, 3)`` turned rigidly about ``pivot (3,)`` by ``angles (F, 3)`` (pitch,
-    yaw, roll; radians): ``pivot + R_f (x - pivot)`` per frame ``f``. A new array; frames whose
-    three angles are all zero are copied bit for bit."""
+def neck_weights(rest: np.ndarray, skull_bottom: float, span: float) -> np.ndarray:
+    """``(n,) float64`` in [0, 1]: how much of the head's turn each rest vertex ``rest (n, 3)``
+    takes. 1 at or above the height ``skull_bottom`` (+Y, the skull's lowest point), fading
+    linearly to 0 at ``span`` below it (skin units); ``span <= 0``: 1 everywhere."""
+    y = np.asarray(rest, dtype=np.float64).reshape(-1, 3)[:, 1]
+    if not span > 0.0:
+        return np.ones(len(y))
+    return np.clip((y - (skull_bottom - span)) / span, 0.0, 1.0)
+
+
+def turn_head(frames: np.ndarray, angles: np.ndarray, pivot: np.ndarray,
+              weights: np.ndarray | None = None) -> np.ndarray:
+    """Frames ``(F, n, 3)`` turned about ``pivot (3,)`` by ``angles (F, 3)`` (pitch, yaw, roll;
+    radians): ``pivot + R(w_i a_f) (x - pivot)`` for vertex ``i`` of frame ``f``, with
+    ``weights (n,)`` in [0, 1] (:func:`neck_weights`; None: all 1, a rigid turn). A new array;
+    frames whose three angles are all zero, and vertices of weight 0, are copied bit for bit."""
     frames = np.asarray(frames)
     angles = np.atleast_2d(np.asarray(angles, dtype=np.float64))
     if angles.shape != (len(frames), 3):
         raise ValueError(f"angles must be ({len(frames)}, 3), got {angles.shape}")
+    n = frames.shape[1] if frames.ndim == 3 else 0
+    w = np.ones(n) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
+    if len(w) != n:
+        raise ValueError(f"weights must be ({n},), got {w.shape}")
     c = np.asarray(pivot, dtype=np.float64).reshape(3)
     out = np.array(frames, copy=True)
-    turned = np.flatnonzero(np.any(angles != 0.0, axis=1))
-    if len(turned):
-        r = head_rotations(angles[turned])
-        out[turned] = (np.einsum("fij,fnj->fni", r, frames[turned] - c) + c).astype(out.dtype)
+    full, part = np.flatnonzero(w == 1.0), np.flatnonzero((w > 0.0) & (w < 1.0))
+    for f in np.flatnonzero(np.any(angles != 0.0, axis=1)):
+        x = frames[f]
+        out[f, full] = ((x[full] - c) @ head_rotations(angles[f])[0].T + c).astype(out.dtype)
+        if len(part):                     # the neck: each vertex its share of the turn
+            r = head_rotations(w[part, None] * angles[f])
+            out[f, part] = (np.einsum("nij,nj->ni", r, x[part] - c) + c).astype(out.dtype)
     return out

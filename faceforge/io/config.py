@@ -155,6 +155,7 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.modiolus_radius", Number(0.0, 0.5)),
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
+    ("animate.neck_fade", Number(0.0, 10.0)),
 ]
 
 

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from faceforge.anatomy.head_motion import AU, HEAD_FAPS, head_angles, head_rotations, turn_head
+from faceforge.anatomy.head_motion import (AU, HEAD_FAPS, head_angles, head_rotations, neck_weights,
+                                           turn_head)
 
 FORWARD, UP, LEFT = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]
 
@@ -58,3 +59,22 @@ def test_turn_is_rigid_about_the_pivot_and_exact_where_still():
     assert out.dtype == frames.dtype and not np.shares_memory(out, frames)
     with pytest.raises(ValueError, match="angles"):
         turn_head(frames, angles[:2], pivot)
+
+
+def test_the_neck_fades_out_of_the_turn():
+    rest = np.zeros((5, 3))
+    rest[:, 1] = [2.0, 1.0, 0.5, 0.0, -1.0]
+    np.testing.assert_allclose(neck_weights(rest, 1.0, 1.0), [1.0, 1.0, 0.5, 0.0, 0.0])
+    np.testing.assert_array_equal(neck_weights(rest, 1.0, 0.0), np.ones(5))   # no fade
+    frames = np.repeat(rest[None] + [0.3, 0.0, 0.2], 2, axis=0)
+    angles = np.array([[0.0, 0.0, 0.0], [0.1, 0.2, -0.1]])
+    pivot = np.array([0.0, 1.5, 0.0])
+    out = turn_head(frames, angles, pivot, neck_weights(rest, 1.0, 1.0))
+    whole = turn_head(frames, angles, pivot)
+    np.testing.assert_array_equal(out[1, :2], whole[1, :2])     # the head turns rigidly
+    assert out[1, 3:].tobytes() == frames[1, 3:].tobytes()      # the neck's base stays
+    half = head_rotations(0.5 * angles[1:])[0] @ (frames[1, 2] - pivot) + pivot
+    np.testing.assert_allclose(out[1, 2], half, atol=1e-15)     # half-way: half the angles
+    assert out[0].tobytes() == frames[0].tobytes()
+    with pytest.raises(ValueError, match="weights"):
+        turn_head(frames, angles, pivot, np.ones(4))

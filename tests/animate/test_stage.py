@@ -130,9 +130,11 @@ def test_neutral_track_is_a_fixed_point(workdir, patched, tmp_path):
 
 @pytest.mark.parametrize("turn", [True, False])
 def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
-    """A neutral face under FAPs 48-50 alone: every frame is the rest skin turned rigidly about
-    the midpoint of the jaw's condyles (the simulation's rest state is a fixed point); with
-    ``animate.head_rotation`` off the FAPs are reported unmapped and the skin stays at rest."""
+    """A neutral face under FAPs 48-50 alone: every frame is the rest skin turned about the
+    midpoint of the jaw's condyles (the simulation's rest state is a fixed point), rigidly down
+    to the skull's lowest point, the skin below fading out of the turn (over a tenth of the
+    skull's height: the synthetic skin reaches 0.3 below its skull); with ``animate.head_rotation`` off the FAPs are reported unmapped and the skin stays
+    at rest."""
     from faceforge.anatomy.head_motion import head_angles, head_rotations
     from faceforge.io.stagefiles import load_npz
     from faceforge.mpeg4 import FapTrack, write_fap
@@ -143,7 +145,7 @@ def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
     write_fap(tmp_path / "head.fap", FapTrack.from_given(25.0, np.ones((n, 68), bool), values))
     out = run_stage("animate", workdir, {"fap": str(tmp_path / "head.fap"),
                                          "animate_mapping": str(workdir / "mapping.yaml")},
-                    sets=(*SETS, f"animate.head_rotation={str(turn).lower()}"))
+                    sets=(*SETS, f"animate.head_rotation={str(turn).lower()}", "animate.neck_fade=0.1"))
     frames = load_npz(out / "animation.npz")["frames"]
     report = json.loads((out / "report.json").read_text())
     v, _ = S.skin_mesh()
@@ -151,11 +153,20 @@ def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
         assert report["unmapped_faps"] == [48, 49, 50]
         assert np.abs(frames - v).max() < 1e-5
         return
-    pivot = load_npz(workdir / "fit" / "fit.npz")["jaw_yaw_point"]
-    expected = np.einsum("fij,nj->fni", head_rotations(head_angles(values)), v - pivot) + pivot
+    fit = load_npz(workdir / "fit" / "fit.npz")
+    pivot = fit["jaw_yaw_point"]
+    bone_y = np.concatenate([fit["cranium_vertices"][:, 1], fit["mandible_vertices"][:, 1]])
+    low, span = bone_y.min(), 0.1 * np.ptp(bone_y)
+    head, neck_base = v[:, 1] >= low, v[:, 1] <= low - span
+    assert head.sum() > 100 and neck_base.sum() > 100
+    rigid = np.einsum("fij,nj->fni", head_rotations(head_angles(values)), v - pivot) + pivot
     assert report["unmapped_faps"] == []
     assert np.degrees(0.06) == pytest.approx(max(report["max_head_rotation_deg"]))
-    assert np.abs(frames - expected).max() < 1e-5
+    assert np.abs(frames[:, head] - rigid[:, head]).max() < 1e-5
+    assert np.abs(frames[:, neck_base] - v[neck_base]).max() < 1e-5
+    neck = ~head & ~neck_base                           # in between: part of the turn, no more
+    moved = np.linalg.norm(frames[-1, neck] - v[neck], axis=1)
+    assert np.all(moved <= np.linalg.norm(rigid[-1, neck] - v[neck], axis=1) + 1e-5)
     assert np.abs(frames[-1] - v).max() > 0.01          # it did turn (head ~2 units across)
     assert report["checks"]["skin_inside_skull"] == 0    # checked in the skull's own frame
 

@@ -387,7 +387,7 @@ def run_animate(ctx):
     import numpy as np
 
     from faceforge.anatomy.animate import Timings, check_animation, play
-    from faceforge.anatomy.head_motion import HEAD_FAPS, head_angles, turn_head
+    from faceforge.anatomy.head_motion import HEAD_FAPS, head_angles, neck_weights, turn_head
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.mpeg4 import read_fap
 
@@ -416,8 +416,14 @@ def run_animate(ctx):
     checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
     threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     # the head turns as a whole about the top of the spine (approximated by the midpoint of the
-    # jaw's condyles), after the checks, which look at the skin in the skull's own frame
-    user = head.to_user(turn_head(frames, angles, head.skull.jaw.yaw_point)).astype(np.float32)
+    # jaw's condyles), the skin below the skull fading out of the turn; after the checks, which
+    # look at the skin in the skull's own frame
+    if np.any(angles):
+        bone_y = np.concatenate([head.cranium[0][:, 1], head.mandible[0][:, 1]])
+        span = float(ctx.config.get("animate.neck_fade")) * float(np.ptp(bone_y))
+        frames = turn_head(frames, angles, head.skull.jaw.yaw_point,
+                           neck_weights(head.rest, float(bone_y.min()), span))
+    user = head.to_user(frames).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
              controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", {
