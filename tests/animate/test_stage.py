@@ -48,7 +48,21 @@ def patched():
     mp.undo()
 
 
-def run_stage(stage_name, workdir, params, sets=SETS):
+class ConfigSpy:
+    """A Config that records every key a stage reads."""
+
+    def __init__(self, config):
+        self._config, self.read = config, []
+
+    def get(self, key, *args, **kwargs):
+        self.read.append(key)
+        return self._config.get(key, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._config, name)
+
+
+def run_stage(stage_name, workdir, params, sets=SETS, spy=None):
     from faceforge.io.config import load_config
     from faceforge.pipeline import StageContext, get_stage
 
@@ -57,15 +71,38 @@ def run_stage(stage_name, workdir, params, sets=SETS):
         import shutil
         shutil.rmtree(out)
     out.mkdir()
-    ctx = StageContext(name=stage_name, config=load_config(None, sets), params=params, out_dir=out,
-                       workdir=workdir, deps=("fit", "bind"))
+    config = load_config(None, sets)
+    ctx = StageContext(name=stage_name, config=config if spy is None else spy(config), params=params,
+                       out_dir=out, workdir=workdir, deps=("fit", "bind"))
     get_stage(stage_name).run(ctx)
     return out
 
 
+CALIBRATE_READ = []
+
+
 @pytest.fixture(scope="module")
 def calibrated(workdir, patched):
-    return run_stage("calibrate", workdir, {}, sets=(*SETS, f"animate.fap_mapping={workdir / 'mapping.yaml'}"))
+    def spy(config):
+        s = ConfigSpy(config)
+        CALIBRATE_READ.append(s.read)
+        return s
+    return run_stage("calibrate", workdir, {}, sets=(*SETS, f"animate.fap_mapping={workdir / 'mapping.yaml'}"),
+                     spy=spy)
+
+
+def test_calibrate_reads_only_the_config_keys_it_declares(calibrated):
+    """The calibrate stage's cache key holds its ``config_keys``: every key it reads must lie in
+    one of them (else a change would leave a stale calibration), and the playback-only keys
+    (head rotation, previews) stay out (a change to them costs no recalibration)."""
+    from faceforge.pipeline import get_stage
+
+    declared = get_stage("calibrate").config_keys
+    read = set(CALIBRATE_READ[0])
+    assert "animate.calibrate.refine" in read and "solver" in read
+    undeclared = {k for k in read if not any(k == p or k.startswith(p + ".") for p in declared)}
+    assert not undeclared
+    assert not {"animate", "animate.head_rotation", "animate.neck_fade", "animate.preview_frames"} & set(declared)
 
 
 @pytest.fixture(scope="module")

@@ -557,8 +557,12 @@ def _lip_opening(mapping, simulate, head, value):
 
 
 CALIBRATE = register_stage(Stage(
-    name="calibrate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
-                                                "animate"),
+    # what the bound head (its solver, muscles, guards) and the calibration itself read, not the
+    # playback-only keys (head rotation, previews, expression presets): changing those does not
+    # cost a recalibration
+    name="calibrate", deps=("fit", "bind"), config_keys=(
+        "solver", "skin.stiffness", "skin.carry", "muscle", "animate.fap_mapping", "animate.fps",
+        "animate.skull_guard", "animate.orientation_guard", "animate.calibrate"),
     inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="4", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
