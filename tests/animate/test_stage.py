@@ -105,9 +105,29 @@ def test_calibrate_reads_only_the_config_keys_it_declares(calibrated):
     assert not {"animate", "animate.head_rotation", "animate.neck_fade", "animate.preview_frames"} & set(declared)
 
 
+ANIMATE_READ = []
+
+
 @pytest.fixture(scope="module")
 def joy(workdir, patched):
-    return run_stage("animate", workdir, {"fap": str(JOY), "animate_mapping": str(workdir / "mapping.yaml")})
+    def spy(config):
+        s = ConfigSpy(config)
+        ANIMATE_READ.append(s.read)
+        return s
+    return run_stage("animate", workdir, {"fap": str(JOY), "animate_mapping": str(workdir / "mapping.yaml")},
+                     spy=spy)
+
+
+def test_animate_reads_only_the_config_keys_it_declares(joy):
+    """As for calibrate below: every key the animate stage reads lies in its ``config_keys``.
+    (The synthetic head builds its own muscles; a real head's also reads ``template.*``, the
+    fit stage's keys, upstream of this one.)"""
+    from faceforge.pipeline import get_stage
+
+    declared = get_stage("animate").config_keys
+    read = set(ANIMATE_READ[0])
+    assert {"animate.head_rotation", "solver"} <= read
+    assert not {k for k in read if not any(k == p or k.startswith(p + ".") for p in declared)}
 
 
 def test_joy_plays_clean_in_user_vertex_order(joy):
