@@ -156,6 +156,8 @@ RULES: list[tuple[str, Rule]] = [
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
     ("animate.neck_fade", Number(0.0, 10.0)),
+    ("animate.eyelid_reach", Number(0.1, 10.0)),
+    ("animate.eyelid_depth", Number(0.1, 10.0)),
 ]
 
 

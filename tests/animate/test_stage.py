@@ -142,9 +142,10 @@ def test_joy_plays_clean_in_user_vertex_order(joy):
     assert checks["non_finite"] == 0 and checks["inverted_triangles"] == 0
     assert checks["skin_inside_skull"] == 0
     assert report["max_contraction"] > 0.1 and report["max_jaw"][0] > 0.0
-    # the Xface joy file carries eyelid and eyeball FAPs that this head cannot play; its head
-    # FAPs turn the whole head
-    assert {19, 23} <= set(report["unmapped_faps"]) and not {48, 49, 50} & set(report["unmapped_faps"])
+    # the Xface joy file carries eyeball FAPs that this head cannot play; its eyelid FAPs move
+    # the lids and its head FAPs turn the whole head
+    unmapped = set(report["unmapped_faps"])
+    assert 23 in unmapped and not {19, 20, 21, 22, 48, 49, 50} & unmapped and report["eyes_with_lids"] == 2
     assert 0.5 < max(report["max_head_rotation_deg"]) < 5.0
     from faceforge.pbd.threads import threads_used
     assert report["threads"] == threads_used(2)   # solver.partitions: 2; its muscle layers are cut
@@ -224,6 +225,46 @@ def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
     assert np.all(moved <= np.linalg.norm(rigid[-1, neck] - v[neck], axis=1) + 1e-5)
     assert np.abs(frames[-1] - v).max() > 0.01          # it did turn (head ~2 units across)
     assert report["checks"]["skin_inside_skull"] == 0    # checked in the skull's own frame
+
+
+@pytest.mark.parametrize("lids", [True, False])
+def test_eyelid_faps_close_the_lids_of_the_still_face(workdir, patched, tmp_path, lids):
+    """FAPs 19-22 alone on a neutral face: the rest skin (the simulation's fixed point) with the
+    lids moved over it (anatomy.eyelids), by exactly the requested IRISD at the lid FDPs; skin
+    away from the eyes stays where it is, and nothing turns over. With ``animate.eyelids`` off
+    the FAPs are reported unmapped and the skin stays at rest."""
+    from faceforge.anatomy.eyelids import MIN_OPENING
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import FapTrack, fapu_from_landmarks, write_fap
+
+    n = 3
+    values = np.zeros((n, 68))
+    values[:, 18:22] = np.array([[0, 0, 0, 0], [512, 300, 100, 0], [1024, 1024, 0, 200]])
+    write_fap(tmp_path / "blink.fap", FapTrack.from_given(25.0, np.ones((n, 68), bool), values))
+    out = run_stage("animate", workdir, {"fap": str(tmp_path / "blink.fap"),
+                                         "animate_mapping": str(workdir / "mapping.yaml")},
+                    sets=(*SETS, f"animate.eyelids={str(lids).lower()}"))
+    frames = load_npz(out / "animation.npz")["frames"]
+    report = json.loads((out / "report.json").read_text())
+    v, f = S.skin_mesh()
+    if not lids:
+        assert report["unmapped_faps"] == [19, 20, 21, 22] and report["eyes_with_lids"] == 0
+        assert np.abs(frames - v).max() < 1e-5
+        return
+    assert report["unmapped_faps"] == [] and report["eyes_with_lids"] == 2
+    assert report["checks"]["inverted_triangles"] == 0
+    lm = S.landmarks(v)
+    irisd = fapu_from_landmarks(lm, "synthetic").unit("IRISD")
+    fdp = {k: int(np.argmin(np.linalg.norm(v - p, axis=1))) for k, p in lm.items()}
+    for k, (fap, sign) in {"3.1": (19, -1), "3.2": (20, -1), "3.3": (21, 1), "3.4": (22, 1)}.items():
+        assert frames[1, fdp[k], 1] - v[fdp[k], 1] == pytest.approx(sign * values[1, fap - 1] * irisd, abs=2e-6)
+    for up, low in (("3.1", "3.3"), ("3.2", "3.4")):   # a full blink: the lids (nearly) meet
+        gap = v[fdp[up], 1] - v[fdp[low], 1]
+        assert MIN_OPENING * gap / 2 < frames[2, fdp[up], 1] - frames[2, fdp[low], 1] < 2 * MIN_OPENING * gap
+    far = np.linalg.norm(v - 0.5 * (lm["3.1"] + lm["3.2"]), axis=1) > 0.8
+    assert far.sum() > len(v) // 2
+    assert np.abs(frames[:, far] - v[far]).max() < 1e-5
+    assert np.abs(frames[1] - v).max() > 0.01
 
 
 def test_a_viseme_track_says_fap_1_is_not_played(workdir, patched, tmp_path):

@@ -78,6 +78,7 @@ class BoundHead:
     user_index : (n_user,) int, working vertex of each of the user's vertices
     user_rotation : (3, 3) head space = the user's frame ``@ user_rotation.T`` (fit.npz)
     fdp_vertex : dict FDP -> working vertex index
+    landmarks : dict FDP -> (3,) position on the neutral skin (head frame)
     cranium, mandible : (vertices, faces) at rest
     guard : faceforge.anatomy.animate.SkullGuard
     orientation : faceforge.anatomy.orientation_guard.OrientationGuard, or None when
@@ -120,7 +121,8 @@ class BoundHead:
             raise StageError(f"fit.npz lacks the jaw axes ({exc.args[0]}); rerun `faceforge fit`",
                              fit_dir / "fit.npz") from None
         self.skull = Skull(self.cranium, self.mandible, {}, {}, axes)
-        skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"])}
+        self.landmarks = skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"],
+                                                              fit["skin_landmark_positions"])}
         self.fapu = fapu_from_landmarks(skin_lm, fit_dir / "fit.npz")
         self.fdp_vertex = _fdp_vertices(skin_lm, self.rest, bind.get("lip_sides"))
         chin = skin_lm.get("2.1", self.rest[self.fdp_vertex.get("2.1", 0)])
@@ -387,6 +389,7 @@ def run_animate(ctx):
     import numpy as np
 
     from faceforge.anatomy.animate import Timings, check_animation, play
+    from faceforge.anatomy.eyelids import Eyelids
     from faceforge.anatomy.head_motion import HEAD_FAPS, head_angles, neck_weights, turn_head
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.mpeg4 import read_fap
@@ -395,12 +398,21 @@ def run_animate(ctx):
     mapping, mapping_path = _mapping(ctx)
     track = read_fap(ctx.param("fap"))
     c, jaw, unmapped = track_controls(track, mapping, head)
+    faps = track_faps(track, mapping)
     turn = bool(ctx.config.get("animate.head_rotation"))
-    angles = head_angles(track_faps(track, mapping)) if turn else np.zeros((track.n_frames, 3))
+    angles = head_angles(faps) if turn else np.zeros((track.n_frames, 3))
     if turn:
         unmapped = [f for f in unmapped if f not in HEAD_FAPS]
         if np.any(angles):
             ctx.log(f"head rotation (FAPs 48-50): up to {np.degrees(np.abs(angles).max()):.1f} deg")
+    lids = None
+    if ctx.config.get("animate.eyelids"):
+        lids = Eyelids(head.rest, head.faces, head.landmarks, head.fapu.unit("IRISD"),
+                       ctx.config.get("animate.eyelid_reach"), ctx.config.get("animate.eyelid_depth"))
+        unmapped = [f for f in unmapped if f not in lids.faps]
+        if lids.faps and np.any(faps[:, [f - 1 for f in lids.faps]]):
+            ctx.log(f"eyelids (FAPs {', '.join(map(str, lids.faps))}) on {len(lids.fields)} eye"
+                    f"{'s' if len(lids.fields) > 1 else ''}")
     if unmapped:
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
@@ -413,6 +425,8 @@ def run_animate(ctx):
 
         raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
                          "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
+    if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
+        frames = lids.apply(frames, faps)
     checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
     threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     # the head turns as a whole about the top of the spine (approximated by the midpoint of the
@@ -432,6 +446,7 @@ def run_animate(ctx):
         "user_vertices": int(user.shape[1]), "working_vertices": int(len(head.rest)),
         "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
         "max_contraction": float(c.max()) if c.size else 0.0,
+        "eyes_with_lids": len(lids.fields) if lids is not None else 0,
         "max_head_rotation_deg": np.degrees(np.abs(angles).max(axis=0)).tolist() if len(angles) else [0, 0, 0],
         "max_jaw": jaw.max(axis=0).tolist() if len(jaw) else [0, 0, 0]})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame on {threads} thread"
@@ -444,7 +459,7 @@ ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
-    version="5", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="6", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- calibrate
