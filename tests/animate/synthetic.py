@@ -138,5 +138,5 @@ MAPPING = {
          "positive": {"zygomaticus_major_L": 0.003}},
         {"fap": [52, 5], "name": "raise_b_midlip", "fapu": "MNS", "coupling": {3: -0.8}},
     ],
-    "expressions": {"joy": {"id": 1, "faps": {59: 150, 12: 150, 3: 60}}},
+    "expressions": {"joy": {"id": 1, "faps": {59: 150, 12: 150, 3: 60, 19: 128, 20: 128, 21: 64, 22: 64}}},
 }

@@ -305,7 +305,7 @@ def test_calibration_report_meets_the_acceptance(calibrated):
 
 def test_expression_preset_through_fap2(workdir, patched, tmp_path):
     from faceforge.io.stagefiles import load_npz
-    from faceforge.mpeg4 import expression_track, write_fap
+    from faceforge.mpeg4 import expression_track, fapu_from_landmarks, write_fap
 
     write_fap(tmp_path / "joy_preset.fap", expression_track("joy", intensity=0.8, fps=25, seconds=0.6, ramp=0.2))
     out = run_stage("animate", workdir, {"fap": str(tmp_path / "joy_preset.fap"),
@@ -314,6 +314,21 @@ def test_expression_preset_through_fap2(workdir, patched, tmp_path):
     c = d["contractions"][:, 0]
     assert c[0] == 0.0 and c[-1] == 0.0                        # ramps in from and out to neutral
     assert c.max() == pytest.approx(0.8 * 150 * 0.003)         # joy's corner FAPs x intensity x gain
+    assert json.loads((out / "report.json").read_text())["unmapped_faps"] == []
+    # joy's eyelid FAPs (upper lids 128 down, lower 64 up), scaled the same way, narrow the eyes:
+    # laid over the simulated skin, they move the lid FDPs by exactly that much more than the
+    # same preset played without lids
+    bare = run_stage("animate", workdir, {"fap": str(tmp_path / "joy_preset.fap"),
+                                          "animate_mapping": str(workdir / "mapping.yaml")},
+                     sets=(*SETS, "animate.eyelids=false"))
+    lids = d["frames"].astype(np.float64) - load_npz(bare / "animation.npz")["frames"]
+    v, _ = S.skin_mesh()
+    lm = S.landmarks(v)
+    irisd = fapu_from_landmarks(lm, "synthetic").unit("IRISD")
+    hold = int(np.argmax(c))
+    for fdp, move in {"3.1": -128, "3.2": -128, "3.3": 64, "3.4": 64}.items():
+        i = int(np.argmin(np.linalg.norm(v - lm[fdp], axis=1)))
+        assert lids[hold, i, 1] == pytest.approx(0.8 * move * irisd, rel=1e-4)
 
 
 def test_a_diverging_simulation_is_a_one_line_stage_error_naming_the_track(workdir, patched, monkeypatch):
