@@ -48,7 +48,7 @@ All lengths are in the skin's units; frames are in the head's frame (+X the subj
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -254,6 +254,16 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
     return out
 
 
+def _pieces(n: int, faces: np.ndarray) -> np.ndarray:
+    """``(n,) int``: the connected piece of the mesh each of ``n`` vertices lies in."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    a, b = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).T
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
 class Eyelids:
     """The lids of a head's eyes, moved by FAPs 19-22 over finished frames.
 
@@ -271,11 +281,21 @@ class Eyelids:
 
         self.rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
         self.irisd = float(irisd)
-        self.fields = [lid_field(eye, self.rest, reach, depth) for eye in find_eyes(landmarks)]
+        faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        piece = _pieces(len(self.rest), faces)
+        self.fields = []
+        for eye in find_eyes(landmarks):
+            field = lid_field(eye, self.rest, reach, depth)
+            # only the skin the lids belong to: an eyeball or a lash in the same mesh stays put
+            fdps = next(e[:2] for e in EYES if e[4] == eye.upper_fap)
+            lids = [int(np.argmin(np.linalg.norm(self.rest - np.asarray(landmarks[f], dtype=np.float64),
+                                                 axis=1))) for f in fdps]
+            keep = np.isin(piece[field.index], piece[lids])
+            self.fields.append(replace(field, index=field.index[keep], up_share=field.up_share[keep],
+                                       low_share=field.low_share[keep]))
         moving = np.zeros(len(self.rest), dtype=bool)
         for field in self.fields:
             moving[field.index] = True
-        faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         near = faces[moving[faces].any(axis=1)]
         self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING) if len(near) else None
 

@@ -178,3 +178,21 @@ def test_bad_parameters_are_refused():
     v, f, lm, vid = _load(HEADS["mediapipe"])
     with pytest.raises(ValueError, match="reach and depth"):
         lid_field(find_eyes(lm)[0], v, reach=0.0)
+
+
+def test_an_eyeball_in_the_same_mesh_stays_put():
+    """A head mesh that carries its eyeballs as separate pieces: the lids close over them, the
+    eyeballs themselves do not move (nor squash with the skin between the lids)."""
+    v, f, lm, vid = _load(HEADS["makehuman"])
+    eye = find_eyes(lm)[0]
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=0.8 * eye.half)
+    centre = eye.centre - 0.5 * eye.half * eye.axes[2]            # its front just behind the lids
+    vb = np.concatenate([v, ball.vertices + centre])
+    fb = np.concatenate([f, ball.faces + len(v)])
+    lids = Eyelids(vb, fb, lm, eye.gap / 1024)
+    out = lids.apply(vb[None], faps([{19: 1024, 21: 200}]))[0]
+    assert np.array_equal(out[len(v):], vb[len(v):])
+    alone = Eyelids(v, f, lm, eye.gap / 1024).apply(v[None], faps([{19: 1024, 21: 200}]))[0]
+    np.testing.assert_array_equal(out[:len(v)], alone)            # the skin moves as without them
+    reached = lid_field(eye, vb).index
+    assert np.any(reached >= len(v))                                # the field alone would move them
