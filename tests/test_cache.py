@@ -163,6 +163,22 @@ def test_record_key_hashes_content_not_paths(tmp_path):
     assert stale_reasons(record, None) == ["never run"]
 
 
+def test_a_stage_may_digest_only_the_part_of_an_input_it_reads(tmp_path):
+    from faceforge.pipeline.runner import current_record
+
+    first_line = lambda path: Path(path).read_text().splitlines()[0]   # noqa: E731
+    stage = Stage("t_part", lambda ctx: None, inputs=("src",), digests={"src": first_line})
+    src = tmp_path / "src.txt"
+    src.write_text("read\nignored\n")
+    before = current_record(stage, load_config(), {"src": str(src)}, {})[0]
+    src.write_text("read\nchanged, still ignored\n")
+    assert current_record(stage, load_config(), {"src": str(src)}, {})[0] == before
+    src.write_text("changed\n")
+    assert current_record(stage, load_config(), {"src": str(src)}, {})[0] != before
+    with pytest.raises(ValueError, match="digests names inputs"):
+        Stage("t_bad", lambda ctx: None, inputs=("src",), digests={"mesh": first_line})
+
+
 def test_folder_digest_depends_on_names_and_contents(tmp_path):
     d = tmp_path / "d"
     (d / "sub").mkdir(parents=True)

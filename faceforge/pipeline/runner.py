@@ -124,7 +124,8 @@ def current_record(stage: Stage, config, params: Mapping, upstream: Mapping[str,
             inputs[name.rstrip("?")] = None
             missing.append(f"{name.rstrip('?')} ({path} not found)")
             continue
-        inputs[name.rstrip("?")] = {"path": path, "sha256": file_digest(path)}
+        digest = stage.digests.get(name.rstrip("?"), file_digest)
+        inputs[name.rstrip("?")] = {"path": path, "sha256": digest(path)}
     record = {
         "stage": stage.name,
         "version": str(stage.version),

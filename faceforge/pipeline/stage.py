@@ -37,6 +37,8 @@ class Stage:
         or a dotted config key holding a path (``"template.skull"``; folders hash all
         their files). A trailing ``?`` marks an optional input.
     outputs : file names ``run`` must create in ``ctx.out_dir``.
+    digests : ``{input name: digest(path) -> str}`` for inputs of which the stage reads only a
+        part (default: the file's bytes, :func:`faceforge.pipeline.cache.file_digest`).
     version : bump when the code changes what the stage writes.
     description : one line for ``faceforge status``.
     """
@@ -47,6 +49,7 @@ class Stage:
     config_keys: tuple[str, ...] = ()
     inputs: tuple[str, ...] = ()
     outputs: tuple[str, ...] = ()
+    digests: dict = field(default_factory=dict, hash=False)
     version: str = "1"
     description: str = ""
 
@@ -58,6 +61,9 @@ class Stage:
             if isinstance(value, str):
                 raise ValueError(f"Stage.{attr} must be a tuple of strings, got the string {value!r}")
             object.__setattr__(self, attr, tuple(value))
+        unknown = set(self.digests) - {name.rstrip("?") for name in self.inputs}
+        if unknown:
+            raise ValueError(f"Stage.digests names inputs the stage does not have: {sorted(unknown)}")
         if "stage.json" in self.outputs:
             raise ValueError("stage.json is written by the runner, not listed as an output")
 

@@ -331,6 +331,47 @@ def test_expression_preset_through_fap2(workdir, patched, tmp_path):
         assert lids[hold, i, 1] == pytest.approx(0.8 * move * irisd, rel=1e-4)
 
 
+def test_playing_the_calibration_takes_the_presets_from_the_template(workdir, patched, calibrated, tmp_path):
+    """The workdir's calibration carries a copy of the expression presets; played, the presets
+    are those of the template (``animate.fap_mapping``), so an edited preset needs no
+    recalibration: joy's upper lids at 300 in the template (128 in the calibrated copy) drop
+    FDP 3.1 by 0.8 x 300 IRISD at intensity 0.8."""
+    import shutil
+
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import expression_track, fapu_from_landmarks, write_fap
+
+    (workdir / "calibrate").mkdir(exist_ok=True)
+    shutil.copy(calibrated / "fap_mapping.yaml", workdir / "calibrate" / "fap_mapping.yaml")
+    edited = yaml.safe_load((workdir / "mapping.yaml").read_text())
+    edited["expressions"]["joy"]["faps"][19] = 300
+    (tmp_path / "edited.yaml").write_text(yaml.safe_dump(edited))
+    write_fap(tmp_path / "joy.fap", expression_track("joy", intensity=0.8, fps=25, seconds=0.6, ramp=0.2))
+    played = {lids: load_npz(run_stage(
+        "animate", workdir, {"fap": str(tmp_path / "joy.fap"),
+                             "animate_mapping": str(workdir / "calibrate" / "fap_mapping.yaml")},
+        sets=(*SETS, f"animate.fap_mapping={tmp_path / 'edited.yaml'}",
+              f"animate.eyelids={str(lids).lower()}")) / "animation.npz") for lids in (True, False)}
+    v, _ = S.skin_mesh()
+    lm = S.landmarks(v)
+    i = int(np.argmin(np.linalg.norm(v - lm["3.1"], axis=1)))
+    hold = int(np.argmax(played[True]["contractions"][:, 0]))
+    drop = played[True]["frames"][hold, i, 1].astype(float) - played[False]["frames"][hold, i, 1]
+    assert drop == pytest.approx(-0.8 * 300 * fapu_from_landmarks(lm, "synthetic").unit("IRISD"), rel=1e-4)
+
+
+def test_animate_warns_when_the_calibration_it_plays_is_out_of_date(tmp_path, capsys):
+    from faceforge.cli import App
+    from faceforge.pipeline.stages.animate import _warn_if_stale_calibration, calibrated_mapping_path
+
+    app = App(str(tmp_path / "w"), None, (), 0, False)
+    calibrated_mapping_path(tmp_path / "w").parent.mkdir(parents=True)
+    calibrated_mapping_path(tmp_path / "w").write_text("entries: []\n")   # left by an earlier run
+    _warn_if_stale_calibration(app)
+    err = capsys.readouterr().err
+    assert "warning: the calibration is out of date" in err and "faceforge calibrate" in err
+
+
 def test_a_diverging_simulation_is_a_one_line_stage_error_naming_the_track(workdir, patched, monkeypatch):
     import faceforge.anatomy.animate as anim
     from faceforge.exceptions import StageError
@@ -362,3 +403,26 @@ def test_calibrate_command_says_wrote_only_when_the_stage_ran(tmp_path, ran):
     assert result.exit_code == 0, result.output
     assert lines[0].startswith("median relative error")
     assert lines[1].startswith("calibrate: wrote " if ran else "calibrate: kept ")
+
+
+def test_editing_a_preset_leaves_the_calibration_up_to_date(tmp_path):
+    """The calibrate stage digests its template without the presets: a preset edit keeps the
+    key (no recalibration), an entry edit changes it."""
+    from faceforge.pipeline import get_stage
+    from faceforge.pipeline.runner import current_record
+
+    mapping = yaml.safe_load(yaml.safe_dump(S.MAPPING))
+    path = tmp_path / "m.yaml"
+
+    def record():
+        path.write_text(yaml.safe_dump(mapping))
+        from faceforge.io.config import load_config
+
+        config = load_config(None, (f"animate.fap_mapping={path}",))
+        return current_record(get_stage("calibrate"), config, {}, {"fit": "f", "bind": "b"})[0]["inputs"]
+
+    before = record()
+    mapping["expressions"]["joy"]["faps"][19] = 400
+    assert record() == before
+    mapping["entries"][0]["fapu"] = "MW"
+    assert record() != before

@@ -61,6 +61,29 @@ def calibrated_mapping_path(workdir) -> Path:
     return Path(workdir) / "calibrate" / "fap_mapping.yaml"
 
 
+def mapping_digest_without_presets(path) -> str:
+    """SHA-256 of a FAP mapping file without its ``expressions`` table (the calibrate stage's
+    digest of the template: calibration never reads the presets, animate takes them from the
+    template, so editing one costs no recalibration). A file that is not a YAML mapping is
+    digested whole (the stage then reports it when it runs)."""
+    import hashlib
+    import json
+
+    import yaml
+
+    from faceforge.pipeline.cache import file_digest
+
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return file_digest(path)
+    if not isinstance(data, dict):
+        return file_digest(path)
+    data.pop("expressions", None)
+    text = json.dumps(data, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 # --------------------------------------------------------------------------- the bound head
 
 class BoundHead:
@@ -377,10 +400,18 @@ def controls(mapping, faps, head):
 
 
 def _mapping(ctx):
+    """The mapping to play (``animate_mapping``) and its path. Playing the workdir's calibration,
+    the expression presets are the template's (``animate.fap_mapping``): calibration measures
+    the FAP entries only, and a preset edited there (or new in a faceforge release) plays
+    without a recalibration."""
+    from dataclasses import replace
+
     from faceforge.anatomy.fap_mapping import load_fap_mapping
 
     path = ctx.param("animate_mapping")
     mapping = load_fap_mapping(path)
+    if Path(path).resolve() == calibrated_mapping_path(ctx.workdir).resolve():
+        mapping = replace(mapping, expressions=load_fap_mapping(mapping_template_path(ctx.config)).expressions)
     return mapping, str(path)
 
 
@@ -458,7 +489,7 @@ def run_animate(ctx):
 ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
-    inputs=("fap", "animate_mapping"), outputs=("animation.npz", "report.json"),
+    inputs=("fap", "animate_mapping", "animate.fap_mapping"), outputs=("animation.npz", "report.json"),
     version="6", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
@@ -578,7 +609,8 @@ CALIBRATE = register_stage(Stage(
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry", "muscle", "animate.fap_mapping", "animate.fps",
         "animate.skull_guard", "animate.orientation_guard", "animate.calibrate"),
-    inputs=("animate.fap_mapping",), outputs=("fap_mapping.yaml", "report.json", "report.txt"),
+    inputs=("animate.fap_mapping",), digests={"animate.fap_mapping": mapping_digest_without_presets},
+    outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="4", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
@@ -665,8 +697,22 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
     calibrated = calibrated_mapping_path(app.workspace.root)
     mapping = calibrated if calibrated.exists() else mapping_template_path(app.config)
     app.log(f"animate: mapping {mapping}")
+    if calibrated.exists():
+        _warn_if_stale_calibration(app)
     app.run_stage("animate", params={"fap": str(fap), "animate_mapping": str(mapping)}, force=force)
     export_outputs(app, output, preview, preview_frames)
+
+
+def _warn_if_stale_calibration(app) -> None:
+    """Say so when the calibration animate plays is out of date (the head was refitted, the
+    template or the solver settings changed since): it is played anyway (a calibration takes
+    minutes; ``faceforge calibrate`` refreshes it)."""
+    from faceforge.pipeline.runner import plan
+
+    status = plan(app.workspace, app.config, app.workspace.load_params(), ["calibrate"])[-1]
+    if not status.up_to_date:
+        app.log(f"animate: warning: the calibration is out of date ({'; '.join(status.reasons)}); "
+                "playing it anyway: `faceforge calibrate` brings it up to date")
 
 
 @click.command("calibrate", help="Measure how precisely FAPs move the skin and fit the mapping (§9).")
