@@ -31,7 +31,8 @@ def pick_frames(n_frames: int, count: int = 6, spec: str | None = None) -> list[
 
 def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: float,
                   view: str = "front", cols: int | None = None, title: str | None = None,
-                  panel: float = 2.6, dpi: int = 110, focus: bool = False) -> Path:
+                  panel: float = 2.6, dpi: int = 110, focus: bool = False,
+                  labels=None, region: np.ndarray | None = None) -> Path:
     """Write a grid of shaded renders of ``frames[indices]``.
 
     Parameters
@@ -46,7 +47,9 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
 
     All panels share one scale (the union of the drawn frames' extents), so motion between
     panels is visible as motion. ``focus`` zooms on the vertices that move (>= 35 % of the
-    largest displacement between the first drawn frame and the others), padded by 30 %.
+    largest displacement between the first drawn frame and the others), padded by 30 %;
+    ``region`` ((n,) bool) frames those vertices instead (e.g. the head without its neck).
+    ``labels``: one title per panel instead of its frame and time.
     """
     import matplotlib
 
@@ -63,7 +66,7 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
                              squeeze=False)
     r = view_matrix(view)
     shown = frames[indices]
-    keep = np.ones(shown.shape[1], dtype=bool)
+    keep = np.ones(shown.shape[1], dtype=bool) if region is None else np.asarray(region, dtype=bool)
     if focus:
         # frame the part that moves: vertices displaced by >= 35 % of the largest displacement
         disp = np.linalg.norm(shown - shown[:1], axis=2).max(axis=0)
@@ -74,11 +77,12 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     pad = (0.3 if focus else 0.04) * (hi - lo).max()
     for ax in axes.ravel():
         ax.axis("off")
-    for ax, i in zip(axes.ravel(), indices):
+    names = list(labels) if labels is not None else [f"frame {i}  ({i / fps:.2f} s)" for i in indices]
+    for ax, i, name in zip(axes.ravel(), indices, names):
         draw_layers(ax, [Layer(frames[i], faces)], view, labels=False)
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
-        ax.set_title(f"frame {i}  ({i / fps:.2f} s)", fontsize=8)
+        ax.set_title(name, fontsize=8)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()

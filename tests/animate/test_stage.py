@@ -426,3 +426,40 @@ def test_editing_a_preset_leaves_the_calibration_up_to_date(tmp_path):
     assert record() == before
     mapping["entries"][0]["fapu"] = "MW"
     assert record() != before
+
+
+def test_expressions_sheet_settles_each_preset_and_checks_it(workdir, patched, tmp_path):
+    """``faceforge expressions``: the neutral face and the six presets, settled one by one.
+    The neutral pose is the rest skin (the simulation's fixed point); joy contracts the
+    zygomaticus by its FAP x gain and opens the jaw; every pose passes the physical checks;
+    the sheet has seven panels in two rows."""
+    import matplotlib.image as mpimg
+
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4.expressions import EXPRESSIONS
+
+    mapping = yaml.safe_load(yaml.safe_dump(S.MAPPING))
+    for i, name in enumerate(EXPRESSIONS):
+        if name != "joy":   # the synthetic head's muscle is the zygomaticus: jaw and lid presets
+            mapping["expressions"][name] = {"id": i + 1, "faps": {3: 40.0 * i, 19: -50.0 * i}}
+    (tmp_path / "six.yaml").write_text(yaml.safe_dump(mapping))
+    out = run_stage("expressions", workdir, {"animate_mapping": str(tmp_path / "six.yaml")})
+    d = load_npz(out / "expressions.npz")
+    report = json.loads((out / "report.json").read_text())
+    assert list(d["names"]) == ["neutral", *EXPRESSIONS]
+    v, _ = S.skin_mesh()
+    assert np.abs(d["poses"][0] - v).max() < 1e-5
+    joy = list(d["names"]).index("joy")
+    assert d["contractions"][joy, 0] == pytest.approx(150 * 0.003)
+    assert d["jaw"][joy, 0] > 0.0 and np.abs(d["poses"][joy] - v).max() > 0.01
+    assert all(e["checks"]["inverted_triangles"] == 0 and e["checks"]["skin_inside_skull"] == 0
+               for e in report["expressions"].values()) and len(report["expressions"]) == 7
+    img = mpimg.imread(out / "expressions.png")
+    assert 1.2 * img.shape[0] < img.shape[1] < 2.4 * img.shape[0]   # four panels wide, two rows
+
+
+def test_expressions_needs_all_six_presets(workdir, patched):
+    from faceforge.exceptions import StageError
+
+    with pytest.raises(StageError, match="no preset for sadness"):
+        run_stage("expressions", workdir, {"animate_mapping": str(workdir / "mapping.yaml")})
