@@ -694,13 +694,20 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
     if expression is not None:
         seconds = seconds or float(app.config.get("animate.expression_seconds"))
         fap = _expression_file(app, expression, intensity, seconds)
-    calibrated = calibrated_mapping_path(app.workspace.root)
-    mapping = calibrated if calibrated.exists() else mapping_template_path(app.config)
-    app.log(f"animate: mapping {mapping}")
-    if calibrated.exists():
-        _warn_if_stale_calibration(app)
+    mapping = playback_mapping(app, "animate")
     app.run_stage("animate", params={"fap": str(fap), "animate_mapping": str(mapping)}, force=force)
     export_outputs(app, output, preview, preview_frames)
+
+
+def playback_mapping(app, command: str) -> Path:
+    """The mapping a playback command plays: the workdir's calibration when there is one (said
+    so when it is out of date), else the template. Logged as ``<command>: mapping <path>``."""
+    calibrated = calibrated_mapping_path(app.workspace.root)
+    mapping = calibrated if calibrated.exists() else mapping_template_path(app.config)
+    app.log(f"{command}: mapping {mapping}")
+    if calibrated.exists():
+        _warn_if_stale_calibration(app)
+    return mapping
 
 
 def _warn_if_stale_calibration(app) -> None:

@@ -89,15 +89,11 @@ EXPRESSIONS_STAGE = register_stage(Stage(
 @click.pass_obj
 def expressions_command(app, output, force):
     from faceforge.exceptions import StageError
-    from faceforge.pipeline.stages.animate import _warn_if_stale_calibration, calibrated_mapping_path, \
-        mapping_template_path
+    from faceforge.pipeline.stages.animate import playback_mapping
 
     if output and not str(output).lower().endswith(".png"):
         raise StageError("the sheet is a PNG: give -o a .png path", output)
-    calibrated = calibrated_mapping_path(app.workspace.root)
-    mapping = calibrated if calibrated.exists() else mapping_template_path(app.config)
-    if calibrated.exists():
-        _warn_if_stale_calibration(app)
+    mapping = playback_mapping(app, "expressions")
     app.run_stage("expressions", params={"animate_mapping": str(mapping)}, force=force)
     sheet = app.workspace.stage_dir("expressions") / "expressions.png"
     if output:
