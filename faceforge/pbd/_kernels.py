@@ -182,36 +182,6 @@ def _predict(x, v, prev, w, damp, h, gravity):
 
 
 @numba.njit(**PBD_NUMBA)
-def _gather_predict(x_src, v_src, order, x, v, prev, w, damp, h, gravity):
-    """:func:`_predict` of the particles in the solver's numbering, read from the caller's:
-    particle ``i`` is ``x_src[order[i]]`` (the gather and the prediction in one pass)."""
-    for i in range(x.shape[0]):
-        j = order[i]
-        px = x_src[j, 0]
-        py = x_src[j, 1]
-        pz = x_src[j, 2]
-        prev[i, 0] = px
-        prev[i, 1] = py
-        prev[i, 2] = pz
-        vx = v_src[j, 0]
-        vy = v_src[j, 1]
-        vz = v_src[j, 2]
-        if w[i] > 0.0:
-            vx = vx * damp
-            vy = vy * damp - h * gravity
-            vz = vz * damp
-            px = px + h * vx
-            py = py + h * vy
-            pz = pz + h * vz
-        x[i, 0] = px
-        x[i, 1] = py
-        x[i, 2] = pz
-        v[i, 0] = vx
-        v[i, 1] = vy
-        v[i, 2] = vz
-
-
-@numba.njit(**PBD_NUMBA)
 def _velocities(x, v, prev, inv_h):
     for i in range(x.shape[0]):
         v[i, 0] = (x[i, 0] - prev[i, 0]) * inv_h
@@ -220,24 +190,7 @@ def _velocities(x, v, prev, inv_h):
 
 
 @numba.njit(**PBD_NUMBA)
-def _velocities_scatter(x, prev, inv_h, order, x_dst, v_dst):
-    """:func:`_velocities` written straight into the caller's numbering: ``x_dst[order[i]]``,
-    ``v_dst[order[i]]`` (the step's last pass and the scatter in one)."""
-    for i in range(x.shape[0]):
-        j = order[i]
-        px = x[i, 0]
-        py = x[i, 1]
-        pz = x[i, 2]
-        x_dst[j, 0] = px
-        x_dst[j, 1] = py
-        x_dst[j, 2] = pz
-        v_dst[j, 0] = (px - prev[i, 0]) * inv_h
-        v_dst[j, 1] = (py - prev[i, 1]) * inv_h
-        v_dst[j, 2] = (pz - prev[i, 2]) * inv_h
-
-
-@numba.njit(**PBD_NUMBA)
-def _step(x_in, v_in, x_out, v_out, order, x_work, v_work, kin_target, p_target, h, threaded,
+def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
           w, kin, kin_start, prev, gravity, damp,
           substeps, iterations, xpbd, blocks, seg, lams,
           d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t, d_wt,
@@ -248,12 +201,6 @@ def _step(x_in, v_in, x_out, v_out, order, x_work, v_work, kin_target, p_target,
           t_idx, t_tri, t_bary, t_k, t_c):
     """A whole step of ``substeps`` substeps of length ``h``; ``x_out``/``v_out`` may be the
     inputs (the same array: then they are not copied onto themselves) or share no memory.
-
-    ``order (n,)``: when not empty, the solver numbers the particles differently from the
-    caller (:mod:`faceforge.pbd.partition`): its particle ``i`` is the caller's ``order[i]``.
-    The step then runs on ``x_work``/``v_work`` (the solver's numbering), reading the inputs in
-    the first prediction and writing the outputs in the last velocity pass (no separate gather
-    or scatter). Empty ``order``: ``x_work``/``v_work`` are unused.
 
     The arguments that change from step to step come first (states, controls, ``h``,
     ``threaded``); the rest are the solver's frozen arrays, passed as one prepared tuple.
@@ -266,49 +213,36 @@ def _step(x_in, v_in, x_out, v_out, order, x_work, v_work, kin_target, p_target,
     order distance, bending, area, volume, position, attachment.
     """
     n = x_in.shape[0]
-    reorder = order.shape[0] > 0
-    if reorder:
-        for q in range(kin.shape[0]):
+    for q in range(kin.shape[0]):
+        for d in range(3):
+            kin_start[q, d] = x_in[kin[q], d]
+    if x_out.ctypes.data != x_in.ctypes.data:  # stepping in place (the usual case): no copy
+        for i in range(n):
             for d in range(3):
-                kin_start[q, d] = x_in[order[kin[q]], d]
-        x = x_work
-        v = v_work
-    else:
-        for q in range(kin.shape[0]):
+                x_out[i, d] = x_in[i, d]
+    if v_out.ctypes.data != v_in.ctypes.data:
+        for i in range(n):
             for d in range(3):
-                kin_start[q, d] = x_in[kin[q], d]
-        if x_out.ctypes.data != x_in.ctypes.data:  # stepping in place (the usual case): no copy
-            for i in range(n):
-                for d in range(3):
-                    x_out[i, d] = x_in[i, d]
-        if v_out.ctypes.data != v_in.ctypes.data:
-            for i in range(n):
-                for d in range(3):
-                    v_out[i, d] = v_in[i, d]
-        x = x_out
-        v = v_out
+                v_out[i, d] = v_in[i, d]
     o1 = d_idx.shape[0]
     o2 = o1 + b_idx.shape[0]
     o3 = o2 + a_idx.shape[0]
     o4 = o3 + v_rest.shape[0]
     o5 = o4 + p_idx.shape[0]
     for s in range(substeps):
-        if reorder and s == 0:
-            _gather_predict(x_in, v_in, order, x, v, prev, w, damp, h, gravity)
-        else:
-            _predict(x, v, prev, w, damp, h, gravity)
+        _predict(x_out, v_out, prev, w, damp, h, gravity)
         alpha = (s + 1.0) / substeps
         for q in range(kin.shape[0]):
             i = kin[q]
             for d in range(3):
                 if s == substeps - 1:  # exactly the control, no rounding
-                    x[i, d] = kin_target[q, d]
+                    x_out[i, d] = kin_target[q, d]
                 else:
-                    x[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
+                    x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
         if xpbd:  # the PBD modes never read the multipliers
             lams[:] = 0.0
         if threaded:   # several parts, on threads (else the same sweeps in one thread)
-            _project_parts(x, w, blocks, seg, iterations, xpbd,
+            _project_parts(x_out, w, blocks, seg, iterations, xpbd,
                            d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
                            b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t,
                            q_stretch, q_area, q_area_stop,
@@ -318,7 +252,7 @@ def _step(x_in, v_in, x_out, v_out, order, x_work, v_work, kin_target, p_target,
                            p_idx, p_target, p_k, p_c, lams[o4:o5],
                            t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
         else:
-            _project(x, w, blocks, iterations, xpbd,
+            _project(x_out, w, blocks, iterations, xpbd,
                      d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
                      b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
                      q_area, q_area_stop,
@@ -327,7 +261,4 @@ def _step(x_in, v_in, x_out, v_out, order, x_work, v_work, kin_target, p_target,
                      lams[o3:o4], v_g,
                      p_idx, p_target, p_k, p_c, lams[o4:o5],
                      t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
-        if reorder and s == substeps - 1:
-            _velocities_scatter(x, prev, 1.0 / h, order, x_out, v_out)
-        else:
-            _velocities(x, v, prev, 1.0 / h)
+        _velocities(x_out, v_out, prev, 1.0 / h)

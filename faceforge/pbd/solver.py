@@ -47,10 +47,6 @@ from faceforge.pbd.settings import SolverSettings
 from faceforge.pbd.threads import threaded, threads_used
 
 
-#: ``_step``'s order when the model keeps the caller's numbering
-_NO_ORDER = np.zeros(0, dtype=np.int64)
-
-
 def _own(a: np.ndarray) -> np.ndarray:
     return np.array(a, order="C", copy=True)
 
@@ -96,7 +92,6 @@ class Solver:
         # (partition.partitioned); _segment: the part of each block row (0 with one part). A
         # model left in one part (too small to cut) keeps its numbering: nothing to gather
         self._position_order = self._particle_order = None
-        self._x = self._v = np.zeros((0, 3))      # the step's own positions and velocities
         self._segment = np.zeros(len(m.blocks), dtype=np.int64)
         part = None
         split = partitioned(model, s.partitions) if s.partitions > 1 else None
@@ -105,6 +100,7 @@ class Solver:
             order, slots = split.particle_order, split.position_order
             if not np.array_equal(order, np.arange(len(order))):
                 self._particle_order = order
+                self._old_order = np.argsort(order)   # new id of each old particle
                 self._x = np.zeros((len(order), 3))
                 self._v = np.zeros((len(order), 3))
             if not np.array_equal(slots, np.arange(len(slots))):
@@ -341,9 +337,13 @@ class Solver:
         if not dt > 0:
             raise ValueError(f"dt must be > 0, got {dt!r}")
         s = self.settings
-        # with a renumbered model the step runs in its numbering, reading and writing the
-        # caller's arrays through the order (in its first and last pass)
-        order = self._particle_order if self._particle_order is not None else _NO_ORDER
-        _step(state_in.positions, state_in.velocities, state_out.positions, state_out.velocities,
-              order, self._x, self._v, kin, targets, dt / s.substeps, self._threaded,
+        x_in, v_in, x_out, v_out = (state_in.positions, state_in.velocities,
+                                    state_out.positions, state_out.velocities)
+        if self._particle_order is not None:  # stepped in the partitioned model's numbering
+            x_in = x_out = _take_rows(x_in, self._particle_order, self._x)
+            v_in = v_out = _take_rows(v_in, self._particle_order, self._v)
+        _step(x_in, v_in, x_out, v_out, kin, targets, dt / s.substeps, self._threaded,
               *self._frozen)
+        if self._particle_order is not None:
+            _take_rows(self._x, self._old_order, state_out.positions)
+            _take_rows(self._v, self._old_order, state_out.velocities)
