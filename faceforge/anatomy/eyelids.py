@@ -254,16 +254,6 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
     return out
 
 
-def _pieces(n: int, faces: np.ndarray) -> np.ndarray:
-    """``(n,) int``: the connected piece of the mesh each of ``n`` vertices lies in."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    a, b = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).T
-    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
-    return connected_components(graph, directed=False)[1]
-
-
 class Eyelids:
     """The lids of a head's eyes, moved by FAPs 19-22 over finished frames.
 
@@ -278,11 +268,12 @@ class Eyelids:
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
                  depth: float = 0.5):
         from faceforge.anatomy.orientation_guard import OrientationGuard
+        from faceforge.geometry.triangles import vertex_components
 
         self.rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
         self.irisd = float(irisd)
         faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-        piece = _pieces(len(self.rest), faces)
+        piece = vertex_components(len(self.rest), faces)
         self.fields = []
         for eye in find_eyes(landmarks):
             field = lid_field(eye, self.rest, reach, depth)

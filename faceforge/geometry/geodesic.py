@@ -12,23 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from faceforge.constants import FLOAT, INT
-from faceforge.geometry.triangles import check_mesh
+from faceforge.geometry.triangles import check_mesh, vertex_components
 
 __all__ = ["GeodesicSolver", "geodesic_distance"]
-
-
-def _components(n_vertices: int, faces: np.ndarray) -> np.ndarray:
-    """Connected-component label of each vertex ``(n,) int64``; unreferenced ones get -1."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
-    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
-    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n_vertices, n_vertices))
-    _, labels = connected_components(graph, directed=False)
-    used = np.zeros(n_vertices, bool)
-    used[faces.ravel()] = True
-    return np.where(used, labels, -1).astype(INT)
 
 
 class GeodesicSolver:
@@ -43,7 +29,7 @@ class GeodesicSolver:
         if len(f) == 0:
             raise ValueError("geodesic distance needs a mesh with faces")
         self.vertices, self.faces, self.t_coef = v, f, t_coef
-        self.labels = _components(len(v), f)
+        self.labels = vertex_components(len(v), f)
         self._solvers: dict[int, tuple] = {}
 
     def _solver(self, label: int):

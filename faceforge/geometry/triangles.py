@@ -18,6 +18,7 @@ __all__ = [
     "barycentric",
     "points_from_barycentric",
     "concatenate_meshes",
+    "vertex_components",
 ]
 
 
@@ -136,3 +137,19 @@ def concatenate_meshes(meshes) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if not vs:
         return np.zeros((0, 3), FLOAT), np.zeros((0, 3), INT), np.zeros(1, INT)
     return np.concatenate(vs), np.concatenate(fs), np.asarray(offsets, INT)
+
+
+def vertex_components(n_vertices: int, faces) -> np.ndarray:
+    """Connected-component label of each vertex ``(n,) int64`` (vertices sharing a face
+    connect); vertices no face uses get -1."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    faces = np.asarray(faces, dtype=INT).reshape(-1, 3)
+    i = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    j = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(n_vertices, n_vertices))
+    _, labels = connected_components(graph, directed=False)
+    used = np.zeros(n_vertices, bool)
+    used[faces.ravel()] = True
+    return np.where(used, labels, -1).astype(INT)
