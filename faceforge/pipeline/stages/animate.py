@@ -243,6 +243,24 @@ class BoundHead:
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
                        finish=None if orientation is None else orientation.apply)
 
+    def bone_heights(self) -> tuple[float, float]:
+        """(lowest, highest) height (+Y) of the bones at rest (cranium and mandible)."""
+        import numpy as np
+
+        y = np.concatenate([self.cranium[0][:, 1], self.mandible[0][:, 1]])
+        return float(y.min()), float(y.max())
+
+    def eyelids(self, config):
+        """The lids of this head's eyes (:class:`faceforge.anatomy.eyelids.Eyelids`) as the
+        config sets them (``animate.eyelids``, ``.eyelid_reach``, ``.eyelid_depth``); None when
+        ``animate.eyelids`` is off."""
+        from faceforge.anatomy.eyelids import Eyelids
+
+        if not config.get("animate.eyelids"):
+            return None
+        return Eyelids(self.rest, self.faces, self.landmarks, self.fapu.unit("IRISD"),
+                       config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"))
+
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
         t = self.skull.jaw_transform(*jaw_dofs)
@@ -420,7 +438,6 @@ def run_animate(ctx):
     import numpy as np
 
     from faceforge.anatomy.animate import Timings, check_animation, play
-    from faceforge.anatomy.eyelids import Eyelids
     from faceforge.anatomy.head_motion import HEAD_FAPS, head_angles, neck_weights, turn_head
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.mpeg4 import read_fap
@@ -436,10 +453,8 @@ def run_animate(ctx):
         unmapped = [f for f in unmapped if f not in HEAD_FAPS]
         if np.any(angles):
             ctx.log(f"head rotation (FAPs 48-50): up to {np.degrees(np.abs(angles).max()):.1f} deg")
-    lids = None
-    if ctx.config.get("animate.eyelids"):
-        lids = Eyelids(head.rest, head.faces, head.landmarks, head.fapu.unit("IRISD"),
-                       ctx.config.get("animate.eyelid_reach"), ctx.config.get("animate.eyelid_depth"))
+    lids = head.eyelids(ctx.config)
+    if lids is not None:
         unmapped = [f for f in unmapped if f not in lids.faps]
         if lids.faps and np.any(faps[:, [f - 1 for f in lids.faps]]):
             ctx.log(f"eyelids (FAPs {', '.join(map(str, lids.faps))}) on {len(lids.fields)} eye"
@@ -464,10 +479,9 @@ def run_animate(ctx):
     # jaw's condyles), the skin below the skull fading out of the turn; after the checks, which
     # look at the skin in the skull's own frame
     if np.any(angles):
-        bone_y = np.concatenate([head.cranium[0][:, 1], head.mandible[0][:, 1]])
-        span = float(ctx.config.get("animate.neck_fade")) * float(np.ptp(bone_y))
-        frames = turn_head(frames, angles, head.skull.jaw.yaw_point,
-                           neck_weights(head.rest, float(bone_y.min()), span))
+        low, high = head.bone_heights()
+        span = float(ctx.config.get("animate.neck_fade")) * (high - low)
+        frames = turn_head(frames, angles, head.skull.jaw.yaw_point, neck_weights(head.rest, low, span))
     user = head.to_user(frames).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
              controls=np.asarray(head.controls, dtype=str), jaw=jaw)
@@ -706,11 +720,11 @@ def playback_mapping(app, command: str) -> Path:
     mapping = calibrated if calibrated.exists() else mapping_template_path(app.config)
     app.log(f"{command}: mapping {mapping}")
     if calibrated.exists():
-        _warn_if_stale_calibration(app)
+        _warn_if_stale_calibration(app, command)
     return mapping
 
 
-def _warn_if_stale_calibration(app) -> None:
+def _warn_if_stale_calibration(app, command: str = "animate") -> None:
     """Say so when the calibration animate plays is out of date (the head was refitted, the
     template or the solver settings changed since): it is played anyway (a calibration takes
     minutes; ``faceforge calibrate`` refreshes it)."""
@@ -718,7 +732,7 @@ def _warn_if_stale_calibration(app) -> None:
 
     status = plan(app.workspace, app.config, app.workspace.load_params(), ["calibrate"])[-1]
     if not status.up_to_date:
-        app.log(f"animate: warning: the calibration is out of date ({'; '.join(status.reasons)}); "
+        app.log(f"{command}: warning: the calibration is out of date ({'; '.join(status.reasons)}); "
                 "playing it anyway: `faceforge calibrate` brings it up to date")
 
 

@@ -34,7 +34,6 @@ def run_expressions(ctx):
     import numpy as np
 
     from faceforge.anatomy.animate import check_animation, static_poses
-    from faceforge.anatomy.eyelids import Eyelids
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.mpeg4.expressions import EXPRESSIONS
     from faceforge.pipeline.stages.animate import BoundHead, _mapping, controls
@@ -53,10 +52,9 @@ def run_expressions(ctx):
     settle = int(ctx.config.get("animate.calibrate.settle_frames"))
     ctx.log(f"{len(EXPRESSIONS)} expressions, {settle} settle frames each")
     poses = static_poses(head.rig, c, jaw, float(ctx.config.get("animate.fps")), settle=settle)
-    if ctx.config.get("animate.eyelids"):
-        poses = Eyelids(head.rest, head.faces, head.landmarks, head.fapu.unit("IRISD"),
-                        ctx.config.get("animate.eyelid_reach"),
-                        ctx.config.get("animate.eyelid_depth")).apply(poses, faps)
+    lids = head.eyelids(ctx.config)
+    if lids is not None:
+        poses = lids.apply(poses, faps)
     report = {"mapping": mapping_path, "expressions": {}}
     for i, name in enumerate(names):
         checks = check_animation(head.rest, poses[i:i + 1], head.faces,
@@ -65,9 +63,8 @@ def run_expressions(ctx):
                                        "jaw": jaw[i].tolist()}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
-    bone_y = np.concatenate([head.cranium[0][:, 1], head.mandible[0][:, 1]])
     contact_sheet(ctx.out_dir / "expressions.png", poses, head.faces, range(len(names)), 1.0,
-                  cols=4, panel=3.2, labels=names, region=head.rest[:, 1] >= bone_y.min(),
+                  cols=4, panel=3.2, labels=names, region=head.rest[:, 1] >= head.bone_heights()[0],
                   title="the six basic expressions (template presets, full intensity)")
     save_npz(ctx.out_dir / "expressions.npz", names=np.asarray(names), poses=head.to_user(poses).astype(np.float32),
              contractions=c, controls=np.asarray(head.controls, dtype=str), jaw=jaw)
