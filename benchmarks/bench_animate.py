@@ -90,7 +90,7 @@ def measure(head, mapping, frames: int, repeats: int, rival=None) -> dict:
     from faceforge.mpeg4 import read_fap
 
     track = read_fap(ROOT / "samples" / "fap" / "joy.fap")
-    c, jaw, _ = stage.track_controls(track, mapping, head)
+    c, jaw, _, _ = stage.track_controls(track, mapping, head)
     c, jaw = c[:frames], jaw[:frames]
     heads = [head] + ([rival] if rival is not None else [])
     for h in heads:

@@ -388,9 +388,10 @@ def track_faps(track, mapping):
 
 
 def track_controls(track, mapping, head):
-    """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values). FAP 1 counts
-    as unmapped when the track selects a viseme: there is no viseme table (FAP 2's
-    expressions have one, the mapping's ``expressions``)."""
+    """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values, the track's
+    low-level FAP frames (F, 68) of :func:`track_faps`). FAP 1 counts as unmapped when the
+    track selects a viseme: there is no viseme table (FAP 2's expressions have one, the
+    mapping's ``expressions``)."""
     import numpy as np
 
     faps = track_faps(track, mapping)
@@ -399,7 +400,7 @@ def track_controls(track, mapping, head):
     if np.any(np.asarray(track.viseme)[np.asarray(track.mask)[:, 0], :2] != 0):
         unmapped = [1, *unmapped]
     c, jaw = controls(mapping, faps, head)
-    return c, jaw, unmapped
+    return c, jaw, unmapped, faps
 
 
 def controls(mapping, faps, head):
@@ -445,8 +446,7 @@ def run_animate(ctx):
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, mapping_path = _mapping(ctx)
     track = read_fap(ctx.param("fap"))
-    c, jaw, unmapped = track_controls(track, mapping, head)
-    faps = track_faps(track, mapping)
+    c, jaw, unmapped, faps = track_controls(track, mapping, head)
     turn = bool(ctx.config.get("animate.head_rotation"))
     angles = head_angles(faps) if turn else np.zeros((track.n_frames, 3))
     if turn:
