@@ -1,4 +1,5 @@
-"""tools/build_template.py: the committed template is its output, and the dental warp is one-to-one.
+"""tools/build_template.py: the committed template is its output (to the last printed
+decimal), and the dental warp is one-to-one.
 
 The build reads the shared assets (``/work/shared/assets``); without them the build tests
 skip. The warp's own properties are checked on synthetic points and need no assets.
@@ -7,6 +8,7 @@ skip. The warp's own properties are checked on synthetic points and need no asse
 from __future__ import annotations
 
 import importlib.util
+import re
 from pathlib import Path
 
 import numpy as np
@@ -29,12 +31,49 @@ def bt():
 needs_assets = pytest.mark.skipif(not (ASSETS / "anatomy").is_dir(), reason="shared assets not on this machine")
 
 
+_NUMBER = re.compile(r"(-?\d+\.\d+)")
+
+
+def _same_to_the_printed_digit(built: str, committed: str) -> list[str]:
+    """The lines of two text files that differ other than by one unit in the last printed
+    decimal of a number (the build's floating point changes in that digit from one numpy or
+    scipy release to the next: 73 of 7,760 vertices moved by 1e-6 between numpy 2.3 and 2.4).
+    All other text, every line and every number to its last printed decimal must agree."""
+    a, b = built.splitlines(), committed.splitlines()
+    if len(a) != len(b):
+        return [f"{len(a)} lines built, {len(b)} committed"]
+    bad = []
+    for i, (x, y) in enumerate(zip(a, b)):
+        px, py = _NUMBER.split(x), _NUMBER.split(y)   # text, number, text, ..., text
+        same = len(px) == len(py) and px[::2] == py[::2]
+        for s, t in zip(px[1::2], py[1::2]) if same else ():
+            digits = max(len(s.partition(".")[2]), len(t.partition(".")[2]))
+            same &= abs(float(s) - float(t)) <= 1.000001 * 10.0 ** -digits
+        if not same:
+            bad.append(f"line {i + 1}: {x!r} built, {y!r} committed")
+    return bad
+
+
 @needs_assets
-def test_the_build_reproduces_the_committed_template_byte_for_byte(bt, tmp_path):
+def test_the_build_reproduces_the_committed_template_to_the_printed_digit(bt, tmp_path):
     summary = bt.build(ASSETS, tmp_path)
     assert summary["dental_drop"] == 0.0
     for name in FILES:
-        assert (tmp_path / name).read_bytes() == (ROOT / "templates" / "skull" / name).read_bytes(), name
+        bad = _same_to_the_printed_digit((tmp_path / name).read_text(),
+                                         (ROOT / "templates" / "skull" / name).read_text())
+        assert not bad, (name, bad[:5])
+
+
+def test_the_printed_digit_comparison_catches_a_real_change():
+    base = "# header\nv 1.000000 -2.500000 3.250000\nf 1 2 3\n"
+    assert _same_to_the_printed_digit(base, base.replace("3.250000", "3.250001")) == []
+    assert _same_to_the_printed_digit(base, base.replace("3.250000", "3.250002"))
+    assert _same_to_the_printed_digit(base, base.replace("f 1 2 3", "f 1 3 2"))
+    assert _same_to_the_printed_digit(base, base.replace("header", "heading"))
+    assert _same_to_the_printed_digit(base, base.replace("-2.500000", "2.500000"))
+    assert _same_to_the_printed_digit("a: [0.5, -6.86341]", "a: [0.5, -6.863411]") == []
+    assert _same_to_the_printed_digit("a: [0.5, -6.86341]", "a: [0.5, -6.86343]")
+    assert _same_to_the_printed_digit(base, base + "v 0 0 0\n")
 
 
 def _turned(v0, v1, f):

@@ -114,8 +114,11 @@ def test_ctrl_c_stops_at_once_with_status_130_and_a_partial_report(tmp_path, hea
     args = [str(a) for a in [sys.executable, "-m", "faceforge.cli", "--no-progress", "batch",
                              *[heads_dir / f"{h}.obj" for h in HEADS], "--fap", short_fap,
                              "--plugin", PLUGIN, "--out", out, "--jobs", "2"]]
+    # a terminal's process gets SIGINT's default action; one started from a background job
+    # (``pytest ... &``) inherits it ignored, and Python then never raises KeyboardInterrupt
     proc = subprocess.Popen(args, cwd=ROOT, env={**subprocess_env, "FACEFORGE_FAKE_DELAY": "5"},
-                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                            start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     logs = [out / h / batch.HEAD_LOG for h in HEADS[:2]]
     deadline = time.monotonic() + 60
     while not all(p.exists() and "fit: running" in p.read_text() for p in logs) and time.monotonic() < deadline:
