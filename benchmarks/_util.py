@@ -64,10 +64,38 @@ def print_table(rows: list[dict], columns: list[str] | None = None, title: str |
     print()
 
 
+#: the libraries whose releases move the figures (numba's LLVM compiles the solver)
+LIBRARIES = ("numpy", "scipy", "numba", "llvmlite", "trimesh", "tbb")
+
+
+def _cpu() -> dict:
+    """The CPU's model name, clock and widest vector extension, from /proc/cpuinfo (Linux)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return {}
+    fields = dict(line.split(":", 1) for line in text.splitlines()[:40] if ":" in line)
+    fields = {k.strip(): v.strip() for k, v in fields.items()}
+    flags = set(fields.get("flags", "").split())
+    vector = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), None)
+    return {"model": fields.get("model name"), "mhz": fields.get("cpu MHz"), "vector": vector}
+
+
 def machine() -> dict:
-    """A short description of where the numbers were measured."""
+    """A short description of where the numbers were measured: the platform, the CPU and the
+    versions of the libraries that move the figures (a new numba can change them as much as
+    a new machine)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    libs = {}
+    for name in LIBRARIES:
+        try:
+            libs[name] = version(name)
+        except PackageNotFoundError:
+            libs[name] = None
     return {"platform": platform.platform(), "python": platform.python_version(),
-            "processor": platform.processor() or platform.machine(), "cpus": os.cpu_count()}
+            "processor": platform.processor() or platform.machine(), "cpus": os.cpu_count(),
+            "cpu": _cpu(), "libraries": libs}
 
 
 def write_results(name: str, data: dict) -> Path:

@@ -590,14 +590,19 @@ def run_calibrate(ctx):
         "rows": [r.as_dict() for r in rows],
         "unobservable_faps": sorted(int(f) for f in template.mapped_faps() if int(f) not in probes)})
     table = format_table(rows)
-    med = summary["all"]["median_relative_error"]
+    med = _percent(summary["all"]["median_relative_error"])
     (ctx.out_dir / "report.txt").write_text(
         table + f"\n\nmedian relative error (lip, jaw, cheek, eyebrow): "
-        f"{'n/a' if med is None else f'{100 * med:.1f}%'}; {summary['all']['within_10_percent']} of "
+        f"{med}; {summary['all']['within_10_percent']} of "
         f"{summary['all']['count']} rows within 10 %, {summary['all']['saturated']} at full contraction "
         f"(c=max)\n")
-    ctx.log(f"median relative error {'n/a' if med is None else f'{100 * med:.1f}%'} "
-            f"(uncalibrated {summary['all_uncalibrated']['median_relative_error']})")
+    ctx.log(f"median relative error {med} "
+            f"(uncalibrated {_percent(summary['all_uncalibrated']['median_relative_error'])})")
+
+
+def _percent(fraction) -> str:
+    """``0.0504`` -> ``'5.0%'``; None (no rows) -> ``'n/a'``."""
+    return "n/a" if fraction is None else f"{100 * fraction:.1f}%"
 
 
 def _lip_opening(mapping, simulate, head, value):
