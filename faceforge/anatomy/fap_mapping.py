@@ -24,8 +24,9 @@ A muscle asked for by several entries takes the **largest** request, clipped to
 several FAPs usually describe one action at several points of the same tissue (the three
 upper-lip FAPs 51, 55, 56 and the one orbicularis oris), and each entry is calibrated alone,
 so adding them would over-drive the shared muscle. Jaw DOFs add (each has its own FAP) and
-are clipped to the mapping's limits. FAP 2 (expression) is expanded into low-level FAPs
-with the ``expressions`` table before all this (:func:`expression_faps`).
+are clipped to the mapping's limits. FAP 2 (expression) and FAP 1 (viseme) are expanded
+into low-level FAPs with the ``expressions`` and ``visemes`` tables before all this
+(:func:`expression_faps`, :func:`viseme_faps`).
 
 This module imports nothing of ``faceforge.mpeg4`` (anatomy stays below mpeg4 in the
 dependency order): FAPs travel as ``(n_frames, 68)`` arrays, column ``k`` = FAP ``k+1``,
@@ -48,6 +49,14 @@ FAPU_NAMES = ("IRISD", "ES", "ENS", "MNS", "MW", "AU")
 EXPRESSION_IDS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
 #: the largest MPEG-4 expression intensity (6 bits)
 EXPRESSION_INTENSITY_MAX = 63.0
+#: MPEG-4 viseme_select values (ISO/IEC 14496-2, FAP 1; 0 = none), named by their phonemes:
+#: p b m (put, bed, mill), f v (far, voice), T D (think, that), t d (tip, doll), k g (call,
+#: gas), tS dZ S (chair, join, she), s z (sir, zeal), n l (lot, not), r (red), A: (car),
+#: e (bed), I (tip), Q (top), U (book)
+VISEME_IDS = {"p_b_m": 1, "f_v": 2, "th": 3, "t_d": 4, "k_g": 5, "ch_j_sh": 6, "s_z": 7,
+              "n_l": 8, "r": 9, "a": 10, "e": 11, "i": 12, "o": 13, "u": 14}
+#: viseme_blend of a frame that is all viseme_select1 (6 bits)
+VISEME_BLEND_MAX = 63.0
 
 
 @dataclass(frozen=True)
@@ -79,13 +88,15 @@ class FapEntry:
 
 @dataclass(frozen=True)
 class FapMapping:
-    """The whole mapping: entries, jaw limits, expressions (low-level FAPs at intensity 63)."""
+    """The whole mapping: entries, jaw limits, and the presets: expressions (low-level FAPs
+    at intensity 63) and visemes (low-level FAPs of each mouth shape)."""
 
     entries: tuple[FapEntry, ...]
     jaw_limits: dict                                  # dof -> (lo, hi); rad, rad, lever fraction
     expressions: dict                                 # name -> (68,) float FAP values
     source: str = "<memory>"
     max_contraction: float = 1.0                      # contractions are clipped to [0, this]
+    visemes: dict = field(default_factory=dict)       # name -> (68,) float FAP values
 
     @property
     def muscles(self) -> tuple[str, ...]:
@@ -242,20 +253,31 @@ def mapping_from_dict(data: dict, source: str = "<memory>") -> FapMapping:
         if not lo <= 0.0 <= hi:
             raise _err(source, f"jaw_limits.{dof}: expected lo <= 0 <= hi, got [{lo}, {hi}]")
         limits[dof] = (lo, hi)
-    expressions = {}
-    for name, spec in (data.get("expressions") or {}).items():
-        if name not in EXPRESSION_IDS:
-            raise _err(source, f"expressions.{name}: unknown expression; valid: {sorted(EXPRESSION_IDS)}")
-        row = np.zeros(N_FAPS)
-        for k, v in ((spec or {}).get("faps") or {}).items():
-            row[_fap_number(k, source, f"expressions.{name}.faps") - 1] = _as_float(
-                v, source, f"expressions.{name}.faps.{k}")
-        expressions[name] = row
+    expressions = _presets(data, "expressions", EXPRESSION_IDS, source)
+    visemes = _presets(data, "visemes", VISEME_IDS, source)
     cmax = _as_float(data.get("max_contraction", 1.0), source, "max_contraction")
     if not 0.0 < cmax <= 1.0:
         raise _err(source, f"max_contraction: expected a number in (0, 1], got {cmax}")
     return FapMapping(entries=entries, jaw_limits=limits, expressions=expressions, source=str(source),
-                      max_contraction=cmax)
+                      max_contraction=cmax, visemes=visemes)
+
+
+def _presets(data: dict, table: str, ids: dict, source) -> dict:
+    """The preset table ``table`` of a mapping (``expressions`` or ``visemes``): name ->
+    (68,) low-level FAP values; names outside ``ids`` are an error naming the valid ones."""
+    out = {}
+    spec_of = data.get(table) or {}
+    if not isinstance(spec_of, dict):
+        raise _err(source, f"{table}: expected a mapping of name -> {{faps: {{FAP: value}}}}")
+    for name, spec in spec_of.items():
+        if name not in ids:
+            raise _err(source, f"{table}.{name}: unknown {table[:-1]}; valid: {sorted(ids, key=ids.get)}")
+        row = np.zeros(N_FAPS)
+        for k, v in ((spec or {}).get("faps") or {}).items():
+            row[_fap_number(k, source, f"{table}.{name}.faps") - 1] = _as_float(
+                v, source, f"{table}.{name}.faps.{k}")
+        out[name] = row
+    return out
 
 
 def load_fap_mapping(path) -> FapMapping:
@@ -298,12 +320,16 @@ def mapping_to_dict(mapping: FapMapping) -> dict:
         if e.response is not None:
             d["response"] = [[float(a), float(b)] for a, b in e.response]
         entries.append(d)
-    exprs = {name: {"id": EXPRESSION_IDS[name],
-                    "faps": {int(k + 1): float(row[k]) for k in np.flatnonzero(row)}}
-             for name, row in mapping.expressions.items()}
-    return {"max_contraction": float(mapping.max_contraction), "entries": entries,
-            "jaw_limits": {k: [float(v[0]), float(v[1])] for k, v in mapping.jaw_limits.items()},
-            "expressions": exprs}
+    def presets(table, ids):
+        return {name: {"id": ids[name], "faps": {int(k + 1): float(row[k]) for k in np.flatnonzero(row)}}
+                for name, row in table.items()}
+
+    out = {"max_contraction": float(mapping.max_contraction), "entries": entries,
+           "jaw_limits": {k: [float(v[0]), float(v[1])] for k, v in mapping.jaw_limits.items()},
+           "expressions": presets(mapping.expressions, EXPRESSION_IDS)}
+    if mapping.visemes:
+        out["visemes"] = presets(mapping.visemes, VISEME_IDS)
+    return out
 
 
 def save_fap_mapping(mapping: FapMapping, path, header: str = "") -> None:
@@ -371,6 +397,46 @@ def expression_faps(mapping: FapMapping, fap2: np.ndarray) -> np.ndarray:
             if row is not None:
                 out[i] += row * (inten / EXPRESSION_INTENSITY_MAX)
     return out
+
+
+def viseme_weights(fap1: np.ndarray) -> np.ndarray:
+    """Weight of each viseme ``(n, 14)`` (column ``k`` = viseme_select ``k + 1``, the order of
+    :data:`VISEME_IDS`) for FAP 1 values ``fap1`` (n, >=3).
+
+    Columns: viseme_select1, viseme_select2, viseme_blend (MPEG-4): the mouth shape is
+    ``select1 * blend / 63 + select2 * (1 - blend / 63)``, blend clipped to [0, 63]; select 0
+    (none) or an unknown code adds nothing (so select1 alone needs blend 63). A viseme in
+    both slots gets both weights.
+    """
+    fap1 = np.atleast_2d(np.asarray(fap1, dtype=float))
+    if fap1.shape[1] < 3:
+        raise ValueError(f"fap1 must be (n, >=3), got {fap1.shape}")
+    share = np.clip(np.nan_to_num(fap1[:, 2]) / VISEME_BLEND_MAX, 0.0, 1.0)
+    out = np.zeros((len(fap1), len(VISEME_IDS)))
+    for col, weight in ((0, share), (1, 1.0 - share)):
+        code = np.rint(np.nan_to_num(fap1[:, col])).astype(np.int64)
+        rows = np.flatnonzero((code >= 1) & (code <= len(VISEME_IDS)))
+        np.add.at(out, (rows, code[rows] - 1), weight[rows])
+    return out
+
+
+def viseme_faps(mapping: FapMapping, fap1: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Low-level FAPs (n, 68) for FAP 1 values ``fap1`` (n, >=3): each viseme's table row
+    times its :func:`viseme_weights` weight, and the names of the visemes the frames select
+    (with a weight) that the mapping's ``visemes`` table lacks."""
+    w = viseme_weights(fap1)
+    names = sorted(VISEME_IDS, key=VISEME_IDS.get)
+    out = np.zeros((len(w), N_FAPS))
+    missing = []
+    for k, name in enumerate(names):
+        if not np.any(w[:, k]):
+            continue
+        row = mapping.visemes.get(name)
+        if row is None:
+            missing.append(name)
+        else:
+            out += np.outer(w[:, k], row)
+    return out, missing
 
 
 def entry_drive(mapping: FapMapping, faps: np.ndarray) -> np.ndarray:

@@ -1,16 +1,18 @@
-"""MPEG-4 Face Animation: FAP/FDP tables, FAPU, the .fap reader/writer, expressions.
+"""MPEG-4 Face Animation: FAP/FDP tables, FAPU, the .fap reader/writer, expressions, visemes.
 
 Imports nothing of faceforge but ``constants``/``exceptions``. Public API::
 
     from faceforge.mpeg4 import (FAP_TABLE, FDP_TABLE, FAPU_NAMES, LIP_PAIRS, fap_record,
                                  FapTrack, read_fap, write_fap, parse_fap, format_fap, FapWarning,
                                  Fapu, fapu_from_landmarks, fap_displacement,
-                                 EXPRESSIONS, expression_track, expression_weights)
+                                 EXPRESSIONS, expression_track, expression_weights,
+                                 VISEMES, viseme_track)
 """
 
 from .expressions import EXPRESSION_CODES, EXPRESSIONS, expression_track, expression_weights
 from .fap import FapTrack, FapWarning, format_fap, parse_fap, read_fap, write_fap
 from .fapu import Fapu, fap_displacement, fapu_from_landmarks
+from .visemes import VISEME_CODES, VISEMES, viseme_track
 from .tables import (
     DIRECTION_VECTORS,
     FAP_BY_NAME,
@@ -42,6 +44,8 @@ __all__ = [
     "FDP_TABLE",
     "LIP_PAIRS",
     "N_FAPS",
+    "VISEME_CODES",
+    "VISEMES",
     "FapRecord",
     "FapTrack",
     "FapWarning",
@@ -55,5 +59,6 @@ __all__ = [
     "format_fap",
     "parse_fap",
     "read_fap",
+    "viseme_track",
     "write_fap",
 ]

@@ -5,10 +5,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceforge.anatomy.fap_mapping import (EXPRESSION_IDS, N_FAPS, JawLevers, entry_drive,
-                                           expression_faps, fap_controls, load_fap_mapping,
-                                           mapping_from_dict, mapping_to_dict, response_curve,
-                                           save_fap_mapping, with_entry)
+from faceforge.anatomy.fap_mapping import (EXPRESSION_IDS, N_FAPS, VISEME_IDS, JawLevers,
+                                           entry_drive, expression_faps, fap_controls,
+                                           load_fap_mapping, mapping_from_dict, mapping_to_dict,
+                                           response_curve, save_fap_mapping, viseme_faps,
+                                           viseme_weights, with_entry)
 from faceforge.exceptions import FaceforgeError, TemplateError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,6 +36,30 @@ def test_every_requested_fap_group_is_mapped(mapping):
     required = {3, 14, 15, *range(4, 14), 16, 17, *range(51, 61), *range(31, 43)}
     assert required <= mapped
     assert set(mapping.expressions) == set(EXPRESSION_IDS)
+    assert set(mapping.visemes) == set(VISEME_IDS)
+
+
+def test_every_preset_fap_drives_something(mapping):
+    # a preset's FAP that no entry maps would be dropped without a word; the lids (19-22) are
+    # played over the skin by anatomy.eyelids
+    mapped = set(mapping.mapped_faps().tolist()) | {19, 20, 21, 22}
+    for table in (mapping.expressions, mapping.visemes):
+        for name, row in table.items():
+            used = {int(k) + 1 for k in np.flatnonzero(row)}
+            assert used <= mapped, (name, sorted(used - mapped))
+            assert used, name
+
+
+def test_viseme_shapes_are_symmetric_and_twins_agree(mapping):
+    # the mouth shapes of speech are left-right symmetric, and give an outer-lip FAP and its
+    # inner-lip twin the same value (the mapping drives a twin pair by their mean)
+    pairs = [(53, 54), (6, 7), (59, 60), (12, 13), (55, 56), (8, 9), (57, 58), (10, 11)]
+    twins = [(e.faps[0], e.faps[1]) for e in mapping.entries if len(e.faps) == 2]
+    for name, row in mapping.visemes.items():
+        for a, b in pairs:
+            assert row[a - 1] == row[b - 1], (name, a, b)
+        for outer, inner in twins:
+            assert row[outer - 1] == row[inner - 1], (name, outer, inner)
 
 
 def test_rest_is_zero(mapping):
@@ -110,6 +135,37 @@ def test_expression_faps_scale_with_intensity(mapping):
     assert not low[3].any()
 
 
+def test_viseme_weights_follow_the_mpeg4_blend():
+    a, u, pbm = VISEME_IDS["a"], VISEME_IDS["u"], VISEME_IDS["p_b_m"]
+    fap1 = np.array([[a, 0, 63, 0],       # select1 alone needs blend 63
+                     [a, 0, 0, 0],        # blend 0: all select2, here none
+                     [a, u, 21, 0],       # a third a, two thirds u
+                     [pbm, pbm, 40, 0],   # one viseme in both slots: both weights
+                     [0, 15, 63, 0],      # none, and a code past the table
+                     [a, u, 90, 1]])      # blend clipped to 63
+    w = viseme_weights(fap1)
+    assert w.shape == (6, 14)
+    assert w[0, a - 1] == 1.0 and w[0].sum() == 1.0
+    assert not w[1].any() and not w[4].any()
+    assert w[2, a - 1] == pytest.approx(1 / 3) and w[2, u - 1] == pytest.approx(2 / 3)
+    assert w[3, pbm - 1] == pytest.approx(1.0) and w[3].sum() == pytest.approx(1.0)
+    assert w[5, a - 1] == 1.0 and w[5, u - 1] == 0.0
+
+
+def test_viseme_faps_mix_the_shapes_and_name_the_missing_ones(mapping):
+    a, o = VISEME_IDS["a"], VISEME_IDS["o"]
+    fap1 = np.array([[a, o, 63, 0], [a, o, 31.5, 0], [0, 0, 0, 0]])
+    low, missing = viseme_faps(mapping, fap1)
+    assert missing == []
+    assert np.array_equal(low[0], mapping.visemes["a"])
+    assert np.allclose(low[1], 0.5 * (mapping.visemes["a"] + mapping.visemes["o"]))
+    assert not low[2].any()
+    # a mapping without the table plays nothing and says which visemes it lacks
+    bare = mapping_from_dict({k: v for k, v in mapping_to_dict(mapping).items() if k != "visemes"})
+    low, missing = viseme_faps(bare, fap1)
+    assert not low.any() and missing == ["a", "o"]
+
+
 def test_response_curve_passes_through_knots_and_origin():
     knots = np.array([[-100.0, -150.0], [50.0, 40.0], [100.0, 120.0]])
     v = np.array([-100.0, 0.0, 50.0, 100.0, 150.0, -200.0])
@@ -140,6 +196,10 @@ def test_save_load_round_trip(mapping, tmp_path):
     (lambda d: d["entries"][3].update(response=[[10, 5], [20, 1], [30, 8]]), "monotone"),
     (lambda d: d["jaw_limits"].update(pitch=[0.1, 0.4]), "lo <= 0 <= hi"),
     (lambda d: d["entries"][3].update(bogus=1), "unknown keys"),
+    (lambda d: d["visemes"].update(schwa={"faps": {3: 50}}), "visemes.schwa: unknown viseme"),
+    (lambda d: d["visemes"]["a"]["faps"].update({2: 10}), "not a low-level FAP"),
+    (lambda d: d["expressions"].update(contempt={"faps": {3: 50}}), "unknown expression"),
+    (lambda d: d.update(visemes=[1, 2]), "visemes: expected a mapping"),
 ])
 def test_bad_mapping_errors_name_the_file(mapping, edit, needle):
     d = mapping_to_dict(mapping)

@@ -27,6 +27,10 @@ ACTIONS = [
     ("mouth-elevation", "8.1", 1, -1, "MNS", (51, 4)),             # lower_t_midlip (negative = up)
     ("eye-left-opened-up", "3.1", 1, -1, "IRISD", (19, 20)),       # close_t_l_eyelid (negative = up)
     ("eye-left-slit", "3.3", 1, +1, "IRISD", (21, 22)),            # close_b_l_eyelid (up)
+    ("mouth-protusion", "8.1", 2, +1, "MNS", (17,)),               # push_t_lip (forward)
+    ("mouth-protusion", "8.2", 2, +1, "MNS", (16,)),               # push_b_lip (forward)
+    ("mouth-pursing", "8.3", 0, -1, "MW", (53, 6)),                # stretch_l_cornerlip (inwards)
+    ("mouth-depression-retraction", "8.2", 1, -1, "MNS", (52, 5)), # raise_b_midlip (down)
 ]
 
 
@@ -61,7 +65,8 @@ def test_calibration_magnitudes_are_within_a_real_face(reference):
     cfg = load_config()
     mags = cfg.get("animate.calibrate.magnitude")
     asked = {3: cfg.get("animate.calibrate.jaw_magnitude"), 59: mags["MNS"], 12: mags["MNS"],
-             53: mags["MW"], 6: mags["MW"], 33: mags["ENS"], 31: mags["ENS"], 51: mags["MNS"], 4: mags["MNS"]}
+             53: mags["MW"], 6: mags["MW"], 33: mags["ENS"], 31: mags["ENS"], 51: mags["MNS"], 4: mags["MNS"],
+             16: mags["MNS"], 17: mags["MNS"], 52: mags["MNS"], 5: mags["MNS"]}
     for fap, real in reference.items():
         if fap in (19, 20, 21, 22):   # the eyelids are kinematic: nothing to calibrate
             continue
@@ -70,10 +75,23 @@ def test_calibration_magnitudes_are_within_a_real_face(reference):
         assert 0.1 * real <= asked[fap] <= 1.5 * real, (fap, asked[fap], real)
 
 
-def test_expression_presets_stay_within_a_real_face(reference):
+@pytest.mark.parametrize("table", ["expressions", "visemes"])
+def test_presets_stay_within_a_real_face(reference, table):
     from faceforge.anatomy.fap_mapping import load_fap_mapping
 
     m = load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml")
-    for name, row in m.expressions.items():
+    presets = getattr(m, table)
+    assert presets
+    for name, row in presets.items():
         for fap, real in reference.items():
             assert abs(row[fap - 1]) <= 1.5 * real, (name, fap, row[fap - 1], real)
+
+
+def test_speech_moves_the_mouth_less_than_a_full_facial_action(reference):
+    # every viseme's jaw and lip values stay under the full-strength unit of the same action
+    from faceforge.anatomy.fap_mapping import load_fap_mapping
+
+    m = load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml")
+    for name, row in m.visemes.items():
+        for fap in (3, 16, 17, 53, 6, 52, 5):
+            assert abs(row[fap - 1]) <= reference[fap], (name, fap, row[fap - 1], reference[fap])

@@ -267,9 +267,9 @@ def test_eyelid_faps_close_the_lids_of_the_still_face(workdir, patched, tmp_path
     assert np.abs(frames[1] - v).max() > 0.01
 
 
-def test_a_viseme_track_says_fap_1_is_not_played(workdir, patched, tmp_path):
-    """Visemes (FAP 1) are read but there is no viseme table: the report lists FAP 1 as unmapped
-    (rather than dropping it silently) and the face stays at rest."""
+def test_a_mapping_without_visemes_says_fap_1_is_not_played(workdir, patched, tmp_path):
+    """Visemes (FAP 1) are read but the mapping has no viseme table: the report lists FAP 1 as
+    unmapped (rather than dropping it silently) and the face stays at rest."""
     from faceforge.io.stagefiles import load_npz
     from faceforge.mpeg4 import FapTrack, write_fap
 
@@ -283,6 +283,38 @@ def test_a_viseme_track_says_fap_1_is_not_played(workdir, patched, tmp_path):
     assert json.loads((out / "report.json").read_text())["unmapped_faps"] == [1]
     v, _ = S.skin_mesh()
     assert np.abs(load_npz(out / "animation.npz")["frames"] - v).max() < 1e-5
+
+
+def test_visemes_play_as_their_low_level_faps(workdir, patched, tmp_path):
+    """A FAP 1 track plays the mapping's viseme shapes: bit for bit the frames of the same mouth
+    shapes given as low-level FAPs (the two visemes of each frame mixed by viseme_blend / 63),
+    and the report names the visemes played."""
+    import yaml
+
+    from faceforge.anatomy.fap_mapping import mapping_from_dict, viseme_faps
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import FapTrack, viseme_track, write_fap
+
+    mapping = {**S.MAPPING, "visemes": {"a": {"id": 10, "faps": {3: 250}},
+                                        "i": {"id": 12, "faps": {3: 60, 59: 120, 12: 120}}}}
+    (tmp_path / "mapping.yaml").write_text(yaml.safe_dump(mapping))
+    said = viseme_track(["a", "i", "a"], fps=25, each=0.16, blend=0.08, ramp=0.08)
+    write_fap(tmp_path / "said.fap", said)
+    low, missing = viseme_faps(mapping_from_dict(mapping), said.viseme)
+    assert missing == [] and low[:, 2].max() == 250.0
+    given = np.zeros_like(low, dtype=bool)
+    given[:, np.flatnonzero(np.abs(low).max(axis=0))] = True    # every frame (absent FAPs hold)
+    write_fap(tmp_path / "low.fap", FapTrack.from_given(25.0, given, low))
+    runs = {}
+    for name in ("said", "low"):
+        out = run_stage("animate", workdir, {"fap": str(tmp_path / f"{name}.fap"),
+                                             "animate_mapping": str(tmp_path / "mapping.yaml")})
+        runs[name] = (load_npz(out / "animation.npz"), json.loads((out / "report.json").read_text()))
+    (a, rep_a), (b, rep_b) = runs["said"], runs["low"]
+    assert rep_a["visemes"] == ["a", "i"] and rep_b["visemes"] == []
+    assert rep_a["unmapped_faps"] == [] and rep_a["checks"]["ok"]
+    assert np.array_equal(a["frames"], b["frames"]) and np.array_equal(a["jaw"], b["jaw"])
+    assert a["jaw"][:, 0].max() > 0.0 and a["contractions"][:, 0].max() > 0.0   # the jaw opens, the smile pulls
 
 
 def test_calibration_report_meets_the_acceptance(calibrated):

@@ -62,9 +62,9 @@ def calibrated_mapping_path(workdir) -> Path:
 
 
 def mapping_digest_without_presets(path) -> str:
-    """SHA-256 of a FAP mapping file without its ``expressions`` table (the calibrate stage's
-    digest of the template: calibration never reads the presets, animate takes them from the
-    template, so editing one costs no recalibration). A file that is not a YAML mapping is
+    """SHA-256 of a FAP mapping file without its presets, the ``expressions`` and ``visemes``
+    tables (the calibrate stage's digest of the template: calibration never reads the presets,
+    animate takes them from the template, so editing one costs no recalibration). A file that is not a YAML mapping is
     digested whole (the stage then reports it when it runs)."""
     import hashlib
     import json
@@ -80,6 +80,7 @@ def mapping_digest_without_presets(path) -> str:
     if not isinstance(data, dict):
         return file_digest(path)
     data.pop("expressions", None)
+    data.pop("visemes", None)
     text = json.dumps(data, sort_keys=True, default=str)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -376,31 +377,48 @@ def _template_path(raw) -> Path:
 # --------------------------------------------------------------------------- FAPs -> controls
 
 def track_faps(track, mapping):
-    """Low-level FAP frames ``(F, 68)`` of a track: its own values (absent ones 0) plus those
-    of its FAP 2 expressions (the mapping's table)."""
+    """``(faps, missing)``: the low-level FAP frames ``(F, 68)`` of a track, its own values
+    (absent ones 0) plus those of its FAP 2 expressions and FAP 1 visemes (the mapping's
+    ``expressions`` and ``visemes`` tables), and the names of the visemes it selects that the
+    mapping has no shape for."""
     import numpy as np
 
-    from faceforge.anatomy.fap_mapping import expression_faps
+    from faceforge.anatomy.fap_mapping import expression_faps, viseme_faps
 
     faps = np.nan_to_num(np.asarray(track.values, dtype=float))
     faps[:, :2] = 0.0
-    return faps + expression_faps(mapping, track.expression)
+    shapes, missing = viseme_faps(mapping, track.viseme)
+    return faps + expression_faps(mapping, track.expression) + shapes, missing
 
 
 def track_controls(track, mapping, head):
     """(contractions (F, m), jaw (F, 3), unmapped FAP numbers with nonzero values, the track's
     low-level FAP frames (F, 68) of :func:`track_faps`). FAP 1 counts as unmapped when the
-    track selects a viseme: there is no viseme table (FAP 2's expressions have one, the
-    mapping's ``expressions``)."""
+    track selects a viseme the mapping's ``visemes`` table lacks."""
     import numpy as np
 
-    faps = track_faps(track, mapping)
+    faps, missing = track_faps(track, mapping)
     mapped = set(mapping.mapped_faps().tolist())
     unmapped = sorted(int(k + 1) for k in np.flatnonzero(np.abs(faps).max(axis=0) > 0) if k + 1 not in mapped)
-    if np.any(np.asarray(track.viseme)[np.asarray(track.mask)[:, 0], :2] != 0):
+    if missing:
         unmapped = [1, *unmapped]
     c, jaw = controls(mapping, faps, head)
     return c, jaw, unmapped, faps
+
+
+def visemes_in_frames(track):
+    """(F,) bool: the frames whose FAP 1 gives some viseme a weight."""
+    from faceforge.anatomy.fap_mapping import viseme_weights
+
+    return viseme_weights(track.viseme).any(axis=1)
+
+
+def visemes_played(track) -> list[str]:
+    """The names of the visemes a track's FAP 1 gives a weight in some frame, by code."""
+    from faceforge.anatomy.fap_mapping import VISEME_IDS, viseme_weights
+
+    used = viseme_weights(track.viseme).any(axis=0)
+    return [name for name in sorted(VISEME_IDS, key=VISEME_IDS.get) if used[VISEME_IDS[name] - 1]]
 
 
 def controls(mapping, faps, head):
@@ -420,9 +438,9 @@ def controls(mapping, faps, head):
 
 def _mapping(ctx):
     """The mapping to play (``animate_mapping``) and its path. Playing the workdir's calibration,
-    the expression presets are the template's (``animate.fap_mapping``): calibration measures
-    the FAP entries only, and a preset edited there (or new in a faceforge release) plays
-    without a recalibration."""
+    the presets (expressions and visemes) are the template's (``animate.fap_mapping``):
+    calibration measures the FAP entries only, and a preset edited there (or new in a faceforge
+    release) plays without a recalibration."""
     from dataclasses import replace
 
     from faceforge.anatomy.fap_mapping import load_fap_mapping
@@ -430,7 +448,8 @@ def _mapping(ctx):
     path = ctx.param("animate_mapping")
     mapping = load_fap_mapping(path)
     if Path(path).resolve() == calibrated_mapping_path(ctx.workdir).resolve():
-        mapping = replace(mapping, expressions=load_fap_mapping(mapping_template_path(ctx.config)).expressions)
+        template = load_fap_mapping(mapping_template_path(ctx.config))
+        mapping = replace(mapping, expressions=template.expressions, visemes=template.visemes)
     return mapping, str(path)
 
 
@@ -459,6 +478,10 @@ def run_animate(ctx):
         if lids.faps and np.any(faps[:, [f - 1 for f in lids.faps]]):
             ctx.log(f"eyelids (FAPs {', '.join(map(str, lids.faps))}) on {len(lids.fields)} eye"
                     f"{'s' if len(lids.fields) > 1 else ''}")
+    visemes = visemes_played(track)
+    if visemes:
+        ctx.log(f"visemes (FAP 1) in {int(np.count_nonzero(visemes_in_frames(track)))} frames: "
+                f"{', '.join(visemes)}")
     if unmapped:
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
@@ -491,7 +514,7 @@ def run_animate(ctx):
         "user_vertices": int(user.shape[1]), "working_vertices": int(len(head.rest)),
         "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
         "max_contraction": float(c.max()) if c.size else 0.0,
-        "eyes_with_lids": len(lids.fields) if lids is not None else 0,
+        "eyes_with_lids": len(lids.fields) if lids is not None else 0, "visemes": visemes,
         "max_head_rotation_deg": np.degrees(np.abs(angles).max(axis=0)).tolist() if len(angles) else [0, 0, 0],
         "max_jaw": jaw.max(axis=0).tolist() if len(jaw) else [0, 0, 0]})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame on {threads} thread"
@@ -504,7 +527,7 @@ ANIMATE = register_stage(Stage(
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate"),
     inputs=("fap", "animate_mapping", "animate.fap_mapping"), outputs=("animation.npz", "report.json"),
-    version="6", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="7", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- calibrate
