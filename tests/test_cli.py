@@ -207,3 +207,11 @@ def test_workdir_from_the_environment(invoke, echo_stage, tmp_path):
                     env={"FACEFORGE_WORKDIR": str(tmp_path / "envwork")})
     assert result.exit_code == 0, result.stderr
     assert (tmp_path / "envwork" / "t_echo" / "stage.json").exists()
+
+
+@pytest.mark.parametrize("command", ["expressions", "visemes"])
+def test_a_sheet_command_wants_a_png(invoke, tmp_path, command):
+    result = invoke("-w", tmp_path / "w", command, "-o", tmp_path / "sheet.txt")
+    assert result.exit_code == 2
+    assert result.stderr == f"faceforge: error: {tmp_path / 'sheet.txt'}: the sheet is a PNG: give -o a .png path\n"
+    assert not (tmp_path / "w").exists() or not any((tmp_path / "w").iterdir())

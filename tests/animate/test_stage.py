@@ -62,8 +62,9 @@ class ConfigSpy:
         return getattr(self._config, name)
 
 
-def run_stage(stage_name, workdir, params, sets=SETS, reads=None):
-    """Run one stage in ``workdir``; ``reads`` (a list): record into it every config key read."""
+def run_stage(stage_name, workdir, params, sets=SETS, reads=None, logged=None):
+    """Run one stage in ``workdir``; ``reads`` (a list): record into it every config key read;
+    ``logged`` (a list): the stage's log lines."""
     from faceforge.io.config import load_config
     from faceforge.pipeline import StageContext, get_stage
 
@@ -77,7 +78,7 @@ def run_stage(stage_name, workdir, params, sets=SETS, reads=None):
         config = ConfigSpy(config)
         config.read = reads
     ctx = StageContext(name=stage_name, config=config, params=params, out_dir=out, workdir=workdir,
-                       deps=("fit", "bind"))
+                       deps=("fit", "bind"), **({} if logged is None else {"logger": logged.append}))
     get_stage(stage_name).run(ctx)
     return out
 
@@ -497,3 +498,33 @@ def test_expressions_needs_all_six_presets(workdir, patched):
 
     with pytest.raises(StageError, match="no preset for sadness"):
         run_stage("expressions", workdir, {"animate_mapping": str(workdir / "mapping.yaml")})
+
+
+def test_visemes_sheet_settles_the_shapes_the_table_has(workdir, patched, tmp_path):
+    """``faceforge visemes``: the neutral face and each viseme of the mapping's table, in the
+    standard's order, settled as a static pose (the shapes through the same mapping as a FAP
+    track); the visemes the table lacks are named and left out."""
+    from faceforge.io.stagefiles import load_npz
+
+    mapping = {**yaml.safe_load(yaml.safe_dump(S.MAPPING)),
+               "visemes": {"i": {"faps": {3: 60, 59: 120, 12: 120}}, "a": {"faps": {3: 250}}}}
+    (tmp_path / "two.yaml").write_text(yaml.safe_dump(mapping))
+    logged = []
+    out = run_stage("visemes", workdir, {"animate_mapping": str(tmp_path / "two.yaml")}, logged=logged)
+    d = load_npz(out / "visemes.npz")
+    report = json.loads((out / "report.json").read_text())
+    assert list(d["names"]) == ["neutral", "a", "i"]            # code order: a is 10, i is 12
+    v, _ = S.skin_mesh()
+    assert np.abs(d["poses"][0] - v).max() < 1e-5
+    assert d["contractions"][2, 0] == pytest.approx(120 * 0.003) and d["contractions"][1, 0] == 0.0
+    assert d["jaw"][1, 0] > d["jaw"][2, 0] > 0.0                  # a opens the jaw more than i
+    assert all(e["checks"]["ok"] for e in report["visemes"].values())
+    assert (out / "visemes.png").stat().st_size > 0
+    assert any("no shape for p_b_m, f_v, th" in line for line in logged), logged
+
+
+def test_visemes_needs_a_table(workdir, patched):
+    from faceforge.exceptions import StageError
+
+    with pytest.raises(StageError, match="no visemes table"):
+        run_stage("visemes", workdir, {"animate_mapping": str(workdir / "mapping.yaml")})

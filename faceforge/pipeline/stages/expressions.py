@@ -1,4 +1,5 @@
-"""The expressions stage: the six basic expressions on the bound head, side by side (paper Fig. 10).
+"""The sheet stages: the six basic expressions (paper Fig. 10) and the fourteen visemes on the
+bound head, side by side.
 
 ``faceforge expressions [-o sheet.png]`` settles the head into each of the six presets of the
 mapping (joy, sadness, anger, fear, disgust, surprise; the template's presets, as ``animate``
@@ -13,6 +14,10 @@ expressions.npz
 report.json
     per expression: the physical checks (inverted triangles, skin inside the skull, folded
     edges), its largest contraction and jaw opening.
+
+``faceforge visemes [-o sheet.png]`` does the same for the mapping's ``visemes`` table (p_b_m
+... u, those it has) into ``<workdir>/visemes/`` (``visemes.png``, five columns;
+``visemes.npz``; ``report.json``).
 
 Each pose is reached as ``calibrate`` reaches its probes (:func:`faceforge.anatomy.animate.
 static_poses`: eased in, then held for ``animate.calibrate.settle_frames`` frames), with the
@@ -30,74 +35,119 @@ from faceforge.pipeline import Stage, register_command, register_stage
 
 
 def run_expressions(ctx):
-    """Settle each preset, check it, draw the sheet."""
+    """Settle each of the six expression presets, check it, draw the sheet."""
+    from faceforge.mpeg4.expressions import EXPRESSIONS
+
+    def rows(mapping, mapping_path):
+        missing = [name for name in EXPRESSIONS if name not in mapping.expressions]
+        if missing:
+            from faceforge.exceptions import StageError
+
+            raise StageError(f"the mapping has no preset for {', '.join(missing)}", mapping_path)
+        return {name: mapping.expressions[name] for name in EXPRESSIONS}
+
+    _preset_sheet(ctx, "expressions", rows, cols=4,
+                  title="the six basic expressions (template presets, full intensity)")
+
+
+def run_visemes(ctx):
+    """Settle each viseme of the mapping's table, check it, draw the sheet."""
+    from faceforge.mpeg4.visemes import VISEMES
+
+    def rows(mapping, mapping_path):
+        if not mapping.visemes:
+            from faceforge.exceptions import StageError
+
+            raise StageError("the mapping has no visemes table", mapping_path)
+        missing = [name for name in VISEMES if name not in mapping.visemes]
+        if missing:
+            ctx.log(f"the mapping has no shape for {', '.join(missing)}: left out")
+        return {name: mapping.visemes[name] for name in VISEMES if name in mapping.visemes}
+
+    _preset_sheet(ctx, "visemes", rows, cols=5, title="the MPEG-4 visemes (template shapes)")
+
+
+def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
+    """The shared body of the sheet stages: ``rows(mapping, path) -> {name: (68,) FAPs}`` (in
+    sheet order) are settled after the neutral face, checked, and written as ``<stem>.png``,
+    ``<stem>.npz`` (``names``, ``poses`` in the user's order, ``contractions``, ``controls``,
+    ``jaw``) and ``report.json`` (per pose: checks, largest contraction, jaw DOFs)."""
     import numpy as np
 
     from faceforge.anatomy.animate import check_animation, static_poses
     from faceforge.io.stagefiles import save_json, save_npz
-    from faceforge.mpeg4.expressions import EXPRESSIONS
     from faceforge.pipeline.stages.animate import BoundHead, _mapping, controls
     from faceforge.viz.contact_sheet import contact_sheet
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, mapping_path = _mapping(ctx)
-    missing = [name for name in EXPRESSIONS if name not in mapping.expressions]
-    if missing:
-        from faceforge.exceptions import StageError
-
-        raise StageError(f"the mapping has no preset for {', '.join(missing)}", mapping_path)
-    names = ["neutral", *EXPRESSIONS]
-    faps = np.stack([np.zeros(68), *(mapping.expressions[n] for n in EXPRESSIONS)])
+    presets = rows(mapping, mapping_path)
+    names = ["neutral", *presets]
+    faps = np.stack([np.zeros(68), *presets.values()])
     c, jaw = controls(mapping, faps, head)
     settle = int(ctx.config.get("animate.calibrate.settle_frames"))
-    ctx.log(f"{len(EXPRESSIONS)} expressions, {settle} settle frames each")
+    ctx.log(f"{len(presets)} {stem}, {settle} settle frames each")
     poses = static_poses(head.rig, c, jaw, float(ctx.config.get("animate.fps")), settle=settle)
     lids = head.eyelids(ctx.config)
     if lids is not None:
         poses = lids.apply(poses, faps)
-    report = {"mapping": mapping_path, "expressions": {}}
+    report = {"mapping": mapping_path, stem: {}}
     for i, name in enumerate(names):
         checks = check_animation(head.rest, poses[i:i + 1], head.faces,
                                  skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
-        report["expressions"][name] = {"checks": checks.as_dict(), "max_contraction": float(c[i].max(initial=0.0)),
-                                       "jaw": jaw[i].tolist()}
+        report[stem][name] = {"checks": checks.as_dict(), "max_contraction": float(c[i].max(initial=0.0)),
+                              "jaw": jaw[i].tolist()}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
-    contact_sheet(ctx.out_dir / "expressions.png", poses, head.faces, range(len(names)), 1.0,
-                  cols=4, panel=3.2, labels=names, region=head.rest[:, 1] >= head.bone_heights()[0],
-                  title="the six basic expressions (template presets, full intensity)")
-    save_npz(ctx.out_dir / "expressions.npz", names=np.asarray(names), poses=head.to_user(poses).astype(np.float32),
+    contact_sheet(ctx.out_dir / f"{stem}.png", poses, head.faces, range(len(names)), 1.0,
+                  cols=cols, panel=3.2, labels=names, region=head.rest[:, 1] >= head.bone_heights()[0],
+                  title=title)
+    save_npz(ctx.out_dir / f"{stem}.npz", names=np.asarray(names), poses=head.to_user(poses).astype(np.float32),
              contractions=c, controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", report)
 
 
+_SHEET_STAGE = dict(deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
+                    inputs=("animate_mapping", "animate.fap_mapping"))
+
 EXPRESSIONS_STAGE = register_stage(Stage(
-    name="expressions", deps=("fit", "bind"),
-    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
-    inputs=("animate_mapping", "animate.fap_mapping"),
-    outputs=("expressions.png", "expressions.npz", "report.json"),
+    name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),
     version="1", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
 
-
-@click.command("expressions", help="Settle the head into the six basic expressions and draw them side by side.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
-              help="Also copy the sheet (PNG) here.")
-@click.option("--force", is_flag=True, help="Rerun even if up to date.")
-@click.pass_obj
-def expressions_command(app, output, force):
-    from faceforge.exceptions import StageError
-    from faceforge.pipeline.stages.animate import playback_mapping
-
-    if output and not str(output).lower().endswith(".png"):
-        raise StageError("the sheet is a PNG: give -o a .png path", output)
-    mapping = playback_mapping(app, "expressions")
-    app.run_stage("expressions", params={"animate_mapping": str(mapping)}, force=force)
-    sheet = app.workspace.stage_dir("expressions") / "expressions.png"
-    if output:
-        Path(output).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(sheet, output)
-        sheet = Path(output)
-    app.log(f"expressions: wrote {sheet}")
+VISEMES_STAGE = register_stage(Stage(
+    name="visemes", **_SHEET_STAGE, outputs=("visemes.png", "visemes.npz", "report.json"),
+    version="1", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
 
 
+def _sheet_command(stem: str, help_text: str):
+    """The command of a sheet stage: ``faceforge <stem> [-o sheet.png] [--force]``."""
+
+    @click.command(stem, help=help_text)
+    @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
+                  help="Also copy the sheet (PNG) here.")
+    @click.option("--force", is_flag=True, help="Rerun even if up to date.")
+    @click.pass_obj
+    def command(app, output, force):
+        from faceforge.exceptions import StageError
+        from faceforge.pipeline.stages.animate import playback_mapping
+
+        if output and not str(output).lower().endswith(".png"):
+            raise StageError("the sheet is a PNG: give -o a .png path", output)
+        mapping = playback_mapping(app, stem)
+        app.run_stage(stem, params={"animate_mapping": str(mapping)}, force=force)
+        sheet = app.workspace.stage_dir(stem) / f"{stem}.png"
+        if output:
+            Path(output).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(sheet, output)
+            sheet = Path(output)
+        app.log(f"{stem}: wrote {sheet}")
+
+    return command
+
+
+expressions_command = _sheet_command(
+    "expressions", "Settle the head into the six basic expressions and draw them side by side.")
+visemes_command = _sheet_command(
+    "visemes", "Settle the head into the fourteen MPEG-4 visemes and draw them side by side.")
 register_command(expressions_command)
+register_command(visemes_command)
