@@ -64,8 +64,8 @@ def calibrated_mapping_path(workdir) -> Path:
 def mapping_digest_without_presets(path) -> str:
     """SHA-256 of a FAP mapping file without its presets, the ``expressions`` and ``visemes``
     tables (the calibrate stage's digest of the template: calibration never reads the presets,
-    animate takes them from the template, so editing one costs no recalibration). A file that is not a YAML mapping is
-    digested whole (the stage then reports it when it runs)."""
+    animate takes them from the template, so editing one costs no recalibration). A file that
+    is not a YAML mapping is digested whole (the stage then reports it when it runs)."""
     import hashlib
     import json
 
@@ -406,19 +406,14 @@ def track_controls(track, mapping, head):
     return c, jaw, unmapped, faps
 
 
-def visemes_in_frames(track):
-    """(F,) bool: the frames whose FAP 1 gives some viseme a weight."""
-    from faceforge.anatomy.fap_mapping import viseme_weights
-
-    return viseme_weights(track.viseme).any(axis=1)
-
-
-def visemes_played(track) -> list[str]:
-    """The names of the visemes a track's FAP 1 gives a weight in some frame, by code."""
+def visemes_played(track) -> tuple[list[str], int]:
+    """The names (in code order) of the visemes a track's FAP 1 gives a weight, and in how
+    many frames it gives one."""
     from faceforge.anatomy.fap_mapping import VISEME_IDS, viseme_weights
 
-    used = viseme_weights(track.viseme).any(axis=0)
-    return [name for name in sorted(VISEME_IDS, key=VISEME_IDS.get) if used[VISEME_IDS[name] - 1]]
+    w = viseme_weights(track.viseme) > 0.0
+    names = [name for name in sorted(VISEME_IDS, key=VISEME_IDS.get) if w[:, VISEME_IDS[name] - 1].any()]
+    return names, int(w.any(axis=1).sum())
 
 
 def controls(mapping, faps, head):
@@ -478,10 +473,9 @@ def run_animate(ctx):
         if lids.faps and np.any(faps[:, [f - 1 for f in lids.faps]]):
             ctx.log(f"eyelids (FAPs {', '.join(map(str, lids.faps))}) on {len(lids.fields)} eye"
                     f"{'s' if len(lids.fields) > 1 else ''}")
-    visemes = visemes_played(track)
+    visemes, viseme_frames = visemes_played(track)
     if visemes:
-        ctx.log(f"visemes (FAP 1) in {int(np.count_nonzero(visemes_in_frames(track)))} frames: "
-                f"{', '.join(visemes)}")
+        ctx.log(f"visemes (FAP 1) in {viseme_frames} frames: {', '.join(visemes)}")
     if unmapped:
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
