@@ -6,6 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -215,3 +216,33 @@ def test_a_sheet_command_wants_a_png(invoke, tmp_path, command):
     assert result.exit_code == 2
     assert result.stderr == f"faceforge: error: {tmp_path / 'sheet.txt'}: the sheet is a PNG: give -o a .png path\n"
     assert not (tmp_path / "w").exists() or not any((tmp_path / "w").iterdir())
+
+
+def test_animate_visemes_are_checked_before_any_work(invoke, tmp_path):
+    result = invoke("-w", tmp_path / "w", "animate", "--visemes", "p_b_m, a,schwa")
+    assert result.exit_code == 2
+    assert result.stderr.splitlines() == [
+        "faceforge: error: --visemes: unknown viseme 'schwa'; valid: none, p_b_m, f_v, th, t_d, k_g, "
+        "ch_j_sh, s_z, n_l, r, a, e, i, o, u"]
+    assert not (tmp_path / "w" / "inputs").exists()
+    result = invoke("-w", tmp_path / "w", "animate", "--visemes", "a", "--expression", "joy")
+    assert result.exit_code == 2
+    assert "give exactly one of --fap FILE, --expression NAME or --visemes" in result.stderr
+
+
+def test_animate_visemes_write_the_track_they_name(tmp_path):
+    from types import SimpleNamespace
+
+    from faceforge.anatomy.fap_mapping import VISEME_IDS, viseme_weights
+    from faceforge.io.config import load_config
+    from faceforge.mpeg4 import read_fap
+    from faceforge.pipeline.stages.animate import _viseme_file
+
+    app = SimpleNamespace(config=load_config(), workspace=SimpleNamespace(root=tmp_path))
+    path = _viseme_file(app, "p_b_m, a u")
+    assert path.parent == tmp_path / "inputs"
+    w = viseme_weights(read_fap(path).viseme)
+    said = [k + 1 for k in np.argmax(w, axis=1)[w.max(axis=1) == 1.0]]
+    assert [k for i, k in enumerate(said) if i == 0 or said[i - 1] != k] == \
+        [VISEME_IDS["p_b_m"], VISEME_IDS["a"], VISEME_IDS["u"]]
+    assert _viseme_file(app, "p_b_m a,u") == path        # the same visemes, the same file

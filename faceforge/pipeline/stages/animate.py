@@ -665,6 +665,27 @@ def _expression_file(app, name: str, intensity: float, seconds: float) -> Path:
     return path
 
 
+def _viseme_file(app, text: str) -> Path:
+    """Write ``--visemes`` (names separated by commas or spaces) as a FAP file in the workdir
+    (:func:`faceforge.mpeg4.viseme_track`; its content keys the cache). An unknown name is a
+    one-line error listing the valid ones."""
+    import hashlib
+
+    from faceforge.exceptions import FapError, StageError
+    from faceforge.mpeg4 import viseme_track, write_fap
+
+    names = [n for n in text.replace(",", " ").split() if n]
+    try:
+        track = viseme_track(names, fps=float(app.config.get("animate.fps")))
+    except FapError as exc:
+        raise StageError(f"--visemes: {exc}") from None
+    tag = hashlib.sha256(" ".join(names).encode()).hexdigest()[:12]
+    path = app.workspace.root / "inputs" / f"visemes_{tag}.fap"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    write_fap(path, track)
+    return path
+
+
 def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
     """Write ``-o`` and ``--preview`` from the animate stage's frames."""
     from faceforge.exceptions import StageError
@@ -711,6 +732,9 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
               help="Peak strength of --expression.")
 @click.option("--seconds", type=click.FloatRange(min=0.1), default=None,
               help="Length of --expression [default: animate.expression_seconds].")
+@click.option("--visemes", default=None, metavar="V1,V2,...",
+              help="Say a sequence of MPEG-4 visemes instead (p_b_m, f_v, th, t_d, k_g, ch_j_sh, s_z, "
+                   "n_l, r, a, e, i, o, u, none), 0.2 s each, cross-fading.")
 @click.option("-o", "--output", type=click.Path(), default=None,
               help="Output by suffix: .pc2, .mdd (Blender Mesh Cache), .glb, .usda or .usdc (USD), "
                    "or a folder (OBJ sequence).")
@@ -718,11 +742,11 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
 @click.option("--preview-frames", default=None, help="Frames for --preview, e.g. 0,20,40 [default: evenly spaced].")
 @click.option("--force", is_flag=True, help="Resimulate even if up to date.")
 @click.pass_obj
-def animate_command(app, fap, expression, intensity, seconds, output, preview, preview_frames, force):
+def animate_command(app, fap, expression, intensity, seconds, visemes, output, preview, preview_frames, force):
     from faceforge.exceptions import StageError
 
-    if (fap is None) == (expression is None):
-        raise StageError("give exactly one of --fap FILE or --expression NAME")
+    if sum(x is not None for x in (fap, expression, visemes)) != 1:
+        raise StageError("give exactly one of --fap FILE, --expression NAME or --visemes V1,V2,...")
     if output:
         from faceforge.io.export import check_output
 
@@ -730,6 +754,8 @@ def animate_command(app, fap, expression, intensity, seconds, output, preview, p
     if expression is not None:
         seconds = seconds or float(app.config.get("animate.expression_seconds"))
         fap = _expression_file(app, expression, intensity, seconds)
+    if visemes is not None:
+        fap = _viseme_file(app, visemes)
     mapping = playback_mapping(app, "animate")
     app.run_stage("animate", params={"fap": str(fap), "animate_mapping": str(mapping)}, force=force)
     export_outputs(app, output, preview, preview_frames)
