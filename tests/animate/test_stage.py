@@ -318,6 +318,52 @@ def test_visemes_play_as_their_low_level_faps(workdir, patched, tmp_path):
     assert a["jaw"][:, 0].max() > 0.0 and a["contractions"][:, 0].max() > 0.0   # the jaw opens, the smile pulls
 
 
+def test_the_warm_up_leaves_the_frames_of_a_cold_play(workdir, patched, tmp_path):
+    """animate plays the first frame once before the timed playback (numba compiles there, not
+    in the ms/frame), then resets the rig: its frames are bit for bit those of a fresh head
+    played without the warm-up."""
+    from faceforge.anatomy.animate import play
+    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.io.config import load_config
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import FapTrack, read_fap, write_fap
+
+    n = 12
+    values = np.zeros((n, 68))
+    values[:, 2] = np.linspace(0.0, 200.0, n)                  # open_jaw
+    values[:, [58, 11]] = np.linspace(0.0, 150.0, n)[:, None]  # raise_l_cornerlip, outer and inner
+    given = np.zeros((n, 68), dtype=bool)
+    given[:, [2, 58, 11]] = True
+    write_fap(tmp_path / "smile.fap", FapTrack.from_given(25.0, given, values))
+    out = run_stage("animate", workdir, {"fap": str(tmp_path / "smile.fap"),
+                                         "animate_mapping": str(workdir / "mapping.yaml")})
+    head = patched.BoundHead(workdir / "fit", workdir / "bind", load_config(None, SETS))
+    c, jaw, _, _ = patched.track_controls(read_fap(tmp_path / "smile.fap"),
+                                          load_fap_mapping(workdir / "mapping.yaml"), head)
+    cold = head.to_user(play(head.rig, c, jaw, 25.0)).astype(np.float32)
+    assert np.array_equal(load_npz(out / "animation.npz")["frames"], cold)
+    assert c[:, 0].max() > 0.0 and jaw[:, 0].max() > 0.0
+
+
+def test_the_warm_up_says_when_it_compiled_and_resets_the_rig():
+    import time
+
+    from faceforge.anatomy.animate import Rig
+    from faceforge.pipeline.stages.animate import warm_up
+
+    calls = []
+    for delay, said in ((0.0, False), (1.05, True)):
+        calls.clear()
+        logged = []
+        rig = Rig(skull=lambda jaw, d=delay: time.sleep(d), muscles=lambda c, b, dt: calls.append("step"),
+                  skin=lambda b, m, dt: np.zeros((3, 3)), rest=np.zeros((3, 3)),
+                  reset=lambda: calls.append("reset"))
+        seconds = warm_up(rig, np.zeros((5, 1)), np.zeros((5, 3)), 25.0, logged.append)
+        assert calls == ["reset", "step", "reset"]              # one frame, at rest before and after
+        assert (seconds > 1.0) == said == any("compiled the simulation kernels" in m for m in logged)
+    assert warm_up(rig, np.zeros((0, 1)), np.zeros((0, 3)), 25.0, logged.append) == 0.0
+
+
 def test_calibration_report_meets_the_acceptance(calibrated):
     report = json.loads((calibrated / "report.json").read_text())
     s = report["summary"]

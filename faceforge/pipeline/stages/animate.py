@@ -431,6 +431,27 @@ def controls(mapping, faps, head):
     return (c if head.controls else np.zeros((len(c), 0))), jaw
 
 
+def warm_up(rig, contractions, jaw, fps: float, log) -> float:
+    """Play the track's first frame once and put the rig back at rest, so that the timed
+    playback does not count numba's compilation of the kernels (about 35 s on the first run
+    after an install or an upgrade; cached on disk afterwards). Logs the compilation when the
+    frame took more than a second; returns its seconds."""
+    import time
+
+    from faceforge.anatomy.animate import play
+
+    if not len(jaw):
+        return 0.0
+    rig.reset()
+    t0 = time.perf_counter()
+    play(rig, contractions[:1], jaw[:1], fps)
+    seconds = time.perf_counter() - t0
+    rig.reset()
+    if seconds > 1.0:
+        log(f"compiled the simulation kernels in {seconds:.0f} s (once: numba caches them)")
+    return seconds
+
+
 def _mapping(ctx):
     """The mapping to play (``animate_mapping``) and its path. Playing the workdir's calibration,
     the presets (expressions and visemes) are the template's (``animate.fap_mapping``):
@@ -479,9 +500,10 @@ def run_animate(ctx):
     if unmapped:
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
-    head.rig.reset()
     timings = Timings()
     try:
+        warm_up(head.rig, c, jaw, track.fps, ctx.log)   # resets the rig; a divergence there is the same error
+        head.rig.reset()
         frames = play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings)
     except FloatingPointError as exc:
         from faceforge.exceptions import StageError
