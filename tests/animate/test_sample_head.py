@@ -86,3 +86,37 @@ def test_open_jaw_parts_the_lips_by_the_requested_amount(head_workdir):
     lips = stage._lip_opening(calibrated, simulate, head, 300.0)
     assert lips["achieved"] > 0.0                             # the lips part
     assert lips["relative_error"] <= 0.15, lips
+
+
+def test_visemes_shape_the_mouth_of_a_real_head(head_workdir):
+    """``animate --visemes`` on the MediaPipe face (template mapping): the checks pass, the open
+    vowel parts the lips more than the rest pose, the bilabial does not part them, and the
+    rounded vowel brings the mouth corners closer together than the spread one."""
+    import json
+
+    import yaml
+
+    from faceforge.io.stagefiles import load_npz
+
+    said = ["p_b_m", "a", "u", "i"]
+    cli("-q", "-w", head_workdir, "animate", "--visemes", ",".join(said))
+    report = json.loads((head_workdir / "animate" / "report.json").read_text())
+    assert report["visemes"] == ["p_b_m", "a", "i", "u"] and 1 not in report["unmapped_faps"]
+    checks = report["checks"]
+    assert checks["non_finite"] == 0 and checks["inverted_triangles"] == 0
+    assert checks["skin_inside_skull"] == 0
+    frames = load_npz(head_workdir / "animate" / "animation.npz")["frames"].astype(np.float64)
+    marks = yaml.safe_load(MESH.with_suffix(".fdp.yaml").read_text())["landmarks"]
+    vid = {k: marks[k]["vertex"] for k in ("2.2", "2.3", "8.3", "8.4")}
+    # each viseme's hold: viseme_track's defaults (0.15 s of rest, 0.2 s each, 0.08 s fades)
+    hold = {name: round(25 * (0.15 + 0.2 * i + 0.14)) for i, name in enumerate(said)}
+
+    def parting(f):
+        return frames[f, vid["2.2"], 1] - frames[f, vid["2.3"], 1]
+
+    def width(f):
+        return frames[f, vid["8.3"], 0] - frames[f, vid["8.4"], 0]
+
+    assert parting(hold["a"]) > parting(0) + 0.02 * width(0)       # the jaw drops for A:
+    assert parting(hold["p_b_m"]) <= parting(0) + 1e-6             # lips together for p, b, m
+    assert width(hold["u"]) < width(0) < width(hold["i"])          # rounded < rest < spread
