@@ -8,9 +8,10 @@ Measures the per-frame time of skull + muscles + skin, broken down by layer, at 
   active zygomaticus and 25 passive sheets (26 muscles, like the paper's map), bound by the
   real bind stage and simulated by the real layered system (``tests/animate/synthetic.py``);
 * ``--workdir DIR`` (optional): a real head already fitted and bound in DIR;
-* ``--sweep`` (optional, slow): every ``samples/fap/*.fap`` on the three sample heads through
-  the CLI (fit, bind, animate -o .pc2): checks (NaN, inverted triangles, skin inside the
-  skull), ms/frame and the .pc2 round trip, per head and file;
+* ``--sweep`` (optional, slow): every ``samples/fap/*.fap``, and a generated track of the
+  fourteen visemes (``visemes_all_fourteen.fap``, :func:`faceforge.mpeg4.viseme_track`), on
+  the three sample heads through the CLI (fit, bind, animate -o .pc2): checks (NaN, inverted
+  triangles, skin inside the skull), ms/frame and the .pc2 round trip, per head and file;
 * ``--calibrated DIR`` (optional, repeatable): the summary and per-FAP rows of a
   ``faceforge calibrate`` run in DIR.
 
@@ -215,12 +216,15 @@ def main(argv=None):
         results["heads"][str(args.workdir)] = measure(head, mapping, frames, repeats, rival)
     results["threads"] = threads_info()   # after a threaded step: numba names its layer then
     if args.sweep:
-        faps = sorted((ROOT / "samples" / "fap").glob("*.fap"))
-        if args.sweep_dir is not None:
-            results["sweep"] = sweep(args.sweep_dir, list(SAMPLE_HEADS), faps)
-        else:
-            with tempfile.TemporaryDirectory() as tmp:
-                results["sweep"] = sweep(Path(tmp), list(SAMPLE_HEADS), faps)
+        from faceforge.mpeg4 import VISEMES, viseme_track, write_fap
+
+        with tempfile.TemporaryDirectory() as tmp:
+            # the eight Xface files, and a generated track of the fourteen visemes (FAP 1)
+            speech = Path(tmp) / "visemes_all_fourteen.fap"
+            write_fap(speech, viseme_track(list(VISEMES), each=0.24))
+            faps = [*sorted((ROOT / "samples" / "fap").glob("*.fap")), speech]
+            root = args.sweep_dir if args.sweep_dir is not None else Path(tmp)
+            results["sweep"] = sweep(root, list(SAMPLE_HEADS), faps)
     if args.calibrated:
         import json
 
