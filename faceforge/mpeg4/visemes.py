@@ -94,6 +94,7 @@ def viseme_track(names, fps: float = 25.0, each: float = 0.2, blend: float = 0.0
     viseme[:, 2] = MAX_BLEND * weight
     mask = np.zeros((n, N_FAPS), dtype=bool)
     mask[:, 0] = True
+    name = "visemes_" + "_".join(names)
     return FapTrack.from_given(fps, mask, np.zeros((n, N_FAPS)), viseme=viseme,
-                               name="visemes_" + "_".join(names))
+                               name=name if len(name) <= 64 else name[:61] + "...")
 

@@ -36,12 +36,14 @@ def test_each_viseme_is_held_whole_and_the_fades_sum_to_one():
             assert np.allclose(pair.sum(axis=1), 1.0) and np.all(np.diff(pair[:, 1]) > 0)
 
 
-def test_a_viseme_track_survives_the_fap_file(tmp_path):
-    track = viseme_track(["f_v", "none", "o"], fps=25)
+@pytest.mark.parametrize("names", [["f_v", "none", "o"], list(VISEMES) * 4])
+def test_a_viseme_track_survives_the_fap_file(tmp_path, names):
+    track = viseme_track(names, fps=25)
     write_fap(tmp_path / "v.fap", track)
     back = read_fap(tmp_path / "v.fap")
     assert np.array_equal(back.viseme, track.viseme)
     assert np.array_equal(back.mask, track.mask)
+    assert back.name == track.name and len(track.name) <= 64     # a long sequence's name is cut
 
 
 @pytest.mark.parametrize("kwargs, needle", [
