@@ -361,7 +361,9 @@ def test_the_warm_up_says_when_it_compiled_and_resets_the_rig():
         seconds = warm_up(rig, np.zeros((5, 1)), np.zeros((5, 3)), 25.0, logged.append)
         assert calls == ["reset", "step", "reset"]              # one frame, at rest before and after
         assert (seconds > 1.0) == said == any("compiled the simulation kernels" in m for m in logged)
+    calls.clear()
     assert warm_up(rig, np.zeros((0, 1)), np.zeros((0, 3)), 25.0, logged.append) == 0.0
+    assert calls == ["reset"]                                   # an empty track: nothing played, at rest
 
 
 def test_calibration_report_meets_the_acceptance(calibrated):

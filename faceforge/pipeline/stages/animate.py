@@ -435,14 +435,15 @@ def warm_up(rig, contractions, jaw, fps: float, log) -> float:
     """Play the track's first frame once and put the rig back at rest, so that the timed
     playback does not count numba's compilation of the kernels (about 35 s on the first run
     after an install or an upgrade; cached on disk afterwards). Logs the compilation when the
-    frame took more than a second; returns its seconds."""
+    frame took more than a second; returns its seconds. The rig is left at rest, also for an
+    empty track."""
     import time
 
     from faceforge.anatomy.animate import play
 
+    rig.reset()
     if not len(jaw):
         return 0.0
-    rig.reset()
     t0 = time.perf_counter()
     play(rig, contractions[:1], jaw[:1], fps)
     seconds = time.perf_counter() - t0
@@ -502,8 +503,7 @@ def run_animate(ctx):
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
     timings = Timings()
     try:
-        warm_up(head.rig, c, jaw, track.fps, ctx.log)   # resets the rig; a divergence there is the same error
-        head.rig.reset()
+        warm_up(head.rig, c, jaw, track.fps, ctx.log)   # leaves the rig at rest; a divergence: same error
         frames = play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings)
     except FloatingPointError as exc:
         from faceforge.exceptions import StageError
