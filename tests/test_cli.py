@@ -233,7 +233,7 @@ def test_animate_visemes_are_checked_before_any_work(invoke, tmp_path):
 def test_animate_visemes_write_the_track_they_name(tmp_path):
     from types import SimpleNamespace
 
-    from faceforge.anatomy.fap_mapping import VISEME_IDS, viseme_weights
+    from faceforge.animation.fap_mapping import VISEME_IDS, viseme_weights
     from faceforge.io.config import load_config
     from faceforge.mpeg4 import read_fap
     from faceforge.pipeline.stages.animate import _viseme_file

@@ -108,7 +108,7 @@ def test_sheet_rest_matches_the_contour_and_contraction_follows_eq4():
 
 @pytest.fixture(scope="module")
 def template():
-    from faceforge.anatomy.muscle_map import load_muscle_map
+    from faceforge.anatomy.muscles.muscle_map import load_muscle_map
     from faceforge.anatomy.skull import load_skull
 
     skull = load_skull(ROOT / "templates" / "skull")

@@ -52,9 +52,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from faceforge.anatomy.action_line import ActionLine
-from faceforge.anatomy.layer_targets import LinearTargets, bary_points
-from faceforge.anatomy.muscle import Muscle, add_muscles_to_builder, protrusion_control
+from faceforge.anatomy.muscles.action_line import ActionLine
+from faceforge.anatomy.muscles.targets import LinearTargets, bary_points
+from faceforge.anatomy.muscles.muscle import Muscle, add_muscles_to_builder, protrusion_control
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
 from faceforge.geometry.surface_points import SurfacePoints
@@ -249,7 +249,7 @@ class MusculoskeletalSystem:
     @property
     def controls(self) -> tuple[str, ...]:
         """What :meth:`step` drives: every muscle by name, then each sphincter's protrusion
-        (:func:`faceforge.anatomy.muscle.protrusion_control`)."""
+        (:func:`faceforge.anatomy.muscles.muscle.protrusion_control`)."""
         return self._controls
 
     @property

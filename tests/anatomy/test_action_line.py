@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.action_line import ActionLine, polyline_parameters, sample_polyline, sample_positions
+from faceforge.anatomy.muscles.action_line import ActionLine, polyline_parameters, sample_polyline, sample_positions
 from faceforge.geometry.surface_points import SurfacePoints
 
 from conftest import icosphere, on_sphere

@@ -26,7 +26,7 @@ def head(tmp_path_factory):
 
     from faceforge.cli import cli
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages.animate import BoundHead
+    from faceforge.animation.rig import BoundHead
 
     wd = tmp_path_factory.mktemp("coupling")
     for args in (["fit", str(MESH)], ["bind"]):
@@ -39,7 +39,7 @@ def head(tmp_path_factory):
 def posed(head, contractions: dict) -> np.ndarray:
     """Skin displacement ``(n, 3)`` of the settled pose with the muscles of ``contractions``
     (name -> c) contracted, the others at rest."""
-    from faceforge.anatomy.animate import static_poses
+    from faceforge.animation.playback import static_poses
 
     names = list(head.muscle_names)
     ctr = np.zeros((1, len(names)))
@@ -55,7 +55,7 @@ def moved(head, muscle: str, c: float = 0.5) -> np.ndarray:
 
 def template_entry(fap: int):
     """The entry of ``templates/fap_mapping.yaml`` that maps FAP ``fap``."""
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.fap_mapping import load_fap_mapping
 
     return next(e for e in load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml").entries
                 if fap in e.faps)
@@ -153,7 +153,7 @@ def test_a_static_pose_with_the_jaw_at_its_limit_stays_bounded(head):
     """Calibration holds poses from rest; eased in (static_poses' ramp), the jaw opened to its
     limit moves no muscle by more than a fifth of the head's diagonal and the skin stays
     finite. (Thrown open in one frame, the orbicularis oris diverged on this head.)"""
-    from faceforge.anatomy.animate import ease_in
+    from faceforge.animation.playback import ease_in
 
     h, _ = head
     limit = 0.45                                            # templates/fap_mapping.yaml jaw_limits

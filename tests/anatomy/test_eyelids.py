@@ -1,4 +1,4 @@
-"""Kinematic eyelids (faceforge.anatomy.eyelids): FAPs 19-22 on the three sample heads.
+"""Kinematic eyelids (faceforge.animation.eyelids): FAPs 19-22 on the three sample heads.
 
 Real data: the sample heads and their FDPs (samples/), and MakeHuman's own eye-closure
 expression unit on the MakeHuman head (tests/data/mh_eye_left_closure.npz, CC0).
@@ -11,8 +11,8 @@ import pytest
 import trimesh
 import yaml
 
-from faceforge.anatomy.animate import inverted_faces
-from faceforge.anatomy.eyelids import (
+from faceforge.animation.checks import inverted_faces
+from faceforge.animation.eyelids import (
     EYELID_FAPS, MIN_OPENING, Eyelids, find_eyes, lid_field, lid_moves, move_lids)
 
 ROOT = Path(__file__).resolve().parents[2]

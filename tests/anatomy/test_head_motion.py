@@ -1,10 +1,10 @@
-"""Rigid head motion from FAPs 48-50 (anatomy.head_motion)."""
+"""Rigid head motion from FAPs 48-50 (animation.head_motion)."""
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from faceforge.anatomy.head_motion import (AU, HEAD_FAPS, head_angles, head_rotations, neck_weights,
+from faceforge.animation.head_motion import (AU, HEAD_FAPS, head_angles, head_rotations, neck_weights,
                                            turn_head)
 
 FORWARD, UP, LEFT = np.eye(3)[2], np.eye(3)[1], np.eye(3)[0]

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import yaml
 
-from faceforge.anatomy.fit_muscles import build_muscles_on
+from faceforge.anatomy.muscles.build import build_muscles_on
 from faceforge.anatomy.layers import MusculoskeletalSystem, expand_lies_on, underlying_mesh
-from faceforge.anatomy.muscle_map import load_muscle_map, mirrored_name
+from faceforge.anatomy.muscles.muscle_map import load_muscle_map, mirrored_name
 from faceforge.anatomy.skull import load_skull
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -257,7 +257,7 @@ def test_a_layer_built_kind_by_kind_steps_like_its_muscles_one_by_one(template):
     """add_muscles_to_builder (four blocks per layer) against Muscle.add_to_builder per muscle
     (four blocks per muscle): in builder order each muscle's projections are the same sequence
     and no constraint crosses muscles, so a step from a perturbed state gives the same bits."""
-    from faceforge.anatomy.muscle import add_muscles_to_builder
+    from faceforge.anatomy.muscles.muscle import add_muscles_to_builder
     from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
     _, specs, muscles, _ = template
@@ -288,7 +288,7 @@ def test_a_muscle_that_cannot_be_built_is_a_one_line_error_naming_it(template):
     the muscle (TemplateError), and the animate stage turns that into a StageError on fit.npz."""
     from faceforge.exceptions import StageError, TemplateError
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages.animate import _muscle_system
+    from faceforge.animation.rig import muscle_system
 
     skull, specs, _, system = template
     points = [s.points() for s in specs]
@@ -300,4 +300,4 @@ def test_a_muscle_that_cannot_be_built_is_a_one_line_error_naming_it(template):
            "muscle_map_start": np.cumsum([0] + [len(p) for p in points]),
            "muscle_map_points": np.vstack(points)}
     with pytest.raises(StageError, match=r"^fit\.npz: muscle 'mentalis' cannot be built .*rerun `faceforge fit`"):
-        _muscle_system(fit, skull.cranium, skull.mandible, system.settings, load_config(), lambda m: None)
+        muscle_system(fit, skull.cranium, skull.mandible, system.settings, load_config(), lambda m: None)

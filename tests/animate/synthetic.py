@@ -102,9 +102,9 @@ def write_fit(fit_dir, count=(24, 32), extra_muscles: int = 0):
 def muscle_system(fit, cranium, mandible, settings, config, log, extra: int = 0):
     """Stand-in for the fit stage's muscle rebuild: a zygomaticus on the cranium, plus
     ``extra`` passive sheets (h 6, w 3) around the upper skull (for timing a full map)."""
-    from faceforge.anatomy.action_line import ActionLine
+    from faceforge.anatomy.muscles.action_line import ActionLine
     from faceforge.anatomy.layers import MusculoskeletalSystem
-    from faceforge.anatomy.muscle import build_linear_muscle
+    from faceforge.anatomy.muscles.muscle import build_linear_muscle
 
     cv, cf = cranium
     stiff = {k: float(v) for k, v in config.get("muscle.linear.stiffness").items()}

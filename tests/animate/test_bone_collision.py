@@ -1,12 +1,12 @@
-"""Skin found inside a rigid bone is put back out (anatomy.bone_collision)."""
+"""Skin found inside a rigid bone is put back out (animation.guards.bone_collision)."""
 
 from __future__ import annotations
 
 import numpy as np
 import trimesh
 
-from faceforge.anatomy.animate import points_inside
-from faceforge.anatomy.bone_collision import BoneCollision
+from faceforge.animation.checks import points_inside
+from faceforge.animation.guards.bone_collision import BoneCollision
 
 
 def box(centre=(0.0, 0.0, 0.0)):

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.calibrate import (Probe, calibrate_mapping, invert_monotone, measure,
+from faceforge.animation.calibrate import (Probe, calibrate_mapping, invert_monotone, measure,
                                          measure_coupling, summarize)
-from faceforge.anatomy.fap_mapping import JawLevers, fap_controls, mapping_from_dict
+from faceforge.animation.fap_mapping import JawLevers, fap_controls, mapping_from_dict
 
 FAPU = {k: v / 1024 for k, v in {"MNS": 0.2, "MW": 0.5, "ENS": 0.45, "ES": 0.6, "IRISD": 0.1}.items()}
 FAPU["AU"] = 1e-5
@@ -124,8 +124,8 @@ def test_coupling_is_measured_from_open_jaw():
 
 
 def test_calibrated_knots_are_always_a_loadable_monotone_curve():
-    from faceforge.anatomy.calibrate import _monotone_knots
-    from faceforge.anatomy.fap_mapping import mapping_from_dict, mapping_to_dict, with_entry
+    from faceforge.animation.calibrate import _monotone_knots
+    from faceforge.animation.fap_mapping import mapping_from_dict, mapping_to_dict, with_entry
 
     rng = np.random.default_rng(3)
     m = mapping_from_dict(MAPPING)
@@ -189,7 +189,7 @@ def test_refinement_runs_until_met_and_stops_where_held():
 
 
 def test_saturated_rows_are_those_whose_muscles_are_all_at_full_contraction():
-    from faceforge.anatomy.calibrate import CalibrationRow, saturated
+    from faceforge.animation.calibrate import CalibrationRow, saturated
 
     m = mapping_from_dict(MAPPING)
     corner, jaw = m.entry_of(59), m.entry_of(3)        # zyg 0.002 up, dep 0.004 down
@@ -206,7 +206,7 @@ def test_a_side_that_moves_the_fdp_the_wrong_way_gets_zero_drive():
     """Both signs of the entry contract ``dep``, which lowers the corner: negative requests are
     met, positive ones are unreachable and must leave the skin at rest (drive 0), not take the
     negative side's slope through (0, 0) and lower the corner they were to raise."""
-    from faceforge.anatomy.fap_mapping import response_curve
+    from faceforge.animation.fap_mapping import response_curve
 
     m = mapping_from_dict({**MAPPING, "entries": [
         {"fap": [59, 12], "name": "raise_l_cornerlip", "fapu": "MNS",
@@ -219,7 +219,7 @@ def test_a_side_that_moves_the_fdp_the_wrong_way_gets_zero_drive():
 
 
 def test_drive_cap_reaches_full_contraction():
-    from faceforge.anatomy.calibrate import drive_cap
+    from faceforge.animation.calibrate import drive_cap
 
     e = mapping_from_dict({**MAPPING, "entries": [
         {"fap": 39, "name": "puff_l_cheek", "fapu": "ES", "positive": {"zyg": 0.001, "front": 0.0005},
@@ -230,7 +230,7 @@ def test_drive_cap_reaches_full_contraction():
 
 
 def test_best_sampled_keeps_the_peak_of_a_curve_that_turns_back():
-    from faceforge.anatomy.calibrate import best_sampled
+    from faceforge.animation.calibrate import best_sampled
 
     drives = np.array([-50.0, 100.0, 300.0, 600.0, 1200.0, 1500.0, 1500.0])
     achieved = np.array([-20.0, 20.0, 40.0, 30.0, 10.0, 10.0, 10.0])   # peaks at 300, then falls

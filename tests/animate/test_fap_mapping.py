@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceforge.anatomy.fap_mapping import (EXPRESSION_IDS, N_FAPS, VISEME_IDS, JawLevers,
+from faceforge.animation.fap_mapping import (EXPRESSION_IDS, N_FAPS, VISEME_IDS, JawLevers,
                                            entry_drive, expression_faps, fap_controls,
                                            load_fap_mapping, mapping_from_dict, mapping_to_dict,
                                            response_curve, save_fap_mapping, viseme_faps,
@@ -41,7 +41,7 @@ def test_every_requested_fap_group_is_mapped(mapping):
 
 def test_every_preset_fap_drives_something(mapping):
     # a preset's FAP that no entry maps would be dropped without a word; the lids (19-22) are
-    # played over the skin by anatomy.eyelids
+    # played over the skin by animation.eyelids
     mapped = set(mapping.mapped_faps().tolist()) | {19, 20, 21, 22}
     for table in (mapping.expressions, mapping.visemes):
         for name, row in table.items():

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.animate import (Rig, Timings, check_animation, inverted_faces, inverted_triangles, play,
-                                       points_inside, static_poses)
+from faceforge.animation.checks import check_animation, inverted_faces, inverted_triangles, points_inside
+from faceforge.animation.playback import Rig, Timings, play, static_poses
 
 
 def grid(n=6):
@@ -151,7 +151,7 @@ def test_folded_edges_are_new_creases_only():
     without failing the animation for them."""
     import math
 
-    from faceforge.anatomy.animate import folded_edges
+    from faceforge.animation.checks import folded_edges
 
     def hinge(deg):   # triangles (0, 1, 2) and (1, 0, 3) on the edge 0-1, each wing lifted deg / 2
         h = math.radians(deg) / 2.0
@@ -202,19 +202,19 @@ def test_contact_sheet_writes_a_png_with_the_chosen_frames(tmp_path):
 
 
 def test_fdp_vertices_pick_the_lip_copy_of_their_side():
-    from faceforge.pipeline.stages.animate import _fdp_vertices, _lever
+    from faceforge.animation.rig import fdp_vertices, lever_arm
 
     rest = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 1.0, 1.0], [0.0, -1.0, 1.0]])
     sides = np.array([1, -1, 1, -1], dtype=np.int8)      # 0/1: a cut ring's upper/lower copies
     lm = {"2.2": rest[0], "2.3": rest[0], "8.1": rest[2] + 0.01, "2.1": rest[3]}
-    got = _fdp_vertices(lm, rest, sides)
+    got = fdp_vertices(lm, rest, sides)
     assert got == {"2.2": 0, "2.3": 1, "8.1": 2, "2.1": 3}
-    assert _fdp_vertices(lm, rest, None)["2.3"] == 0      # no lip sides: plain nearest
-    assert _lever(np.array([0.0, -3.0, 4.0]), np.zeros(3), np.array([2.0, 0.0, 0.0])) == pytest.approx(5.0)
+    assert fdp_vertices(lm, rest, None)["2.3"] == 0      # no lip sides: plain nearest
+    assert lever_arm(np.array([0.0, -3.0, 4.0]), np.zeros(3), np.array([2.0, 0.0, 0.0])) == pytest.approx(5.0)
 
 
 def test_skull_guard_keeps_skin_outside_a_moving_bone():
-    from faceforge.anatomy.animate import SkullGuard
+    from faceforge.animation.guards.skull import SkullGuard
 
     bv, bf = box()                                          # unit cube at the origin
     rest = np.array([[0.0, 0.0, 0.6], [0.2, 0.1, 0.7], [0.0, 0.0, 3.0], [0.0, 0.0, 0.0]])
@@ -282,7 +282,7 @@ def _skull_guard_twin(guard, positions, bodies_now):
 
 
 def test_compiled_skull_guard_matches_its_twin_on_two_moving_bones():
-    from faceforge.anatomy.animate import SkullGuard
+    from faceforge.animation.guards.skull import SkullGuard
 
     bv, bf = box()
     rng = np.random.default_rng(5)

@@ -1,10 +1,11 @@
-"""The orientation guard (anatomy.orientation_guard): skin triangles do not turn over."""
+"""The orientation guard (animation.guards.orientation): skin triangles do not turn over."""
 
 import numpy as np
 import pytest
 
-from faceforge.anatomy.animate import Rig, inverted_faces, play
-from faceforge.anatomy.orientation_guard import OrientationGuard, _project_signed_areas, _watched
+from faceforge.animation.checks import inverted_faces
+from faceforge.animation.playback import Rig, play
+from faceforge.animation.guards.orientation import OrientationGuard, _project_signed_areas, _watched
 
 from .test_loop import grid
 

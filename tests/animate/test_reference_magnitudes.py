@@ -77,7 +77,7 @@ def test_calibration_magnitudes_are_within_a_real_face(reference):
 
 @pytest.mark.parametrize("table", ["expressions", "visemes"])
 def test_presets_stay_within_a_real_face(reference, table):
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.fap_mapping import load_fap_mapping
 
     m = load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml")
     presets = getattr(m, table)
@@ -89,7 +89,7 @@ def test_presets_stay_within_a_real_face(reference, table):
 
 def test_speech_moves_the_mouth_less_than_a_full_facial_action(reference):
     # every viseme's jaw and lip values stay under the full-strength unit of the same action
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.fap_mapping import load_fap_mapping
 
     m = load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml")
     for name, row in m.visemes.items():

@@ -66,24 +66,26 @@ def test_xface_clip_plays_clean_and_exports_in_input_order(head_workdir, tmp_pat
 
 def test_open_jaw_parts_the_lips_by_the_requested_amount(head_workdir):
     """Calibrate open_jaw alone (a short one) and check the lip separation within 15 %."""
-    from faceforge.anatomy.animate import static_poses
-    from faceforge.anatomy.calibrate import calibrate_mapping
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.playback import static_poses
+    from faceforge.animation.calibrate import calibrate_mapping
+    from faceforge.animation.calibrate_head import calibration_probes, lip_opening
+    from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages import animate as stage
+    from faceforge.animation.controls import controls
+    from faceforge.animation.rig import BoundHead
 
     config = load_config()
-    head = stage.BoundHead(head_workdir / "fit", head_workdir / "bind", config)
+    head = BoundHead(head_workdir / "fit", head_workdir / "bind", config)
     mapping = load_fap_mapping(ROOT / "templates" / "fap_mapping.yaml")
 
     def simulate(m, faps):
-        c, jaw = stage.controls(m, faps, head)
+        c, jaw = controls(m, faps, head)
         return static_poses(head.rig, c, jaw, 25.0, settle=20)
 
-    probes = stage.calibration_probes(mapping, head)
+    probes = calibration_probes(mapping, head)
     calibrated, rows = calibrate_mapping(mapping, simulate, head.rest, {3: probes[3]}, {3: [300.0]},
                                          refine=1, sample_scale=(0.5, 1.0))
-    lips = stage._lip_opening(calibrated, simulate, head, 300.0)
+    lips = lip_opening(calibrated, simulate, head, 300.0)
     assert lips["achieved"] > 0.0                             # the lips part
     assert lips["relative_error"] <= 0.15, lips
 

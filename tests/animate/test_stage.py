@@ -40,10 +40,11 @@ def patched():
 
     Module-scoped: the patch must not leak into later test modules (the sample-head tests
     rebuild the real muscles)."""
+    import faceforge.animation.rig as rig
     import faceforge.pipeline.stages.animate as stage
 
     mp = pytest.MonkeyPatch()
-    mp.setattr(stage, "_muscle_system", S.muscle_system)
+    mp.setattr(rig, "muscle_system", S.muscle_system)
     yield stage
     mp.undo()
 
@@ -192,7 +193,7 @@ def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
     to the skull's lowest point, the skin below fading out of the turn (over a tenth of the
     skull's height: the synthetic skin reaches 0.3 below its skull); with ``animate.head_rotation`` off the FAPs are reported unmapped and the skin stays
     at rest."""
-    from faceforge.anatomy.head_motion import head_angles, head_rotations
+    from faceforge.animation.head_motion import head_angles, head_rotations
     from faceforge.io.stagefiles import load_npz
     from faceforge.mpeg4 import FapTrack, write_fap
 
@@ -231,10 +232,10 @@ def test_head_faps_turn_the_head_as_a_whole(workdir, patched, tmp_path, turn):
 @pytest.mark.parametrize("lids", [True, False])
 def test_eyelid_faps_close_the_lids_of_the_still_face(workdir, patched, tmp_path, lids):
     """FAPs 19-22 alone on a neutral face: the rest skin (the simulation's fixed point) with the
-    lids moved over it (anatomy.eyelids), by exactly the requested IRISD at the lid FDPs; skin
+    lids moved over it (animation.eyelids), by exactly the requested IRISD at the lid FDPs; skin
     away from the eyes stays where it is, and nothing turns over. With ``animate.eyelids`` off
     the FAPs are reported unmapped and the skin stays at rest."""
-    from faceforge.anatomy.eyelids import MIN_OPENING
+    from faceforge.animation.eyelids import MIN_OPENING
     from faceforge.io.stagefiles import load_npz
     from faceforge.mpeg4 import FapTrack, fapu_from_landmarks, write_fap
 
@@ -292,7 +293,7 @@ def test_visemes_play_as_their_low_level_faps(workdir, patched, tmp_path):
     and the report names the visemes played."""
     import yaml
 
-    from faceforge.anatomy.fap_mapping import mapping_from_dict, viseme_faps
+    from faceforge.animation.fap_mapping import mapping_from_dict, viseme_faps
     from faceforge.io.stagefiles import load_npz
     from faceforge.mpeg4 import FapTrack, viseme_track, write_fap
 
@@ -322,8 +323,8 @@ def test_the_warm_up_leaves_the_frames_of_a_cold_play(workdir, patched, tmp_path
     """animate plays the first frame once before the timed playback (numba compiles there, not
     in the ms/frame), then resets the rig: its frames are bit for bit those of a fresh head
     played without the warm-up."""
-    from faceforge.anatomy.animate import play
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.playback import play
+    from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.io.config import load_config
     from faceforge.io.stagefiles import load_npz
     from faceforge.mpeg4 import FapTrack, read_fap, write_fap
@@ -348,8 +349,8 @@ def test_the_warm_up_leaves_the_frames_of_a_cold_play(workdir, patched, tmp_path
 def test_the_warm_up_says_when_it_compiled_and_resets_the_rig():
     import time
 
-    from faceforge.anatomy.animate import Rig
-    from faceforge.pipeline.stages.animate import warm_up
+    from faceforge.animation.playback import Rig
+    from faceforge.animation.playback import warm_up
 
     calls = []
     for delay, said in ((0.0, False), (1.05, True)):
@@ -375,7 +376,7 @@ def test_calibration_report_meets_the_acceptance(calibrated):
     # open_jaw parts the lips by the requested amount within 15 %
     assert report["open_jaw_lip_separation"]["relative_error"] <= 0.15
     # the calibrated mapping is a valid mapping with response curves and a measured coupling
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.fap_mapping import load_fap_mapping
 
     m = load_fap_mapping(calibrated / "fap_mapping.yaml")
     assert m.entry_of(3).response is not None and m.entry_of(59).response is not None
@@ -456,7 +457,7 @@ def test_animate_warns_when_the_calibration_it_plays_is_out_of_date(tmp_path, ca
 
 
 def test_a_diverging_simulation_is_a_one_line_stage_error_naming_the_track(workdir, patched, monkeypatch):
-    import faceforge.anatomy.animate as anim
+    import faceforge.animation.playback as anim
     from faceforge.exceptions import StageError
 
     def diverges(*args, **kwargs):

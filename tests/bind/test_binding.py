@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.binding import CRANIUM, MANDIBLE, MUSCLE, UNBOUND, Body, bind_skin
+from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, UNBOUND, Body, bind_skin
 from tests.bind.synthetic import sphere
 
 
@@ -98,7 +98,7 @@ def test_targets_round_trip_and_follow_rigid_motion(skin):
 
 
 def test_arrays_round_trip(skin):
-    from faceforge.anatomy.binding import Binding
+    from faceforge.skin.binding import Binding
 
     v, f = skin
     b = bind_skin(v, f, [Body("cranium", "cranium", *sphere(0.8, 2))], max_distance=0.5)
@@ -125,7 +125,7 @@ def test_side_of_drops_hits_across_the_lip_line(skin):
     assert band.any() and np.all(b.status[band] == UNBOUND)
     # the closest-point fallback binds them to the muscle's own (upper) half: its faces
     # above the line, at their lower edge
-    from faceforge.anatomy.mouth import AROUND_MOUTH
+    from faceforge.skin.mouth import AROUND_MOUTH
 
     b = bind_skin(v, f, [muscle], max_distance=0.5, lip_sides=sides, side_of=side_of,
                   body_sides=[AROUND_MOUTH])
@@ -138,7 +138,7 @@ def test_side_of_drops_hits_across_the_lip_line(skin):
 def test_face_sides_decide_a_rings_half_instead_of_the_lip_line(skin):
     """With ``face_sides`` (a ring's rows, mouth.ring_face_sides) a lip vertex binds only to
     the faces labelled with its own lip, by ray or by closest point, wherever they lie."""
-    from faceforge.anatomy.mouth import AROUND_MOUTH
+    from faceforge.skin.mouth import AROUND_MOUTH
 
     v, f = skin
     muscle = Body("ring", "muscle", *sphere(0.9, 3))
@@ -263,7 +263,7 @@ def test_a_lip_never_binds_to_the_other_lips_muscle_or_to_one_far_away(skin):
     brow = Body("brow", "muscle", *_band(0.9, 0.6, 0.95, 0.0))   # far from the lips
     skull = Body("cranium", "cranium", *sphere(0.7, 3))
     bodies = [dep, brow, lev, skull]
-    body_sides = [-1, 0, 1, 0]      # as faceforge.anatomy.mouth.muscle_lip_side says of them
+    body_sides = [-1, 0, 1, 0]      # as faceforge.skin.mouth.muscle_lip_side says of them
     sides = _lip_line_side(v)
     sides[np.abs(v[:, 1]) > 0.7] = 1                               # lip skin reaching up the "nose"
     front = v[:, 2] > 0.5
@@ -289,7 +289,7 @@ def test_lips_to_ring_puts_a_missed_lip_on_its_arc_before_the_teeth(skin):
     """A lip vertex whose rays miss takes the nearer of its own arc of the ring and the bone,
     and with ``lips_to_ring`` its own arc whenever one is within reach (ICT's FDP 8.1: its arc
     1.66 cm away, the teeth 1.59). Out of reach it still takes the bone."""
-    from faceforge.anatomy.mouth import AROUND_MOUTH
+    from faceforge.skin.mouth import AROUND_MOUTH
 
     v, f = skin
     sv, sf = sphere(0.8, 3)
@@ -323,7 +323,7 @@ def test_modiolus_moves_corner_skin_from_another_muscle_to_its_arc_of_the_ring(s
     closest point of the muscles around the mouth within reach -- a lip vertex on its own arc,
     a corner vertex anywhere -- with no second anchor; corner skin on the bone stays there,
     the rest of the skin binds as before, and out of reach the rays decide."""
-    from faceforge.anatomy.mouth import AROUND_MOUTH
+    from faceforge.skin.mouth import AROUND_MOUTH
     from faceforge.geometry.surface_points import closest_points
 
     v, f = skin
@@ -376,7 +376,7 @@ def test_modiolus_moves_corner_skin_from_another_muscle_to_its_arc_of_the_ring(s
 
 
 def test_modiolus_mask_is_the_skin_near_the_corner_fdps():
-    from faceforge.anatomy.binding import modiolus_mask
+    from faceforge.skin.binding import modiolus_mask
 
     lm = {"8.3": np.array([1.0, 0.0, 0.0]), "8.4": np.array([-1.0, 0.0, 0.0]),
           "2.4": np.array([0.9, 0.0, 0.0])}

@@ -8,8 +8,8 @@ rest position moved as its surface point moved.
 import numpy as np
 import pytest
 
-from faceforge.anatomy.binding import Body, bind_skin
-from faceforge.anatomy.skin import SkinSimulation, SkinStiffness
+from faceforge.skin.binding import Body, bind_skin
+from faceforge.skin.layer import SkinSimulation, SkinStiffness
 from faceforge.pbd import SolverSettings
 from tests.bind.synthetic import sphere
 
@@ -87,7 +87,7 @@ def test_carried_skin_goes_where_the_tissue_under_it_goes(bound):
 def test_compiled_carry_matches_carry_targets(bound):
     """The skin step fills the carried rows in place with ``skin._carry``; its plain twin is
     :meth:`SkinSimulation.carry_targets`: the same bits, the other rows untouched."""
-    from faceforge.anatomy.skin import _carry
+    from faceforge.skin.layer import _carry
 
     v, f, muscle, b = bound
     rng = np.random.default_rng(2)

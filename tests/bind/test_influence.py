@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from faceforge.anatomy.influence import (apply_influence, influence_weights, save_influence_png,
+from faceforge.skin.influence import (apply_influence, influence_weights, save_influence_png,
                                          smoothstep_falloff)
 from tests.bind.synthetic import sphere
 

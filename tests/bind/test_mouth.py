@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from faceforge.anatomy.mouth import cut_mouth, lip_side
-from faceforge.anatomy.skin import skin_topology
+from faceforge.skin.mouth import cut_mouth, lip_side
+from faceforge.skin.layer import skin_topology
 from tests.bind.synthetic import mouth_grid
 
 
@@ -108,7 +108,7 @@ def test_lip_side_follows_the_surface_where_the_lips_roll_in():
     beside = (verts[:, 0] < 1 / 8 - 1e-9) | (verts[:, 0] > 7 / 8 + 1e-9)
     np.testing.assert_array_equal(side[beside], before[beside])
     # and the old rule alone would have called the lifted skin upper lip
-    from faceforge.anatomy.mouth import side_of_points
+    from faceforge.skin.mouth import side_of_points
 
     assert np.all(side_of_points(verts[below], rolled) == 1)
 
@@ -117,7 +117,7 @@ def test_muscle_lip_side_tells_the_sphincter_from_the_lips_own_muscles():
     """A ring around the mouth is AROUND_MOUTH even when most of it lies above the line
     (ICT); a sheet below whose end crosses into the upper lip is a lower-lip muscle; one
     above is upper; one far away is neither."""
-    from faceforge.anatomy.mouth import AROUND_MOUTH, muscle_lip_side
+    from faceforge.skin.mouth import AROUND_MOUTH, muscle_lip_side
 
     v, f, lips = mouth_grid(8)
     cut = cut_mouth(v, f, lips)                          # lip line y = 0.5, mouth 1/8 .. 7/8
@@ -137,7 +137,7 @@ def _ring(h, w, centre, radii, lift):
     """A closed two-sheet muscle ring laid out as hexmesh's (rows around the mouth starting at
     the right corner, counter-clockwise; column 0 inner, w - 1 outer), its lower arc lifted by
     ``lift`` towards the centre line (most of it above the lip line, as ICT's sphincter)."""
-    from faceforge.anatomy.hexmesh import hex_topology
+    from faceforge.anatomy.muscles.hexmesh import hex_topology
 
     topo = hex_topology(h, w, closed=True)
     t = 2 * np.pi * np.arange(h) / h
@@ -149,7 +149,7 @@ def _ring(h, w, centre, radii, lift):
 
 
 def test_grid_layout_finds_the_muscle_grids_and_nothing_else():
-    from faceforge.anatomy.hexmesh import _faces, grid_layout, hex_topology
+    from faceforge.anatomy.muscles.hexmesh import _faces, grid_layout, hex_topology
 
     for h, w, closed in ((20, 2, True), (7, 3, True), (5, 4, False), (12, 6, False)):
         assert grid_layout(2 * h * w, hex_topology(h, w, closed).faces, closed) == (h, w)
@@ -167,7 +167,7 @@ def test_ring_face_sides_follow_the_rows_not_the_lip_line():
     """A sphincter fitted above the lip line (its lower arc mostly above it too): the faces
     of its lower arc still belong to the lower lip, those of the upper arc to the upper one,
     whichever side of the line they lie on."""
-    from faceforge.anatomy.mouth import MouthCut, ring_face_sides, side_of_points
+    from faceforge.skin.mouth import MouthCut, ring_face_sides, side_of_points
 
     v, f, lips = mouth_grid(8)
     cut = cut_mouth(v, f, lips)                          # lip line y = 0.5, corners x = 1/8, 7/8

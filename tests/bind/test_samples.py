@@ -45,12 +45,13 @@ def fit_and_bind(mesh: Path, work: Path, config):
     themselves are tested in tests/fit and tests/bind/test_stage.py). Returns the
     bind report.
     """
-    from faceforge.anatomy.binding import bind_head
-    from faceforge.anatomy.fit_report import npz_arrays
+    from faceforge.skin.binding import bind_head
+    from faceforge.fit.report import npz_arrays
     from faceforge.io.landmarks import default_landmark_path
     from faceforge.io.stagefiles import load_npz, save_npz
     from faceforge.pipeline.stages.bind import head_from_fit_arrays
-    from faceforge.pipeline.stages.fit import fit_files, load_template
+    from faceforge.fit.files import fit_files
+    from faceforge.fit.template import load_template
 
     template = load_template(config.get("template.skull"), config.get("template.muscle_map"))
     result, _, extra = fit_files(str(mesh), str(default_landmark_path(mesh)), template,
@@ -73,7 +74,7 @@ def bound(request, config, tmp_path_factory):
     """(name, workdir, report dict, BoundHead) of one fitted + bound sample head."""
     name = request.param
     if name not in _HEADS:
-        from faceforge.pipeline.stages.animate import BoundHead
+        from faceforge.animation.rig import BoundHead
 
         work = tmp_path_factory.mktemp(name)
         report = fit_and_bind(SAMPLES[name], work, config)
@@ -120,8 +121,8 @@ def test_every_face_front_vertex_is_bound(bound):
 
 
 def _lip_band(d, report):
-    from faceforge.anatomy.binding import lip_band
-    from faceforge.anatomy.mouth import MouthCut
+    from faceforge.skin.binding import lip_band
+    from faceforge.skin.mouth import MouthCut
 
     cut = MouthCut("open", d["vertices"], d["faces"], int(d["n_user"]), d["duplicate_source"],
                    d["removed_faces"], d["lip_upper"], d["lip_lower"])
@@ -132,14 +133,15 @@ def _lip_band(d, report):
 
 #: known failures of the fast jaw opening, by sample (xfail only while they fail). ICT's lip
 #: corners (22-64 slivers per frame at 3 degrees, unbound inner lip between anchors on the jaw
-#: and on the orbicularis oris) no longer turn over since anatomy.orientation_guard.OrientationGuard
+#: and on the orbicularis oris) no longer turn over since animation.guards.orientation.OrientationGuard
 KNOWN_FLIPS: dict = {}
 
 
 def test_a_quick_jaw_opening_turns_no_skin_triangle_over(bound):
     """The jaw opens 3 degrees in 4 frames at 25 fps (as in anger.fap) and holds: no skin
     triangle's normal turns more than 90 degrees from its rest normal in any frame."""
-    from faceforge.anatomy.animate import inverted_triangles, play
+    from faceforge.animation.checks import inverted_triangles
+    from faceforge.animation.playback import play
 
     name, _, _, head = bound
     frames = 12
@@ -200,7 +202,7 @@ def test_opening_the_jaw_separates_the_lips(bound):
 
 
 def test_upper_lip_binds_above_lower_lip_to_the_jaw_side(bound):
-    from faceforge.anatomy.binding import CRANIUM, MANDIBLE
+    from faceforge.skin.binding import CRANIUM, MANDIBLE
     from faceforge.io.stagefiles import load_npz
 
     name, work, report, _ = bound
@@ -232,7 +234,7 @@ def test_the_mouth_corners_bind_to_the_orbicularis_oris(bound, config):
     outer, 2.4, 2.5 inner) that is bound to a muscle has its one anchor on the ring, the outer
     corners' FDPs among it (bind_head's default radius, which these heads are bound with, is
     the config's). Their rays bound MakeHuman's 8.3 to the risorius."""
-    from faceforge.anatomy.binding import MODIOLUS_RADIUS, MUSCLE, modiolus_mask
+    from faceforge.skin.binding import MODIOLUS_RADIUS, MUSCLE, modiolus_mask
     from faceforge.io.stagefiles import load_npz
 
     assert config.get("bind.modiolus_radius") == MODIOLUS_RADIUS

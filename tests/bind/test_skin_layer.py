@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.binding import Body, bind_skin
-from faceforge.anatomy.skin import SkinStiffness, add_skin, skin_topology
+from faceforge.skin.binding import Body, bind_skin
+from faceforge.skin.layer import SkinStiffness, add_skin, skin_topology
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 from tests.bind.synthetic import grid, sphere
 

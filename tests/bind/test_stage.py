@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from faceforge.anatomy.binding import (CRANIUM, MUSCLE, UNBOUND, Binding, bind_report,
+from faceforge.skin.binding import (CRANIUM, MUSCLE, UNBOUND, Binding, bind_report,
                                        face_front_mask)
 from faceforge.exceptions import StageError
 from tests.bind.synthetic import sphere

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.binding import CRANIUM, MANDIBLE, bind_head
-from faceforge.anatomy.skin import SkinSimulation, SkinStiffness
+from faceforge.skin.binding import CRANIUM, MANDIBLE, bind_head
+from faceforge.skin.layer import SkinSimulation, SkinStiffness
 from tests.bind.synthetic import jaw_matrix, lipped_head
 
 

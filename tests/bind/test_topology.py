@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.skin import skin_topology
+from faceforge.skin.layer import skin_topology
 from tests.bind.synthetic import grid, sphere
 
 

@@ -60,7 +60,7 @@ def face_landmarks_on(vertices, faces):
 @pytest.fixture(scope="session")
 def template():
     """The repository's template skull and muscle map (muscles from the disk cache)."""
-    from faceforge.pipeline.stages.fit import load_template
+    from faceforge.fit.template import load_template
 
     return load_template(ROOT / "templates/skull", ROOT / "templates/muscle_map.yaml")
 
@@ -73,7 +73,7 @@ class _Fits:
 
     def __call__(self, name):
         if name not in self.cache:
-            from faceforge.pipeline.stages.fit import fit_files
+            from faceforge.fit.files import fit_files
 
             mesh = SAMPLES[name]
             self.cache[name] = fit_files(mesh, mesh.with_name(mesh.stem + ".fdp.yaml"), self.template, {})

@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy import fit_tissue
-from faceforge.anatomy.fit import (FitSettings, FitTemplate, SkinSurface, Warp, apply_affine, fit_head,
-                                   front_mask, map_directions, orient_outward, signed_skin_depth, similarity_transform,
-                                   worst_first_sample)
-from faceforge.anatomy.fit_muscles import cylindrical_projection, eq5_thickness
+from faceforge.anatomy import tissue as fit_tissue
+from faceforge.fit.align import Warp, apply_affine, map_directions, similarity_transform, worst_first_sample
+from faceforge.fit.head import FitSettings, FitTemplate, fit_head
+from faceforge.fit.surface import SkinSurface, front_mask, orient_outward, signed_skin_depth
+from faceforge.anatomy.muscles.build import eq5_thickness
+from faceforge.fit.muscles import cylindrical_projection
 from faceforge.io.mesh_check import fill_holes
 
 from .conftest import ellipsoid_head, face_landmarks_on
@@ -176,7 +177,7 @@ def test_enhancement_flow_keeps_placed_landmarks_and_does_not_fold():
     every cell's orientation (the map is one-to-one) even where the exact RBF through the
     same pairs turns cells over (a target pulled past a held landmark 1 unit away: the
     flow brings the bone point up to the landmark, never across)."""
-    from faceforge.anatomy.fit import Flow, enhancement_field, integrate_flow
+    from faceforge.fit.align import Flow, enhancement_field, integrate_flow
     from faceforge.geometry.rbf import hardy_epsilon, hardy_rbf
 
     rng = np.random.default_rng(3)

@@ -1,11 +1,11 @@
-"""The muscle map around the mouth follows the skin's lips (faceforge.anatomy.fit_mouth)."""
+"""The muscle map around the mouth follows the skin's lips (faceforge.fit.mouth)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from faceforge.anatomy.fit_mouth import MouthField, mouth_field
+from faceforge.fit.mouth import MouthField, mouth_field
 
 from .conftest import SAMPLES
 
@@ -44,7 +44,7 @@ def test_mouth_field_shifts_in_the_frontal_plane_only():
 @pytest.fixture(scope="module")
 def mouth_fits(template):
     """``fits(name)``: the sample head fitted with ``mouth_follows_lips`` (off by default)."""
-    from faceforge.pipeline.stages.fit import fit_files
+    from faceforge.fit.files import fit_files
 
     cache = {}
 
@@ -82,7 +82,7 @@ def test_weights_run_from_the_origin_to_the_insertion(template):
     insertion all of it, and its fibres' inner points a weight that grows toward the
     insertion; a sphincter takes all of it. The built sheets agree: row 0 lies at the
     origin, row h - 1 at the insertion."""
-    from faceforge.anatomy.fit_mouth import point_weights, sheet_weights
+    from faceforge.fit.mouth import point_weights, sheet_weights
 
     built = {name: (rest, hw) for name, rest, _, hw, _ in template.muscles}
     for spec in template.specs:

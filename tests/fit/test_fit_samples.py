@@ -68,7 +68,7 @@ def test_fitted_bone_turns_over_few_triangles(fitted, template, name):
     against the template's marks a fold of the bone surface (thin bone pushed through itself).
     The enhancement flow (the default) folds few (only triangles larger than the field's
     detail); the paper's exact RBF, still an option, folds more and still fits."""
-    from faceforge.pipeline.stages.fit import fit_files
+    from faceforge.fit.files import fit_files
 
     counts = turned_over_counts(fitted(name)[0], template)
     assert all(c <= limit for c, limit in zip(counts, TURNED_OVER[name])), (name, counts)
@@ -85,8 +85,8 @@ def test_modelled_eye_sockets_stay_hollow(fitted, name):
     """MakeHuman models the closed eye socket (a skin pocket behind the lids): the fitted
     bone keeps out of it, and the map that clears it moves the bone by little. Heads with
     eye holes and no socket (ICT, MediaPipe) have no hollow and no such map."""
-    from faceforge.anatomy.fit import SkinSurface
-    from faceforge.anatomy.fit_orbits import find_orbit_hollows
+    from faceforge.fit.surface import SkinSurface
+    from faceforge.fit.orbits import find_orbit_hollows
 
     result, report, extra = fitted(name)
     checked = extra["checked"]
@@ -149,7 +149,7 @@ def test_stage_files_are_what_bind_reads(fitted, tmp_path):
     # that skull as every muscle map's points are (the mouth's shift moves some off it)
     from dataclasses import replace
 
-    from faceforge.anatomy.muscle_map import SkullProjector, load_muscle_map
+    from faceforge.anatomy.muscles.muscle_map import SkullProjector, load_muscle_map
 
     skull = replace(extra["template"].skull, cranium=(result.cranium, result.cranium_faces),
                     mandible=(result.mandible, result.mandible_faces), landmarks=result.landmarks,
@@ -166,7 +166,7 @@ def test_units_and_pose_do_not_matter(template, fitted, tmp_path):
     """The MediaPipe head in millimetres, turned 8 degrees about Y and moved: the same fit."""
     from faceforge.io.mesh import load_mesh, save_mesh
     from faceforge.io.stagefiles import load_yaml, save_yaml
-    from faceforge.pipeline.stages.fit import fit_files
+    from faceforge.fit.files import fit_files
 
     base, base_report, _ = fitted("mediapipe")
     v, f, _ = load_mesh(SAMPLES["mediapipe"])
@@ -188,7 +188,7 @@ def test_units_and_pose_do_not_matter(template, fitted, tmp_path):
 
 def test_same_inputs_same_fit(fitted, template):
     """Deterministic: a second fit of the same head gives identical arrays."""
-    from faceforge.pipeline.stages.fit import fit_files
+    from faceforge.fit.files import fit_files
 
     first, report, _ = fitted("mediapipe")
     mesh = SAMPLES["mediapipe"]

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from faceforge.anatomy.fap_mapping import VISEME_IDS, viseme_weights
+from faceforge.animation.fap_mapping import VISEME_IDS, viseme_weights
 from faceforge.exceptions import FapError
 from faceforge.mpeg4 import VISEME_CODES, VISEMES, read_fap, viseme_track, write_fap
 

@@ -1,6 +1,6 @@
 """The muscles around the mouth follow the skin's lips (beyond §7).
 
-The skull fit uses only FDPs with bone beneath them (:mod:`faceforge.anatomy.fit_tissue`): the
+The skull fit uses only FDPs with bone beneath them (:mod:`faceforge.anatomy.tissue`): the
 lips are soft tissue, free to sit higher or lower in front of the teeth from one face to the
 next, so nothing in the fit tells the muscle map where this head's mouth is. The map is
 morphed with the skull, and the orbicularis oris, whose inner loop the template puts on the
@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from faceforge.anatomy.muscle_map import POINTS_ORDER
+from faceforge.anatomy.muscles.muscle_map import POINTS_ORDER
 
 #: FDPs of the lip contours (MPEG-4 groups 2 and 8) whose bone counterparts carry the shift
 LIP_FDPS = ("2.2", "2.3", "2.4", "2.5", "2.6", "2.7", "2.8", "2.9",

@@ -12,7 +12,7 @@ constraint index arrays of §8:
   surface virtually).
 
 :func:`add_skin` feeds them, plus the anchors found by
-:mod:`faceforge.anatomy.binding`, into a :class:`faceforge.pbd.ModelBuilder`.
+:mod:`faceforge.skin.binding`, into a :class:`faceforge.pbd.ModelBuilder`.
 Each anchor is a particle ``q`` held by a position constraint whose target is
 a surface point on a muscle or a bone (recomputed every frame from the
 deformed layer, :meth:`SkinLayer.anchor_targets`) and a stretch constraint
@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from faceforge.anatomy.layer_targets import bary_points
+from faceforge.anatomy.muscles.targets import bary_points
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 
 __all__ = [
@@ -262,7 +262,7 @@ class SkinSimulation:
     vertices : (n, 3) float
         Working skin rest positions (after the mouth cut).
     faces : (m, 3) int
-    binding : faceforge.anatomy.binding.Binding
+    binding : faceforge.skin.binding.Binding
         Its ``body_names`` must be bodies of the system the layer is added to.
     stiffness : SkinStiffness
     settings : faceforge.pbd.SolverSettings, optional

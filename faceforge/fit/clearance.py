@@ -1,6 +1,6 @@
 """Clear skin that the fitted bone swallowed: the last step of the fit (§7).
 
-The RBF fit (:mod:`faceforge.anatomy.fit`) is smooth and global, so a skin that is
+The RBF fit (:mod:`faceforge.fit.head`) is smooth and global, so a skin that is
 modelled deep into the head (a closed eye socket folding behind the lids, a nostril
 reaching into the nasal aperture) can end up inside the fitted bone, and enhancement
 landmarks cannot always push the bone out of it without ringing elsewhere. The skin
@@ -78,7 +78,7 @@ class BumpField:
 
 def swallowed(bones, points: np.ndarray) -> np.ndarray:
     """Bool (n,): ``points (n, 3)`` inside any closed bone of ``bones`` [(vertices, faces)]."""
-    from faceforge.anatomy.fit import inside_closed
+    from faceforge.fit.surface import inside_closed
 
     inside = np.zeros(len(points), bool)
     for v, f in bones:

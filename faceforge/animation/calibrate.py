@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from faceforge.anatomy.fap_mapping import N_FAPS, FapMapping, with_entry
+from faceforge.animation.fap_mapping import N_FAPS, FapMapping, with_entry
 
 #: FAP groups the acceptance criterion is computed over (MPEG-4 FAP numbers)
 JAW_FAPS = (3, 14, 15)

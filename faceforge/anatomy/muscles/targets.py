@@ -5,7 +5,7 @@ layers (A0 and A2 at the step ``1 - c kappa`` of Eq. 4, A3 and A1 at the full st
 its insertion with the ends of the two fibres, and hands the contour samples to its
 bottom particles as position targets; its interior bottom particles get the blend of
 their row's two side samples plus their rest offset in the row's basis
-(:func:`faceforge.anatomy.muscle.interior_targets`). :meth:`faceforge.anatomy.muscle.
+(:func:`faceforge.anatomy.muscles.muscle.interior_targets`). :meth:`faceforge.anatomy.muscles.muscle.
 Muscle.targets_from_line_points` is the plain twin. Done muscle by muscle in numpy that is ~35
 small array operations per muscle, ~0.9 ms a frame for the 25 sheets of the default map;
 :class:`LinearTargets` does the same arithmetic, in the same order (so the same bits), for
@@ -20,7 +20,7 @@ Layout (CSR over the layer's linear muscles, ``q`` of them):
 * ``cells (t, 2)`` grid cells ``(i, j)`` of every muscle's bound particles (its contour,
   then its interior ones), one muscle after another, and ``cell_start (q + 1,)``; the
   targets come out in the same rows, ``(t, 3)``; ``offsets (t, 3)`` the rest offsets of the
-  interior rows in their row's basis (:attr:`faceforge.anatomy.muscle.Muscle.interior`),
+  interior rows in their row's basis (:attr:`faceforge.anatomy.muscles.muscle.Muscle.interior`),
   zero on the contour rows.
 """
 
@@ -29,7 +29,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from faceforge.anatomy.action_line import _polyline_samples
+from faceforge.anatomy.muscles.action_line import _polyline_samples
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 
 __all__ = ["LinearTargets", "bary_points"]
@@ -135,7 +135,7 @@ class LinearTargets:
 
     Parameters
     ----------
-    muscles : list of :class:`~faceforge.anatomy.muscle.Muscle` (the linear ones of a layer)
+    muscles : list of :class:`~faceforge.anatomy.muscles.muscle.Muscle` (the linear ones of a layer)
     pieces : list of ``{line key: slice}``, each muscle's rows in the layer's gathered points
     slots : list of ``(s_i,)`` int arrays, each muscle's position slots in the layer's Control
 

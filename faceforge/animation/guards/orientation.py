@@ -6,14 +6,14 @@ is made of slivers (the lip corners of a dense head: triangles of 0.1-20 % of
 the median area, nearly collinear in the plane of the lips' contact surface),
 a small shear between neighbouring vertices turns them over. On the ICT head
 this happens where the jaw drags the lower lip away from the upper lip: the
-inner lip skin between them (the lip band, :func:`faceforge.anatomy.binding.lip_band`;
+inner lip skin between them (the lip band, :func:`faceforge.skin.binding.lip_band`;
 measured while it had no anchor of its own), carried by anchors on different bodies
 (depressor labii and mandible below, orbicularis oris and cranium above), lags
 behind the anchored skin while the jaw moves and overshoots when it stops; with the jaw wide open, the upper lip, dragged back
 by the orbicularis oris, crushes its inner skin against the teeth.
 
 :class:`OrientationGuard` is a pass over the skin positions after each PBD
-step (like :class:`faceforge.anatomy.animate.SkullGuard`): every triangle keeps
+step (like :class:`faceforge.animation.guards.skull.SkullGuard`): every triangle keeps
 a signed area, measured along its rest normal ``n0``, of at least ``min_area``
 times its rest area ``A0``::
 
@@ -30,7 +30,7 @@ its orientation is never moved: the paper's skin stiffness values are
 untouched. The rest normal is the reference because the head does not turn in
 the simulation (the cranium is fixed; the jaw opens a few tens of degrees): a
 triangle's normal more than 90 degrees from its rest normal is a fold, which is
-also what :func:`faceforge.anatomy.animate.inverted_faces` counts. (A
+also what :func:`faceforge.animation.checks.inverted_faces` counts. (A
 reference turned with each triangle's neighbourhood, fitted by Kabsch on the
 2- to 6-ring, was tried on ICT: the corner neighbourhoods deform far from
 rigidly, the fitted rotations were 25-90 degrees for a 3-degree jaw opening,

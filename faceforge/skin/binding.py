@@ -10,7 +10,7 @@ muscle is met, the skull (cranium and mandible, nearest hit) is tested. Hits
 farther than ``max_distance`` are ignored.
 
 On a hit the binding records a surface point (triangle + barycentric
-coordinates) on the hit body. The skin layer (:func:`faceforge.anatomy.skin.add_skin`)
+coordinates) on the hit body. The skin layer (:func:`faceforge.skin.layer.add_skin`)
 turns each into a particle ``q`` held on that surface point by a position
 constraint and a stretch constraint ``k_anchor`` between ``p`` and ``q``;
 :meth:`Binding.targets` recomputes the surface points on the deformed bodies
@@ -18,11 +18,11 @@ every frame.
 
 Lips: skin of the upper lip may bind only to the cranium (upper structures),
 skin of the lower lip only to the mandible (``lip_sides`` from
-:func:`faceforge.anatomy.mouth.lip_side`), so the lips part when the jaw opens.
+:func:`faceforge.skin.mouth.lip_side`), so the lips part when the jaw opens.
 A lip vertex ignores muscle hits on the other side of the lip line (the lower
 lip never binds to the upper half of the orbicularis oris), muscle hits far from
 the lips, and the other lip's muscles
-(:func:`faceforge.anatomy.mouth.muscle_lip_side`).
+(:func:`faceforge.skin.mouth.muscle_lip_side`).
 
 Beyond the paper: some muscles insert into the skin through the muscles above them (the
 corrugator and the depressor supercilii pass through the frontalis and the orbicularis
@@ -69,7 +69,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from faceforge.anatomy.mouth import AROUND_MOUTH
+from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import barycentric, check_mesh, vertex_normals
@@ -398,7 +398,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         Longest ray, in skin units (``bind.max_ray_distance`` x head diagonal).
     lip_sides : (n,) int, optional
         +1 upper lip (binds to the cranium only), -1 lower lip (mandible only),
-        0 elsewhere; see :func:`faceforge.anatomy.mouth.lip_side`.
+        0 elsewhere; see :func:`faceforge.skin.mouth.lip_side`.
     normals : (n, 3) float, optional
         Outward unit normals; default the area-weighted star average.
     depth_rank : (len(bodies),) int, optional
@@ -407,7 +407,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         muscles' order in ``bodies``.
     side_of : callable, optional
         ``points (k, 3) -> (k,) int`` side of the lip line (+1 above, -1 below,
-        0 far; :func:`faceforge.anatomy.mouth.side_of_points`). A lip vertex
+        0 far; :func:`faceforge.skin.mouth.side_of_points`). A lip vertex
         (``lip_sides != 0``) ignores hits on the other side, so the lower lip
         never binds to the upper part of a muscle around the mouth; it also ignores
         muscle hits far from the lips (side 0: a ray up the nose to the brows).
@@ -416,7 +416,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         closest skull point within ``max_distance`` (:attr:`Binding.closest`);
         False keeps the paper's rays only.
     body_sides : (len(bodies),) int, optional
-        With ``side_of``: the lip each body acts on (:func:`faceforge.anatomy.mouth.
+        With ``side_of``: the lip each body acts on (:func:`faceforge.skin.mouth.
         muscle_lip_side`): +1 upper, -1 lower, ``AROUND_MOUTH`` (2), 0 neither (and the
         skull parts). Rays and fallback of an upper-lip vertex skip the lower lip's
         muscles and vice versa (an upper-lip vertex never binds to the end of a depressor
@@ -429,7 +429,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         on it (the nearest hit; :attr:`Binding.vertex_ids` then lists the vertex twice).
     face_sides : sequence, optional
         Per body, None or ``(f_i,) int8``: the lip side of each face of a ring around the
-        mouth by its rows (:func:`faceforge.anatomy.mouth.ring_face_sides`), used for that
+        mouth by its rows (:func:`faceforge.skin.mouth.ring_face_sides`), used for that
         body in place of the side of the lip line its hits and faces lie on.
     lips_to_ring : bool
         A lip vertex whose rays miss binds to its own half of the muscles around the mouth
@@ -644,7 +644,7 @@ class BoundSkin:
 
     Attributes
     ----------
-    cut : faceforge.anatomy.mouth.MouthCut
+    cut : faceforge.skin.mouth.MouthCut
         The working skin mesh (``cut.vertices``, ``cut.faces``) and the mapping
         back to the user's vertices.
     binding : Binding
@@ -694,14 +694,14 @@ def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 
 #: soft tissue depth at the mouth corners, mm (Rhine 1983 ``ecm2_sup``, the deepest of the
-#: mouth region in :data:`faceforge.anatomy.fit_tissue.DEPTH_MM`): the width of the lip band
+#: mouth region in :data:`faceforge.anatomy.tissue.DEPTH_MM`): the width of the lip band
 LIP_BAND_MM = 18.0
 
 
 def lip_band_width(landmarks: dict) -> float | None:
     """:data:`LIP_BAND_MM` in skin units (scaled by the eye separation, ``ES0 / 63 mm``);
     None when the eye FDPs that give ES0 are missing."""
-    from faceforge.anatomy.fit_tissue import units_per_mm
+    from faceforge.anatomy.tissue import units_per_mm
 
     try:
         return LIP_BAND_MM * units_per_mm(landmarks)
@@ -720,7 +720,7 @@ def lip_band(cut, width: float | None, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
     lips touch each other and roll into the mouth. None, or no contours: no vertex."""
     from scipy.sparse.csgraph import dijkstra
 
-    from faceforge.anatomy.mouth import _graph
+    from faceforge.skin.mouth import _graph
 
     n = len(cut.vertices)
     if width is None or len(cut.upper) < 2 or len(cut.lower) < 2:
@@ -805,15 +805,15 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     (``lip_sides``), so every front vertex is bound. The lip corners' small triangles
     between those and the orbicularis oris used to turn over while the jaw moved, which is
     why this band was once left unbound; the skin's orientation guard
-    (:mod:`faceforge.anatomy.orientation_guard`) now keeps them upright. The band is still
+    (:mod:`faceforge.animation.guards.orientation`) now keeps them upright. The band is still
     a region of the report.
 
     Returns
     -------
     BoundSkin
     """
-    from faceforge.anatomy.influence import influence_weights
-    from faceforge.anatomy.mouth import (LIP_FDPS, cut_mouth, lip_side, muscle_lip_side,
+    from faceforge.skin.influence import influence_weights
+    from faceforge.skin.mouth import (LIP_FDPS, cut_mouth, lip_side, muscle_lip_side,
                                          ring_face_sides, side_of_points)
 
     v, f = check_mesh(vertices, faces)

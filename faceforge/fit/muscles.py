@@ -23,13 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from faceforge.geometry.rbf import hardy_rbf
+from faceforge.anatomy.muscles.build import eq5_thickness
 from faceforge.geometry.rays import RayCaster
-
-
-def eq5_thickness(fraction: float, skull_diagonal: float) -> float:
-    """Muscle thickness in head units from the template's fraction of the skull diagonal (Eq. 5)."""
-    return float(fraction) * float(skull_diagonal)
+from faceforge.geometry.rbf import hardy_rbf
 
 
 def vertical_axis(cranium_vertices: np.ndarray) -> np.ndarray:
@@ -90,11 +86,11 @@ def refit_pairs(landmarks_fitted: np.ndarray, skin, axis_point: np.ndarray, musc
                 reach: float, max_lift: float) -> Refit:
     """Cylindrical projection of the fitted bone landmarks (n, 3) onto the muscles, and the
     move each needs so that its muscle point lies at least ``gap`` beneath the skin
-    (depth by the closest skin point, :func:`faceforge.anatomy.fit.signed_skin_depth`).
+    (depth by the closest skin point, :func:`faceforge.fit.surface.signed_skin_depth`).
     A hit more than ``max_lift`` above the landmark belongs to another part of the face
     (the ray grazed a muscle in front) and does not count as covering it.
     """
-    from faceforge.anatomy.fit import signed_skin_depth
+    from faceforge.fit.surface import signed_skin_depth
 
     covered, hits, which, lift = cylindrical_projection(landmarks_fitted, axis_point, muscle_meshes, reach)
     covered &= lift <= max_lift
@@ -123,62 +119,6 @@ def refit_rbf(refit: Refit, landmarks_fitted: np.ndarray, fixed_points: np.ndarr
     return hardy_rbf(src, dst, epsilon=epsilon)
 
 
-def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
-                     carry_inner: float = 0.0, protrusion: float = 0.0) -> list:
-    """Build every muscle of ``specs`` on the given skull, deepest layer first.
-
-    Each muscle's action lines are projected (outermost surface) onto the concatenation of
-    the bodies it lies on (cranium, mandible, deeper muscles); thickness is Eq. 5:
-    ``spec.thickness * skull_diagonal``. ``stiffness``: ``{"linear": {...}, "sphincter":
-    {...}}`` of the config (empty: geometry only); ``carry_inner``: the sphincter's
-    ``carry_inner`` of :func:`build_sphincter_muscle` (``muscle.sphincter.carry_inner``, on
-    the skull's faces; it does not change the rest geometry); ``protrusion``: the sphincter's
-    ``protrusion`` (``muscle.sphincter.protrusion``). Returns ``[Muscle]`` in build order.
-    Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
-    """
-    from faceforge.anatomy.action_line import ActionLine
-    from faceforge.anatomy.layers import expand_lies_on
-    from faceforge.anatomy.muscle import align_loops, build_linear_muscle, build_sphincter_muscle
-    from faceforge.exceptions import TemplateError
-
-    stiffness = stiffness or {}
-    bodies = {"cranium": cranium, "mandible": mandible}
-    built = []
-    for spec in sorted(specs, key=lambda s: s.layer):
-        parts = []
-        for name in expand_lies_on(spec.lies_on):
-            if name not in bodies:
-                raise TemplateError(f"muscle {spec.name!r} lies on {name!r}, which is not built before it")
-            parts.append(bodies[name])
-        offsets = np.cumsum([0] + [len(v) for v, _ in parts])
-        v = np.vstack([p[0] for p in parts])
-        f = np.vstack([p[1] + o for p, o in zip(parts, offsets)])
-        t = eq5_thickness(spec.thickness, skull_diagonal)
-        kw = dict(lies_on=tuple(spec.lies_on), layer=spec.layer, active=spec.active)
-        lines = spec.action_lines()
-
-        def line(points, closed=False):
-            return ActionLine.from_points(points, v, f, closed=closed, project="outermost")
-
-        try:
-            if spec.type == "linear":
-                m = build_linear_muscle(spec.name, line(lines["A3"]), line(lines["A1"]), line(lines["A0"]),
-                                        line(lines["A2"]), v, f, spec.h, spec.w, t,
-                                        stiffness.get("linear", {}), **kw)
-            else:
-                inner, outer = align_loops(spec.inner, spec.outer)
-                bone = np.concatenate([np.full(len(p[1]), n in ("cranium", "mandible"))
-                                       for n, p in zip(expand_lies_on(spec.lies_on), parts)])
-                m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h,
-                                           spec.w, t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
-                                           carry_faces=bone, protrusion=protrusion, **kw)
-        except ValueError as exc:   # e.g. an action line collapsing to one point on these surfaces
-            raise TemplateError(f"muscle {spec.name!r} cannot be built on this skull: {exc}") from exc
-        bodies[spec.name] = (m.rest_positions, m.faces)
-        built.append(m)
-    return built
-
-
 def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float, shift=None, weights=None) -> list:
     """Muscles built on the template skull, carried into the head by ``warp`` (Eq. 5).
 
@@ -189,7 +129,7 @@ def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float, shift=Non
 
     template_muscles : [(name, rest_positions (2hw, 3), faces, hw, thickness fraction)]
     shift, weights : optional ``(points, weights) -> points`` applied after ``warp`` (the mouth's
-    :class:`faceforge.anatomy.fit_mouth.MouthField`) with ``weights[name] (2hw,)``
+    :class:`faceforge.fit.mouth.MouthField`) with ``weights[name] (2hw,)``
     Returns ``[(name, vertices (2hw, 3), faces)]``.
     """
     out = []
@@ -207,9 +147,9 @@ def morph_muscle_meshes(template_muscles, warp, skull_diagonal: float, shift=Non
 def fitted_muscle_map(specs, points: dict) -> dict:
     """The muscle map carried into the head, in the muscle-map YAML structure.
 
-    Every point of every :class:`~faceforge.anatomy.muscle_map.MuscleSpec` is taken from
+    Every point of every :class:`~faceforge.anatomy.muscles.muscle_map.MuscleSpec` is taken from
     ``points`` (``{name: (k, 3)}`` in ``spec.points()`` order:
-    :attr:`faceforge.anatomy.fit.FitResult.muscle_points`, the map as the fit carried it);
+    :attr:`faceforge.fit.head.FitResult.muscle_points`, the map as the fit carried it);
     mirrored muscles are written out in full. Thickness stays a fraction of the skull
     diagonal (Eq. 5 then applies with the fitted skull). Loadable with
     ``load_muscle_map(path, fitted_skull)`` (its ``units: template`` means "the skull it

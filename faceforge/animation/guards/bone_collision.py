@@ -1,6 +1,6 @@
 """Skin that got inside a bone is put back out (beyond the paper; after the skin's constraints).
 
-:class:`faceforge.anatomy.animate.SkullGuard` holds each skin vertex above the plane of the
+:class:`faceforge.animation.guards.skull.SkullGuard` holds each skin vertex above the plane of the
 bone triangle under it at rest. A vertex that slides over the bone (the lips onto the other
 jaw's teeth, the cheek over the cheekbone) meets bone that triangle does not describe and can
 end inside it. :class:`BoneCollision` finds such vertices with the same test the animation

@@ -11,7 +11,7 @@ empty of bone: that is what this module enforces, with a map that cannot fold.
 fraction of the corner distance) a centre ``c`` is sought from which the skin encloses a
 pocket: rays cast from ``c`` in every direction first meet either the socket lining from
 its outer side (skin normal facing ``c``) or the virtual fan closing the eye opening
-(:meth:`faceforge.anatomy.fit.SkinSurface.build`). Its radius in direction ``u`` is the
+(:meth:`faceforge.fit.surface.SkinSurface.build`). Its radius in direction ``u`` is the
 distance ``t(u)`` of that first hit; the bone must stay beyond ``T(u) = t(u) + clearance``.
 Heads with eye holes and no socket (ICT, MediaPipe) have no such centre: rays from behind
 their eye openings meet the skin from inside, and no hollow is found.
@@ -204,7 +204,7 @@ def find_orbit_hollows(skin, skin_landmarks: dict, clearance: float, beta: float
                        depths=(0.0, 0.1, 0.2, 0.3, 0.4, 0.5)) -> list[OrbitHollow]:
     """The hollows behind the eyes (0, 1 or 2) of a skin.
 
-    skin : :class:`faceforge.anatomy.fit.SkinSurface`; skin_landmarks {fdp: (3,)} (the eye
+    skin : :class:`faceforge.fit.surface.SkinSurface`; skin_landmarks {fdp: (3,)} (the eye
     corners 3.7, 3.11, 3.8, 3.12 are used; an eye without both corners is skipped).
     Centres are tried at the corners' midpoint moved back (-Z) by ``depths`` times the
     corner distance; rays count up to 1.5 corner distances.

@@ -39,7 +39,7 @@ radius from the upper lid FDP.
 **Gathered skin stays upright.** Where the lids meet, the skin between them is squeezed to
 :data:`MIN_OPENING` of its height, and a few slivers near the corners (where the taper bends
 fastest) can turn over. :class:`Eyelids` runs an
-:class:`~faceforge.anatomy.orientation_guard.OrientationGuard` over the triangles in the lids'
+:class:`~faceforge.animation.guards.orientation.OrientationGuard` over the triangles in the lids'
 reach, with a floor of half :data:`MIN_OPENING`, on each frame the lids moved.
 
 All lengths are in the skin's units; frames are in the head's frame (+X the subject's left,
@@ -267,7 +267,7 @@ class Eyelids:
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
                  depth: float = 0.5):
-        from faceforge.anatomy.orientation_guard import OrientationGuard
+        from faceforge.animation.guards.orientation import OrientationGuard
         from faceforge.geometry.triangles import vertex_components
 
         self.rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)

@@ -94,8 +94,8 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from faceforge.anatomy.action_line import eval_polyline, sample_positions
-from faceforge.anatomy.hexmesh import HexTopology, hex_topology, morph_hex
+from faceforge.anatomy.muscles.action_line import eval_polyline, sample_positions
+from faceforge.anatomy.muscles.hexmesh import HexTopology, hex_topology, morph_hex
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
@@ -859,7 +859,7 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
 
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
-    :func:`faceforge.anatomy.muscle.align_loops` arranges that for raw points.
+    :func:`faceforge.anatomy.muscles.muscle.align_loops` arranges that for raw points.
     """
     if not (inner.closed and outer.closed):
         raise ValueError(f"sphincter {name}: inner and outer action lines must be closed loops")

@@ -20,8 +20,8 @@ import numpy as np
 
 def depth_below_skin(points: np.ndarray, skin) -> tuple[np.ndarray, np.ndarray]:
     """Signed depth (k,) float (positive beneath the skin, head units; 0 in a pocket) and
-    covered (k,) bool; see :func:`faceforge.anatomy.fit.signed_skin_depth`."""
-    from faceforge.anatomy.fit import signed_skin_depth
+    covered (k,) bool; see :func:`faceforge.fit.surface.signed_skin_depth`."""
+    from faceforge.fit.surface import signed_skin_depth
 
     depth, _, _, covered, _ = signed_skin_depth(points, skin)
     return depth, covered
@@ -50,33 +50,20 @@ def landmark_residuals(fdps, reached: np.ndarray, targets: np.ndarray, diagonal:
     return {f: float(x) for f, x in zip(fdps, r)}
 
 
-def save_fit_png(path, skin_v, skin_f, layers: list, title: str = "fit", points=None) -> None:
-    """Front and side pictures: ``layers`` [(name, vertices, faces, rgb)] inside the translucent
-    skin, with optional ``points`` (k, 3) (the landmark targets, as in Fig. 8).
-
-    Uses :func:`faceforge.viz.render.render_meshes` (painter's algorithm, Agg).
-    """
-    from faceforge.viz.render import Layer, render_meshes
-
-    drawn = [Layer(v, f, color=c) for name, v, f, c in layers]
-    drawn.append(Layer(skin_v, skin_f, color=(0.95, 0.78, 0.68), alpha=0.25))
-    render_meshes(path, drawn, views=("front", "side"), title=title, points=points)
-
-
 def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_es0: float = 0.75) -> dict:
-    """The fit report (JSON-friendly) of a :class:`faceforge.anatomy.fit.FitResult`.
+    """The fit report (JSON-friendly) of a :class:`faceforge.fit.head.FitResult`.
 
     Skull numbers cover the *front* vertices (in front of the coronal plane ``front_offset_es0``
     ES0 behind the outer eye corners) that the skin covers; muscle numbers cover every
     muscle vertex the skin covers. Depths are in head units and in millimetres of an
     average adult (``units_per_mm``).
     """
-    from faceforge.anatomy.fit import front_mask
+    from faceforge.fit.surface import front_mask
 
     diag = skin.diagonal
     mm = result.info["units_per_mm"]
     skin_lm = skin_landmarks.as_dict()
-    from faceforge.anatomy.fit import signed_skin_depth
+    from faceforge.fit.surface import signed_skin_depth
 
     skull = np.vstack([result.cranium, result.mandible])
     depth, _, _, covered, pocket = signed_skin_depth(skull, skin)
@@ -101,7 +88,7 @@ def build_report(result, skin, skin_landmarks, mesh_report: dict, front_offset_e
     for st in (skull_stats, muscle_stats):
         for key in ("min_depth", "median_depth"):
             st[key + "_mm"] = None if st[key] is None else st[key] / mm
-    from faceforge.anatomy.fit import inside_closed
+    from faceforge.fit.surface import inside_closed
 
     own = skin.vertices[:skin.n_real] if skin.n_real >= 0 else skin.vertices
     swallowed = np.zeros(len(own), bool)

@@ -363,7 +363,7 @@ def ring_face_sides(vertices, faces, cut: MouthCut, up=(0.0, 1.0, 0.0)):
     """Lip side of each face of a muscle ring around the mouth, by the ring's rows rather
     than where the face lies: ``(m,) int8``, +1 the upper lip's arc, -1 the lower's (0: a face
     touching neither arc); None when the mesh is not a closed muscle grid
-    (:func:`faceforge.anatomy.hexmesh.grid_layout`) or the cut has no corners.
+    (:func:`faceforge.anatomy.muscles.hexmesh.grid_layout`) or the cut has no corners.
 
     The two rows whose outer samples (column ``w - 1`` of the bottom sheet: the loop around
     the lips) lie nearest the mouth corners split the ring into two arcs; the arc whose outer
@@ -373,7 +373,7 @@ def ring_face_sides(vertices, faces, cut: MouthCut, up=(0.0, 1.0, 0.0)):
     contour): the side of the lip line a face lies on then gives the upper lip the arc that
     the lower lip's muscles pull.
     """
-    from faceforge.anatomy.hexmesh import grid_layout
+    from faceforge.anatomy.muscles.hexmesh import grid_layout
 
     v = np.asarray(vertices, FLOAT).reshape(-1, 3)
     f = np.asarray(faces, INT).reshape(-1, 3)
