@@ -192,3 +192,29 @@ def test_rules_inferred_from_default_types_and_added_rules(monkeypatch):
     monkeypatch.undo()
     cfg._DEFAULT_CACHE.clear()
     assert parse_sets(["animate.fps=500"]).tree == {"animate": {"fps": 500}}
+
+
+def test_every_range_rule_holds_without_importing_a_stage_module():
+    """The range rules live in faceforge.io.config: a fresh interpreter that imports no stage
+    module still rejects out-of-range values of keys the stages read (issue 24)."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from faceforge.exceptions import ConfigError\n"
+            "from faceforge.io.config import load_config\n"
+            "bad = ['skin.carry=some', 'muscle.damping=1.5', 'animate.orientation_guard.min_area=0.99',\n"
+            "       'animate.skull_guard.collision_reach=0.9', 'fit.orientation=+Z,+Z']\n"
+            "caught = 0\n"
+            "for s in bad:\n"
+            "    try:\n"
+            "        load_config(sets=[s])\n"
+            "    except ConfigError:\n"
+            "        caught += 1\n"
+            "assert 'faceforge.pipeline.stages' not in ' '.join(sys.modules), 'a stage module was imported'\n"
+            "print(caught)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(__file__).resolve().parents[1],
+                         env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "5"

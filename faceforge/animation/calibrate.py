@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from faceforge.animation.fap_mapping import N_FAPS, FapMapping, with_entry
+from faceforge.animation.fap_mapping import FapMapping, with_entry
+from faceforge.mpeg4.tables import N_FAPS
 
 #: FAP groups the acceptance criterion is computed over (MPEG-4 FAP numbers)
 JAW_FAPS = (3, 14, 15)

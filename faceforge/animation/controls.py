@@ -42,10 +42,11 @@ def track_controls(track, mapping, head):
 def visemes_played(track) -> tuple[list[str], int]:
     """The names (in code order) of the visemes a track's FAP 1 gives a weight, and in how
     many frames it gives one."""
-    from faceforge.animation.fap_mapping import VISEME_IDS, viseme_weights
+    from faceforge.animation.fap_mapping import viseme_weights
+    from faceforge.mpeg4.visemes import VISEME_CODES
 
     w = viseme_weights(track.viseme) > 0.0
-    names = [name for name in sorted(VISEME_IDS, key=VISEME_IDS.get) if w[:, VISEME_IDS[name] - 1].any()]
+    names = [name for name in sorted(VISEME_CODES, key=VISEME_CODES.get) if w[:, VISEME_CODES[name] - 1].any()]
     return names, int(w.any(axis=1).sum())
 
 

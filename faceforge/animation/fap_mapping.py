@@ -28,9 +28,9 @@ are clipped to the mapping's limits. FAP 2 (expression) and FAP 1 (viseme) are e
 into low-level FAPs with the ``expressions`` and ``visemes`` tables before all this
 (:func:`expression_faps`, :func:`viseme_faps`).
 
-This module imports nothing of ``faceforge.mpeg4`` (anatomy stays below mpeg4 in the
-dependency order): FAPs travel as ``(n_frames, 68)`` arrays, column ``k`` = FAP ``k+1``,
-and FAPU as a ``{"MNS": length, ...}`` dict of skin lengths per FAPU.
+FAPs travel as ``(n_frames, 68)`` arrays, column ``k`` = FAP ``k+1``, and FAPU as a
+``{"MNS": length, ...}`` dict of skin lengths per FAPU. The standard's tables (FAP count,
+FAPU names, expression and viseme codes, their 6-bit maxima) are :mod:`faceforge.mpeg4`'s.
 """
 
 from __future__ import annotations
@@ -41,22 +41,11 @@ from pathlib import Path
 import numpy as np
 
 from faceforge.exceptions import TemplateError
+from faceforge.mpeg4.expressions import EXPRESSION_CODES, MAX_INTENSITY
+from faceforge.mpeg4.tables import FAPU_NAMES, N_FAPS
+from faceforge.mpeg4.visemes import MAX_BLEND, VISEME_CODES
 
-N_FAPS = 68
 JAW_DOFS = ("pitch", "yaw", "protrusion")
-FAPU_NAMES = ("IRISD", "ES", "ENS", "MNS", "MW", "AU")
-#: MPEG-4 expression_select values (ISO/IEC 14496-2, FAP 2)
-EXPRESSION_IDS = {"joy": 1, "sadness": 2, "anger": 3, "fear": 4, "disgust": 5, "surprise": 6}
-#: the largest MPEG-4 expression intensity (6 bits)
-EXPRESSION_INTENSITY_MAX = 63.0
-#: MPEG-4 viseme_select values (ISO/IEC 14496-2, FAP 1; 0 = none), named by their phonemes:
-#: p b m (put, bed, mill), f v (far, voice), T D (think, that), t d (tip, doll), k g (call,
-#: gas), tS dZ S (chair, join, she), s z (sir, zeal), n l (lot, not), r (red), A: (car),
-#: e (bed), I (tip), Q (top), U (book)
-VISEME_IDS = {"p_b_m": 1, "f_v": 2, "th": 3, "t_d": 4, "k_g": 5, "ch_j_sh": 6, "s_z": 7,
-              "n_l": 8, "r": 9, "a": 10, "e": 11, "i": 12, "o": 13, "u": 14}
-#: viseme_blend of a frame that is all viseme_select1 (6 bits)
-VISEME_BLEND_MAX = 63.0
 
 
 @dataclass(frozen=True)
@@ -253,8 +242,8 @@ def mapping_from_dict(data: dict, source: str = "<memory>") -> FapMapping:
         if not lo <= 0.0 <= hi:
             raise _err(source, f"jaw_limits.{dof}: expected lo <= 0 <= hi, got [{lo}, {hi}]")
         limits[dof] = (lo, hi)
-    expressions = _presets(data, "expressions", EXPRESSION_IDS, source)
-    visemes = _presets(data, "visemes", VISEME_IDS, source)
+    expressions = _presets(data, "expressions", EXPRESSION_CODES, source)
+    visemes = _presets(data, "visemes", VISEME_CODES, source)
     cmax = _as_float(data.get("max_contraction", 1.0), source, "max_contraction")
     if not 0.0 < cmax <= 1.0:
         raise _err(source, f"max_contraction: expected a number in (0, 1], got {cmax}")
@@ -326,9 +315,9 @@ def mapping_to_dict(mapping: FapMapping) -> dict:
 
     out = {"max_contraction": float(mapping.max_contraction), "entries": entries,
            "jaw_limits": {k: [float(v[0]), float(v[1])] for k, v in mapping.jaw_limits.items()},
-           "expressions": presets(mapping.expressions, EXPRESSION_IDS)}
+           "expressions": presets(mapping.expressions, EXPRESSION_CODES)}
     if mapping.visemes:
-        out["visemes"] = presets(mapping.visemes, VISEME_IDS)
+        out["visemes"] = presets(mapping.visemes, VISEME_CODES)
     return out
 
 
@@ -389,19 +378,19 @@ def expression_faps(mapping: FapMapping, fap2: np.ndarray) -> np.ndarray:
     fap2 = np.atleast_2d(np.asarray(fap2, dtype=float))
     if fap2.shape[1] < 4:
         raise ValueError(f"fap2 must be (n, >=4), got {fap2.shape}")
-    by_id = {EXPRESSION_IDS[n]: row for n, row in mapping.expressions.items()}
+    by_id = {EXPRESSION_CODES[n]: row for n, row in mapping.expressions.items()}
     out = np.zeros((len(fap2), N_FAPS))
     for sel_col, int_col in ((0, 1), (2, 3)):
         for i, (sel, inten) in enumerate(fap2[:, [sel_col, int_col]]):
             row = by_id.get(int(round(sel)))
             if row is not None:
-                out[i] += row * (inten / EXPRESSION_INTENSITY_MAX)
+                out[i] += row * (inten / MAX_INTENSITY)
     return out
 
 
 def viseme_weights(fap1: np.ndarray) -> np.ndarray:
     """Weight of each viseme ``(n, 14)`` (column ``k`` = viseme_select ``k + 1``, the order of
-    :data:`VISEME_IDS`) for FAP 1 values ``fap1`` (n, >=3).
+    :data:`VISEME_CODES`) for FAP 1 values ``fap1`` (n, >=3).
 
     Columns: viseme_select1, viseme_select2, viseme_blend (MPEG-4): the mouth shape is
     ``select1 * blend / 63 + select2 * (1 - blend / 63)``, blend clipped to [0, 63]; select 0
@@ -411,11 +400,11 @@ def viseme_weights(fap1: np.ndarray) -> np.ndarray:
     fap1 = np.atleast_2d(np.asarray(fap1, dtype=float))
     if fap1.shape[1] < 3:
         raise ValueError(f"fap1 must be (n, >=3), got {fap1.shape}")
-    share = np.clip(np.nan_to_num(fap1[:, 2]) / VISEME_BLEND_MAX, 0.0, 1.0)
-    out = np.zeros((len(fap1), len(VISEME_IDS)))
+    share = np.clip(np.nan_to_num(fap1[:, 2]) / MAX_BLEND, 0.0, 1.0)
+    out = np.zeros((len(fap1), len(VISEME_CODES)))
     for col, weight in ((0, share), (1, 1.0 - share)):
         code = np.rint(np.nan_to_num(fap1[:, col])).astype(np.int64)
-        rows = np.flatnonzero((code >= 1) & (code <= len(VISEME_IDS)))
+        rows = np.flatnonzero((code >= 1) & (code <= len(VISEME_CODES)))
         np.add.at(out, (rows, code[rows] - 1), weight[rows])
     return out
 
@@ -425,7 +414,7 @@ def viseme_faps(mapping: FapMapping, fap1: np.ndarray) -> tuple[np.ndarray, list
     times its :func:`viseme_weights` weight, and the names of the visemes the frames select
     (with a weight) that the mapping's ``visemes`` table lacks."""
     w = viseme_weights(fap1)
-    names = sorted(VISEME_IDS, key=VISEME_IDS.get)
+    names = sorted(VISEME_CODES, key=VISEME_CODES.get)
     out = np.zeros((len(w), N_FAPS))
     missing = []
     for k, name in enumerate(names):

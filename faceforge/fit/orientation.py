@@ -9,14 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
-def check_orientation(value, base):
-    """``fit.orientation``: ``auto`` or ``UP,FORWARD`` (two signed axes, e.g. ``+Z,-Y``)."""
-    axes = {"+x", "-x", "+y", "-y", "+z", "-z", "x", "y", "z"}
-    words = [w.strip().lower() for w in value.split(",")] if isinstance(value, str) else []
-    if value == "auto" or (len(words) == 2 and set(words) <= axes and words[0][-1] != words[1][-1]):
-        return value
-    raise ValueError("auto, or the mesh's up and forward axes as UP,FORWARD (e.g. +Z,-Y)")
+from faceforge.io.config import check_orientation
 
 
 class HeadOrientation:
@@ -82,7 +75,7 @@ def head_orientation(setting: str, raw, vertices) -> HeadOrientation:
 
     if setting != "auto":
         try:
-            check_orientation(setting, None)
+            check_orientation(setting)
             up, forward = (parse_axis(w) for w in setting.split(","))
         except ValueError as exc:
             from faceforge.exceptions import ConfigError

@@ -5,12 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceforge.animation.fap_mapping import (EXPRESSION_IDS, N_FAPS, VISEME_IDS, JawLevers,
-                                           entry_drive, expression_faps, fap_controls,
+from faceforge.animation.fap_mapping import (JawLevers, entry_drive, expression_faps, fap_controls,
                                            load_fap_mapping, mapping_from_dict, mapping_to_dict,
                                            response_curve, save_fap_mapping, viseme_faps,
                                            viseme_weights, with_entry)
 from faceforge.exceptions import FaceforgeError, TemplateError
+from faceforge.mpeg4 import EXPRESSION_CODES, N_FAPS, VISEME_CODES
 
 ROOT = Path(__file__).resolve().parents[2]
 MAPPING = ROOT / "templates" / "fap_mapping.yaml"
@@ -35,8 +35,8 @@ def test_every_requested_fap_group_is_mapped(mapping):
     mapped = set(mapping.mapped_faps().tolist())
     required = {3, 14, 15, *range(4, 14), 16, 17, *range(51, 61), *range(31, 43)}
     assert required <= mapped
-    assert set(mapping.expressions) == set(EXPRESSION_IDS)
-    assert set(mapping.visemes) == set(VISEME_IDS)
+    assert set(mapping.expressions) == set(EXPRESSION_CODES)
+    assert set(mapping.visemes) == set(VISEME_CODES)
 
 
 def test_every_preset_fap_drives_something(mapping):
@@ -124,9 +124,9 @@ def test_jaw_coupling_removes_only_what_the_jaw_carries(mapping):
 
 
 def test_expression_faps_scale_with_intensity(mapping):
-    fap2 = np.array([[EXPRESSION_IDS["joy"], 63, 0, 0, 0, 0],
-                     [EXPRESSION_IDS["joy"], 31.5, 0, 0, 0, 0],
-                     [EXPRESSION_IDS["joy"], 63, EXPRESSION_IDS["surprise"], 63, 0, 0],
+    fap2 = np.array([[EXPRESSION_CODES["joy"], 63, 0, 0, 0, 0],
+                     [EXPRESSION_CODES["joy"], 31.5, 0, 0, 0, 0],
+                     [EXPRESSION_CODES["joy"], 63, EXPRESSION_CODES["surprise"], 63, 0, 0],
                      [0, 63, 0, 0, 0, 0]])
     low = expression_faps(mapping, fap2)
     assert np.allclose(low[0], mapping.expressions["joy"])
@@ -136,7 +136,7 @@ def test_expression_faps_scale_with_intensity(mapping):
 
 
 def test_viseme_weights_follow_the_mpeg4_blend():
-    a, u, pbm = VISEME_IDS["a"], VISEME_IDS["u"], VISEME_IDS["p_b_m"]
+    a, u, pbm = VISEME_CODES["a"], VISEME_CODES["u"], VISEME_CODES["p_b_m"]
     fap1 = np.array([[a, 0, 63, 0],       # select1 alone needs blend 63
                      [a, 0, 0, 0],        # blend 0: all select2, here none
                      [a, u, 21, 0],       # a third a, two thirds u
@@ -153,7 +153,7 @@ def test_viseme_weights_follow_the_mpeg4_blend():
 
 
 def test_viseme_faps_mix_the_shapes_and_name_the_missing_ones(mapping):
-    a, o = VISEME_IDS["a"], VISEME_IDS["o"]
+    a, o = VISEME_CODES["a"], VISEME_CODES["o"]
     fap1 = np.array([[a, o, 63, 0], [a, o, 31.5, 0], [0, 0, 0, 0]])
     low, missing = viseme_faps(mapping, fap1)
     assert missing == []

@@ -176,7 +176,6 @@ def test_play_applies_the_rigs_finish_to_the_weighted_frames():
 
 
 def test_config_turns_the_guard_off_with_zero_rounds():
-    import faceforge.pipeline.stages.animate  # noqa: F401  (adds the guard's config rules)
     from faceforge.exceptions import ConfigError
     from faceforge.io.config import load_config
 

@@ -9,8 +9,9 @@ import pytest
 import yaml
 
 from faceforge.exceptions import FaceforgeError, LandmarkError
-from faceforge.io.landmarks import (ALL_FDPS, LEFT_RIGHT_PAIRS, REQUIRED_FDPS, default_landmark_path,
+from faceforge.io.landmarks import (REQUIRED_FDPS, default_landmark_path,
                                     load_landmarks, read_landmarks, snap_landmarks)
+from faceforge.mpeg4 import FDP_IDS, LEFT_RIGHT_PAIRS
 
 from .conftest import SAMPLES, face_landmarks_on
 
@@ -29,9 +30,9 @@ def write_yaml(path, pts, vertex=None):
 
 
 def test_fdp_table_is_the_standard():
-    assert len(ALL_FDPS) == 84 and len(set(ALL_FDPS)) == 84
+    assert len(FDP_IDS) == 84 and len(set(FDP_IDS)) == 84
     flat = [f for p in LEFT_RIGHT_PAIRS for f in p]
-    assert len(flat) == len(set(flat)) and set(flat) <= set(ALL_FDPS)
+    assert len(flat) == len(set(flat)) and set(flat) <= set(FDP_IDS)
 
 
 def test_three_formats_agree_and_snap_onto_the_surface(tmp_path, head):

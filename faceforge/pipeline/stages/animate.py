@@ -31,14 +31,7 @@ from pathlib import Path
 
 import click
 
-from faceforge.io.config import Choice, Integer, Number, add_rule
 from faceforge.pipeline import Stage, register_command, register_stage
-
-add_rule("skin.carry", Choice(("muscles", "all", "none")))
-add_rule("muscle.damping", Number(0.0, 0.99))
-add_rule("animate.orientation_guard.rounds", Integer(0))           # 0 turns the guard off
-add_rule("animate.orientation_guard.min_area", Number(0.0, 0.95))
-add_rule("animate.skull_guard.collision_reach", Number(0.0, 0.5))    # 0 turns bone collision off
 
 
 # --------------------------------------------------------------------------- paths
@@ -171,9 +164,12 @@ def run_animate(ctx):
 
 
 ANIMATE = register_stage(Stage(
+    # the bound head rebuilds the muscles from the template's muscle map on its skull
+    # (faceforge.animation.rig.muscle_system): both template files are inputs
     name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
-                                                "animate"),
-    inputs=("fap", "animate_mapping", "animate.fap_mapping"), outputs=("animation.npz", "report.json"),
+                                                "animate", "template"),
+    inputs=("fap", "animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"),
+    outputs=("animation.npz", "report.json"),
     version="7", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
@@ -223,8 +219,8 @@ CALIBRATE = register_stage(Stage(
     # cost a recalibration
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry", "muscle", "animate.fap_mapping", "animate.fps",
-        "animate.skull_guard", "animate.orientation_guard", "animate.calibrate"),
-    inputs=("animate.fap_mapping",), digests={"animate.fap_mapping": mapping_digest_without_presets},
+        "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "template"),
+    inputs=("animate.fap_mapping", "template.skull", "template.muscle_map"), digests={"animate.fap_mapping": mapping_digest_without_presets},
     outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="4", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 

@@ -85,11 +85,9 @@ def run(ctx):
     """Bind the fitted head in ``ctx.input("fit")``; write bind.npz, report.json, influence.png."""
     from faceforge.skin.binding import bind_head, match_insertions
     from faceforge.skin.influence import save_influence_png
-    from faceforge.skin.layer import SkinStiffness
     from faceforge.io.stagefiles import save_json, save_npz
 
     head = load_fit(ctx.input("fit"))
-    SkinStiffness.from_config(ctx.config)  # validates the keys this stage hashes
     insertions = tuple(str(n) for n in ctx.config.get("bind.insertions"))
     names = [str(m[0]) for m in head["muscles"]]
     _, unknown = match_insertions(insertions, names)

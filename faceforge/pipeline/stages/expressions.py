@@ -110,8 +110,9 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     save_json(ctx.out_dir / "report.json", report)
 
 
-_SHEET_STAGE = dict(deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
-                    inputs=("animate_mapping", "animate.fap_mapping"))
+_SHEET_STAGE = dict(deps=("fit", "bind"),
+                    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
+                    inputs=("animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"))
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),

@@ -43,21 +43,6 @@ from faceforge.pipeline import Stage, register_command, register_stage
 VERSION = "6"
 
 
-def _register_rules() -> None:
-    from faceforge.io.config import Rule, add_rule
-
-    from faceforge.fit.orientation import check_orientation
-
-    class Orientation(Rule):
-        def check(self, value, base):
-            return check_orientation(value, base)
-
-    add_rule("fit.orientation", Orientation())
-
-
-_register_rules()
-
-
 def run(ctx) -> None:
     """Stage body: read mesh + landmarks + template, fit, write fit.npz, report.json, fit.png."""
     import time
