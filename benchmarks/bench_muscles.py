@@ -142,7 +142,7 @@ def main():
 
     def targets_only():
         for layer in system._layers:
-            system._set_targets(layer, {n: 0.5 for n in names})
+            system._set_targets(layer, system.contraction_array({n: 0.5 for n in names}))
 
     def solver_only():
         for layer in system._layers:

@@ -41,13 +41,14 @@ class JawDrive:
 
 
 class MuscleDrive:
-    """The rig's muscle step: contractions (m,) in ``controls`` order drive the system's layers."""
+    """The rig's muscle step: contractions (m,) in the system's ``controls`` order, passed on as
+    they are (each layer reads its muscles' columns)."""
 
-    def __init__(self, system, controls):
-        self.system, self.controls = system, tuple(controls)
+    def __init__(self, system):
+        self.system = system
 
     def __call__(self, c, _bones, dt: float):
-        self.system.step(dict(zip(self.controls, c)), None, dt)
+        self.system.step(c, None, dt)
 
 
 class BoundHead:
@@ -95,7 +96,7 @@ class BoundHead:
             system.reset()
             self.skin.reset()
 
-        self.rig = Rig(skull=jaw, muscles=MuscleDrive(system, self.controls), skin=skin_step, rest=self.rest,
+        self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
                        finish=None if self.orientation is None else self.orientation.apply)
 

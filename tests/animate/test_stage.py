@@ -323,8 +323,10 @@ def test_the_warm_up_leaves_the_frames_of_a_cold_play(workdir, patched, tmp_path
     """animate plays the first frame once before the timed playback (numba compiles there, not
     in the ms/frame), then resets the rig: its frames are bit for bit those of a fresh head
     played without the warm-up."""
-    from faceforge.animation.playback import play
+    from faceforge.animation.controls import track_controls
     from faceforge.animation.fap_mapping import load_fap_mapping
+    from faceforge.animation.playback import play
+    from faceforge.animation.rig import BoundHead
     from faceforge.io.config import load_config
     from faceforge.io.stagefiles import load_npz
     from faceforge.mpeg4 import FapTrack, read_fap, write_fap
@@ -338,9 +340,8 @@ def test_the_warm_up_leaves_the_frames_of_a_cold_play(workdir, patched, tmp_path
     write_fap(tmp_path / "smile.fap", FapTrack.from_given(25.0, given, values))
     out = run_stage("animate", workdir, {"fap": str(tmp_path / "smile.fap"),
                                          "animate_mapping": str(workdir / "mapping.yaml")})
-    head = patched.BoundHead(workdir / "fit", workdir / "bind", load_config(None, SETS))
-    c, jaw, _, _ = patched.track_controls(read_fap(tmp_path / "smile.fap"),
-                                          load_fap_mapping(workdir / "mapping.yaml"), head)
+    head = BoundHead(workdir / "fit", workdir / "bind", load_config(None, SETS))
+    c, jaw, _, _ = track_controls(read_fap(tmp_path / "smile.fap"), load_fap_mapping(workdir / "mapping.yaml"), head)
     cold = head.to_user(play(head.rig, c, jaw, 25.0)).astype(np.float32)
     assert np.array_equal(load_npz(out / "animation.npz")["frames"], cold)
     assert c[:, 0].max() > 0.0 and jaw[:, 0].max() > 0.0

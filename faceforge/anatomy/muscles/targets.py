@@ -166,13 +166,19 @@ class LinearTargets:
         if len(self.slots) != len(self.cells):
             raise ValueError(f"{len(self.slots)} position slots for {len(self.cells)} targets")
         self._out = np.empty((len(self.cells), 3))
+        #: (q,) int, each muscle's column in the system's contraction array (set by the system)
+        self.columns = np.arange(q, dtype=INT)
         self._scratch = np.empty((4, int(self.hw.max()) if q else 0, 3))
 
-    def __call__(self, pts: np.ndarray, contractions: dict, out: np.ndarray | None = None) -> np.ndarray:
+    def __call__(self, pts: np.ndarray, contractions, out: np.ndarray | None = None) -> np.ndarray:
         """Targets ``(t, 3)`` (rows as :attr:`slots`) from the gathered points ``pts (k, 3)`` and
-        ``{muscle: c}`` (clipped to [0, 1]; passive muscles and absent names at 0). ``out``
-        (t, 3) float64 C-contiguous, filled and returned when given."""
-        c = np.array([contractions.get(n, 0.0) for n in self.names], dtype=FLOAT)
+        the contractions (clipped to [0, 1]; passive muscles at 0): an array in the order of
+        the system's controls, read at :attr:`columns` (set by the system), or ``{muscle: c}``
+        (absent names 0). ``out`` (t, 3) float64 C-contiguous, filled and returned when given."""
+        if isinstance(contractions, dict):
+            c = np.array([contractions.get(n, 0.0) for n in self.names], dtype=FLOAT)
+        else:
+            c = np.ascontiguousarray(np.asarray(contractions, dtype=FLOAT)[self.columns])
         out = self._out if out is None else out
         _linear_targets(np.ascontiguousarray(pts, dtype=FLOAT), self.lines, self.hw, self.kappa,
                         self.cells, self.cell_start, self.offsets, c, self.active, self._scratch, out)
