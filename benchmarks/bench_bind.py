@@ -1,6 +1,6 @@
 """Benchmark of the bind stage's work (§8): ~5,000 and ~50,000 skin vertices.
 
-Times, end to end, :func:`faceforge.skin.binding.bind_head` (lip cut, ray-cast
+Times, end to end, :func:`faceforge.skin.head.bind_head` (lip cut, ray-cast
 binding, geodesic influence map, report) plus building the skin layer into a PBD
 model (:func:`faceforge.skin.layer.add_skin` + ``finalize``). Targets: < 5 s for
 ~5k vertices (the paper), < 60 s for ~50k.
@@ -28,7 +28,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from faceforge.skin.binding import bind_head  # noqa: E402
+from faceforge.skin.head import bind_head  # noqa: E402
 from faceforge.skin.layer import SkinStiffness, add_skin  # noqa: E402
 from faceforge.geometry.rays import has_embree  # noqa: E402
 

@@ -51,7 +51,8 @@ def scene(h=6, w=3):
     """Skull + 25 linear muscles (12 / 9 / 4 in layers 0 / 1 / 2) + a sphincter (layer 2)."""
     from faceforge.anatomy.muscles.action_line import ActionLine
     from faceforge.anatomy.layers import underlying_mesh
-    from faceforge.anatomy.muscles.muscle import align_loops, build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.muscle import build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.sphincter import align_loops
 
     cranium, mandible = skull()
     centres = [(x, y) for y in (0.55, 0.2, -0.55) for x in (-0.45, -0.15, 0.15, 0.45)]

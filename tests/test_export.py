@@ -25,7 +25,7 @@ from faceforge.io.export import (
 )
 from faceforge.io.export_common import atomic_write_bytes, faces_to_csr, polygons_from_fan, triangulate
 
-MAKEHUMAN = Path("/work/shared/assets/heads/makehuman/mh_head_default.obj")
+MAKEHUMAN = Path(__file__).resolve().parents[1] / "samples" / "makehuman" / "mh_head_default.obj"
 
 
 def animation(n_frames=6, seed=0):
@@ -86,8 +86,6 @@ def test_obj_sequence_keeps_faces_and_order(tmp_path):
 
 
 def test_obj_sequence_of_a_real_quad_mesh(tmp_path):
-    if not MAKEHUMAN.exists():
-        pytest.skip("shared assets not available")
     vertices, faces = read_obj(MAKEHUMAN)
     frames = np.stack([vertices, vertices * 1.01])
     folder = write_obj_sequence(tmp_path / "mh", frames, faces, 25.0)
@@ -201,8 +199,6 @@ def test_polygons_from_fan_undoes_the_triangulation():
 
 
 def test_polygons_from_fan_matches_the_mesh_loader():
-    if not MAKEHUMAN.exists():
-        pytest.skip("shared assets not available")
     mesh = pytest.importorskip("faceforge.io.mesh")
     _, triangles, info = mesh.load_mesh(MAKEHUMAN)
     assert polygons_from_fan(triangles, info.face_source) == read_obj(MAKEHUMAN)[1]

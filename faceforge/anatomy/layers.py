@@ -55,7 +55,8 @@ import numpy as np
 
 from faceforge.anatomy.muscles.action_line import ActionLine
 from faceforge.anatomy.muscles.targets import LinearTargets, bary_points
-from faceforge.anatomy.muscles.muscle import Muscle, add_muscles_to_builder, protrusion_control
+from faceforge.anatomy.muscles.muscle import Muscle, add_muscles_to_builder
+from faceforge.anatomy.muscles.sphincter import protrusion_control
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
 from faceforge.geometry.surface_points import SurfacePoints
@@ -260,7 +261,7 @@ class MusculoskeletalSystem:
     @property
     def controls(self) -> tuple[str, ...]:
         """What :meth:`step` drives: every muscle by name, then each sphincter's protrusion
-        (:func:`faceforge.anatomy.muscles.muscle.protrusion_control`)."""
+        (:func:`faceforge.anatomy.muscles.sphincter.protrusion_control`)."""
         return self._controls
 
     @property
@@ -355,7 +356,8 @@ class MusculoskeletalSystem:
     def contraction_array(self, contractions=None) -> np.ndarray:
         """``(m,)`` float64 contractions in :attr:`controls` order from a dict (control -> c;
         missing ones 0; unknown names raise ``KeyError`` listing the controls), None (all 0)
-        or an array already in that order (checked for its length)."""
+        or an array already in that order (or of the muscles alone, which come first: the
+        protrusion drives then stay at rest)."""
         if contractions is None:
             return self._rest_controls
         if isinstance(contractions, Mapping):
@@ -367,8 +369,13 @@ class MusculoskeletalSystem:
                 out[self._column[name]] = c
             return out
         c = np.asarray(contractions, dtype=FLOAT)
+        if c.shape == (len(self._muscles),) and len(self._muscles) < len(self._controls):
+            out = np.zeros(len(self._controls))   # the muscles alone: the protrusion drives at rest
+            out[:len(c)] = c
+            return out
         if c.shape != (len(self._controls),):
-            raise ValueError(f"contractions must be ({len(self._controls)},) in controls order, got {c.shape}")
+            raise ValueError(f"contractions must be ({len(self._controls)},) in controls order "
+                             f"(or ({len(self._muscles)},), the muscles alone), got {c.shape}")
         return c
 
     def step(self, contractions=None, jaw_matrix=None, dt: float = 1.0 / 25.0) -> None:

@@ -87,16 +87,19 @@ def load_template(skull_dir, muscle_map) -> Template:
 def _muscle_code_files() -> list[Path]:
     """Source files whose code decides the built muscles: they enter the cache key, so an
     edit to the muscle model can never be masked by muscles cached by older code."""
-    import faceforge.anatomy.muscles.action_line as a
-    import faceforge.anatomy.muscles.build as h
-    import faceforge.fit.muscles as b
-    import faceforge.anatomy.muscles.hexmesh as c
-    import faceforge.anatomy.muscles.muscle as d
-    import faceforge.anatomy.muscles.muscle_map as e
-    import faceforge.geometry.rbf as f
-    import faceforge.geometry.surface_points as g
+    import faceforge.anatomy.muscles.action_line as action_line
+    import faceforge.anatomy.muscles.build as build
+    import faceforge.anatomy.muscles.hexmesh as hexmesh
+    import faceforge.anatomy.muscles.linear as linear
+    import faceforge.anatomy.muscles.muscle as muscle
+    import faceforge.anatomy.muscles.muscle_map as muscle_map
+    import faceforge.anatomy.muscles.sphincter as sphincter
+    import faceforge.fit.muscles as fit_muscles
+    import faceforge.geometry.rbf as rbf
+    import faceforge.geometry.surface_points as surface_points
 
-    return [Path(m.__file__) for m in (a, b, c, d, e, f, g, h)]
+    return [Path(m.__file__) for m in (action_line, fit_muscles, hexmesh, muscle, muscle_map, rbf, surface_points,
+                                       build, linear, sphincter)]
 
 
 def _template_muscles(key: str, specs, skull) -> list:

@@ -5,8 +5,8 @@ import pytest
 import trimesh
 
 from faceforge.anatomy.muscles.hexmesh import hex_topology, signed_volume
-from faceforge.anatomy.muscles.muscle import (
-    STIFFNESS_KEYS, bending_quads, distance_network, fit_ellipse, sphincter_displacement)
+from faceforge.anatomy.muscles.muscle import STIFFNESS_KEYS, bending_quads, distance_network
+from faceforge.anatomy.muscles.sphincter import fit_ellipse, sphincter_displacement
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
 from conftest import LINEAR_STIFFNESS, SPHINCTER_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
@@ -385,7 +385,7 @@ def test_sphincter_carry_faces_give_per_row_weights(sphere):
 
 
 def test_conic_least_squares_matches_lstsq():
-    from faceforge.anatomy.muscles.muscle import _conic_lstsq
+    from faceforge.anatomy.muscles.sphincter import _conic_lstsq
 
     rng = np.random.default_rng(6)
     for a, b in ((1.0, 1.0), (3.0, 0.5), (0.01, 0.002)):
@@ -398,7 +398,7 @@ def test_conic_least_squares_matches_lstsq():
 
 def test_compiled_sphincter_targets_survive_collinear_loops():
     """No conic through collinear samples: the PCA fallback, finite targets (no LinAlgError)."""
-    from faceforge.anatomy.muscles.muscle import _sphincter_grid
+    from faceforge.anatomy.muscles.sphincter import _sphincter_grid
 
     p = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], 1)
     seg, t = np.arange(5), np.full(5, 0.5)

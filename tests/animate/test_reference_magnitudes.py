@@ -1,7 +1,7 @@
 """Are the FAP magnitudes we calibrate for and the expression presets those of a real face?
 
-Reference: the MakeHuman expression units (/work/shared/assets/expressions/makehuman-units/,
-CC0): per-vertex offsets of full-strength facial actions on the MakeHuman head of
+Reference: the MakeHuman expression units (tests/data/mh_head_expression_units_caucasian.npz,
+CC0, see tests/data/README.md): per-vertex offsets of full-strength facial actions on the MakeHuman head of
 samples/makehuman/. Measured at the FAP's FDP along its direction, in the FAPU of that
 head, each unit gives how far a real face goes for a comparable action.
 """
@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parents[2]
-UNITS = Path("/work/shared/assets/expressions/makehuman-units/mh_head_expression_units_caucasian.npz")
+UNITS = ROOT / "tests" / "data" / "mh_head_expression_units_caucasian.npz"
 LANDMARKS = ROOT / "samples" / "makehuman" / "mh_head_default.fdp.yaml"
 
 #: (unit, FDP, axis, sign of the FAP's positive direction on that axis, FAPU, the FAPs it is
@@ -36,8 +36,6 @@ ACTIONS = [
 
 @pytest.fixture(scope="module")
 def reference():
-    if not UNITS.exists():
-        pytest.skip("shared expression units not available")
     from faceforge.mpeg4 import fapu_from_landmarks
 
     d = np.load(UNITS)

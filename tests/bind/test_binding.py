@@ -376,7 +376,7 @@ def test_modiolus_moves_corner_skin_from_another_muscle_to_its_arc_of_the_ring(s
 
 
 def test_modiolus_mask_is_the_skin_near_the_corner_fdps():
-    from faceforge.skin.binding import modiolus_mask
+    from faceforge.skin.rules import modiolus_mask
 
     lm = {"8.3": np.array([1.0, 0.0, 0.0]), "8.4": np.array([-1.0, 0.0, 0.0]),
           "2.4": np.array([0.9, 0.0, 0.0])}

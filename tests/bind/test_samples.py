@@ -45,7 +45,7 @@ def fit_and_bind(mesh: Path, work: Path, config):
     themselves are tested in tests/fit and tests/bind/test_stage.py). Returns the
     bind report.
     """
-    from faceforge.skin.binding import bind_head
+    from faceforge.skin.head import bind_head
     from faceforge.fit.report import npz_arrays
     from faceforge.io.landmarks import default_landmark_path
     from faceforge.io.stagefiles import load_npz, save_npz
@@ -121,7 +121,7 @@ def test_every_face_front_vertex_is_bound(bound):
 
 
 def _lip_band(d, report):
-    from faceforge.skin.binding import lip_band
+    from faceforge.skin.rules import lip_band
     from faceforge.skin.mouth import MouthCut
 
     cut = MouthCut("open", d["vertices"], d["faces"], int(d["n_user"]), d["duplicate_source"],
@@ -234,7 +234,8 @@ def test_the_mouth_corners_bind_to_the_orbicularis_oris(bound, config):
     outer, 2.4, 2.5 inner) that is bound to a muscle has its one anchor on the ring, the outer
     corners' FDPs among it (bind_head's default radius, which these heads are bound with, is
     the config's). Their rays bound MakeHuman's 8.3 to the risorius."""
-    from faceforge.skin.binding import MODIOLUS_RADIUS, MUSCLE, modiolus_mask
+    from faceforge.skin.binding import MUSCLE
+    from faceforge.skin.rules import MODIOLUS_RADIUS, modiolus_mask
     from faceforge.io.stagefiles import load_npz
 
     assert config.get("bind.modiolus_radius") == MODIOLUS_RADIUS

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from faceforge.skin.binding import CRANIUM, MANDIBLE, bind_head
+from faceforge.skin.binding import CRANIUM, MANDIBLE
+from faceforge.skin.head import bind_head
 from faceforge.skin.layer import SkinSimulation, SkinStiffness
 from tests.bind.synthetic import jaw_matrix, lipped_head
 

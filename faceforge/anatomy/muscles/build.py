@@ -30,7 +30,8 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     """
     from faceforge.anatomy.muscles.action_line import ActionLine
     from faceforge.anatomy.layers import expand_lies_on
-    from faceforge.anatomy.muscles.muscle import align_loops, build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.muscle import build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.sphincter import align_loops
     from faceforge.exceptions import TemplateError
 
     stiffness = stiffness or {}

@@ -20,83 +20,25 @@ position            bottom contour particles to their contour samples, and (line
                     the interior bottom particles to their fibre targets (below)
 =================  ==============================================================
 
-Linear contraction (§5.2.1, Eq. 4): the fibre lines A0, A2 are sampled with
-``step' = step (1 - kappa c)`` so their samples slide toward the origin (sample 0
-stays on the origin). The origin line A3 is sampled normally (the fixed site).
-The interior insertion samples (A1, ``0 < j < w-1``) have no fibre of their
-own: each is moved by the linear blend (in ``j``) of the displacements of the
-two insertion corners, so the whole insertion edge travels with the fibres.
-The interior bottom particles (``0 < i < h-1``, ``0 < j < w-1``) have no sample of the
-contour either; left free (the paper binds only the contour), nothing drives them along
-the fibres: with the stiffness of §5.2.1 the bottom sheet has no distance constraint at
-all, the top sheet no shear, and ``k_longitudinal^up = 0.1`` alone drags them. Under fast
-contraction the bound insertion sample then runs over the lagging interior node next to
-it and single bottom faces turn over (the depressor anguli at the modiolus, issue 4).
-"When it contracts, the fibers shorten by equal amounts" (§5.2.1), so each interior node
-is bound like the contour, with ``k_position``, to a target that keeps its rest place
-between the two side fibres' samples of its row ``i``: their blend in ``j`` (the rule of
-the insertion edge, applied to every row) plus the node's rest offset from that blend,
-kept in the row's basis (:func:`row_bases`: the row ``a2[i] - a0[i]``, the fibres' mean
-step, the unit normal), so its part in the sheet scales with the row's width and with the
-fibre step as the fibres shorten, and its normal part (mostly the layer's sag under the
-chord) keeps its length; all of it turns with the anatomy, e.g. the jaw. At rest the
-targets are the rest positions. (A surface point of the layer under the node, tried
-first, does not do: a deeper muscle's contraction carries it along with that muscle's
-fibres while the action lines' samples stay evenly spread along the lines; with every
-muscle at c = 1 the depressor labii inferioris, on the platysma and mentalis, folded.)
-``kappa`` (``max_contraction``, default :data:`LINEAR_MAX_CONTRACTION` = 0.5) is
-the fibre shortening at c = 1. The paper's literal kappa = 1 collapses every
-fibre sample onto the origin at c = 1; on the synthetic head the muscle then
-folds over itself (its bottom sheet turns over from c ~ 0.9 at rest and
-under smooth random driving). A fibre cannot shorten to nothing anyway
-(skeletal muscle shortens by roughly half at most), so c = 1 here means
-"half the rest fibre length"; pass ``max_contraction=1.0`` for the literal
-Eq. 4. The FAP -> contraction calibration absorbs the scale.
-
 Regular sampling is recomputed on the current layer every frame, as Eq. 3
 says, except for the sphincter's loops (see :func:`build_sphincter_muscle`,
 ``material_sampling``).
 
-Sphincter contraction (§5.2.2). The paper's
-``delta = (o - s1) (1 - c) cos(pi/2 (1 - sqrt(y^2 b^2 + x^2 a^2) / (ab)))``
-moves every sample to the centre at c = 0, contradicting "c = 0 is rest". We
-read ``(1 - c)`` as the *remaining* fraction of the orifice and use
-``delta = c kappa P (o - s1) cos(pi/2 (1 - r))``: c = 0 is the rest state and c = 1
-the maximal contraction, which moves each inner sample the fraction ``kappa``
-(``max_contraction``, default :data:`SPHINCTER_MAX_CONTRACTION` = 0.5) of the
-way to the centre, times the fall-off. kappa = 1 (a fully closed orifice)
-collapses the inner loop to a point; its wall triangles degenerate and the
-dihedral bending projection diverges (observed from kappa c ~ 0.6 on the
-synthetic mouth), so the default stops half way (a puckered mouth). ``P`` projects onto
-the ellipse's plane (dir_a, dir_b): the loops wrap around the face, so their mean ``o`` lies
-behind the lips, and the literal ``o - s1`` pulled the lips into the head (on the MakeHuman
-head the lower lip went down and back at c = 1 instead of up); the paper's ellipse is planar
-and its (x, y) are in-plane coordinates, so the contraction is taken in that plane. ``r`` is the ellipse
-radius of the outer sample ``s3 = o + x dir_a + y dir_b``, written correctly as
-``r = sqrt(x^2 / a^2 + y^2 / b^2) = sqrt(x^2 b^2 + y^2 a^2) / (ab)`` (the paper
-swaps a and b, which would give r != 1 on the ellipse itself), clipped so that
-``|1 - r| <= 1``. The ellipse is fitted by linear least squares
-(``q11 x^2 + 2 q12 x y + q22 y^2 = 1`` about the centre ``o`` = mean of all
-inner and outer samples) in the plane of best fit (PCA) of those samples,
-recomputed every frame from the current, uncontracted samples. The same delta
-moves the pair's inner and outer samples (with a protrusion drive it also has a part along
-the plane's normal: :func:`build_sphincter_muscle`, ``protrusion``); the interior (``0 < j < w-1``)
-bottom particles are not bound, as in the linear muscle. With material sampling the
-per-frame targets are compiled (:func:`_sphincter_grid`: the plane from the eigenvectors of
-the 3 x 3 scatter matrix, the conic by Gram-Schmidt); :meth:`Muscle._grid_targets` is its
-numpy twin, equal to round-off.
+The contraction rules: :mod:`.linear` (§5.2.1, Eq. 4) and :mod:`.sphincter` (§5.2.2).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from faceforge.anatomy.muscles.action_line import eval_polyline, sample_positions
 from faceforge.anatomy.muscles.hexmesh import HexTopology, hex_topology, morph_hex
-from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
+from faceforge.anatomy.muscles.linear import (LINEAR_MAX_CONTRACTION, _row_blend, interior_grid, interior_targets,
+                                              row_bases)
+from faceforge.anatomy.muscles.sphincter import SPHINCTER_MAX_CONTRACTION, _sphincter_grid, sphincter_displacement
+from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
 __all__ = [
@@ -106,12 +48,6 @@ __all__ = [
     "build_sphincter_muscle",
     "distance_network",
     "bending_quads",
-    "fit_ellipse",
-    "sphincter_displacement",
-    "protrusion_control",
-    "align_loops",
-    "SPHINCTER_MAX_CONTRACTION",
-    "LINEAR_MAX_CONTRACTION",
 ]
 
 STIFFNESS_KEYS = (
@@ -169,209 +105,6 @@ def bending_quads(faces) -> np.ndarray:
         raise ValueError("bending_quads: an edge is shared by more than two faces")
     k = np.flatnonzero(same)
     return np.stack([e[k, 0], e[k, 1], opp[k], opp[k + 1]], 1).astype(INT)
-
-
-def fit_ellipse(points) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
-    """Least-squares ellipse of ``points (k, 3)`` in their plane of best fit.
-
-    Returns ``(o (3,), dir_a (3,), dir_b (3,), a, b)``: centre (the mean, as
-    §5.2.2 prescribes), unit semi-major / semi-minor directions and semi-axis
-    lengths (a >= b > 0). The conic ``q11 x^2 + 2 q12 xy + q22 y^2 = 1`` about
-    ``o`` is solved by linear least squares; if it is not positive definite
-    (nearly collinear points) the PCA standard deviations scaled by sqrt(2)
-    are used instead.
-    """
-    p = np.asarray(points, dtype=FLOAT)
-    o = p.mean(axis=0)
-    d = p - o
-    _, sv, vt = np.linalg.svd(d, full_matrices=False)
-    e1, e2 = vt[0], vt[1]
-    x, y = d @ e1, d @ e2
-    A = np.stack([x * x, 2 * x * y, y * y], 1)
-    q, *_ = np.linalg.lstsq(A, np.ones(len(p)), rcond=None)
-    Q = np.array([[q[0], q[1]], [q[1], q[2]]])
-    lam, vec = np.linalg.eigh(Q)
-    if lam[0] > 0:
-        a, b = 1.0 / np.sqrt(lam[0]), 1.0 / np.sqrt(lam[1])
-        ua, ub = vec[:, 0], vec[:, 1]
-    else:
-        n = max(len(p), 1)
-        a, b = sv[0] * np.sqrt(2.0 / n), max(sv[1] * np.sqrt(2.0 / n), 1e-300)
-        ua, ub = np.array([1.0, 0.0]), np.array([0.0, 1.0])
-    dir_a = ua[0] * e1 + ua[1] * e2
-    dir_b = ub[0] * e1 + ub[1] * e2
-    return o, dir_a, dir_b, float(a), float(b)
-
-
-@numba.njit(**NUMBA_OPTIONS)
-def _loop_samples(p, seg, t, out, col):  # pragma: no cover - numba
-    """``eval_polyline(p, None, seg, t, closed=True)`` into ``out[:, col]`` (``out (h, w, 3)``)."""
-    m = p.shape[0]
-    for i in range(seg.shape[0]):
-        a = seg[i]
-        b = a + 1 if a + 1 < m else 0
-        for d in range(3):
-            out[i, col, d] = (1.0 - t[i]) * p[a, d] + t[i] * p[b, d]
-
-
-@numba.njit(**NUMBA_OPTIONS)
-def _conic_lstsq(x, y):  # pragma: no cover - numba
-    """Least-squares ``q (3,)`` of ``q0 x^2 + 2 q1 x y + q2 y^2 = 1`` over the points ``x, y
-    (k,)``: modified Gram-Schmidt on the columns and the right-hand side together (backward
-    stable, as ``np.linalg.lstsq`` for a full-rank system)."""
-    k = x.shape[0]
-    m = np.empty((4, k))
-    for i in range(k):
-        m[0, i] = x[i] * x[i]
-        m[1, i] = 2.0 * x[i] * y[i]
-        m[2, i] = y[i] * y[i]
-        m[3, i] = 1.0
-    r = np.zeros((3, 4))
-    for j in range(3):
-        r[j, j] = np.sqrt(np.sum(m[j] * m[j]))
-        m[j] /= r[j, j]
-        for l in range(j + 1, 4):
-            r[j, l] = np.sum(m[j] * m[l])
-            m[l] -= r[j, l] * m[j]
-    q = np.empty(3)
-    for j in range(2, -1, -1):
-        acc = r[j, 3]
-        for l in range(j + 1, 3):
-            acc -= r[j, l] * q[l]
-        q[j] = acc / r[j, j]
-    return q
-
-
-@numba.njit(**NUMBA_OPTIONS)
-def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd):  # pragma: no cover - numba
-    """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
-    fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
-    at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
-    :func:`sphincter_displacement` with ``c`` (already times the maximal closure) and ``lift``
-    (``fwd (3,)``: :attr:`Muscle.forward`) when either is > 0; before that, with ``carry
-    (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
-    r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples. Same values as the numpy code to
-    round-off (LAPACK's, summation order)."""
-    h = grid.shape[0]
-    w1 = grid.shape[1] - 1
-    _loop_samples(p1, seg1, t1, grid, 0)
-    _loop_samples(p3, seg3, t3, grid, w1)
-    if carry.shape[0]:   # the inner loop follows the outer one's drag (see Muscle.carry_inner)
-        for i in range(h):
-            for j in range(3):
-                grid[i, 0, j] += carry[i] * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
-    if not (c > 0.0 or lift > 0.0):
-        return
-    # fit_ellipse of the 2h samples (inner then outer)
-    k = 2 * h
-    d = np.empty((k, 3))
-    for i in range(h):
-        for j in range(3):
-            d[i, j] = grid[i, 0, j]
-            d[h + i, j] = grid[i, w1, j]
-    o = np.empty(3)
-    for j in range(3):
-        o[j] = np.mean(d[:, j])
-    for i in range(k):
-        for j in range(3):
-            d[i, j] -= o[j]
-    # the plane of best fit: the right singular vectors of d are the eigenvectors of d^T d
-    gram = d.T @ d
-    ev, evec = np.linalg.eigh(gram)                  # ascending
-    e1 = evec[:, 2].copy()
-    e2 = evec[:, 1].copy()
-    sv0 = np.sqrt(max(ev[2], 0.0))
-    sv1 = np.sqrt(max(ev[1], 0.0))
-    x = d @ e1
-    y = d @ e2
-    q = _conic_lstsq(x, y)
-    lam = np.full(2, -1.0)      # no conic (collinear samples: q is not finite): the PCA fallback
-    vec = np.eye(2)
-    if np.all(np.isfinite(q)):
-        Q = np.empty((2, 2))
-        Q[0, 0] = q[0]
-        Q[0, 1] = q[1]
-        Q[1, 0] = q[1]
-        Q[1, 1] = q[2]
-        lam, vec = np.linalg.eigh(Q)
-    if lam[0] > 0:
-        a, b = 1.0 / np.sqrt(lam[0]), 1.0 / np.sqrt(lam[1])
-        ua0, ua1, ub0, ub1 = vec[0, 0], vec[1, 0], vec[0, 1], vec[1, 1]
-    else:
-        a, b = sv0 * np.sqrt(2.0 / k), max(sv1 * np.sqrt(2.0 / k), 1e-300)
-        ua0, ua1, ub0, ub1 = 1.0, 0.0, 0.0, 1.0
-    da = ua0 * e1 + ua1 * e2
-    db = ub0 * e1 + ub1 * e2
-    # sphincter_displacement: delta = (c P (o - s1) + lift b n) cos(pi/2 (1 - r)), r of the
-    # outer sample, n the plane's normal on the side of fwd
-    nrm = np.empty(3)
-    nrm[0] = da[1] * db[2] - da[2] * db[1]
-    nrm[1] = da[2] * db[0] - da[0] * db[2]
-    nrm[2] = da[0] * db[1] - da[1] * db[0]
-    if nrm[0] * fwd[0] + nrm[1] * fwd[1] + nrm[2] * fwd[2] < 0.0:
-        for j in range(3):
-            nrm[j] = -nrm[j]
-    lift = lift * b
-    for i in range(h):
-        xo = 0.0
-        yo = 0.0
-        ta = 0.0
-        tb = 0.0
-        for j in range(3):
-            xo += (grid[i, w1, j] - o[j]) * da[j]
-            yo += (grid[i, w1, j] - o[j]) * db[j]
-            ta += (o[j] - grid[i, 0, j]) * da[j]
-            tb += (o[j] - grid[i, 0, j]) * db[j]
-        r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
-        fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
-        for j in range(3):
-            dj = (c * (ta * da[j] + tb * db[j]) + lift * nrm[j]) * fall
-            grid[i, 0, j] += dj
-            grid[i, w1, j] += dj
-
-
-#: suffix of a sphincter's protrusion control (:func:`protrusion_control`)
-PROTRUSION_SUFFIX = ".protrude"
-
-
-def protrusion_control(name: str) -> str:
-    """The control name of sphincter ``name``'s protrusion drive (``orbicularis_oris.protrude``):
-    a contraction-like value in [0, 1] that FAP mappings and ``MusculoskeletalSystem.step`` take
-    alongside the muscles' own (:attr:`Muscle.protrusion`)."""
-    return name + PROTRUSION_SUFFIX
-
-
-#: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
-SPHINCTER_MAX_CONTRACTION = 0.5
-#: fraction of the fibre length that c = 1 removes from a linear muscle
-LINEAR_MAX_CONTRACTION = 0.5
-
-
-def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None) -> np.ndarray:
-    """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
-
-    ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
-    multiplied by the maximal closure. ``delta = (c P (o - s1) + lift b n) cos(pi/2 (1 -
-    r))``, ``P`` the projection onto the ellipse's plane, ``b`` its semi-minor axis and ``n``
-    its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
-    ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
-    maximal closure.
-    """
-    s1 = np.asarray(inner, dtype=FLOAT)
-    s3 = np.asarray(outer, dtype=FLOAT)
-    o, da, db, a, b = fit_ellipse(np.concatenate([s1, s3]))
-    x = (s3 - o) @ da
-    y = (s3 - o) @ db
-    r = np.sqrt(x * x * b * b + y * y * a * a) / (a * b)
-    fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
-    to = o - s1
-    d = float(c) * (np.outer(to @ da, da) + np.outer(to @ db, db))      # in the ellipse's plane
-    if lift:
-        n = np.cross(da, db)
-        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
-            n = -n
-        d = d + lift * b * n
-    return d * fall[:, None]
 
 
 @dataclass
@@ -725,54 +458,6 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
                   interior, carry, protrusion)
 
 
-def _cross(a, b):
-    """``a x b`` over the last axis, component by component (the compiled twin's arithmetic)."""
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], -1)
-
-
-def row_bases(a0, a2) -> np.ndarray:
-    """Basis of each interior row ``i = 1..h-2`` of a linear muscle, ``(h-2, 3, 3)``.
-
-    ``a0, a2 (h, 3)``: the samples of the two side fibres. Rows of each basis: ``e_u =
-    a2[i] - a0[i]`` across the row, ``e_v = ((a0[i+1] - a0[i-1]) + (a2[i+1] - a2[i-1])) / 4``
-    the mean fibre step there, and the unit normal ``n`` along ``e_u x e_v``.
-    """
-    a0 = np.asarray(a0, FLOAT)
-    a2 = np.asarray(a2, FLOAT)
-    eu = a2[1:-1] - a0[1:-1]
-    ev = ((a0[2:] - a0[:-2]) + (a2[2:] - a2[:-2])) * 0.25
-    n = _cross(eu, ev)
-    length = np.sqrt((n[..., 0] * n[..., 0] + n[..., 1] * n[..., 1]) + n[..., 2] * n[..., 2])
-    return np.stack([eu, ev, n / np.maximum(length, 1e-300)[..., None]], 1)
-
-
-def _row_blend(a0, a2, w: int) -> np.ndarray:
-    """``(1 - t_j) a0[i] + t_j a2[i]``, ``t = linspace(0, 1, w)``, for the interior rows
-    and columns, ``(h-2, w-2, 3)``."""
-    t = np.linspace(0.0, 1.0, w)[None, 1:-1, None]
-    return (1.0 - t) * np.asarray(a0, FLOAT)[1:-1, None] + t * np.asarray(a2, FLOAT)[1:-1, None]
-
-
-def interior_targets(a0, a2, offset) -> np.ndarray:
-    """Targets of the interior bottom particles, ``(h-2, w-2, 3)`` (module docstring).
-
-    ``a0, a2 (h, 3)`` the current (contracted) samples of the side fibres; ``offset
-    (h-2, w-2, 3)`` :attr:`Muscle.interior`. Per component: ``blend + ((k_u e_u + k_v e_v) + k_n n)``.
-    """
-    fr = row_bases(a0, a2)[:, None]                   # (h-2, 1, 3, 3)
-    k = np.asarray(offset, FLOAT)
-    off = (k[..., 0:1] * fr[..., 0, :] + k[..., 1:2] * fr[..., 1, :]) + k[..., 2:3] * fr[..., 2, :]
-    return _row_blend(a0, a2, k.shape[1] + 2) + off
-
-
-def interior_grid(h: int, w: int) -> np.ndarray:
-    """``((h-2) (w-2), 2)`` grid cells ``(i, j)``, ``0 < i < h-1``, ``0 < j < w-1``, row-major."""
-    i, j = np.meshgrid(np.arange(1, h - 1), np.arange(1, w - 1), indexing="ij")
-    return np.stack([i.ravel(), j.ravel()], 1).astype(INT)
-
-
 def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:
     h, w = m.topology.h, m.topology.w
     grid = np.zeros((h, w, 3))
@@ -859,7 +544,7 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
 
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
-    :func:`faceforge.anatomy.muscles.muscle.align_loops` arranges that for raw points.
+    :func:`faceforge.anatomy.muscles.sphincter.align_loops` arranges that for raw points.
     """
     if not (inner.closed and outer.closed):
         raise ValueError(f"sphincter {name}: inner and outer action lines must be closed loops")
@@ -875,25 +560,3 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
                   lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
                   material_sampling=material_sampling, protrusion=float(protrusion),
                   carry_inner=(float(carry_inner), np.ones(len(faces), bool) if carry_faces is None else carry_faces))
-
-
-def align_loops(inner, outer) -> tuple[np.ndarray, np.ndarray]:
-    """Reorder the closed point loop ``outer (q, 3)`` to match ``inner (p, 3)``.
-
-    Makes both loops turn the same way about their common mean (in the plane of
-    best fit) and rotates ``outer`` to start at its point nearest ``inner[0]``.
-    """
-    p = np.asarray(inner, FLOAT)
-    q = np.asarray(outer, FLOAT)
-    o = np.concatenate([p, q]).mean(axis=0)
-    _, _, vt = np.linalg.svd(np.concatenate([p, q]) - o, full_matrices=False)
-    n = vt[2]
-
-    def turn(loop):
-        d = loop - o
-        return np.sum(np.cross(d, np.roll(d, -1, axis=0)) @ n)
-
-    if np.sign(turn(p)) != np.sign(turn(q)):
-        q = q[::-1]
-    start = int(np.argmin(np.linalg.norm(q - p[0], axis=1)))
-    return p, np.roll(q, -start, axis=0)

@@ -5,7 +5,7 @@ layers (A0 and A2 at the step ``1 - c kappa`` of Eq. 4, A3 and A1 at the full st
 its insertion with the ends of the two fibres, and hands the contour samples to its
 bottom particles as position targets; its interior bottom particles get the blend of
 their row's two side samples plus their rest offset in the row's basis
-(:func:`faceforge.anatomy.muscles.muscle.interior_targets`). :meth:`faceforge.anatomy.muscles.muscle.
+(:func:`faceforge.anatomy.muscles.linear.interior_targets`). :meth:`faceforge.anatomy.muscles.muscle.
 Muscle.targets_from_line_points` is the plain twin. Done muscle by muscle in numpy that is ~35
 small array operations per muscle, ~0.9 ms a frame for the 25 sheets of the default map;
 :class:`LinearTargets` does the same arithmetic, in the same order (so the same bits), for

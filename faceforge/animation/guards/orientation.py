@@ -6,7 +6,7 @@ is made of slivers (the lip corners of a dense head: triangles of 0.1-20 % of
 the median area, nearly collinear in the plane of the lips' contact surface),
 a small shear between neighbouring vertices turns them over. On the ICT head
 this happens where the jaw drags the lower lip away from the upper lip: the
-inner lip skin between them (the lip band, :func:`faceforge.skin.binding.lip_band`;
+inner lip skin between them (the lip band, :func:`faceforge.skin.rules.lip_band`;
 measured while it had no anchor of its own), carried by anchors on different bodies
 (depressor labii and mandible below, orbicularis oris and cranium above), lags
 behind the anchored skin while the jaw moves and overshoots when it stops; with the jaw wide open, the upper lip, dragged back

@@ -6,7 +6,7 @@ skull by ray casting (:mod:`faceforge.skin.binding`) and computes the
 influence map (:mod:`faceforge.skin.influence`). Writes:
 
 ``bind.npz``
-    :meth:`faceforge.skin.binding.BoundSkin.as_arrays`: the working skin
+    :meth:`faceforge.skin.head.BoundSkin.as_arrays`: the working skin
     (``vertices``, ``faces``; the first ``n_user`` vertices are the user's, in
     order, appended vertex ``n_user + i`` duplicates ``duplicate_source[i]``),
     the anchors (``anchor_*``, ``status``, ``body_names``), ``lip_sides``,
@@ -83,7 +83,8 @@ def head_from_fit_arrays(d: dict) -> dict:
 
 def run(ctx):
     """Bind the fitted head in ``ctx.input("fit")``; write bind.npz, report.json, influence.png."""
-    from faceforge.skin.binding import bind_head, match_insertions
+    from faceforge.skin.head import bind_head
+    from faceforge.skin.rules import match_insertions
     from faceforge.skin.influence import save_influence_png
     from faceforge.io.stagefiles import save_json, save_npz
 
