@@ -6,7 +6,7 @@ Measures the per-frame time of skull + muscles + skin, broken down by layer, at 
 * ``synthetic`` (always): a Mesh_D-sized head (UV-sphere skin of 4,874 vertices / 9,744
   triangles vs the paper's Mesh_D 4,904 / 9,541) with a closed cranium and mandible, one
   active zygomaticus and 25 passive sheets (26 muscles, like the paper's map), bound by the
-  real bind stage and simulated by the real layered system (``tests/animate/synthetic.py``);
+  real bind stage and simulated by the real layered system (``tests/animation/synthetic.py``);
 * ``--workdir DIR`` (optional): a real head already fitted and bound in DIR;
 * ``--sweep`` (optional, slow): every ``samples/fap/*.fap``, and a generated track of the
   fourteen visemes (``visemes_all_fourteen.fap``, :func:`faceforge.mpeg4.viseme_track`), on
@@ -54,7 +54,7 @@ def synthetic_head(tmp: Path, count, extra: int, sets=()):
     from faceforge.io.config import load_config
     from faceforge.pipeline import StageContext
     from faceforge.pipeline.stages.bind import run as run_bind
-    from tests.animate import synthetic as S
+    from tests.animation import synthetic as S
 
     S.write_fit(tmp / "fit", count=count, extra_muscles=extra)
     (tmp / "bind").mkdir()

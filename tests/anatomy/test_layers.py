@@ -6,7 +6,7 @@ import pytest
 from faceforge.anatomy.layers import MusculoskeletalSystem, expand_lies_on
 from faceforge.exceptions import TemplateError
 
-from conftest import jaw_matrix, linear_on, split_skull
+from tests.anatomy.conftest import jaw_matrix, linear_on, split_skull
 
 
 @pytest.fixture

@@ -9,7 +9,7 @@ from faceforge.anatomy.muscles.muscle import STIFFNESS_KEYS, bending_quads, dist
 from faceforge.anatomy.muscles.sphincter import fit_ellipse, sphincter_displacement
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
-from conftest import LINEAR_STIFFNESS, SPHINCTER_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
+from tests.anatomy.conftest import LINEAR_STIFFNESS, SPHINCTER_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ import numpy as np
 
 from faceforge.skin.mouth import cut_mouth, lip_side
 from faceforge.skin.layer import skin_topology
-from tests.bind.synthetic import mouth_grid
+from tests.skin.synthetic import mouth_grid
 
 
 def _boundary(faces):

@@ -1,6 +1,6 @@
 """Scenario tests: the animate and calibrate stages on a synthetic fitted + bound head.
 
-The head (tests/animate/synthetic.py) goes through the real bind stage; the stages then run
+The head (tests/animation/synthetic.py) goes through the real bind stage; the stages then run
 the real layered system (kinematic skull, one PBD muscle, the PBD skin) frame by frame.
 """
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tests.animate import synthetic as S
+from tests.animation import synthetic as S
 
 ROOT = Path(__file__).resolve().parents[2]
 JOY = ROOT / "samples" / "fap" / "joy.fap"

@@ -8,7 +8,7 @@ import pytest
 from faceforge.skin.binding import CRANIUM, MUSCLE, UNBOUND, Binding
 from faceforge.skin.regions import bind_report, face_front_mask
 from faceforge.exceptions import StageError
-from tests.bind.synthetic import sphere
+from tests.skin.synthetic import sphere
 
 
 def _fake_fit(path):

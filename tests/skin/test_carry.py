@@ -11,7 +11,7 @@ import pytest
 from faceforge.skin.binding import Body, bind_skin
 from faceforge.skin.layer import SkinSimulation, SkinStiffness
 from faceforge.pbd import SolverSettings
-from tests.bind.synthetic import sphere
+from tests.skin.synthetic import sphere
 
 
 class Bodies:

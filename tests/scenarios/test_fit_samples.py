@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from .conftest import SAMPLES
+from tests.fit.heads import SAMPLES
 
 HEADS = sorted(SAMPLES)
 

@@ -25,7 +25,7 @@ from faceforge.io.export import (
 )
 from faceforge.io.export_common import atomic_write_bytes, faces_to_csr, polygons_from_fan, triangulate
 
-MAKEHUMAN = Path(__file__).resolve().parents[1] / "samples" / "makehuman" / "mh_head_default.obj"
+MAKEHUMAN = Path(__file__).resolve().parents[2] / "samples" / "makehuman" / "mh_head_default.obj"
 
 
 def animation(n_frames=6, seed=0):

@@ -4,7 +4,7 @@ import numpy as np
 
 from faceforge.skin.influence import (apply_influence, influence_weights, save_influence_png,
                                          smoothstep_falloff)
-from tests.bind.synthetic import sphere
+from tests.skin.synthetic import sphere
 
 
 def test_falloff_ends_and_monotone():

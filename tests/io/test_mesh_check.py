@@ -8,7 +8,7 @@ import pytest
 from faceforge.exceptions import MeshError
 from faceforge.io.mesh_check import boundary_loops, check_mesh, merge_duplicate_vertices
 
-from .conftest import ellipsoid_head
+from tests.fit.heads import ellipsoid_head
 
 
 def unwelded(v, f):

@@ -14,7 +14,7 @@ from faceforge.anatomy.muscles.build import eq5_thickness
 from faceforge.fit.muscles import cylindrical_projection
 from faceforge.io.mesh_check import fill_holes
 
-from .conftest import ellipsoid_head, face_landmarks_on
+from .heads import ellipsoid_head, face_landmarks_on
 
 
 def rotation(axis, angle):

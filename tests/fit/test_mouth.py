@@ -7,7 +7,7 @@ import pytest
 
 from faceforge.fit.mouth import MouthField, mouth_field
 
-from .conftest import SAMPLES
+from .heads import SAMPLES
 
 
 def test_a_uniform_shift_is_exact_inside_and_fades_to_nothing():

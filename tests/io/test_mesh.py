@@ -11,7 +11,7 @@ import pytest
 from faceforge.exceptions import MeshError
 from faceforge.io.mesh import load_mesh, save_mesh, supported_formats, triangulate_polygons
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def tetra():

@@ -9,7 +9,7 @@ import pytest
 from faceforge.io.export import ExportError, check_output, export_animation, read_usd, up_axis_of, write_usda
 from faceforge.io.export_common import faces_to_csr
 
-from tests.test_export import animation
+from tests.io.test_export import animation
 
 pytest.importorskip("pxr", reason="usd-core is in the test extra")
 

@@ -15,7 +15,7 @@ import trimesh  # noqa: E402
 from faceforge.viz.render import LIGHT, VIEWS, Layer, lambert, render_meshes, shaded_polygons  # noqa: E402
 from faceforge.viz.template import grid_faces, muscle_layers, muscle_sheet, render_template, resample  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def sphere():

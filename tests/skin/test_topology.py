@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from faceforge.skin.layer import skin_topology
-from tests.bind.synthetic import grid, sphere
+from tests.skin.synthetic import grid, sphere
 
 
 def _slow_topology(faces):

@@ -7,7 +7,7 @@ from faceforge.animation.checks import inverted_faces
 from faceforge.animation.playback import Rig, play
 from faceforge.animation.guards.orientation import OrientationGuard, _project_signed_areas, _watched
 
-from .test_loop import grid
+from .test_playback import grid
 
 
 def _twin(x, tris, nref, floor, aim, iterations, hit):

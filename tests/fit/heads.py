@@ -1,4 +1,5 @@
-"""Shared fixtures of the fit tests: a small synthetic head and the sample heads."""
+"""Shared fixtures of the fit tests (registered for the whole suite by tests/conftest.py): a small
+synthetic head and the sample heads, fitted once per session."""
 
 from __future__ import annotations
 

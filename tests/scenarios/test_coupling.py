@@ -76,17 +76,18 @@ def test_zygomaticus_raises_its_own_lip_corner_only(head):
 
 
 def test_zygomaticus_widens_the_mouth(head):
-    """Its own corner moves laterally (+x) away from the other corner: the smile widens the mouth."""
+    """Its own corner moves laterally (+x) away from the other corner, which stays put: the
+    smile widens the mouth. Measured at c = 0.5 (MakeHuman, 2026-11-27): own corner 8.3 +64 MW
+    sideways (and 112 MW up), the other corner 8.4 +0.9 MW, so the mouth widens by 63 MW; the
+    bounds sit at about half of that. (This test used to xfail below 5 MW, when the orbicularis
+    ring carried the pull to the other corner; it could not fail.)"""
     h, _ = head
     d = moved(h, "zygomaticus_major_L")
     mw = h.fapu.unit("MW")
     own, other = d[h.fdp_vertex["8.3"], 0] / mw, d[h.fdp_vertex["8.4"], 0] / mw
-    widening = own - other
-    if widening <= 5.0:
-        pytest.xfail(f"the mouth widens by {widening:.2f} MW only: the orbicularis ring carries the pull "
-                     f"to the other corner (+x: own corner {own:.1f} MW, other corner {other:.1f} MW), so "
-                     "the corner rises but does not spread (issue 7, coupling)")
-    assert widening > 5.0
+    assert own > 30.0, own
+    assert abs(other) < 5.0, other
+    assert own - other > 25.0, (own, other)
 
 
 @pytest.mark.parametrize("muscle", ["zygomaticus_major", "risorius", "depressor_anguli"])

@@ -214,7 +214,7 @@ def test_every_range_rule_holds_without_importing_a_stage_module():
             "        caught += 1\n"
             "assert 'faceforge.pipeline.stages' not in ' '.join(sys.modules), 'a stage module was imported'\n"
             "print(caught)\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(__file__).resolve().parents[1],
-                         env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=Path(__file__).resolve().parents[2],
+                         env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])})
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "5"

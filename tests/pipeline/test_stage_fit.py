@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 
-from .conftest import SAMPLES
+from tests.fit.heads import SAMPLES
 
 
 def test_fit_command_writes_the_stage_and_reuses_it(invoke, tmp_path, template):

@@ -6,7 +6,7 @@ import pytest
 from faceforge.skin.binding import CRANIUM, MANDIBLE
 from faceforge.skin.head import bind_head
 from faceforge.skin.layer import SkinSimulation, SkinStiffness
-from tests.bind.synthetic import jaw_matrix, lipped_head
+from tests.skin.synthetic import jaw_matrix, lipped_head
 
 
 @pytest.fixture(scope="module")

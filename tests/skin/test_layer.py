@@ -6,7 +6,7 @@ import pytest
 from faceforge.skin.binding import Body, bind_skin
 from faceforge.skin.layer import SkinStiffness, add_skin, skin_topology
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
-from tests.bind.synthetic import grid, sphere
+from tests.skin.synthetic import grid, sphere
 
 
 def _model(v, f, b, stiffness=SkinStiffness()):

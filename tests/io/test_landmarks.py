@@ -13,7 +13,7 @@ from faceforge.io.landmarks import (REQUIRED_FDPS, default_landmark_path,
                                     load_landmarks, read_landmarks, snap_landmarks)
 from faceforge.mpeg4 import FDP_IDS, LEFT_RIGHT_PAIRS
 
-from .conftest import SAMPLES, face_landmarks_on
+from tests.fit.heads import SAMPLES, face_landmarks_on
 
 
 @pytest.fixture()

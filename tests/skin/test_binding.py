@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, UNBOUND, Body, bind_skin
-from tests.bind.synthetic import sphere
+from tests.skin.synthetic import sphere
 
 
 def _cap(radius, zmin, subdivisions=3):
