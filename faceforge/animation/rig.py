@@ -255,12 +255,13 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
     from faceforge.anatomy.skull import load_skull
     from faceforge.exceptions import StageError, TemplateError
     from faceforge.anatomy.muscles.build import build_muscles_on
+    from faceforge.fit.template import resolve_template_path
 
     if "muscle_map_names" not in fit or not len(fit["muscle_map_names"]):
         log("fit.npz has no muscles: animating the skull alone")
         return MusculoskeletalSystem.from_parts(cranium, mandible, [], settings)
-    specs = load_muscle_map(template_path(config.get("template.muscle_map")),
-                            load_skull(template_path(config.get("template.skull"))))
+    specs = load_muscle_map(resolve_template_path(config.get("template.muscle_map")),
+                            load_skull(resolve_template_path(config.get("template.skull"))))
     start = fit["muscle_map_start"]
     points = {str(n): fit["muscle_map_points"][start[i]:start[i + 1]]
               for i, n in enumerate(fit["muscle_map_names"])}
@@ -283,15 +284,3 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
                          "another muscle map)") from None
     settings = replace(settings, damping=float(config.get("muscle.damping")))
     return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
-
-
-def template_path(raw) -> Path:
-    """A template file's path: as given when it exists (or is absolute), else under the
-    repository, else under the package."""
-    p = Path(str(raw))
-    if p.exists() or p.is_absolute():
-        return p
-    for root in (Path(__file__).resolve().parents[2], Path(__file__).resolve().parents[1]):
-        if (root / p).exists():
-            return root / p
-    return p

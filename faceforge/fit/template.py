@@ -134,9 +134,18 @@ def _template_muscles(key: str, specs, skull) -> list:
 
 
 def resolve_template_path(path) -> Path:
-    """A template path as given, or relative to the package's repository root."""
-    p = Path(path)
+    """A template file's or folder's path (``template.skull``, ``template.muscle_map``).
+
+    As given when it exists (relative to the working directory) or is absolute; else under
+    the repository root (``templates/...`` of a source checkout), else under the package
+    (``faceforge/templates/...`` of an installed copy); else as given, for the loader's error.
+    The only template-path resolver: the fit, the animation rig and ``faceforge template``
+    all use it.
+    """
+    p = Path(str(path))
     if p.exists() or p.is_absolute():
         return p
-    root = Path(__file__).resolve().parents[2]
-    return root / p if (root / p).exists() else p
+    for root in (Path(__file__).resolve().parents[2], Path(__file__).resolve().parents[1]):
+        if (root / p).exists():
+            return root / p
+    return p
