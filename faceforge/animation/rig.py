@@ -255,7 +255,7 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
     from faceforge.anatomy.skull import load_skull
     from faceforge.exceptions import StageError, TemplateError
     from faceforge.anatomy.muscles.build import build_muscles_on
-    from faceforge.fit.template import resolve_template_path
+    from faceforge.io.templates import resolve_template_path
 
     if "muscle_map_names" not in fit or not len(fit["muscle_map_names"]):
         log("fit.npz has no muscles: animating the skull alone")

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from faceforge.io.templates import resolve_template_path  # noqa: F401 (also this module's API)
+
 
 class Template:
     """The template skull and muscle map, with the muscles built on the template skull.
@@ -131,21 +133,3 @@ def _template_muscles(key: str, specs, skull) -> list:
     except OSError:
         pass  # a read-only cache only costs time
     return built
-
-
-def resolve_template_path(path) -> Path:
-    """A template file's or folder's path (``template.skull``, ``template.muscle_map``).
-
-    As given when it exists (relative to the working directory) or is absolute; else under
-    the repository root (``templates/...`` of a source checkout), else under the package
-    (``faceforge/templates/...`` of an installed copy); else as given, for the loader's error.
-    The only template-path resolver: the fit, the animation rig and ``faceforge template``
-    all use it.
-    """
-    p = Path(str(path))
-    if p.exists() or p.is_absolute():
-        return p
-    for root in (Path(__file__).resolve().parents[2], Path(__file__).resolve().parents[1]):
-        if (root / p).exists():
-            return root / p
-    return p

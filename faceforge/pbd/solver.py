@@ -74,75 +74,81 @@ def effective_stiffness(k: np.ndarray, settings: SolverSettings) -> tuple[np.nda
     return on.astype(np.float64), c
 
 
+def _check_particle_ids(m: Model) -> None:
+    """ValueError when an index array of ``m`` holds a particle id outside
+    ``[0, particle_count)`` (the kernels read ids unsigned, without bounds checks)."""
+    for name in ("kinematic_indices", "distance_indices", "bending_indices", "area_indices",
+                 "volume_triangles", "volume_particles", "position_indices",
+                 "attachment_indices", "attachment_triangles"):
+        ids = getattr(m, name)
+        if ids.size and (ids.min() < 0 or ids.max() >= m.particle_count):
+            raise ValueError(f"model.{name} holds particle ids outside "
+                             f"[0, {m.particle_count})")
+
+
+def _volume_arrays(m: Model, part, partitions: int) -> tuple:
+    """The volume kernel's eight arrays (private copies), in the compiled step's order.
+
+    ``(particle_start (bodies + 1,), particles (p,), particle_cuts (bodies, partitions + 2),
+    row_cuts (bodies, partitions + 2), rows (r, 4) paired triangles, reference_start,
+    reference particles in global ids, rest volumes (bodies,))``. With ``part`` ((particles,)
+    int, -1 none) each body's rows are grouped by part, the seam last, and its particles by
+    part, those of no part last (offsets in its slice), so that a body joining parts sums them
+    part by part at once (``volume._solve_volume_parts``); without, one group each.
+    """
+    ref_global = np.concatenate([  # reference particles of each body, in global ids
+        m.volume_particles[m.volume_particle_start[j]:][
+            m.volume_reference[m.volume_reference_start[j]:m.volume_reference_start[j + 1]]]
+        for j in range(m.volume_count)]) if m.volume_count else np.zeros(0, dtype=np.int64)
+    ts = m.volume_triangle_start  # the kernel takes each body's triangles paired
+    rows = [pair_triangles(m.volume_triangles[ts[j]:ts[j + 1]])
+            for j in range(m.volume_count)]
+    row_start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
+    cuts = np.repeat(row_start[1:, None], partitions + 2, axis=1)
+    cuts[:, 0] = row_start[:-1]
+    ps = m.volume_particle_start
+    particles = np.array(m.volume_particles)
+    pcuts = np.repeat(np.diff(ps)[:, None], partitions + 2, axis=1)
+    pcuts[:, 0] = 0
+    if part is not None:
+        for j in range(m.volume_count):
+            order, cuts_j = row_cuts(rows[j], part, partitions)
+            rows[j] = rows[j][order]
+            cuts[j] = row_start[j] + cuts_j
+            own = particles[ps[j]:ps[j + 1]]
+            label = np.where(part[own] < 0, partitions, part[own])
+            order = np.argsort(label, kind="stable")
+            particles[ps[j]:ps[j + 1]] = own[order]
+            pcuts[j] = np.searchsorted(label[order], np.arange(partitions + 2))
+    return tuple(_own(a) for a in (
+        m.volume_particle_start, particles, pcuts, cuts,
+        np.concatenate(rows) if rows else np.zeros((0, 4), dtype=np.int64),
+        m.volume_reference_start, ref_global, m.volume_rest_volume))
+
+
 class Solver:
     """Steps a :class:`Model`; holds only derived per-mode arrays and scratch buffers."""
 
     def __init__(self, model: Model, settings: SolverSettings | None = None):
+        """Derive the compiled step's arrays from ``model`` (left untouched) for ``settings``.
+
+        model : :class:`Model` (particle ids checked against ``particle_count``; ValueError
+        otherwise). settings : :class:`SolverSettings`, default ``SolverSettings()``. With
+        ``partitions > 1`` the kernels see the model renumbered part by part
+        (:meth:`_partition`); with ``colouring`` the distance, bending and area constraints are
+        reordered colour by colour (:meth:`_constraint_arrays`). Every array handed to the
+        compiled step is a private writable C-contiguous copy, so that all models share one
+        compiled signature (read-only arrays would type differently).
+        """
         self.model = model
         self.settings = settings or SolverSettings()
-        m, s = model, self.settings
-        for name in ("kinematic_indices", "distance_indices", "bending_indices", "area_indices",
-                     "volume_triangles", "volume_particles", "position_indices",
-                     "attachment_indices", "attachment_triangles"):
-            ids = getattr(m, name)  # the kernels read ids unsigned, without bounds checks
-            if ids.size and (ids.min() < 0 or ids.max() >= m.particle_count):
-                raise ValueError(f"model.{name} holds particle ids outside "
-                                 f"[0, {m.particle_count})")
-        # with partitions the kernels see the model renumbered and regrouped part by part
-        # (partition.partitioned); _segment: the part of each block row (0 with one part). A
-        # model left in one part (too small to cut) keeps its numbering: nothing to gather
-        self._position_order = self._particle_order = None
-        self._segment = np.zeros(len(m.blocks), dtype=np.int64)
-        part = None
-        split = partitioned(model, s.partitions) if s.partitions > 1 else None
-        if split is not None and split.segment.max() > 0:
-            m, self._segment, part = split.model, split.segment, split.part
-            order, slots = split.particle_order, split.position_order
-            if not np.array_equal(order, np.arange(len(order))):
-                self._particle_order = order
-                self._old_order = np.argsort(order)   # new id of each old particle
-                self._x = np.zeros((len(order), 3))
-                self._v = np.zeros((len(order), 3))
-            if not np.array_equal(slots, np.arange(len(slots))):
-                self._position_order = slots
-                self._targets = np.zeros((len(slots), 3))
-        # every array handed to the compiled step is a private writable copy, so that all
-        # models share one compiled signature (read-only arrays would type differently)
+        s = self.settings
+        _check_particle_ids(model)
+        m, part = self._partition(model, s)
         self._w = _own(m.inv_mass)
         self._kin = _own(m.kinematic_indices)
         self._blocks = _own(m.blocks)
-        ref_global = np.concatenate([  # reference particles of each body, in global ids
-            m.volume_particles[m.volume_particle_start[j]:][
-                m.volume_reference[m.volume_reference_start[j]:m.volume_reference_start[j + 1]]]
-            for j in range(m.volume_count)]) if m.volume_count else np.zeros(0, dtype=np.int64)
-        ts = m.volume_triangle_start  # the kernel takes each body's triangles paired
-        rows = [pair_triangles(m.volume_triangles[ts[j]:ts[j + 1]])
-                for j in range(m.volume_count)]
-        row_start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
-        # per body, its rows (absolute) grouped by part, the seam last: a body joining parts
-        # sums its rows part by part at once (volume._solve_volume_parts); one group without
-        cuts = np.repeat(row_start[1:, None], s.partitions + 2, axis=1)
-        cuts[:, 0] = row_start[:-1]
-        # and its particles grouped by part, those of no part last (offsets in its slice), for
-        # the sums over them at once; one group without
-        ps = m.volume_particle_start
-        particles = np.array(m.volume_particles)
-        pcuts = np.repeat(np.diff(ps)[:, None], s.partitions + 2, axis=1)
-        pcuts[:, 0] = 0
-        if part is not None:
-            for j in range(m.volume_count):
-                order, cuts_j = row_cuts(rows[j], part, s.partitions)
-                rows[j] = rows[j][order]
-                cuts[j] = row_start[j] + cuts_j
-                own = particles[ps[j]:ps[j + 1]]
-                label = np.where(part[own] < 0, s.partitions, part[own])
-                order = np.argsort(label, kind="stable")
-                particles[ps[j]:ps[j + 1]] = own[order]
-                pcuts[j] = np.searchsorted(label[order], np.arange(s.partitions + 2))
-        self._volume = tuple(_own(a) for a in (
-            m.volume_particle_start, particles, pcuts, cuts,
-            np.concatenate(rows) if rows else np.zeros((0, 4), dtype=np.int64),
-            m.volume_reference_start, ref_global, m.volume_rest_volume))
+        self._volume = _volume_arrays(m, part, s.partitions)
         self._position = _own(m.position_indices)
         self._attachment = tuple(_own(a) for a in (
             m.attachment_indices, m.attachment_triangles, m.attachment_bary))
@@ -154,12 +160,48 @@ class Solver:
         self._lams = np.zeros(m.constraint_count)
         self._vol_g = np.zeros((m.particle_count, 3))
         self._damp = (1.0 - s.damping) ** (1.0 / s.substeps)
-        self._arrays = {  # per kind (indices, rest, k_eff, c), permuted when colouring
+        d_weight = self._constraint_arrays(m, s)
+        self._sweep_data(m, s, d_weight)
+        self._frozen = self._frozen_arguments()
+
+    def _partition(self, model: Model, s: SolverSettings):
+        """Renumber and regroup ``model`` into parts when ``s.partitions > 1``.
+
+        Sets ``_segment`` ((blocks,) int64: the part of each block row, 0 with one part) and,
+        when the numbering changes, ``_particle_order`` / ``_old_order`` / ``_x`` / ``_v``
+        (particles, gathered and scattered by the step) and ``_position_order`` /
+        ``_targets`` (position-constraint slots). A model left in one part (too small to cut)
+        keeps its numbering. Returns ``(model the kernels see, part)``: ``part`` (particles,)
+        int, the part of each particle (-1 none), or None without parts.
+        """
+        self._position_order = self._particle_order = None
+        self._segment = np.zeros(len(model.blocks), dtype=np.int64)
+        split = partitioned(model, s.partitions) if s.partitions > 1 else None
+        if split is None or split.segment.max() <= 0:
+            return model, None
+        self._segment = split.segment
+        order, slots = split.particle_order, split.position_order
+        if not np.array_equal(order, np.arange(len(order))):
+            self._particle_order = order
+            self._old_order = np.argsort(order)   # new id of each old particle
+            self._x = np.zeros((len(order), 3))
+            self._v = np.zeros((len(order), 3))
+        if not np.array_equal(slots, np.arange(len(slots))):
+            self._position_order = slots
+            self._targets = np.zeros((len(slots), 3))
+        return split.model, split.part
+
+    def _constraint_arrays(self, m: Model, s: SolverSettings) -> np.ndarray:
+        """Set ``_arrays`` (per kind ``(indices, rest, k_eff, c)``) and ``_runs`` (per kind,
+        run starts of independent constraints for the vectorised sweeps; empty: the scalar
+        sweep) for distance, bending and area, permuted colour by colour with
+        ``s.colouring``. Returns the distance weights ((distance,) float) in the same order.
+        """
+        self._arrays = {
             "distance": (_own(m.distance_indices), _own(m.distance_rest_length)),
             "bending": (_own(m.bending_indices), rest_cos_sin(m.bending_rest_angle)),
             "area": (_own(m.area_indices), _own(m.area_rest_area)),
         }
-        # runs of independent constraints for the vectorised sweeps; empty: the scalar sweep
         self._runs = {kind: np.zeros(0, dtype=np.int64) for kind in ("distance", "bending", "area")}
         d_weight = m.distance_weight
         for code, kind in ((DISTANCE, "distance"), (BENDING, "bending"), (AREA, "area")):
@@ -174,8 +216,12 @@ class Solver:
                 if kind in self._runs and s.stiffness_mode != "xpbd":
                     self._runs[kind] = runs
             self._arrays[kind] = (idx, rest, kk, c)
-        # per-constraint data of the PBD sweeps (inverse masses are frozen in the Model) and
-        # the XPBD sweep's weights
+        return d_weight
+
+    def _sweep_data(self, m: Model, s: SolverSettings, d_weight: np.ndarray) -> None:
+        """Per-constraint data of the PBD sweeps (inverse masses are frozen in the Model), the
+        XPBD sweep's weights, the fused quad tables (colouring in the PBD modes), the scratch
+        buffers (one per part) and the part boundaries ``_seg`` ((partitions + 2,) int64)."""
         d_idx, d_rest, d_k, _ = self._arrays["distance"]
         self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass, d_weight)
         self._d_wt = move_weights(d_idx, m.inv_mass, d_weight)
@@ -198,10 +244,12 @@ class Solver:
         # (not when one part holds every row: a small model, partition.MIN_SLAB_CONSTRAINTS)
         busy = np.count_nonzero(np.diff(self._seg) > 0)
         self._threaded = busy > 1 and threaded()
-        # the compiled step's arguments that never change, gathered once (a step's Python
-        # side then costs a few microseconds, which the small muscle layers notice)
-        k = self._k
-        self._frozen = (
+
+    def _frozen_arguments(self) -> tuple:
+        """The compiled step's arguments that never change, gathered once (a step's Python
+        side then costs a few microseconds, which the small muscle layers notice)."""
+        s, k = self.settings, self._k
+        return (
             self._w, self._kin, self._kin_start, self._prev, float(s.gravity), self._damp,
             s.substeps, s.iterations, s.stiffness_mode == "xpbd", self._blocks, self._seg,
             self._lams,

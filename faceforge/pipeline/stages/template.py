@@ -94,7 +94,7 @@ def render(app, output, pitch, yaw, protrusion, contract, frames, proxy, landmar
     from faceforge.anatomy.muscles.muscle_map import load_muscle_map
     from faceforge.anatomy.skull import load_skull
     from faceforge.exceptions import TemplateError
-    from faceforge.fit.template import resolve_template_path
+    from faceforge.io.templates import resolve_template_path
     from faceforge.viz.template import render_template
 
     config = app.config
