@@ -1,0 +1,149 @@
+"""Which way the face looks: the orientation search and the consensus views.
+
+:func:`find_face` renders the mesh from the six axis directions, turns each picture
+through four quarter turns (exactly the four ``up`` choices of that direction), runs the
+face detector on all 24 and keeps the face with the best score. Every camera is built
+from the mesh's bounding box and the axes, so a head turned by a signed permutation of the
+axes (Blender's Z-up frame, a head facing +X) sees the very same pictures.
+
+:func:`face_frame` turns the best view's points into the face's own frame (left, up,
+forward, from the back-projected eye, mouth and chin points), and :func:`consensus_views`
+places a frontal camera in that frame plus a few turned a little, framed on the face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.landmarks.raster import Render, View, render
+
+#: the face search's picture size (pixels)
+SEARCH_SIZE = 320
+#: the consensus pictures' size (pixels) and the face's share of it
+VIEW_SIZE = 512
+FACE_SHARE = 0.5
+#: consensus views: (yaw, pitch) in degrees about the face's up and left axes
+VIEW_ANGLES = ((0.0, 0.0), (-12.0, 0.0), (12.0, 0.0), (0.0, -8.0), (0.0, 8.0))
+#: a face scoring below this is no face
+MIN_SCORE = 0.35
+
+#: MediaPipe point indices used for the face frame: (left, right) mirror pairs, chin, brows
+_PAIRS = ((263, 33), (362, 133), (291, 61), (334, 105), (358, 129))
+_CHIN, _NOSE_TIP = 152, 4
+
+
+@dataclass
+class Sighting:
+    """A face seen in one render: ``points (478, 2)`` pixels, ``score``, the render."""
+
+    render: Render
+    points: np.ndarray
+    score: float
+    label: str
+
+
+def _axis_name(vec) -> str:
+    i = int(np.argmax(np.abs(vec)))
+    return ("+" if vec[i] > 0 else "-") + "XYZ"[i]
+
+
+def search_views(vertices: np.ndarray):
+    """The six axis-direction cameras over the whole mesh: [(direction, up)] (unit (3,))."""
+    eye = np.eye(3)
+    out = []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            direction = sign * eye[axis]
+            up = eye[(axis + 1) % 3] if axis != 1 else eye[2]
+            out.append((direction, up))
+    return out
+
+
+def _relief(render_: Render, points: np.ndarray) -> float:
+    """1 when the nose tip is nearer the camera than the eye corners and the chin (a face in
+    relief), falling to 0 when it is not (a face painted on a flat or round surface)."""
+    n = render_.depth.shape[0]
+    rc = np.clip(np.round(points[[_NOSE_TIP, 33, 263, _CHIN]] - 0.5).astype(int), 0, n - 1)
+    d = render_.depth[rc[:, 1], rc[:, 0]]
+    if not np.all(np.isfinite(d)):
+        return 0.0
+    span = np.linalg.norm(points[263] - points[33]) / render_.view.scale   # eye width, mesh units
+    gain = (np.mean(d[1:]) - d[0]) / max(span, 1e-300)                       # ~0.5 for a human nose
+    return float(np.clip(gain / 0.2, 0.0, 1.0))
+
+
+def find_face(vertices, faces, normals, detector, centre, radius) -> tuple[Sighting | None, int]:
+    """The best face over the 24 axis frames, or None; and the number of views tried.
+
+    ``centre (3,)``, ``radius``: the mesh's bounding-box centre and half diagonal.
+    """
+    best, tried = None, 0
+    for direction, up in search_views(vertices):
+        view = View(direction, up, centre, SEARCH_SIZE / (2.0 * radius), SEARCH_SIZE)
+        r = render(vertices, faces, normals, view)
+        for quarter in range(4):
+            tried += 1
+            rgb = np.rot90(r.rgb(), k=quarter).copy()
+            face = detector.detect(rgb)
+            if face is None:
+                continue
+            pts = _unrotate(face.points, quarter, SEARCH_SIZE)
+            score = face.score * _relief(r, pts)
+            if best is None or score > best.score:
+                best = Sighting(r, pts, score, f"looking along {_axis_name(direction)}, turn {90 * quarter}")
+    if best is None or best.score < MIN_SCORE:
+        return None, tried
+    return best, tried
+
+
+def _unrotate(points: np.ndarray, quarter: int, size: int) -> np.ndarray:
+    """Pixel points found on ``np.rot90(image, quarter)`` -> the unrotated image's pixels."""
+    p = points.copy()
+    for _ in range(quarter % 4):
+        # rot90 (counter-clockwise) maps (col, row) -> (row, size - col); undo it
+        p = np.column_stack([size - p[:, 1], p[:, 0]])
+    return p
+
+
+def face_frame(points3d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(left, up, forward) unit (3,) of the face from its back-projected points ``(478, 3)``
+    (NaN where unseen): left from the mirror pairs, up from the chin to the eyes and brows."""
+    diffs = [points3d[a] - points3d[b] for a, b in _PAIRS]
+    left = np.nanmean(np.array(diffs), axis=0)
+    left /= np.linalg.norm(left)
+    high = np.nanmean(points3d[[263, 33, 334, 105]], axis=0)
+    up = high - points3d[_CHIN]
+    up -= left * (up @ left)
+    up /= np.linalg.norm(up)
+    forward = np.cross(left, up)
+    return left, up, forward
+
+
+def _turn(vec, axis, deg):
+    """``vec`` turned about unit ``axis`` by ``deg`` degrees (Rodrigues)."""
+    t = np.radians(deg)
+    return vec * np.cos(t) + np.cross(axis, vec) * np.sin(t) + axis * (axis @ vec) * (1 - np.cos(t))
+
+
+def consensus_views(left, up, forward, centre, width) -> list[View]:
+    """Cameras around the face: frontal, then turned by :data:`VIEW_ANGLES`. ``centre (3,)``
+    the face's middle, ``width`` its extent (mesh units)."""
+    scale = FACE_SHARE * VIEW_SIZE / width
+    views = []
+    for yaw, pitch in VIEW_ANGLES:
+        d = _turn(-forward, up, yaw)
+        u = _turn(up, left, pitch)
+        d = _turn(d, left, pitch)
+        views.append(View(d, u, centre, scale, VIEW_SIZE))
+    return views
+
+
+def sight(vertices, faces, normals, detector, view: View, label: str) -> Sighting | None:
+    """Render ``view`` and detect the face in it (upright: no quarter turns)."""
+    r = render(vertices, faces, normals, view)
+    face = detector.detect(r.rgb())
+    if face is None:
+        return None
+    return Sighting(r, face.points, 1.0, label)
