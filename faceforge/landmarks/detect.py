@@ -134,18 +134,22 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
     idx = np.array([table[k] for k in ids])
     pos = agreed[idx]
     on_skin = np.array([k not in PUPILS for k in ids])
-    snapped, _, _ = closest_points(pos, v, f)
+    snapped, gap, _ = closest_points(pos, v, f)
     pos = np.where(on_skin[:, None], snapped, pos)
     method = ["MediaPipe point %d, median of %d views" % (table[k], int(seen[:, table[k]].sum())) for k in ids]
+    for i in np.flatnonzero(~on_skin & (gap > 1e-3 * diagonal)):
+        method[i] += ", in the eye opening at the depth of its lids"
     det = Detection(ids, pos, np.full(len(ids), -1, np.int64), method,
                     np.clip(1.0 - spread[idx] / 0.01, 0.0, 1.0),
                     [[names[j] for j in np.flatnonzero(seen[:, table[k]])] for k in ids], spread[idx],
                     {"search": best.label, "search_score": round(best.score, 4), "views_tried": tried + len(labels),
                      "frame": {"left": left.tolist(), "up": up.tolist(), "forward": forward.tolist()},
                      "timings": {"search_s": t_search}})
-    if symmetrise:
-        _symmetrise(det, v, f, diagonal)
-    _choose_vertices(det, v, diagonal)
+    plane = _mirror(det, v, diagonal)
+    _apply_rules(det, v, f, plane, diagonal)
+    if symmetrise and det.info["symmetry"]["symmetric"]:
+        _symmetrise(det, v, f, plane)
+    _choose_vertices(det, v, diagonal, plane if det.info["symmetry"]["symmetric"] else None)
     det.info["timings"]["total_s"] = time.perf_counter() - t0
     return det
 
@@ -163,9 +167,8 @@ def _placeable(table: dict, agreed: np.ndarray, path: str) -> tuple:
     return ok
 
 
-def _symmetrise(det: Detection, v, f, diagonal) -> None:
-    """Make pairs mirror images and midline points lie on the mirror plane, on a symmetric mesh."""
-    from faceforge.geometry.surface_points import closest_points
+def _mirror(det: Detection, v, diagonal):
+    """The mesh's mirror plane started from the detected pairs (recorded in ``det.info``)."""
     from faceforge.io.landmarks import LEFT_RIGHT_PAIRS
     from faceforge.landmarks.symmetry import mirror_plane, symmetric
 
@@ -174,8 +177,45 @@ def _symmetrise(det: Detection, v, f, diagonal) -> None:
     plane = mirror_plane(v, det.positions[[a for a, _ in pairs]], det.positions[[b for _, b in pairs]], diagonal)
     det.info["symmetry"] = {"mirror_error": round(plane.error, 6), "symmetric": symmetric(plane),
                             "normal": plane.normal.tolist(), "offset": plane.offset}
-    if not symmetric(plane):
-        return
+    return plane
+
+
+def _apply_rules(det: Detection, v, f, plane, diagonal) -> None:
+    """Move the points the geometric rules of :mod:`faceforge.landmarks.rules` place."""
+    from faceforge.geometry.rays import RayCaster
+    from faceforge.landmarks import rules
+
+    fr = det.info["frame"]
+    frame = tuple(np.asarray(fr[k]) for k in ("left", "up", "forward"))
+    at = {k: i for i, k in enumerate(det.ids)}
+
+    def pos():
+        return {k: det.positions[i] for k, i in at.items()}
+
+    if det.info["symmetry"]["symmetric"]:
+        origin, normal = plane.normal * plane.offset, plane.normal
+    else:
+        mids = [at[k] for k in MIDLINE_FDPS if k in at]
+        origin, normal = det.positions[mids].mean(axis=0), frame[0]
+    moved = {}
+    for name, found in (("eye opening (boundary loop)", rules.eye_loops(v, f, pos(), frame)),
+                        ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal)),
+                        ("cheek construction", rules.cheeks(RayCaster(v, f), pos(), frame, diagonal))):
+        for k, p in found.items():
+            if k in at:
+                det.positions[at[k]] = p
+                det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
+                moved[k] = name
+    det.info["rules"] = moved
+
+
+def _symmetrise(det: Detection, v, f, plane) -> None:
+    """Make pairs mirror images and midline points lie on the mirror plane (a symmetric mesh)."""
+    from faceforge.geometry.surface_points import closest_points
+    from faceforge.io.landmarks import LEFT_RIGHT_PAIRS
+
+    at = {k: i for i, k in enumerate(det.ids)}
+    pairs = [(at[a], at[b]) for a, b in LEFT_RIGHT_PAIRS if a in at and b in at]
     p = det.positions
     for a, b in pairs:
         mean_left = (p[a] + plane.reflect(p[b:b + 1])[0]) / 2
@@ -188,12 +228,11 @@ def _symmetrise(det: Detection, v, f, diagonal) -> None:
     for a, b in pairs:   # mirror the snapped left point again, so the pair stays exact
         if skin[a]:
             p[b] = plane.reflect(p[a:a + 1])[0]
-    det.info["plane"] = plane
     for i in list(mids) + [i for pr in pairs for i in pr]:
         det.method[i] += ", symmetrised"
 
 
-def _choose_vertices(det: Detection, v, diagonal) -> None:
+def _choose_vertices(det: Detection, v, diagonal, plane=None) -> None:
     """A vertex id for each point with a vertex within :data:`VERTEX_SNAP` (mirror vertices for
     the pairs of a symmetric mesh); the position then is that vertex's."""
     from scipy.spatial import cKDTree
@@ -201,10 +240,9 @@ def _choose_vertices(det: Detection, v, diagonal) -> None:
     from faceforge.io.landmarks import LEFT_RIGHT_PAIRS
 
     dist, nearest = cKDTree(v).query(det.positions)
-    plane = det.info.pop("plane", None)
     at = {k: i for i, k in enumerate(det.ids)}
     for i, k in enumerate(det.ids):
-        if k in PUPILS and det.method[i].find("hole") >= 0:
+        if k in PUPILS and "eye opening" in det.method[i]:
             continue
         if dist[i] <= VERTEX_SNAP * diagonal:
             det.vertex[i] = nearest[i]

@@ -119,15 +119,16 @@ def rasterise(vertices: np.ndarray, faces: np.ndarray, view: View):
 
 
 def render(vertices: np.ndarray, faces: np.ndarray, vertex_normals: np.ndarray, view: View,
-           ambient: float = 0.15) -> Render:
+           ambient: float = 0.15, raise_light: float = 0.35) -> Render:
     """Lambert-shaded grey picture of the mesh (smooth normals, two-sided, a light at the camera
-    raised a little above it), with its buffers. ``vertex_normals (n, 3)`` unit."""
+    raised by ``raise_light`` along the view's up; 0: a head light, the same picture for every
+    ``up``), with its buffers. ``vertex_normals (n, 3)`` unit."""
     depth, face_id, bary = rasterise(vertices, faces, view)
     hit = face_id >= 0
     tri = faces[face_id[hit]]
     normal = np.einsum("kj,kjd->kd", bary[hit], vertex_normals[tri])
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-    light = -view.direction + 0.35 * view.up
+    light = -view.direction + raise_light * view.up
     light = light / np.linalg.norm(light)
     shade = ambient + (1.0 - ambient) * np.abs(normal @ light)
     image = np.zeros(depth.shape, dtype=np.uint8)

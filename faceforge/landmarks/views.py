@@ -26,8 +26,9 @@ VIEW_SIZE = 512
 FACE_SHARE = 0.5
 #: consensus views: (yaw, pitch) in degrees about the face's up and left axes
 VIEW_ANGLES = ((0.0, 0.0), (-12.0, 0.0), (12.0, 0.0), (0.0, -8.0), (0.0, 8.0))
-#: a face scoring below this is no face
+#: a face scoring below this is no face; one scoring above SURE_SCORE ends the search
 MIN_SCORE = 0.35
+SURE_SCORE = 0.9
 
 #: MediaPipe point indices used for the face frame: (left, right) mirror pairs, chin, brows
 _PAIRS = ((263, 33), (362, 133), (291, 61), (334, 105), (358, 129))
@@ -82,7 +83,7 @@ def find_face(vertices, faces, normals, detector, centre, radius) -> tuple[Sight
     best, tried = None, 0
     for direction, up in search_views(vertices):
         view = View(direction, up, centre, SEARCH_SIZE / (2.0 * radius), SEARCH_SIZE)
-        r = render(vertices, faces, normals, view)
+        r = render(vertices, faces, normals, view, raise_light=0.0)   # a quarter turn = another up
         for quarter in range(4):
             tried += 1
             rgb = np.rot90(r.rgb(), k=quarter).copy()
@@ -93,6 +94,8 @@ def find_face(vertices, faces, normals, detector, centre, radius) -> tuple[Sight
             score = face.score * _relief(r, pts)
             if best is None or score > best.score:
                 best = Sighting(r, pts, score, f"looking along {_axis_name(direction)}, turn {90 * quarter}")
+        if best is not None and best.score >= SURE_SCORE:
+            break   # only an upright face seen from the front scores this high
     if best is None or best.score < MIN_SCORE:
         return None, tried
     return best, tried

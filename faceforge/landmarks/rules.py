@@ -1,0 +1,170 @@
+"""Geometric rules that place FDPs where the mesh itself defines them better than a face
+detector trained on photos (which sees neither bone nor a grey mesh's chin shadow).
+
+All work in the face's frame (left, up, forward unit (3,)) from the detection:
+
+* chin, on the midline profile (the mesh cut by the mid-sagittal plane):
+  2.10 pogonion = the most anterior profile point between the labiomental fold (the most
+  posterior forward-facing point between the lower lip 8.2 and the chin) and the detected
+  menton;
+  2.1 menton = below the pogonion, the first profile point whose surface normal points
+  :data:`MENTON_NORMAL_DEG` below the forward direction (the convention of the sample heads'
+  hand files).
+* cheeks (the MPEG-4 standard gives no construction; the rule of the sample heads' files):
+  5.1/5.2 below the outer eye corner, at the height midway between the subnasale 9.15 and
+  the outer lip corner; 5.3/5.4 below the outer eye corner, 45 % of the way down to the alare
+  9.1/9.2; each put on the skin by a ray along -forward.
+* eyes that are holes in the mesh (an open boundary loop around the detected eye): the
+  corners 3.7/3.11 (3.12/3.8) are the loop's extremes along the left axis, the lid centres
+  3.1/3.3 (3.2/3.4) its top and bottom vertices nearest the pupil's vertical, the pupil
+  3.5 (3.6) the loop's centre at the depth of those lids.
+
+Each rule returns new positions only where its construction succeeds; the caller keeps
+the detected point otherwise and records which rule moved which point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MENTON_NORMAL_DEG = 50.0
+#: an eye boundary loop must lie this close to the detected pupil (fraction of the eye width)
+EYE_LOOP_REACH = 0.6
+
+
+def midline_profile(vertices, faces, origin, normal):
+    """Points and in-plane unit normals of the mesh cut by the plane (``origin``, ``normal``):
+    ``(points (k, 3), normals (k, 3))``, one per cut triangle (segment midpoints; the normals
+    interpolated from the vertex normals)."""
+    import trimesh
+
+    from faceforge.geometry.triangles import barycentric, vertex_normals
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+    segs, fids = trimesh.intersections.mesh_plane(mesh, normal, origin, return_faces=True)
+    if len(segs) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    pts = segs.mean(axis=1)
+    bary = barycentric(pts, vertices, faces, fids)          # smooth normals: a low-poly chin still turns gradually
+    n = np.einsum("kj,kjd->kd", bary, vertex_normals(vertices, faces)[faces[fids]])
+    n = n - np.outer(n @ normal, normal)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return pts, n
+
+
+def _crossing(pts, angle, order, level):
+    """The lowest place along ``order`` (profile indices, top to bottom) where ``angle`` rises
+    through ``level`` (linear between the two profile points), or None."""
+    a = angle[order] - level
+    ups = np.flatnonzero((a[:-1] <= 0) & (a[1:] > 0))
+    if len(ups) == 0:
+        return None
+    j = ups[-1]
+    t = -a[j] / (a[j + 1] - a[j])
+    return pts[order[j]] * (1 - t) + pts[order[j + 1]] * t
+
+
+def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal) -> dict:
+    """{"2.10": (3,), "2.1": (3,)} from the midline profile (module docstring); {} if it fails.
+
+    Along the profile from the lower lip down, the surface normal tilts up most in the
+    labiomental fold; below it the most anterior profile point is the pogonion, and the
+    normal then turns down through :data:`MENTON_NORMAL_DEG` at the menton.
+    """
+    left, up, fwd = frame
+    if not all(k in pos for k in ("2.1", "8.2")):
+        return {}
+    pts, nrm = midline_profile(vertices, faces, plane_point, plane_normal)
+    if len(pts) == 0:
+        return {}
+    u, w = pts @ up, pts @ fwd
+    u_lip, u_men = pos["8.2"] @ up, pos["2.1"] @ up
+    front = w > min(pos["2.1"] @ fwd, pos["8.2"] @ fwd) - 0.06 * diagonal
+    band = front & (nrm @ fwd > 0.2) & (u <= u_lip) & (u >= u_men - 0.03 * diagonal)
+    order = np.flatnonzero(band)
+    order = order[np.argsort(-u[order])]
+    if len(order) < 4:
+        return {}
+    angle = np.degrees(np.arctan2(-(nrm @ up), nrm @ fwd))        # degrees below forward
+    upper = order[u[order] >= u_men + 0.25 * (u_lip - u_men)]
+    if len(upper) == 0:
+        return {}
+    fold = upper[np.argmin(angle[upper])]                         # the most back-tilted tangent
+    chin_pts = order[u[order] < u[fold]]
+    if len(chin_pts) == 0:
+        return {}
+    pog = pts[chin_pts[np.argmax(w[chin_pts])]]
+    out = {"2.10": pog}
+    low = order[u[order] < pog @ up]
+    if len(low) >= 2:
+        men = _crossing(pts, angle, np.concatenate([order[u[order] >= pog @ up][-1:], low]), MENTON_NORMAL_DEG)
+        if men is not None:
+            out["2.1"] = men
+    return out
+
+
+def _onto_skin(caster, points, fwd, diagonal):
+    """(k, 3) points moved onto the skin along -forward (from in front); NaN where missed."""
+    origins = points + fwd * 0.3 * diagonal
+    fid, hit, _ = caster.first_hit(origins, np.repeat(-fwd[None], len(points), axis=0), 0.6 * diagonal)
+    hit = np.asarray(hit, dtype=np.float64)
+    hit[np.asarray(fid) < 0] = np.nan
+    return hit
+
+
+def cheeks(caster, pos: dict, frame, diagonal) -> dict:
+    """{"5.1".."5.4": (3,)} by the sample heads' construction rules (module docstring)."""
+    left, up, fwd = frame
+    out = {}
+    sides = (("5.1", "5.3", "3.7", "8.3", "9.1"), ("5.2", "5.4", "3.12", "8.4", "9.2"))
+    for cheek, bone, eye, lip, ala in sides:
+        if not all(k in pos for k in (eye, lip, ala, "9.15")):
+            continue
+        e = pos[eye]
+        h_cheek = 0.5 * (pos["9.15"] @ up + pos[lip] @ up)
+        h_bone = e @ up + 0.45 * (pos[ala] @ up - e @ up)
+        targets = np.array([e + up * (h_cheek - e @ up), e + up * (h_bone - e @ up)])
+        hits = _onto_skin(caster, targets, fwd, diagonal)
+        for k, p in zip((cheek, bone), hits):
+            if np.isfinite(p).all():
+                out[k] = p
+    return out
+
+
+def eye_loops(vertices, faces, pos: dict, frame) -> dict:
+    """Corners and lid centres from open boundary loops around the eyes (module docstring)."""
+    from faceforge.io.mesh_check import boundary_loops
+
+    left, up, fwd = frame
+    loops = [np.asarray(lp) for lp in boundary_loops(faces)]
+    if not loops:
+        return {}
+    out = {}
+    for outer, inner, upper, lower, pupil in (("3.7", "3.11", "3.1", "3.3", "3.5"), ("3.12", "3.8", "3.2", "3.4", "3.6")):
+        if not all(k in pos for k in (outer, inner, pupil)):
+            continue
+        width = np.linalg.norm(pos[outer] - pos[inner])
+        centre = pos[pupil]
+        best = None
+        for lp in loops:
+            p = vertices[lp]
+            span = np.ptp(p @ left)
+            d = np.linalg.norm(p.mean(axis=0) - centre)
+            if d < EYE_LOOP_REACH * width and 0.6 * width < span < 1.5 * width:
+                if best is None or d < best[0]:
+                    best = (d, p)
+        if best is None:
+            continue
+        p = best[1]
+        x = p @ left
+        sign = 1.0 if pos[outer] @ left > pos[inner] @ left else -1.0
+        out[outer] = p[np.argmax(sign * x)]
+        out[inner] = p[np.argmin(sign * x)]
+        near = np.abs(x - centre @ left) < 0.15 * width
+        if near.sum() >= 2:
+            q = p[near]
+            out[upper] = q[np.argmax(q @ up)]
+            out[lower] = q[np.argmin(q @ up)]
+            c = p.mean(axis=0)      # the opening's centre, at the depth of its lids
+            out[pupil] = c + fwd * (0.5 * (out[upper] + out[lower]) @ fwd - c @ fwd)
+    return out
