@@ -99,7 +99,8 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
     from faceforge.geometry.surface_points import closest_points
     from faceforge.geometry.triangles import vertex_normals
     from faceforge.landmarks.detector import Detector
-    from faceforge.landmarks.views import VIEW_SIZE, FACE_SHARE, consensus_views, face_frame, find_face, sight
+    from faceforge.landmarks.views import (FACE_SHARE, SEARCH_LIFT, VIEW_SIZE, consensus_views, face_frame,
+                                           find_face, sight)
 
     t0 = time.perf_counter()
     v = np.asarray(vertices, dtype=np.float64)
@@ -112,7 +113,7 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
         if best is None:
             raise LandmarkError(f"no face found in {path} (tried {tried} views)", path)
         t_search = time.perf_counter() - t0
-        search_pts, _ = _lift_view(best, v, f, diagonal, 0.06 * best.render.view.size)
+        search_pts, _ = _lift_view(best, v, f, diagonal, SEARCH_LIFT * best.render.view.size)
         left, up, forward = face_frame(search_pts)
         local = (search_pts - np.nanmean(search_pts, axis=0)) @ np.array([left, up]).T
         width = float(np.nanmax(np.ptp(local[np.isfinite(local[:, 0])], axis=0)))

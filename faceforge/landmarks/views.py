@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from faceforge.landmarks.lift import lift
 from faceforge.landmarks.raster import Render, View, render
 
 #: the face search's picture size (pixels)
@@ -29,10 +30,17 @@ VIEW_ANGLES = ((0.0, 0.0), (-12.0, 0.0), (12.0, 0.0), (0.0, -8.0), (0.0, 8.0))
 #: a face scoring below this is no face; one scoring above SURE_SCORE ends the search
 MIN_SCORE = 0.35
 SURE_SCORE = 0.9
+#: face likeness (:func:`face_likeness`) at which a detection's score falls to zero, and the
+#: span over which it rises to full (measured: the sample heads 0.08-0.10 in their frontal
+#: view, 0.19-0.61 in other views; a sphere's hallucinated face 0.25)
+LIKENESS_NONE = 0.2
+LIKENESS_SPAN = 0.08
+#: hole-search radius of the search views' lifting, fraction of the picture
+SEARCH_LIFT = 0.06
 
 #: MediaPipe point indices used for the face frame: (left, right) mirror pairs, chin, brows
 _PAIRS = ((263, 33), (362, 133), (291, 61), (334, 105), (358, 129))
-_CHIN, _NOSE_TIP = 152, 4
+_CHIN = 152
 
 
 @dataclass
@@ -62,23 +70,35 @@ def search_views(vertices: np.ndarray):
     return out
 
 
-def _relief(render_: Render, points: np.ndarray) -> float:
-    """1 when the nose tip is nearer the camera than the eye corners and the chin (a face in
-    relief), falling to 0 when it is not (a face painted on a flat or round surface)."""
-    n = render_.depth.shape[0]
-    rc = np.clip(np.round(points[[_NOSE_TIP, 33, 263, _CHIN]] - 0.5).astype(int), 0, n - 1)
-    d = render_.depth[rc[:, 1], rc[:, 0]]
-    if not np.all(np.isfinite(d)):
-        return 0.0
-    span = np.linalg.norm(points[263] - points[33]) / render_.view.scale   # eye width, mesh units
-    gain = (np.mean(d[1:]) - d[0]) / max(span, 1e-300)                       # ~0.5 for a human nose
-    return float(np.clip(gain / 0.2, 0.0, 1.0))
+def face_likeness(points3d: np.ndarray) -> float:
+    """RMS distance (fraction of the model's RMS radius) between lifted points ``(478, 3)``
+    (NaN where lost) and MediaPipe's canonical face after the best similarity transform
+    (Umeyama): small for a face in relief, large for a face-like pattern painted on a sphere
+    or a box, whose lifted points do not have a face's shape."""
+    from pathlib import Path
+
+    model = np.loadtxt(Path(__file__).with_name("data") / "mediapipe_canonical_478.txt")
+    ok = np.isfinite(points3d).all(axis=1)
+    if ok.sum() < 100:
+        return np.inf
+    a, b = points3d[ok], model[ok]
+    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
+    u, s, vt = np.linalg.svd(a0.T @ b0)
+    d = np.sign(np.linalg.det(u @ vt))
+    s[-1] *= d
+    u[:, -1] *= d
+    rot = u @ vt                                   # a0 @ rot ~ scale * b0
+    scale = s.sum() / (a0 ** 2).sum()
+    resid = scale * a0 @ rot - b0
+    return float(np.sqrt((resid ** 2).sum(axis=1).mean() / (b0 ** 2).sum(axis=1).mean()))
 
 
 def find_face(vertices, faces, normals, detector, centre, radius) -> tuple[Sighting | None, int]:
     """The best face over the 24 axis frames, or None; and the number of views tried.
 
-    ``centre (3,)``, ``radius``: the mesh's bounding-box centre and half diagonal.
+    ``centre (3,)``, ``radius``: the mesh's bounding-box centre and half diagonal. A face's
+    score is the detector's plausibility (upright, frontal) times how much the points lifted
+    onto the mesh have a face's shape (:func:`face_likeness`).
     """
     best, tried = None, 0
     for direction, up in search_views(vertices):
@@ -91,7 +111,8 @@ def find_face(vertices, faces, normals, detector, centre, radius) -> tuple[Sight
             if face is None:
                 continue
             pts = _unrotate(face.points, quarter, SEARCH_SIZE)
-            score = face.score * _relief(r, pts)
+            lifted, _ = lift(r, vertices, faces, pts, 2.0 * radius, SEARCH_LIFT * SEARCH_SIZE)
+            score = face.score * float(np.clip((LIKENESS_NONE - face_likeness(lifted)) / LIKENESS_SPAN, 0.0, 1.0))
             if best is None or score > best.score:
                 best = Sighting(r, pts, score, f"looking along {_axis_name(direction)}, turn {90 * quarter}")
         if best is not None and best.score >= SURE_SCORE:
