@@ -36,6 +36,7 @@ def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True) -> Fo
     """See the module docstring. ``landmark_path`` None: the default path next to the mesh."""
     from faceforge.io.landmarks import default_landmark_path, read_landmarks
     from faceforge.io.mesh import load_mesh
+    from faceforge.io.mesh_check import check_mesh
     from faceforge.landmarks.detect import detect_landmarks, fdp_table
     from faceforge.landmarks.output import merge
 
@@ -48,6 +49,7 @@ def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True) -> Fo
         raw = read_landmarks(path)    # an explicit path that is absent: "not found"
         if set(fdp_table()) <= set(raw.ids):
             return Found("given", None, str(path), v, f)
+    check_mesh(v, f, str(mesh_path))     # a broken mesh says what is wrong with it, not "no face"
     det = detect_landmarks(v, f, str(mesh_path), symmetrise=symmetrise)
     if raw is None:
         return Found("detected", det, None, v, f)
