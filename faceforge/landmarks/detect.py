@@ -119,11 +119,12 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
         width = float(np.nanmax(np.ptp(local[np.isfinite(local[:, 0])], axis=0)))
         mid = np.nanmean(search_pts, axis=0)
         labels = ["front", "yaw-", "yaw+", "pitch-", "pitch+"]
-        stack, names = [], []
+        stack, names, front = [], [], None
         for view, label in zip(consensus_views(left, up, forward, mid, width), labels):
             s = sight(v, f, normals, det, view, label)
             if s is None:
                 continue
+            front = s.render if label == "front" else front
             pts, _ = _lift_view(s, v, f, diagonal, 0.12 * FACE_SHARE * VIEW_SIZE)
             stack.append(pts)
             names.append(label)
@@ -147,7 +148,7 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
                      "frame": {"left": left.tolist(), "up": up.tolist(), "forward": forward.tolist()},
                      "timings": {"search_s": t_search}})
     plane = _mirror(det, v, diagonal)
-    _apply_rules(det, v, f, plane, diagonal)
+    _apply_rules(det, v, f, plane, diagonal, front)
     if symmetrise and det.info["symmetry"]["symmetric"]:
         _symmetrise(det, v, f, plane)
     _choose_vertices(det, v, diagonal, plane if det.info["symmetry"]["symmetric"] else None)
@@ -181,8 +182,9 @@ def _mirror(det: Detection, v, diagonal):
     return plane
 
 
-def _apply_rules(det: Detection, v, f, plane, diagonal) -> None:
-    """Move the points the geometric rules of :mod:`faceforge.landmarks.rules` place."""
+def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
+    """Move the points the geometric rules of :mod:`faceforge.landmarks.rules` place
+    (``front``: the frontal view's render, which serves as the cheeks' ray cast)."""
     from faceforge.geometry.rays import RayCaster
     from faceforge.landmarks import rules
 
@@ -201,7 +203,8 @@ def _apply_rules(det: Detection, v, f, plane, diagonal) -> None:
     moved = {}
     for name, found in (("eye opening (boundary loop)", rules.eye_loops(v, f, pos(), frame)),
                         ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal)),
-                        ("cheek construction", rules.cheeks(RayCaster(v, f), pos(), frame, diagonal))):
+                        ("cheek construction", rules.cheeks(RayCaster(v, f) if front is None else (front, v, f),
+                                                            pos(), frame, diagonal))):
         for k, p in found.items():
             if k in at:
                 det.positions[at[k]] = p

@@ -104,7 +104,18 @@ def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal)
 
 
 def _onto_skin(caster, points, fwd, diagonal):
-    """(k, 3) points moved onto the skin along -forward (from in front); NaN where missed."""
+    """(k, 3) points moved onto the skin along -forward (from in front); NaN where missed.
+    ``caster``: a :class:`faceforge.geometry.rays.RayCaster`, or the frontal render (its
+    buffers are that ray cast, to a pixel)."""
+    from faceforge.landmarks.raster import Render, surface_at
+
+    if isinstance(caster, tuple) and isinstance(caster[0], Render):
+        render_, vertices, faces = caster
+        px = render_.view.project(points)
+        n = render_.depth.shape[0]
+        rows = np.clip(np.floor(px[:, 1]).astype(np.int64), 0, n - 1)
+        cols = np.clip(np.floor(px[:, 0]).astype(np.int64), 0, n - 1)
+        return surface_at(render_, faces, vertices, rows, cols)
     origins = points + fwd * 0.3 * diagonal
     fid, hit, _ = caster.first_hit(origins, np.repeat(-fwd[None], len(points), axis=0), 0.6 * diagonal)
     hit = np.asarray(hit, dtype=np.float64)
@@ -131,12 +142,58 @@ def cheeks(caster, pos: dict, frame, diagonal) -> dict:
     return out
 
 
+def _loops_near(vertices, faces, centres: np.ndarray, reach: float) -> list:
+    """Open boundary loops (vertex-id arrays) of the mesh with every vertex within ``reach``
+    of one of ``centres (k, 3)``: the boundary edges (used by one triangle, found on 1D
+    integer keys: fast on big meshes) near the eyes, chained."""
+    from scipy.spatial import cKDTree
+
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    n = int(f.max()) + 1
+    keys, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    edges = np.column_stack([keys[counts == 1] // n, keys[counts == 1] % n])
+    if len(edges) == 0 or reach <= 0:
+        return []
+    dist, _ = cKDTree(centres).query(vertices[edges.ravel()])
+    edges = edges[(dist.reshape(-1, 2) <= reach).all(axis=1)]
+    nbr: dict = {}
+    for a, b in edges.tolist():
+        nbr.setdefault(a, []).append(b)
+        nbr.setdefault(b, []).append(a)
+    loops, seen = [], set()
+    for start in nbr:
+        if start in seen or len(nbr[start]) != 2:
+            continue
+        loop, prev, cur = [start], None, start
+        seen.add(start)
+        while True:
+            nxt = [c for c in nbr[cur] if c != prev]
+            if not nxt or len(nbr[cur]) != 2:
+                loop = None
+                break
+            prev, cur = cur, nxt[0]
+            if cur == start:
+                break
+            if cur in seen:
+                loop = None
+                break
+            seen.add(cur)
+            loop.append(cur)
+        if loop is not None and len(loop) >= 6:
+            loops.append(np.asarray(loop, dtype=np.int64))
+    return loops
+
+
 def eye_loops(vertices, faces, pos: dict, frame) -> dict:
     """Corners and lid centres from open boundary loops around the eyes (module docstring)."""
-    from faceforge.io.mesh_check import boundary_loops
-
     left, up, fwd = frame
-    loops = [np.asarray(lp) for lp in boundary_loops(faces)]
+    eyes = [pos[k] for k in ("3.5", "3.6", "3.7", "3.12") if k in pos]
+    if len(eyes) < 2:
+        return {}
+    reach = 1.5 * max(np.linalg.norm(pos["3.7"] - pos["3.11"]), np.linalg.norm(pos["3.12"] - pos["3.8"])) \
+        if all(k in pos for k in ("3.7", "3.11", "3.12", "3.8")) else 0.0
+    loops = _loops_near(vertices, faces, np.array(eyes), reach)
     if not loops:
         return {}
     out = {}

@@ -16,6 +16,8 @@ import numpy as np
 #: a mesh whose vertices' mirror images lie this close (90th percentile, fraction of the
 #: diagonal) to another vertex is symmetric
 SYMMETRY_TOLERANCE = 0.002
+#: at most about this many vertices refine the plane (every k-th vertex)
+SAMPLE = 5000
 
 
 @dataclass(frozen=True)
@@ -50,11 +52,11 @@ def mirror_plane(vertices: np.ndarray, left: np.ndarray, right: np.ndarray, diag
     normal /= np.linalg.norm(normal)
     offset = float(np.mean((np.asarray(left) + np.asarray(right)) / 2 @ normal))
     tree = cKDTree(v)
-    plane = None
+    sample = v[:: max(1, len(v) // SAMPLE)]       # the plane's rounds need only a few thousand vertices
     for _ in range(rounds):
         plane = MirrorPlane(normal, offset, np.zeros(0, np.int64), 1.0)
-        dist, partner = tree.query(plane.reflect(v))
-        apart = v - v[partner]
+        dist, partner = tree.query(plane.reflect(sample))
+        apart = sample - v[partner]
         far = np.linalg.norm(apart, axis=1) > 1e-3 * diagonal
         side = np.sign(apart[far] @ normal)
         d = apart[far] * side[:, None]
@@ -62,7 +64,7 @@ def mirror_plane(vertices: np.ndarray, left: np.ndarray, right: np.ndarray, diag
             break
         normal = np.mean(d, axis=0)
         normal /= np.linalg.norm(normal)
-        offset = float(np.mean((v[far] + v[partner[far]]) / 2 @ normal))
+        offset = float(np.mean((sample[far] + v[partner[far]]) / 2 @ normal))
     dist, partner = tree.query(MirrorPlane(normal, offset, partner, 1.0).reflect(v))
     return MirrorPlane(normal, offset, partner.astype(np.int64), float(np.percentile(dist, 90) / diagonal))
 
