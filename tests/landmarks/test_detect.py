@@ -75,16 +75,24 @@ def test_pairs_are_mirror_images_on_a_symmetric_head(detected):
     p = det.positions
     for a, b in pairs:
         assert np.allclose(p[a] * [-1, 1, 1], p[b], atol=1e-6)
-    for k in ("2.1", "2.10", "9.3", "9.15", "8.1", "8.2"):
-        assert abs(p[at[k]][0]) < 1e-6
+    diag = np.linalg.norm(np.ptp(v, axis=0))
+    for k in ("2.1", "2.10", "9.3", "9.15", "8.1", "8.2"):   # on the midline (to the snap's rounding)
+        assert abs(p[at[k]][0]) < 1e-4 * diag
 
 
 def test_every_written_vertex_is_near_its_point_and_fit_accepts_the_points(detected):
     from faceforge.io.landmarks import RawLandmarks, check_landmarks, snap_landmarks
 
+    from faceforge.geometry.surface_points import closest_points
+
     v, f, det = detected["ict"]
     has = det.vertex >= 0
-    assert has.sum() >= 40 and np.allclose(v[det.vertex[has]], det.positions[has])
+    assert has.sum() >= 10 and np.allclose(v[det.vertex[has]], det.positions[has])
+    _, gap, _ = closest_points(det.positions, v, f)
+    # on the skin (a mirrored point to the mesh's own symmetry, 0.05 mm), but the pupils: ICT's
+    # eyes are holes, the pupils lie in the opening
+    off = [k for i, k in enumerate(det.ids) if gap[i] > 1e-4 * np.linalg.norm(np.ptp(v, axis=0))]
+    assert off == ["3.5", "3.6"]
     raw = RawLandmarks("detected", det.ids, det.vertex, det.positions)
     check_landmarks(snap_landmarks(raw, v, f), v)
 
