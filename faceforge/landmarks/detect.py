@@ -83,10 +83,14 @@ def _lift_view(sighting, vertices, faces, diagonal, radius_px):
 
 def _consensus(stack: np.ndarray, diagonal: float):
     """(views, 478, 3) with NaN rows -> agreed (478, 3), spread (478,) and seen (views, 478)."""
+    import warnings
+
     seen = np.isfinite(stack[:, :, 0])
-    agreed = np.nanmedian(stack, axis=0)
-    dist = np.linalg.norm(stack - agreed[None], axis=2)
-    spread = np.nanmedian(np.where(seen, dist, np.nan), axis=0) / diagonal
+    with warnings.catch_warnings():      # a point no view saw stays NaN (then: not placeable)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        agreed = np.nanmedian(stack, axis=0)
+        dist = np.linalg.norm(stack - agreed[None], axis=2)
+        spread = np.nanmedian(np.where(seen, dist, np.nan), axis=0) / diagonal
     return agreed, spread, seen
 
 
@@ -102,7 +106,7 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
     from faceforge.geometry.triangles import vertex_normals
     from faceforge.landmarks.detector import Detector
     from faceforge.landmarks.views import (FACE_SHARE, SEARCH_LIFT, VIEW_SIZE, consensus_views, face_frame,
-                                           find_face, sight)
+                                           find_face, sight, view_labels)
 
     t0 = time.perf_counter()
     v = np.asarray(vertices, dtype=np.float64)
@@ -120,7 +124,7 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
         local = (search_pts - np.nanmean(search_pts, axis=0)) @ np.array([left, up]).T
         width = float(np.nanmax(np.ptp(local[np.isfinite(local[:, 0])], axis=0)))
         mid = np.nanmean(search_pts, axis=0)
-        labels = ["front", "yaw-", "yaw+", "pitch-", "pitch+"]
+        labels = view_labels()
         stack, names, front = [], [], None
         for view, label in zip(consensus_views(left, up, forward, mid, width), labels):
             s = sight(v, f, normals, det, view, label)
