@@ -165,3 +165,15 @@ def test_cli_partial_file_overrides_its_points_and_the_rest_are_detected(invoke,
     assert again.exit_code == 0
     assert yaml.safe_load((tmp_path / "w2/landmarks/report.json").read_text())["source"] == "given"
     assert not (tmp_path / "w2/landmarks/landmarks.png").exists()
+
+
+def test_cli_output_never_overwrites_the_mesh_or_the_given_file(invoke, tmp_path):
+    mesh = tmp_path / "face.obj"
+    mesh.write_bytes(SAMPLES["mediapipe"].read_bytes())
+    mine = tmp_path / "mine.yaml"
+    mine.write_text('landmarks:\n  "9.3": {vertex: 1}\n')
+    for out in (mesh, mine):
+        before = out.read_bytes()
+        result = invoke("-w", tmp_path / "w", "--no-progress", "landmarks", mesh, "--landmarks", mine, "-o", out)
+        assert result.exit_code == 2 and "never overwrites" in result.stderr
+        assert out.read_bytes() == before and not (tmp_path / "w" / "landmarks").exists()

@@ -84,16 +84,18 @@ STAGE = register_stage(Stage(
 @click.option("--force", is_flag=True, help="Rerun even if up to date.")
 @click.pass_obj
 def command(app, mesh, landmarks, output, force):
-    import shutil
-
+    from faceforge.io.export import protect_inputs
     from faceforge.io.landmarks import default_landmark_path
+    from faceforge.io.stagefiles import atomic_write_bytes
 
     if landmarks is None:   # the file next to the mesh, if any; else the landmarks are detected
         landmarks = str(default_landmark_path(mesh)) if default_landmark_path(mesh).exists() else None
+    if output:              # before any work: never the user's own mesh or landmark file
+        protect_inputs(output, {"mesh": mesh, "landmark file": landmarks})
     app.run_stage("landmarks", params={"mesh": mesh, "landmarks": landmarks}, force=force)
     folder = app.workspace.stage_dir("landmarks")
     if output:
-        shutil.copyfile(folder / "landmarks.fdp.yaml", output)
+        atomic_write_bytes(output, (folder / "landmarks.fdp.yaml").read_bytes())
         app.log(f"landmarks: wrote {output}")
     app.log(f"landmarks: {folder / 'landmarks.fdp.yaml'}, {folder / 'report.json'}"
             + (f", {folder / 'landmarks.png'}" if (folder / "landmarks.png").exists() else ""))
