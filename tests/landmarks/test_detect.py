@@ -160,6 +160,8 @@ def test_cli_partial_file_overrides_its_points_and_the_rest_are_detected(invoke,
     report = yaml.safe_load((tmp_path / "w/landmarks/report.json").read_text())
     assert report["source"] == "completed" and report["points"]["9.3"]["method"] == "given in mine.yaml"
     assert (tmp_path / "w/landmarks/landmarks.png").stat().st_size > 10000
+    rerun = invoke("-w", tmp_path / "w", "--no-progress", "landmarks", mesh, "--landmarks", partial)
+    assert rerun.exit_code == 0 and "landmarks: up to date" in rerun.stderr
     # the written file fed back is complete: used as it is, nothing detected
     again = invoke("-w", tmp_path / "w2", "--no-progress", "landmarks", mesh, "--landmarks", out)
     assert again.exit_code == 0
@@ -177,3 +179,16 @@ def test_cli_output_never_overwrites_the_mesh_or_the_given_file(invoke, tmp_path
         result = invoke("-w", tmp_path / "w", "--no-progress", "landmarks", mesh, "--landmarks", mine, "-o", out)
         assert result.exit_code == 2 and "never overwrites" in result.stderr
         assert out.read_bytes() == before and not (tmp_path / "w" / "landmarks").exists()
+
+
+@pytest.mark.slow
+def test_fit_without_a_landmark_file_detects_them_says_so_and_is_cached(invoke, tmp_path):
+    mesh = tmp_path / "face.obj"
+    mesh.write_bytes(SAMPLES["mediapipe"].read_bytes())
+    first = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
+    assert first.exit_code == 0, first.stderr
+    assert "using the detected landmarks" in first.stderr
+    report = yaml.safe_load((tmp_path / "w/fit/report.json").read_text())
+    assert report["landmarks"]["max_residual"] < 0.05
+    again = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
+    assert again.exit_code == 0 and "landmarks: up to date" in again.stderr and "fit: up to date" in again.stderr
