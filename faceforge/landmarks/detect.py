@@ -206,8 +206,11 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
     else:
         mids = [at[k] for k in MIDLINE_FDPS if k in at]
         origin, normal = det.positions[mids].mean(axis=0), frame[0]
+    loops = rules.eye_loops(v, f, pos(), frame)
+    sockets = {} if front is None else rules.eye_openings(front, v, f, pos())
     moved = {}
-    for name, found in (("eye opening (boundary loop)", rules.eye_loops(v, f, pos(), frame)),
+    for name, found in (("eye opening (boundary loop)", loops),
+                        ("eye opening (recess in the frontal render)", {k: p for k, p in sockets.items() if k not in loops}),
                         ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal)),
                         ("cheek construction", rules.cheeks(RayCaster(v, f) if front is None else (front, v, f),
                                                             pos(), frame, diagonal))):

@@ -14,6 +14,8 @@ All work in the face's frame (left, up, forward unit (3,)) from the detection:
   5.1/5.2 below the outer eye corner, at the height midway between the subnasale 9.15 and
   the outer lip corner; 5.3/5.4 below the outer eye corner, 45 % of the way down to the alare
   9.1/9.2; each put on the skin by a ray along -forward.
+* eyes whose opening is a recess in the frontal render (a closed socket behind the lids):
+  :func:`eye_openings`;
 * eyes that are holes in the mesh (an open boundary loop around the detected eye): the
   corners 3.7/3.11 (3.12/3.8) are the loop's extremes along the left axis, the lid centres
   3.1/3.3 (3.2/3.4) its top and bottom vertices nearest the pupil's vertical, the pupil
@@ -224,4 +226,113 @@ def eye_loops(vertices, faces, pos: dict, frame) -> dict:
             out[lower] = q[np.argmin(q @ up)]
             c = p.mean(axis=0)      # the opening's centre, at the depth of its lids
             out[pupil] = c + fwd * (0.5 * (out[upper] + out[lower]) @ fwd - c @ fwd)
+    return out
+
+
+#: a pixel recessed this much (fraction of the eye's width) behind the skin bridged over it
+#: belongs to the eye opening (a socket behind the lids, or a hole)
+RECESS = 0.1
+
+
+def _recess(depth: np.ndarray, size: int) -> np.ndarray:
+    """How far each pixel of ``depth (h, w)`` lies behind the skin bridged over it: a grey
+    closing of the height (-depth) with a ``size`` square fills pits narrower than ``size``
+    and leaves slopes (the nose's flank) as they are; background counts as deepest."""
+    from scipy import ndimage
+
+    finite = np.isfinite(depth)
+    far = np.max(depth[finite]) if finite.any() else 0.0
+    height = -np.where(finite, depth, far)
+    return ndimage.grey_closing(height, size=(size, size)) - height
+
+
+def _opening_ends(comp: np.ndarray, pupil_col: int, step: int) -> int | None:
+    """Column where the opening ``comp (h, w) bool`` ends walking from ``pupil_col`` by
+    ``step`` (+1/-1): where it stops, or its narrowest column before it widens again into
+    another hollow (the inner canthus before the nose's)."""
+    extent = comp.sum(axis=0)
+    cols = list(range(pupil_col, comp.shape[1] if step > 0 else -1, step))
+    peak, best, last = extent[pupil_col], None, None
+    for c in cols:
+        if extent[c] == 0:
+            break
+        last = c
+        if extent[c] < 0.5 * peak and (best is None or extent[c] <= extent[best]):
+            best = c
+        elif best is not None and extent[c] > 1.5 * extent[best] + 1:
+            return best            # widening again: the opening ended at its narrowest column
+    return last
+
+
+def eye_openings(render_, vertices, faces, pos: dict) -> dict:
+    """Corners, lid centres and pupil of eyes whose opening is a recess in the frontal render
+    (a closed socket behind the lids): the opening is the connected region of pixels
+    recessed :data:`RECESS` of the eye's width behind the skin bridged over it
+    (:func:`_recess`), around the detected pupil; its ends along the picture's width are the
+    corners (the inner one at the narrowest column before the nose's hollow), its top and
+    bottom at the pupil's column the lid centres, each taken at the nearest pixel of skin
+    (the lid margin, not the socket behind it); its centre at the lids' depth is the pupil.
+    An opening that is not eye-sized is ignored."""
+    from scipy import ndimage
+
+    from faceforge.landmarks.raster import surface_at
+
+    view = render_.view
+    n = render_.depth.shape[0]
+    out = {}
+    for outer, inner, upper, lower, pupil in (("3.7", "3.11", "3.1", "3.3", "3.5"), ("3.12", "3.8", "3.2", "3.4", "3.6")):
+        if not all(k in pos for k in (outer, inner, pupil)):
+            continue
+        px = view.project(np.array([pos[outer], pos[inner], pos[pupil]]))[:, :2]
+        width = float(np.linalg.norm(px[0] - px[1]))
+        if width < 12:
+            continue
+        c = px[2]
+        c0, c1 = int(max(c[0] - 0.9 * width, 0)), int(min(c[0] + 0.9 * width, n))
+        r0, r1 = int(max(c[1] - 0.5 * width, 0)), int(min(c[1] + 0.5 * width, n))
+        win = render_.depth[r0:r1, c0:c1]
+        mask = _recess(win, max(3, int(0.6 * width) | 1)) > RECESS * width / view.scale
+        labels, _ = ndimage.label(mask)
+        near = np.argwhere(labels > 0)
+        if len(near) == 0:
+            continue
+        pr, pc = int(c[1]) - r0, int(c[0]) - c0
+        d = np.hypot(near[:, 0] - pr, near[:, 1] - pc)
+        if d.min() > 0.2 * width:
+            continue
+        comp = labels == labels[tuple(near[np.argmin(d)])]
+        col = int(np.clip(pc, 0, comp.shape[1] - 1))
+        if not comp[:, col].any():
+            continue
+        sign = 1 if px[0, 0] > px[1, 0] else -1          # the outer corner's side in the picture
+        end_out, end_in = _opening_ends(comp, col, sign), _opening_ends(comp, col, -sign)
+        if end_out is None or end_in is None or not 0.6 * width < abs(end_out - end_in) < 1.4 * width:
+            continue
+        rows = np.flatnonzero(comp[:, col])
+        if rows.max() - rows.min() > 0.8 * width:
+            continue
+        picks = {outer: (np.flatnonzero(comp[:, end_out]).mean(), end_out),
+                 inner: (np.flatnonzero(comp[:, end_in]).mean(), end_in),
+                 upper: (rows.min(), col), lower: (rows.max(), col)}
+        rim = np.argwhere(~mask & np.isfinite(win))       # the skin around: the lid margins
+        if len(rim) == 0:
+            continue
+        rr, cc = [], []
+        for r_, c_ in picks.values():     # each on the nearest skin pixel, not in the recess
+            j = int(np.argmin(np.hypot(rim[:, 0] - r_, rim[:, 1] - c_)))
+            rr.append(rim[j, 0] + r0)
+            cc.append(rim[j, 1] + c0)
+        pts = surface_at(render_, faces, vertices, np.array(rr), np.array(cc))
+        found = {k: p for k, p in zip(picks, pts) if np.isfinite(p).all()}
+        if len(found) < 4:
+            continue
+        out.update(found)
+        lo, hi = sorted((end_in, end_out))
+        part = comp.copy()
+        part[:, :lo] = False
+        part[:, hi + 1:] = False
+        ys, xs = np.nonzero(part)
+        lids_depth = np.mean(view.project(np.array([found[upper], found[lower]]))[:, 2])
+        out[pupil] = view.unproject(np.array([[xs.mean() + c0 + 0.5, ys.mean() + r0 + 0.5]]),
+                                    np.array([lids_depth]))[0]
     return out

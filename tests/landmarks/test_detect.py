@@ -20,7 +20,7 @@ SAMPLES = {
 #: (median, p90, max) error bounds, fraction of the diagonal: the measured values (benchmarks/
 #: results/landmarks.json) plus a margin; the MediaPipe mask is a face without a head, whose
 #: diagonal is a third of the others'
-BOUNDS = {"makehuman": (0.007, 0.022, 0.028), "ict": (0.007, 0.014, 0.018), "mediapipe": (0.016, 0.030, 0.040)}
+BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.006, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
 
 
 def _mesh(name):
