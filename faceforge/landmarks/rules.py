@@ -246,21 +246,21 @@ def _recess(depth: np.ndarray, size: int) -> np.ndarray:
     return ndimage.grey_closing(height, size=(size, size)) - height
 
 
-def _opening_ends(comp: np.ndarray, pupil_col: int, step: int) -> int | None:
+def _opening_ends(comp: np.ndarray, pupil_col: int, step: int, narrowest: bool) -> int | None:
     """Column where the opening ``comp (h, w) bool`` ends walking from ``pupil_col`` by
-    ``step`` (+1/-1): where it stops, or its narrowest column before it widens again into
-    another hollow (the inner canthus before the nose's)."""
+    ``step`` (+1/-1): where it stops or, with ``narrowest``, at its narrowest column once it
+    widens again (toward the nose the opening runs into the hollow beside it: the inner
+    canthus is the waist between the two)."""
     extent = comp.sum(axis=0)
-    cols = list(range(pupil_col, comp.shape[1] if step > 0 else -1, step))
-    peak, best, last = extent[pupil_col], None, None
-    for c in cols:
+    best, last = None, None
+    for c in range(pupil_col, comp.shape[1] if step > 0 else -1, step):
         if extent[c] == 0:
             break
         last = c
-        if extent[c] < 0.5 * peak and (best is None or extent[c] <= extent[best]):
+        if best is None or extent[c] <= extent[best]:
             best = c
-        elif best is not None and extent[c] > 1.5 * extent[best] + 1:
-            return best            # widening again: the opening ended at its narrowest column
+        elif narrowest and extent[c] > extent[best] + max(2, 0.3 * extent[best]):
+            return best
     return last
 
 
@@ -305,7 +305,7 @@ def eye_openings(render_, vertices, faces, pos: dict) -> dict:
         if not comp[:, col].any():
             continue
         sign = 1 if px[0, 0] > px[1, 0] else -1          # the outer corner's side in the picture
-        end_out, end_in = _opening_ends(comp, col, sign), _opening_ends(comp, col, -sign)
+        end_out, end_in = _opening_ends(comp, col, sign, False), _opening_ends(comp, col, -sign, True)
         if end_out is None or end_in is None or not 0.6 * width < abs(end_out - end_in) < 1.4 * width:
             continue
         rows = np.flatnonzero(comp[:, col])
