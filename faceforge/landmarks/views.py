@@ -35,10 +35,14 @@ VIEW_ANGLES = ((0.0, 0.0), (-12.0, 0.0), (12.0, 0.0), (0.0, -8.0), (0.0, 8.0),
 MIN_SCORE = 0.35
 SURE_SCORE = 0.9
 #: face likeness (:func:`face_likeness`) at which a detection's score falls to zero, and the
-#: span over which it rises to full (measured: the sample heads 0.08-0.10 in their frontal
-#: view, 0.19-0.61 in other views; a sphere's hallucinated face 0.25)
-LIKENESS_NONE = 0.2
-LIKENESS_SPAN = 0.08
+#: span over which it rises to full (measured, trimmed RMS: MakeHuman 0.07 facing the camera,
+#: 0.09 turned 25 degrees and rolled 15, 0.11 looking 40 degrees down; a sphere's hallucinated
+#: face 0.185)
+LIKENESS_NONE = 0.16
+LIKENESS_SPAN = 0.06
+#: the share of the points (best fitting) the likeness is measured on: points MediaPipe
+#: places behind the nose of a turned head lift onto the wrong surface
+LIKENESS_KEEP = 0.75
 #: hole-search radius of the search views' lifting, fraction of the picture
 SEARCH_LIFT = 0.06
 
@@ -77,8 +81,9 @@ def search_views(vertices: np.ndarray):
 def face_likeness(points3d: np.ndarray) -> float:
     """RMS distance (fraction of the model's RMS radius) between lifted points ``(478, 3)``
     (NaN where lost) and MediaPipe's canonical face after the best similarity transform
-    (Umeyama): small for a face in relief, large for a face-like pattern painted on a sphere
-    or a box, whose lifted points do not have a face's shape."""
+    (Umeyama), over the best-fitting :data:`LIKENESS_KEEP` of them: small for a face in
+    relief, large for a face-like pattern painted on a sphere or a box, whose lifted points
+    do not have a face's shape."""
     from pathlib import Path
 
     model = np.loadtxt(Path(__file__).with_name("data") / "mediapipe_canonical_478.txt")
@@ -93,8 +98,8 @@ def face_likeness(points3d: np.ndarray) -> float:
     u[:, -1] *= d
     rot = u @ vt                                   # a0 @ rot ~ scale * b0
     scale = s.sum() / (a0 ** 2).sum()
-    resid = scale * a0 @ rot - b0
-    return float(np.sqrt((resid ** 2).sum(axis=1).mean() / (b0 ** 2).sum(axis=1).mean()))
+    resid = np.sort(((scale * a0 @ rot - b0) ** 2).sum(axis=1))[: int(LIKENESS_KEEP * len(a0))]
+    return float(np.sqrt(resid.mean() / (b0 ** 2).sum(axis=1).mean()))
 
 
 def find_face(vertices, faces, normals, detector, centre, radius) -> tuple[Sighting | None, int]:

@@ -192,3 +192,19 @@ def test_fit_without_a_landmark_file_detects_them_says_so_and_is_cached(invoke, 
     assert report["landmarks"]["max_residual"] < 0.05
     again = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
     assert again.exit_code == 0 and "landmarks: up to date" in again.stderr and "fit: up to date" in again.stderr
+
+
+def test_a_head_turned_between_the_axes_is_found_as_well(detected):
+    from faceforge.landmarks.detect import detect_landmarks
+
+    v, f, det = detected["makehuman"]
+    hand = _hand("makehuman", v)
+    a, b = np.radians(25), np.radians(15)     # 25 degrees about up, then rolled 15 about forward
+    yaw = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    roll = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    m = roll @ yaw
+    turned = detect_landmarks(v @ m.T, f)
+    back = turned.positions @ m
+    diag = np.linalg.norm(np.ptp(v, axis=0))
+    err = np.array([np.linalg.norm(back[i] - hand[k]) / diag for i, k in enumerate(turned.ids) if k in hand])
+    assert len(err) == 46 and np.median(err) < 0.007 and err.max() < 0.03
