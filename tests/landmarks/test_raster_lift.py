@@ -114,3 +114,18 @@ def test_mirror_plane_of_a_symmetric_mesh_and_of_a_lopsided_one():
     lopsided = v.copy()
     lopsided[200:] += rng.normal(scale=0.05, size=(200, 3))
     assert not symmetric(mirror_plane(lopsided, left, right, diag))
+
+
+def test_a_required_fdp_that_lands_nowhere_is_named():
+    from faceforge.exceptions import LandmarkError
+    from faceforge.landmarks.detect import _placeable, fdp_table
+
+    table = fdp_table()
+    agreed = np.zeros((478, 3))
+    agreed[table["9.3"]] = np.nan          # the nose tip fell off the mesh in every view
+    agreed[table["5.1"]] = np.nan          # an optional one is simply left out
+    with pytest.raises(LandmarkError, match=r"FDP 9\.3 could not be placed"):
+        _placeable(table, agreed, "head.obj")
+    agreed[table["9.3"]] = 0.0
+    ids = _placeable(table, agreed, "head.obj")
+    assert "5.1" not in ids and len(ids) == len(table) - 1
