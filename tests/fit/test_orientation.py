@@ -19,7 +19,7 @@ from faceforge.exceptions import LandmarkError
 from faceforge.geometry.orientation import (AXES, estimate_frame, frame_rotation, parse_axis,
                                             snap_to_axes)
 
-from .conftest import SAMPLES
+from .heads import SAMPLES
 
 #: every axis-aligned (up, forward) pair: 24 frames
 FRAMES = [(u, f) for u, f in itertools.permutations(AXES, 2) if u[1] != f[1]]
@@ -179,7 +179,7 @@ def test_too_few_landmarks_to_tell_the_frame_is_reported_as_the_missing_fdps(inv
     (tmp_path / "head.fdp.yaml").write_text(yaml.safe_dump(data))
     from faceforge.io.landmarks import load_landmarks, read_landmarks
     from faceforge.io.mesh import load_mesh
-    from faceforge.pipeline.stages.fit import head_orientation
+    from faceforge.fit.orientation import head_orientation
 
     v, f, _ = load_mesh(mesh)
     raw = read_landmarks(tmp_path / "head.fdp.yaml")
