@@ -177,7 +177,7 @@ def _placeable(table: dict, agreed: np.ndarray, path: str) -> tuple:
 
 def _mirror(det: Detection, v, diagonal):
     """The mesh's mirror plane started from the detected pairs (recorded in ``det.info``)."""
-    from faceforge.io.landmarks import LEFT_RIGHT_PAIRS
+    from faceforge.mpeg4.tables import LEFT_RIGHT_PAIRS
     from faceforge.landmarks.symmetry import mirror_plane, symmetric
 
     at = {k: i for i, k in enumerate(det.ids)}
@@ -225,7 +225,7 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
 def _symmetrise(det: Detection, v, f, plane) -> None:
     """Make pairs mirror images and midline points lie on the mirror plane (a symmetric mesh)."""
     from faceforge.geometry.surface_points import closest_points
-    from faceforge.io.landmarks import LEFT_RIGHT_PAIRS
+    from faceforge.mpeg4.tables import LEFT_RIGHT_PAIRS
 
     at = {k: i for i, k in enumerate(det.ids)}
     pairs = [(at[a], at[b]) for a, b in LEFT_RIGHT_PAIRS if a in at and b in at]
@@ -250,7 +250,7 @@ def _choose_vertices(det: Detection, v, diagonal, plane=None) -> None:
     the pairs of a symmetric mesh); the position then is that vertex's."""
     from scipy.spatial import cKDTree
 
-    from faceforge.io.landmarks import LEFT_RIGHT_PAIRS
+    from faceforge.mpeg4.tables import LEFT_RIGHT_PAIRS
 
     dist, nearest = cKDTree(v).query(det.positions)
     at = {k: i for i, k in enumerate(det.ids)}

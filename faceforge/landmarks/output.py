@@ -36,9 +36,9 @@ def merge(det: Detection, given, vertices: np.ndarray) -> Detection:
 
 
 def _order(ids) -> list:
-    from faceforge.io.landmarks import ALL_FDPS
+    from faceforge.mpeg4.tables import FDP_IDS
 
-    return sorted(range(len(ids)), key=lambda i: ALL_FDPS.index(ids[i]))
+    return sorted(range(len(ids)), key=lambda i: FDP_IDS.index(ids[i]))
 
 
 def landmark_yaml(det: Detection, mesh_path: str) -> str:

@@ -65,7 +65,7 @@ def test_detected_points_agree_with_the_hand_files(detected, name):
 
 
 def test_pairs_are_mirror_images_on_a_symmetric_head(detected):
-    from faceforge.io.landmarks import LEFT_RIGHT_PAIRS
+    from faceforge.mpeg4.tables import LEFT_RIGHT_PAIRS
 
     v, f, det = detected["makehuman"]      # exactly symmetric about x = 0
     assert det.info["symmetry"]["symmetric"]
