@@ -1,0 +1,243 @@
+"""The bake stage (issue 27): named blendshapes from the muscle simulation.
+
+``faceforge bake [-o head.glb|head.usda|shapes.npz] [--shapes arkit|visemes|expressions|all]``
+settles one pose per named shape on the bound head and writes ``<workdir>/bake/``:
+
+shapes.npz
+    ``names (k,)``, ``made (k,) bool``, ``neutral (n_user, 3) float32`` and ``shapes (k, n_user, 3)
+    float32`` in the user's vertex order and frame (a shape not made is the neutral), per shape
+    ``contractions (k, m)`` (columns ``controls (m,)``), ``jaw (k, 3)`` and ``lids (k, 68)`` (the
+    eyelid FAPs laid over it): what ``animate --arkit`` plays.
+report.json
+    per shape: made or why not, the solve's controls, FAP targets requested and achieved, the
+    peak displacement, the physical checks at full weight, approximations; the left/right
+    mirror agreement; the Jacobian's and the solve's seconds.
+shapes.png
+    a contact sheet of the shapes made.
+
+ARKit shapes come from ``templates/arkit_mapping.yaml`` (``--mapping``), solved per head
+(:mod:`faceforge.blendshapes.bake`); visemes and expressions are the FAP mapping's presets played
+as ``faceforge visemes`` / ``expressions`` settle them. ``-o`` writes the GLB (one morph target per
+shape, named as ARKit names them in ``extras.targetNames``; the shapes not made are empty targets
+so that every engine finds its 52 slots, and are listed in ``extras.notMade``), USD
+(``UsdSkelBlendShape``s) or a copy of the npz.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import click
+
+from faceforge.pipeline import Stage, register_command, register_stage
+
+KINDS = ("arkit", "visemes", "expressions")
+
+
+def run_bake(ctx):
+    """Settle each selected shape, check it, write shapes.npz, report.json, shapes.png."""
+    import time
+
+    import numpy as np
+
+    from faceforge.blendshapes.arkit import ARKIT_NAMES, load_arkit_mapping, mirror_name
+    from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
+    from faceforge.blendshapes.rigsolve import probe_observer, settler
+    from faceforge.blendshapes.solve import control_space
+    from faceforge.io.stagefiles import save_json, save_npz
+    from faceforge.pipeline.stages.animate import BoundHead, _mapping, calibration_probes
+
+    t_start = time.perf_counter()
+    kinds = Path(ctx.param("bake_shapes")).read_text().split()
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    mapping, mapping_path = _mapping(ctx)
+    fps = float(ctx.config.get("animate.fps"))
+    settle = int(ctx.config.get("animate.calibrate.settle_frames"))
+    simulate = settler(head.rig, fps, settle)
+    lids = head.eyelids(ctx.config)
+    simulate(np.zeros((1, len(head.controls))), np.zeros((1, 3)))   # compile outside the timing
+    t0 = time.perf_counter()
+    names, frames, c, jaw, lid_faps, made, report = [], [], [], [], [], [], {}
+    out = {"mapping": mapping_path, "settle_frames": settle, "shapes": report}
+    if "arkit" in kinds:
+        specs = load_arkit_mapping(ctx.param("arkit_mapping"))
+        space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
+                              mapping.max_contraction)
+        baked = bake_shapes(specs, space, calibration_probes(mapping, head), simulate,
+                            lambda probes: probe_observer(head.rest, probes), head.rest, lids, log=ctx.log)
+        index = {n: i for i, n in enumerate(baked.names)}
+        for name in ARKIT_NAMES:
+            i = index.get(name)
+            names.append(name)
+            made.append(i is not None)
+            frames.append(baked.frames[i] if i is not None else head.rest)
+            c.append(baked.contractions[i] if i is not None else np.zeros(len(head.controls)))
+            jaw.append(baked.jaw[i] if i is not None else np.zeros(3))
+            lid_faps.append(baked.faps[i] if i is not None else np.zeros(68))
+        report.update(baked.report)
+        out.update(arkit_mapping=str(ctx.param("arkit_mapping")), jacobian_seconds=round(baked.jacobian_seconds, 2),
+                   solve_seconds=round(baked.solve_seconds, 2))
+    for kind in ("visemes", "expressions"):
+        if kind in kinds:
+            _presets(ctx, head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_faps, made, report)
+    out["bake_seconds"] = round(time.perf_counter() - t0, 2)
+    frames = np.stack(frames)
+    _check_shapes(head, frames, np.stack(jaw), names, made, report)
+    user = head.to_user(np.concatenate([head.rest[None], frames])).astype(np.float32)
+    deltas = {n: user[i + 1] - user[0] for i, n in enumerate(names) if made[i]}
+    pairs = [(n, mirror_name(n)) for n in names if mirror_name(n) != n and n.endswith(("Left", "_L"))]
+    out["mirror_rel_diff"] = mirror_agreement(user[0] @ np.eye(3), deltas, pairs) if np.array_equal(
+        head.user_rotation, np.eye(3)) else mirror_agreement(user[0] @ head.user_rotation.T,
+                                                             {k: v @ head.user_rotation.T for k, v in deltas.items()},
+                                                             pairs)
+    out["made"] = int(sum(made))
+    out["not_made"] = [n for n, m in zip(names, made) if not m]
+    out["total_seconds"] = round(time.perf_counter() - t_start, 2)
+    ctx.log(f"{out['made']} of {len(names)} shapes made in {out['bake_seconds']:.1f} s"
+            + (f"; not made: {', '.join(out['not_made'])}" if out["not_made"] else ""))
+    save_npz(ctx.out_dir / "shapes.npz", names=np.asarray(names), made=np.asarray(made), neutral=user[0],
+             shapes=user[1:], contractions=np.stack(c), controls=np.asarray(head.controls, dtype=str),
+             jaw=np.stack(jaw), lids=np.stack(lid_faps))
+    save_json(ctx.out_dir / "report.json", out)
+    _sheet(ctx.out_dir / "shapes.png", head, frames, names, made)
+
+
+def _presets(ctx, head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_faps, made, report):
+    """Settle the FAP mapping's ``visemes`` or ``expressions`` presets (as the sheet stages do) and
+    append them to the shape lists."""
+    import numpy as np
+
+    from faceforge.pipeline.stages.animate import controls
+
+    table = mapping.visemes if kind == "visemes" else mapping.expressions
+    if not table:
+        ctx.log(f"the mapping has no {kind}: none baked")
+        return
+    faps = np.stack(list(table.values()))
+    cc, jj = controls(mapping, faps, head)
+    poses = simulate(cc, jj)
+    if lids is not None:
+        poses = lids.apply(poses, faps)
+    for i, name in enumerate(table):
+        names.append(name)
+        made.append(True)
+        frames.append(poses[i])
+        c.append(cc[i])
+        jaw.append(jj[i])
+        lid_faps.append(np.where(np.isin(np.arange(1, 69), (19, 20, 21, 22)), faps[i], 0.0))
+        report[name] = {"made": True, "kind": kind[:-1],
+                        "controls": {n: round(float(v), 4) for n, v in zip(head.controls, cc[i]) if v > 1e-4},
+                        "jaw": jj[i].tolist()}
+
+
+def _check_shapes(head, frames, jaw, names, made, report) -> None:
+    """Per made shape: peak displacement (skin units) and the physical checks at full weight."""
+    import numpy as np
+
+    from faceforge.anatomy.animate import check_animation
+
+    for i, name in enumerate(names):
+        if not made[i]:
+            continue
+        checks = check_animation(head.rest, frames[i:i + 1], head.faces,
+                                 skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
+        report[name]["peak_displacement"] = float(np.linalg.norm(frames[i] - head.rest, axis=1).max())
+        report[name]["checks"] = checks.as_dict()
+
+
+def _sheet(path, head, frames, names, made) -> None:
+    from faceforge.viz.contact_sheet import contact_sheet
+
+    idx = [i for i, m in enumerate(made) if m]
+    contact_sheet(path, frames, head.faces, idx, 1.0, cols=8, panel=2.4,
+                  labels=[names[i] for i in idx], region=head.rest[:, 1] >= head.bone_heights()[0],
+                  title="baked shapes (full weight)")
+
+
+BAKE = register_stage(Stage(
+    name="bake", deps=("fit", "bind"),
+    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
+    inputs=("bake_shapes", "arkit_mapping", "animate_mapping", "animate.fap_mapping"),
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="1", run=run_bake,
+    description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
+
+
+def bake_params(app, shapes: str, mapping: str | None) -> dict:
+    """The bake stage's params: the selection written to ``<workdir>/inputs/bake_<shapes>.txt`` (its
+    content keys the cache), the ARKit mapping and the FAP mapping played."""
+    from faceforge.blendshapes.arkit import default_mapping_path
+    from faceforge.pipeline.stages.animate import playback_mapping
+
+    kinds = KINDS if shapes == "all" else (shapes,)
+    sel = app.workspace.root / "inputs" / f"bake_{shapes}.txt"
+    sel.parent.mkdir(parents=True, exist_ok=True)
+    if not sel.exists() or sel.read_text() != " ".join(kinds):
+        sel.write_text(" ".join(kinds))
+    return {"bake_shapes": str(sel), "arkit_mapping": str(Path(mapping) if mapping else default_mapping_path()),
+            "animate_mapping": str(playback_mapping(app, "bake"))}
+
+
+def export_shapes(app, output: str, weights=None, fps: float = 25.0, names_only=None) -> Path:
+    """Write the bake's shapes to ``output`` by suffix: .glb (named morph targets), .usda (USD
+    blend shapes), .npz (a copy of shapes.npz). ``weights (F, k)``: an animation of the targets.
+    ``names_only``: the shapes to write (default all)."""
+    import numpy as np
+
+    from faceforge.exceptions import StageError
+    from faceforge.io.export_shapes import read_obj_uvs, write_shapes_glb, write_shapes_usda
+    from faceforge.io.export import polygons_from_fan, up_axis_of
+    from faceforge.io.mesh import load_mesh
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.pipeline.stages.fit import user_rotation
+
+    src = app.workspace.stage_dir("bake") / "shapes.npz"
+    suffix = Path(output).suffix.lower()
+    if suffix == ".npz":
+        Path(output).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(src, output)
+        return Path(output)
+    d = load_npz(src)
+    names = [str(n) for n in d["names"]]
+    keep = [i for i, n in enumerate(names) if names_only is None or n in names_only]
+    mesh = app.workspace.load_params().get("mesh")
+    if not mesh:
+        raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
+    v, faces, info = load_mesh(mesh)
+    if len(v) != d["neutral"].shape[0]:
+        raise StageError(f"has {len(v)} vertices but the bake {d['neutral'].shape[0]}; rerun `faceforge fit`", mesh)
+    polygons = polygons_from_fan(faces, info.face_source)
+    base = np.asarray(v, dtype=np.float32)
+    shapes = base + (d["shapes"][keep] - d["neutral"])       # the user's own neutral + the deltas
+    sel = [names[i] for i in keep]
+    if suffix == ".glb":
+        return write_shapes_glb(output, base, shapes, sel, polygons, uvs=read_obj_uvs(mesh, len(v)),
+                                weights=weights, fps=fps, name=Path(mesh).stem)
+    if suffix in (".usda", ".usd"):
+        return write_shapes_usda(output, base, shapes, sel, polygons, weights=weights, fps=fps,
+                                 up_axis=up_axis_of(user_rotation(app.workspace.stage_dir("fit"))))
+    raise StageError(f"bake writes .glb, .usda or .npz, not {suffix or 'a folder'}", output)
+
+
+@click.command("bake", help="Bake named blendshapes (ARKit-52, visemes, expressions) from the muscles.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
+              help="Also write the shapes: .glb (named morph targets), .usda (USD blend shapes) or .npz.")
+@click.option("--shapes", type=click.Choice(["arkit", "visemes", "expressions", "all"]), default="arkit",
+              show_default=True, help="Which shapes to bake.")
+@click.option("--mapping", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="ARKit -> pose mapping [default: templates/arkit_mapping.yaml].")
+@click.option("--force", is_flag=True, help="Rebake even if up to date.")
+@click.pass_obj
+def bake_command(app, output, shapes, mapping, force):
+    from faceforge.exceptions import StageError
+
+    if output and Path(output).suffix.lower() not in (".glb", ".usda", ".usd", ".npz"):
+        raise StageError("bake writes .glb, .usda or .npz", output)
+    app.run_stage("bake", params=bake_params(app, shapes, mapping), force=force)
+    out = app.workspace.stage_dir("bake")
+    app.log(f"bake: {out / 'shapes.npz'}, {out / 'report.json'}, {out / 'shapes.png'}")
+    if output:
+        app.log(f"bake: wrote {export_shapes(app, output)}")
+
+
+register_command(bake_command)
