@@ -708,12 +708,13 @@ def _viseme_file(app, text: str) -> Path:
     return path
 
 
-def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
-    """Write ``-o`` and ``--preview`` from the animate stage's frames."""
+def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None,
+                   stage: str = "animate") -> None:
+    """Write ``-o`` and ``--preview`` from the frames of ``stage`` (animate, or arkit)."""
     from faceforge.exceptions import StageError
     from faceforge.io.stagefiles import load_npz
 
-    d = load_npz(app.workspace.stage_dir("animate") / "animation.npz")
+    d = load_npz(app.workspace.stage_dir(stage) / "animation.npz")
     frames, fps = d["frames"], float(d["fps"])
     mesh = app.workspace.load_params().get("mesh")
     if not mesh:
@@ -757,6 +758,12 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
 @click.option("--visemes", default=None, metavar="V1,V2,...",
               help="Say a sequence of MPEG-4 visemes instead (p_b_m, f_v, th, t_d, k_g, ch_j_sh, s_z, "
                    "n_l, r, a, e, i, o, u, none), 0.2 s each, cross-fading.")
+@click.option("--arkit", "arkit", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="Play ARKit blendshape weights instead (Live Link Face CSV, or CSV/JSON of name -> "
+                   "weight per frame) through the muscles of the baked shapes (`faceforge bake`).")
+@click.option("--curves", type=click.Path(dir_okay=False), default=None,
+              help="Also write the track's per-frame ARKit weights (.csv Live Link Face, .json), solved "
+                   "against the baked shapes; with -o x.glb the GLB carries the named shapes + weights.")
 @click.option("-o", "--output", type=click.Path(), default=None,
               help="Output by suffix: .pc2, .mdd (Blender Mesh Cache), .glb, .usda or .usdc (USD), "
                    "or a folder (OBJ sequence).")
@@ -764,15 +771,27 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
 @click.option("--preview-frames", default=None, help="Frames for --preview, e.g. 0,20,40 [default: evenly spaced].")
 @click.option("--force", is_flag=True, help="Resimulate even if up to date.")
 @click.pass_obj
-def animate_command(app, fap, expression, intensity, seconds, visemes, output, preview, preview_frames, force):
+def animate_command(app, fap, expression, intensity, seconds, visemes, arkit, curves, output, preview,
+                    preview_frames, force):
     from faceforge.exceptions import StageError
 
-    if sum(x is not None for x in (fap, expression, visemes)) != 1:
-        raise StageError("give exactly one of --fap FILE, --expression NAME or --visemes V1,V2,...")
+    if sum(x is not None for x in (fap, expression, visemes, arkit)) != 1:
+        raise StageError("give exactly one of --fap FILE, --expression NAME, --visemes V1,V2,... or --arkit FILE")
+    if curves and Path(curves).suffix.lower() not in (".csv", ".json"):
+        raise StageError("--curves writes .csv or .json", curves)
     if output:
         from faceforge.io.export import check_output
 
         check_output(output)      # an output it cannot write fails before the simulation
+    if arkit is not None:
+        from faceforge.pipeline.stages.arkit import write_curves
+        from faceforge.pipeline.stages.bake import bake_params
+
+        params = bake_params(app, "arkit", None)
+        app.run_stage("arkit", params={**params, "arkit_take": str(arkit)}, force=force)
+        glb = bool(curves) and write_curves(app, "arkit", curves, output)
+        export_outputs(app, None if glb else output, preview, preview_frames, stage="arkit")
+        return
     if expression is not None:
         seconds = seconds or float(app.config.get("animate.expression_seconds"))
         fap = _expression_file(app, expression, intensity, seconds)
@@ -780,7 +799,12 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, output, p
         fap = _viseme_file(app, visemes)
     mapping = playback_mapping(app, "animate")
     app.run_stage("animate", params={"fap": str(fap), "animate_mapping": str(mapping)}, force=force)
-    export_outputs(app, output, preview, preview_frames)
+    glb = False
+    if curves:
+        from faceforge.pipeline.stages.arkit import write_curves
+
+        glb = write_curves(app, "animate", curves, output)
+    export_outputs(app, None if glb else output, preview, preview_frames)
 
 
 def playback_mapping(app, command: str) -> Path:

@@ -1,0 +1,114 @@
+"""ARKit weight tracks through the muscles, and ARKit curves out (issue 27).
+
+``faceforge animate --arkit take.csv -o out.pc2`` plays an ARKit weight track (a Live Link Face
+CSV, a plain CSV or JSON of name -> weight per frame: :func:`faceforge.blendshapes.curves.read_weights`)
+on the bound head: each frame's controls are the weighted sum of the baked shapes' controls
+(contractions, jaw DOFs, eyelid FAPs; ``faceforge bake``, brought up to date first), clipped to
+their ranges, and simulated like any track. Writes ``<workdir>/arkit/animation.npz`` (the animate
+stage's format, plus ``weights (F, k)`` and ``names``) and ``report.json``.
+
+``animate ... --curves out.csv|json`` solves per-frame ARKit weights of the track just played
+against the baked shapes (:func:`faceforge.blendshapes.curves.solve_weights`, bounded least
+squares in [0, 1]) and writes them; with ``-o x.glb`` the GLB carries the named targets and that
+weights animation instead of one target per frame.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from faceforge.pipeline import Stage, register_stage
+
+
+def run_arkit(ctx):
+    """Play the take in ``ctx.params['arkit_take']`` through the baked shapes' controls."""
+    import numpy as np
+
+    from faceforge.anatomy.animate import Timings, check_animation, play
+    from faceforge.blendshapes.curves import read_weights
+    from faceforge.io.stagefiles import load_npz, save_json, save_npz
+    from faceforge.pipeline.stages.animate import BoundHead, _mapping, warm_up
+
+    take = ctx.param("arkit_take")
+    names, weights, fps = read_weights(take)
+    baked = load_npz(ctx.input("bake") / "shapes.npz")
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    mapping, _ = _mapping(ctx)
+    if [str(c) for c in baked["controls"]] != list(head.controls):
+        from faceforge.exceptions import StageError
+
+        raise StageError("the bake's controls are not this head's; rerun `faceforge bake`", ctx.input("bake"))
+    index = {str(n): i for i, n in enumerate(baked["names"])}
+    made = np.asarray(baked["made"], dtype=bool)
+    cols = [j for j, n in enumerate(names) if n in index and made[index[n]]]
+    ignored = [n for j, n in enumerate(names) if j not in cols and np.any(weights[:, j] > 0)]
+    if ignored:
+        ctx.log(f"shapes not made on this head (their weights are ignored): {', '.join(ignored)}")
+    rows = [index[names[j]] for j in cols]
+    w = weights[:, cols]
+    c = np.clip(w @ baked["contractions"][rows], 0.0, mapping.max_contraction)
+    jaw = w @ baked["jaw"][rows]
+    for k, dof in enumerate(("pitch", "yaw", "protrusion")):
+        lo, hi = mapping.jaw_limits.get(dof, (0.0, 0.0))
+        scale = head.levers.pitch if dof == "protrusion" else 1.0
+        jaw[:, k] = np.clip(jaw[:, k], lo * scale, hi * scale)
+    lid_faps = w @ baked["lids"][rows]
+    ctx.log(f"{len(w)} frames at {fps:g} fps, {len(cols)} shapes")
+    timings = Timings()
+    warm_up(head.rig, c, jaw, fps, ctx.log)
+    frames = play(head.rig, c, jaw, fps, progress=ctx.progress, timings=timings)
+    lids = head.eyelids(ctx.config)
+    if lids is not None:
+        frames = lids.apply(frames, lid_faps)
+    checks = check_animation(head.rest, frames, head.faces,
+                             skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
+    user = head.to_user(frames).astype(np.float32)
+    save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(fps), contractions=c,
+             controls=np.asarray(head.controls, dtype=str), jaw=jaw, weights=weights, names=np.asarray(names))
+    save_json(ctx.out_dir / "report.json", {
+        "take": str(take), "frames": len(w), "fps": fps, "shapes": [names[j] for j in cols],
+        "ignored": ignored, "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict()})
+    ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame; checks: {'ok' if checks.ok else checks.as_dict()}")
+
+
+ARKIT = register_stage(Stage(
+    name="arkit", deps=("fit", "bind", "bake"),
+    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
+    inputs=("arkit_take", "animate_mapping", "animate.fap_mapping"), outputs=("animation.npz", "report.json"),
+    version="1", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
+
+
+def write_curves(app, stage: str, curves: str | None, output: str | None) -> bool:
+    """Solve the ARKit weights of ``<workdir>/<stage>/animation.npz`` against the baked shapes,
+    write them to ``curves`` (.csv Live Link Face, .json) and, when ``output`` is a .glb, the GLB
+    of the named targets with that weights animation. Returns whether ``output`` was written.
+    Logs the round trip: the shapes mixed by the weights against the simulated frames."""
+    import numpy as np
+
+    from faceforge.blendshapes.curves import solve_weights, write_weights
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.pipeline.stages.bake import bake_params, export_shapes
+
+    app.run_stage("bake", params=bake_params(app, "arkit", None))
+    baked = load_npz(app.workspace.stage_dir("bake") / "shapes.npz")
+    anim = load_npz(app.workspace.stage_dir(stage) / "animation.npz")
+    made = np.asarray(baked["made"], dtype=bool)
+    names = [str(n) for n, m in zip(baked["names"], made) if m]
+    shapes = baked["shapes"][made]
+    frames, fps = anim["frames"], float(anim["fps"])
+    w = solve_weights(frames, baked["neutral"], shapes)
+    mixed = baked["neutral"] + np.einsum("fk,knd->fnd", w, shapes - baked["neutral"])
+    moved = frames - baked["neutral"]
+    err = float(np.sqrt(np.mean((mixed - frames) ** 2)) / max(np.sqrt(np.mean(moved ** 2)), 1e-30))
+    peak = float(np.linalg.norm(mixed - frames, axis=2).max())
+    app.log(f"animate: curves: {len(names)} shapes x {len(frames)} frames; the mixed shapes reproduce the "
+            f"simulated frames to {err:.1%} RMS of the motion (largest vertex error {peak:.4g} units)")
+    if curves:
+        app.log(f"animate: wrote {write_weights(curves, names, w, fps)}")
+    if output and Path(output).suffix.lower() == ".glb":
+        full = np.zeros((len(w), len(made)))
+        full[:, made] = w
+        app.log(f"animate: wrote {export_shapes(app, output, weights=full, fps=fps)} "
+                f"({int(made.size)} named targets, {len(w)} frames of weights)")
+        return True
+    return False
