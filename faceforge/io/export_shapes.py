@@ -57,12 +57,13 @@ def _check(base, shapes, names, weights):
 
 
 def write_shapes_glb(path, base, shapes, names, faces, *, uvs=None, weights=None, fps: float = 25.0,
-                     name: str = "faceforge") -> Path:
+                     name: str = "faceforge", not_made=()) -> Path:
     """Write the neutral mesh with named morph targets (module docstring).
 
     base : (n, 3) float neutral positions; shapes : (k, n, 3) float positions of each shape;
     names : k str; faces : (m, k) int or polygons; uvs : (n, 2) float or None (OBJ convention,
-    v up: written as glTF's 1 - v); weights : (F, k) float or None, an animation at ``fps``.
+    v up: written as glTF's 1 - v); weights : (F, k) float or None, an animation at ``fps``;
+    not_made : names of shapes that are placeholders (listed in ``mesh.extras.notMade``).
     """
     base, shapes, weights = _check(base, shapes, names, weights)
     tri = triangulate(*faces_to_csr(faces, len(base))).astype(np.uint32)
@@ -91,6 +92,8 @@ def write_shapes_glb(path, base, shapes, names, faces, *, uvs=None, weights=None
                                                           bounds=True)} for k in range(len(shapes))]
         mesh["weights"] = [0.0] * len(shapes)
         mesh["extras"] = {"targetNames": list(map(str, names))}
+        if len(not_made):
+            mesh["extras"]["notMade"] = [str(n) for n in not_made]
         if weights is not None:
             times = (np.arange(len(weights)) / float(fps)).astype(np.float32)
             t_acc = buf.accessor(buf.view(times), times, "SCALAR", _FLOAT, bounds=True)

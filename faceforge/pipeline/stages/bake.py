@@ -212,7 +212,8 @@ def export_shapes(app, output: str, weights=None, fps: float = 25.0, names_only=
     sel = [names[i] for i in keep]
     if suffix == ".glb":
         return write_shapes_glb(output, base, shapes, sel, polygons, uvs=read_obj_uvs(mesh, len(v)),
-                                weights=weights, fps=fps, name=Path(mesh).stem)
+                                weights=weights, fps=fps, name=Path(mesh).stem,
+                                not_made=[names[i] for i in keep if not d["made"][i]])
     if suffix in (".usda", ".usd"):
         return write_shapes_usda(output, base, shapes, sel, polygons, weights=weights, fps=fps,
                                  up_axis=up_axis_of(user_rotation(app.workspace.stage_dir("fit"))))
