@@ -784,7 +784,10 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, arkit, cu
 
         check_output(output)      # an output it cannot write fails before the simulation
     if arkit is not None:
+        from faceforge.blendshapes.curves import read_weights
         from faceforge.pipeline.stages.arkit import write_curves
+
+        read_weights(arkit)       # a bad take fails before anything runs
         from faceforge.pipeline.stages.bake import bake_params
 
         params = bake_params(app, "arkit", None)
