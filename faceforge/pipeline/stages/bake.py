@@ -149,12 +149,17 @@ def _check_shapes(head, frames, jaw, names, made, report) -> None:
 
 
 def _sheet(path, head, frames, names, made) -> None:
-    from faceforge.viz.contact_sheet import contact_sheet
+    """The neutral face and the shapes made, smooth-shaded, framed on the face (above the lowest
+    bone, the front half of the head)."""
+    import numpy as np
+
+    from faceforge.viz.shape_sheet import shape_sheet
 
     idx = [i for i, m in enumerate(made) if m]
-    contact_sheet(path, frames, head.faces, idx, 1.0, cols=8, panel=2.4,
-                  labels=[names[i] for i in idx], region=head.rest[:, 1] >= head.bone_heights()[0],
-                  title="baked shapes (full weight)")
+    rest = head.rest
+    region = (rest[:, 1] >= head.bone_heights()[0]) & (rest[:, 2] >= np.median(rest[:, 2]))
+    shape_sheet(path, np.concatenate([rest[None], frames[idx]]), head.faces, ["neutral"] + [names[i] for i in idx],
+                region=region, title="baked shapes at full weight (faceforge bake)")
 
 
 BAKE = register_stage(Stage(
