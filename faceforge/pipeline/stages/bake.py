@@ -56,6 +56,8 @@ def run_bake(ctx):
     settle = int(ctx.config.get("animate.calibrate.settle_frames"))
     simulate = settler(head.rig, fps, settle)
     lids = head.eyelids(ctx.config)
+    if lids is not None and not lids.fields:
+        lids = None                      # no eye with its four lid FDPs: lid shapes are not made
     simulate(np.zeros((1, len(head.controls))), np.zeros((1, 3)))   # compile outside the timing
     t0, cpu0 = time.perf_counter(), time.process_time()
     names, frames, c, jaw, lid_faps, made, report = [], [], [], [], [], [], {}
