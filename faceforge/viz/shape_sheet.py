@@ -59,8 +59,11 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
     cmap = LinearSegmentedColormap.from_list("skin", [(0, 0, 0), color])
     for ax in axes.ravel():
         ax.axis("off")
+    box = (lo - 2 * pad, hi + 2 * pad)
     for ax, frame, name in zip(axes.ravel(), frames, labels):
         xy, tri, shade = smooth_shade(frame, faces)
+        centre = xy[tri].mean(axis=1)        # only the triangles in the panel (speed)
+        tri = tri[np.all((centre >= box[0]) & (centre <= box[1]), axis=1)]
         if len(tri):
             ax.tripcolor(Triangulation(xy[:, 0], xy[:, 1], tri), shade, shading="gouraud", cmap=cmap,
                          vmin=0.0, vmax=1.0, rasterized=True)

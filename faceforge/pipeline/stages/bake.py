@@ -54,7 +54,13 @@ def run_bake(ctx):
     mapping, mapping_path = _mapping(ctx)
     fps = float(ctx.config.get("animate.fps"))
     settle = int(ctx.config.get("animate.calibrate.settle_frames"))
-    simulate = settler(head.rig, fps, settle)
+    settled = settler(head.rig, fps, settle)
+    poses = [0]
+
+    def simulate(c, j):
+        poses[0] += len(c)
+        return settled(c, j)
+
     lids = head.eyelids(ctx.config)
     if lids is not None and not lids.fields:
         lids = None                      # no eye with its four lid FDPs: lid shapes are not made
@@ -85,6 +91,8 @@ def run_bake(ctx):
             _presets(ctx, head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_faps, made, report)
     out["bake_seconds"] = round(time.perf_counter() - t0, 2)
     out["bake_cpu_seconds"] = round(time.process_time() - cpu0, 2)   # all threads: honest on a busy machine
+    out["poses_settled"] = poses[0] - 1                                # the first compiles, outside the timing
+    out["frames_simulated"] = out["poses_settled"] * settle
     frames = np.stack(frames)
     _check_shapes(head, frames, np.stack(jaw), names, made, report)
     user = head.to_user(np.concatenate([head.rest[None], frames])).astype(np.float32)
@@ -98,7 +106,8 @@ def run_bake(ctx):
     out["not_made"] = [n for n, m in zip(names, made) if not m]
     out["total_seconds"] = round(time.perf_counter() - t_start, 2)
     ctx.log(f"{out['made']} of {len(names)} shapes made in {out['bake_seconds']:.1f} s "
-            f"({out['bake_cpu_seconds']:.1f} s CPU)"
+            f"({out['bake_cpu_seconds']:.1f} s CPU; {out['poses_settled']} poses settled, "
+            f"{1e3 * out['bake_seconds'] / max(out['frames_simulated'], 1):.1f} ms a frame)"
             + (f"; not made: {', '.join(out['not_made'])}" if out["not_made"] else ""))
     save_npz(ctx.out_dir / "shapes.npz", names=np.asarray(names), made=np.asarray(made), neutral=user[0],
              shapes=user[1:], contractions=np.stack(c), controls=np.asarray(head.controls, dtype=str),
