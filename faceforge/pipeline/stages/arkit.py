@@ -83,6 +83,8 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
     write them to ``curves`` (.csv Live Link Face, .json) and, when ``output`` is a .glb, the GLB
     of the named targets with that weights animation. Returns whether ``output`` was written.
     Logs the round trip: the shapes mixed by the weights against the simulated frames."""
+    import json
+
     import numpy as np
 
     from faceforge.blendshapes.curves import solve_weights, write_weights
@@ -103,6 +105,12 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
     peak = float(np.linalg.norm(mixed - frames, axis=2).max())
     app.log(f"animate: curves: {len(names)} shapes x {len(frames)} frames; the mixed shapes reproduce the "
             f"simulated frames to {err:.1%} RMS of the motion (largest vertex error {peak:.4g} units)")
+    report = app.workspace.stage_dir(stage) / "report.json"
+    turn = json.loads(report.read_text()).get("max_head_rotation_deg", [0, 0, 0]) if report.exists() else [0]
+    if max(turn, default=0) > 0:
+        app.log(f"animate: note: the track turns the head (FAPs 48-50, up to {max(turn):.1f} deg), which no "
+                "blendshape makes: the curves fit it as best they can (for the face alone, play it with "
+                "--set animate.head_rotation=false)")
     if curves:
         app.log(f"animate: wrote {write_weights(curves, names, w, fps)}")
     if output and Path(output).suffix.lower() == ".glb":
