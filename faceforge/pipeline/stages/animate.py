@@ -779,17 +779,24 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, arkit, cu
         raise StageError("give exactly one of --fap FILE, --expression NAME, --visemes V1,V2,... or --arkit FILE")
     if curves and Path(curves).suffix.lower() not in (".csv", ".json"):
         raise StageError("--curves writes .csv or .json", curves)
-    if output:
-        from faceforge.io.export import check_output
+    if output or preview or curves:
+        from faceforge.io.export import check_output, protect_inputs
 
-        check_output(output)      # an output it cannot write fails before the simulation
+        params = app.workspace.load_params()
+        inputs = {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"), "FAP track": fap,
+                  "ARKit take": arkit}
+        if output:
+            check_output(output, inputs)      # an output it cannot or must not write fails before the simulation
+        if preview:
+            protect_inputs(preview, {**inputs, "-o output": output})
+        if curves:
+            protect_inputs(curves, {**inputs, "-o output": output, "--preview": preview})
     if arkit is not None:
         from faceforge.blendshapes.curves import read_weights
         from faceforge.pipeline.stages.arkit import write_curves
-
-        read_weights(arkit)       # a bad take fails before anything runs
         from faceforge.pipeline.stages.bake import bake_params
 
+        read_weights(arkit)       # a bad take fails before anything runs
         params = bake_params(app, "arkit", None)
         app.run_stage("arkit", params={**params, "arkit_take": str(arkit)}, force=force)
         glb = bool(curves) and write_curves(app, "arkit", curves, output)
