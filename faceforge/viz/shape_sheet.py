@@ -73,7 +73,7 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
         ax.set_title(name, fontsize=9)
     if title:
         fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.25 / (panel * 1.1 * rows)) if title else None)
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png)
