@@ -14,6 +14,9 @@ A mapping entry says how one shape is made on a head:
     ``jaw.protrusion``) the solve may use (FACS: the muscles of the shape's action units);
 ``lids: {FAP: IRISD}``
     eyelid FAPs 19-22, laid over the settled skin kinematically (:mod:`faceforge.anatomy.eyelids`);
+``eye: {side: L|R, yaw: deg, pitch: deg}``
+    turn that eye's eyeball piece (yaw towards +X, the subject's left; pitch up) when the mesh
+    has one (:mod:`faceforge.blendshapes.eyes`), else the shape is not made;
 ``mirror: otherShape``
     this shape is ``otherShape`` with left and right swapped (FAPs, controls, lids);
 ``approximation: why``
@@ -81,6 +84,7 @@ class ShapeSpec:
     faps: dict = field(default_factory=dict)
     controls: tuple = ()
     lids: dict = field(default_factory=dict)
+    eye: dict = field(default_factory=dict)
     approximation: str = ""
     not_made: str = ""
     mirror_of: str = ""
@@ -126,9 +130,11 @@ def load_arkit_mapping(path: str | Path, names=ARKIT_NAMES) -> dict:
             src = raw.get(spec.mirror_of)
             if src is None or src.mirror_of:
                 raise _err(path, f"shapes.{n}.mirror: {spec.mirror_of!r} is not a shape made directly")
+            eye = ({"side": "R" if src.eye["side"] == "L" else "L", "yaw": -src.eye["yaw"],
+                    "pitch": src.eye["pitch"]} if src.eye else {})
             spec = ShapeSpec(n, dict(mirror_fap(f, v) for f, v in src.faps.items()),
                              tuple(mirror_name(c) for c in src.controls),
-                             dict(mirror_fap(f, v) for f, v in src.lids.items()),
+                             dict(mirror_fap(f, v) for f, v in src.lids.items()), eye,
                              src.approximation, src.not_made, src.name)
         out[n] = spec
     return out
@@ -137,7 +143,7 @@ def load_arkit_mapping(path: str | Path, names=ARKIT_NAMES) -> dict:
 def _entry(path, name, raw) -> ShapeSpec:
     if not isinstance(raw, dict):
         raise _err(path, f"shapes.{name}: expected a mapping")
-    allowed = {"faps", "controls", "lids", "mirror", "approximation", "not_made"}
+    allowed = {"faps", "controls", "lids", "eye", "mirror", "approximation", "not_made"}
     extra = sorted(set(raw) - allowed)
     if extra:
         raise _err(path, f"shapes.{name}: unknown key {extra[0]!r} (valid: {', '.join(sorted(allowed))})")
@@ -163,11 +169,27 @@ def _entry(path, name, raw) -> ShapeSpec:
     lids = fap_table("lids", 19, 22)
     controls = tuple(str(c) for c in (raw.get("controls") or ()))
     not_made = str(raw.get("not_made") or "")
-    if not not_made and not (faps and controls) and not lids:
-        raise _err(path, f"shapes.{name}: needs faps + controls, lids, mirror or not_made")
+    eye = _eye(path, name, raw.get("eye"))
+    if not not_made and not (faps and controls) and not lids and not eye:
+        raise _err(path, f"shapes.{name}: needs faps + controls, lids, eye, mirror or not_made")
     if faps and not controls:
         raise _err(path, f"shapes.{name}: faps without controls")
-    return ShapeSpec(name, faps, controls, lids, str(raw.get("approximation") or ""), not_made)
+    return ShapeSpec(name, faps, controls, lids, eye, str(raw.get("approximation") or ""), not_made)
+
+
+def _eye(path, name, raw) -> dict:
+    """``eye: {side: L|R, yaw: deg, pitch: deg}`` -> {"side", "yaw" rad, "pitch" rad} or {}."""
+    import math
+
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict) or str(raw.get("side")) not in ("L", "R") or set(raw) - {"side", "yaw", "pitch"}:
+        raise _err(path, f"shapes.{name}.eye: expected {{side: L|R, yaw: degrees, pitch: degrees}}")
+    try:
+        return {"side": str(raw["side"]), "yaw": math.radians(float(raw.get("yaw", 0.0))),
+                "pitch": math.radians(float(raw.get("pitch", 0.0)))}
+    except (TypeError, ValueError):
+        raise _err(path, f"shapes.{name}.eye: yaw and pitch are degrees") from None
 
 
 def default_mapping_path() -> Path:

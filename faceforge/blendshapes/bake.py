@@ -25,7 +25,8 @@ from faceforge.blendshapes.solve import jacobian, solve_activations
 class BakedShapes:
     """names : (k,) str, the shapes made; frames : (k, n, 3) float, settled skin (working mesh,
     eyelids applied); contractions : (k, m) float; jaw : (k, 3); faps : (k, 68) float, the lid
-    FAPs applied (the solved FAP targets are in ``report``); report : {name: dict} for every
+    FAPs applied (the solved FAP targets are in ``report``); gaze : (k, 4) float, the eye turns
+    (yaw L, pitch L, yaw R, pitch R; radians); report : {name: dict} for every
     shape of the mapping, made or not; jacobian_seconds, solve_seconds : float."""
 
     names: list
@@ -33,21 +34,27 @@ class BakedShapes:
     contractions: np.ndarray
     jaw: np.ndarray
     faps: np.ndarray
+    gaze: np.ndarray
     report: dict = field(default_factory=dict)
     jacobian_seconds: float = 0.0
     solve_seconds: float = 0.0
 
 
 def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest: np.ndarray,
-                lids=None, passes: int = 1, ridge: float = 1e-3, log=lambda m: None) -> BakedShapes:
+                lids=None, eyes: dict | None = None, passes: int = 1, ridge: float = 1e-3,
+                log=lambda m: None) -> BakedShapes:
     """Settle every made shape of ``specs`` (module docstring).
 
     specs : {name: ShapeSpec} in output order; space : ControlSpace of the head (all controls;
         each shape uses its ``controls`` of it); probes : {FAP: Probe} of the head;
     simulate : (c (k, m), jaw (k, 3)) -> (k, n, 3) settled skin; observe_probes : list of Probe ->
         (frames -> (k, len) FAPU) (:func:`faceforge.blendshapes.rigsolve.probe_observer` bound to rest);
-    lids : faceforge.anatomy.eyelids.Eyelids or None (then lid-only shapes are not made).
+    lids : faceforge.anatomy.eyelids.Eyelids or None (then lid-only shapes are not made);
+    eyes : {side: (vertex ids, centre)} (:func:`faceforge.blendshapes.eyes.eye_pieces`) or None.
     """
+    from faceforge.blendshapes.eyes import rotate_eye
+
+    eyes = eyes or {}
     import time
 
     report, todo = {}, []
@@ -57,9 +64,12 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
             continue
         unknown = [c for c in spec.controls if c not in space.names]
         missing = [f for f in spec.faps if f not in probes]
-        if unknown or missing or (spec.lids and lids is None) or (spec.faps and len(missing) == len(spec.faps)):
+        no_eye = bool(spec.eye) and spec.eye["side"] not in eyes
+        if unknown or missing or (spec.lids and lids is None) or no_eye:
             why = (f"the head has no control {unknown[0]}" if unknown else
-                   f"no FDP on this head for FAP {missing[0]}" if missing else "the head has no eyelids")
+                   f"no FDP on this head for FAP {missing[0]}" if missing else
+                   f"eye rotation: the mesh has no eyeball piece at the {spec.eye['side']} pupil" if no_eye
+                   else "the head has no eyelids")
             report[name] = {"made": False, "reason": why}
             continue
         todo.append(spec)
@@ -72,7 +82,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     t_jac = time.perf_counter() - t0
     log(f"Jacobian: {len(used)} controls x {len(faps)} FAPs in {t_jac:.1f} s")
     m = len(space.columns)
-    names, frames, cs, jaws, lid_faps = [], [], [], [], []
+    names, frames, cs, jaws, lid_faps, gazes = [], [], [], [], [], []
     t0 = time.perf_counter()
     for spec in todo:
         c, jaw, frame, row = np.zeros(m), np.zeros(3), np.asarray(rest, dtype=float), {}
@@ -96,6 +106,13 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         if spec.lids:
             frame = lids.apply(frame[None], f68[None])[0]
             row["lids"] = {str(f): v for f, v in spec.lids.items()}
+        gaze = np.zeros(4)
+        if spec.eye:
+            gaze[[0, 1] if spec.eye["side"] == "L" else [2, 3]] = spec.eye["yaw"], spec.eye["pitch"]
+            ids, centre = eyes[spec.eye["side"]]
+            frame = rotate_eye(frame, ids, centre, spec.eye["yaw"], spec.eye["pitch"])
+            row["eye"] = {"side": spec.eye["side"], "yaw_deg": round(float(np.degrees(spec.eye["yaw"])), 2),
+                          "pitch_deg": round(float(np.degrees(spec.eye["pitch"])), 2), "vertices": int(len(ids))}
         row.update(made=True, approximation=spec.approximation or None, mirror_of=spec.mirror_of or None)
         report[spec.name] = row
         names.append(spec.name)
@@ -103,13 +120,31 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         cs.append(c)
         jaws.append(jaw)
         lid_faps.append(f68)
-        log(f"{spec.name}: " + (f"FAP error {row['error']:.0%}" if "error" in row else "lids only"))
+        gazes.append(gaze)
+        log(f"{spec.name}: " + (f"FAP error {row['error']:.0%}" if "error" in row else
+                                "eye rotation" if spec.eye else "lids only"))
     t_solve = time.perf_counter() - t0
     n = len(rest)
     return BakedShapes(names, np.stack(frames) if frames else np.zeros((0, n, 3)),
                        np.stack(cs) if cs else np.zeros((0, m)), np.stack(jaws) if jaws else np.zeros((0, 3)),
                        np.stack(lid_faps) if lid_faps else np.zeros((0, 68)),
+                       np.stack(gazes) if gazes else np.zeros((0, 4)),
                        {name: report[name] for name in specs}, t_jac, t_solve)
+
+
+def apply_gaze(frames: np.ndarray, gaze: np.ndarray, eyes: dict) -> np.ndarray:
+    """Frames (F, n, 3) with each eye piece turned by ``gaze (F, 4)`` (yaw L, pitch L, yaw R,
+    pitch R; radians) about its centre (:func:`faceforge.blendshapes.eyes.eye_pieces`); a copy."""
+    from faceforge.blendshapes.eyes import rotate_eye
+
+    out = np.array(frames, dtype=float, copy=True)
+    for side, cols in (("L", (0, 1)), ("R", (2, 3))):
+        if side not in eyes:
+            continue
+        ids, centre = eyes[side]
+        for f in np.flatnonzero(np.any(gaze[:, cols] != 0.0, axis=1)):
+            out[f] = rotate_eye(out[f], ids, centre, gaze[f, cols[0]], gaze[f, cols[1]])
+    return out
 
 
 def mirror_agreement(user_rest: np.ndarray, deltas: dict, pairs) -> dict:

@@ -93,8 +93,9 @@ def test_the_template_covers_all_52_and_mirrors():
     assert right.mirror_of == "mouthSmileLeft" and set(right.controls) == {"zygomaticus_major_R", "risorius_R"}
     assert specs["jawRight"].faps == {15: -specs["jawLeft"].faps[15]}
     assert specs["eyeBlinkRight"].lids == {20: 900.0, 22: 124.0}
-    assert {n for n, s in specs.items() if not s.made} == {
-        *(f"eyeLook{d}{s}" for d in ("Down", "In", "Out", "Up") for s in ("Left", "Right")), "cheekPuff", "tongueOut"}
+    assert {n for n, s in specs.items() if not s.made} == {"cheekPuff", "tongueOut"}
+    assert specs["eyeLookInLeft"].eye["side"] == "L" and specs["eyeLookInLeft"].eye["yaw"] < 0   # towards -X
+    assert specs["eyeLookInRight"].eye == {"side": "R", "yaw": -specs["eyeLookInLeft"].eye["yaw"], "pitch": 0.0}
     assert mirror_name("eyeBlinkLeft") == "eyeBlinkRight" and mirror_name("jawOpen") == "jawOpen"
 
 

@@ -60,6 +60,13 @@ def run_arkit(ctx):
     lids = head.eyelids(ctx.config)
     if lids is not None:
         frames = lids.apply(frames, lid_faps)
+    if "gaze" in baked:
+        gaze = w @ baked["gaze"][rows]
+        if np.any(gaze):
+            from faceforge.blendshapes.bake import apply_gaze
+            from faceforge.blendshapes.eyes import eye_pieces
+
+            frames = apply_gaze(frames, gaze, eye_pieces(head.rest, head.faces, head.landmarks))
     checks = check_animation(head.rest, frames, head.faces,
                              skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
     user = head.to_user(frames).astype(np.float32)

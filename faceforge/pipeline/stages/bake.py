@@ -6,8 +6,9 @@ settles one pose per named shape on the bound head and writes ``<workdir>/bake/`
 shapes.npz
     ``names (k,)``, ``made (k,) bool``, ``neutral (n_user, 3) float32`` and ``shapes (k, n_user, 3)
     float32`` in the user's vertex order and frame (a shape not made is the neutral), per shape
-    ``contractions (k, m)`` (columns ``controls (m,)``), ``jaw (k, 3)`` and ``lids (k, 68)`` (the
-    eyelid FAPs laid over it): what ``animate --arkit`` plays.
+    ``contractions (k, m)`` (columns ``controls (m,)``), ``jaw (k, 3)``, ``lids (k, 68)`` (the
+    eyelid FAPs laid over it) and ``gaze (k, 4)`` (the eye pieces' turns, radians: yaw L, pitch L,
+    yaw R, pitch R): what ``animate --arkit`` plays.
 report.json
     per shape: made or why not, the solve's controls, FAP targets requested and achieved, the
     peak displacement, the physical checks at full weight, approximations; the left/right
@@ -43,6 +44,7 @@ def run_bake(ctx):
 
     from faceforge.blendshapes.arkit import ARKIT_NAMES, load_arkit_mapping, mirror_name
     from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
+    from faceforge.blendshapes.eyes import eye_pieces
     from faceforge.blendshapes.rigsolve import probe_observer, settler
     from faceforge.blendshapes.solve import control_space
     from faceforge.io.stagefiles import save_json, save_npz
@@ -66,14 +68,17 @@ def run_bake(ctx):
         lids = None                      # no eye with its four lid FDPs: lid shapes are not made
     simulate(np.zeros((1, len(head.controls))), np.zeros((1, 3)))   # compile outside the timing
     t0, cpu0 = time.perf_counter(), time.process_time()
-    names, frames, c, jaw, lid_faps, made, report = [], [], [], [], [], [], {}
+    names, frames, c, jaw, lid_faps, gaze, made, report = [], [], [], [], [], [], [], {}
     out = {"mapping": mapping_path, "settle_frames": settle, "shapes": report}
     if "arkit" in kinds:
         specs = load_arkit_mapping(ctx.param("arkit_mapping"))
         space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
                               mapping.max_contraction)
+        eyes = eye_pieces(head.rest, head.faces, head.landmarks)
+        if eyes:
+            ctx.log(f"eyeball pieces: {', '.join(f'{s} ({len(v[0])} vertices)' for s, v in eyes.items())}")
         baked = bake_shapes(specs, space, calibration_probes(mapping, head), simulate,
-                            lambda probes: probe_observer(head.rest, probes), head.rest, lids, log=ctx.log)
+                            lambda probes: probe_observer(head.rest, probes), head.rest, lids, eyes, log=ctx.log)
         index = {n: i for i, n in enumerate(baked.names)}
         for name in ARKIT_NAMES:
             i = index.get(name)
@@ -83,12 +88,14 @@ def run_bake(ctx):
             c.append(baked.contractions[i] if i is not None else np.zeros(len(head.controls)))
             jaw.append(baked.jaw[i] if i is not None else np.zeros(3))
             lid_faps.append(baked.faps[i] if i is not None else np.zeros(68))
+            gaze.append(baked.gaze[i] if i is not None else np.zeros(4))
         report.update(baked.report)
         out.update(arkit_mapping=str(ctx.param("arkit_mapping")), jacobian_seconds=round(baked.jacobian_seconds, 2),
                    solve_seconds=round(baked.solve_seconds, 2))
     for kind in ("visemes", "expressions"):
         if kind in kinds:
             _presets(ctx, head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_faps, made, report)
+            gaze += [np.zeros(4)] * (len(names) - len(gaze))
     out["bake_seconds"] = round(time.perf_counter() - t0, 2)
     out["bake_cpu_seconds"] = round(time.process_time() - cpu0, 2)   # all threads: honest on a busy machine
     out["poses_settled"] = poses[0] - 1                                # the first compiles, outside the timing
@@ -111,7 +118,7 @@ def run_bake(ctx):
             + (f"; not made: {', '.join(out['not_made'])}" if out["not_made"] else ""))
     save_npz(ctx.out_dir / "shapes.npz", names=np.asarray(names), made=np.asarray(made), neutral=user[0],
              shapes=user[1:], contractions=np.stack(c), controls=np.asarray(head.controls, dtype=str),
-             jaw=np.stack(jaw), lids=np.stack(lid_faps))
+             jaw=np.stack(jaw), lids=np.stack(lid_faps), gaze=np.stack(gaze))
     save_json(ctx.out_dir / "report.json", out)
     _sheet(ctx.out_dir / "shapes.png", head, frames, names, made)
 
