@@ -121,7 +121,9 @@ def load_arkit_mapping(path: str | Path, names=ARKIT_NAMES) -> dict:
         raise _err(path, f"shapes: unknown name {unknown[0]!r} (ARKit's 52 names are case-sensitive)")
     missing = [n for n in names if n not in shapes]
     if missing:
-        raise _err(path, f"shapes: no entry for {', '.join(missing)}")
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise _err(path, f"shapes: no entry for {', '.join(missing[:3])}{more} (every ARKit name needs one, "
+                         "`not_made: why` for a shape the head cannot make)")
     raw = {n: _entry(path, n, shapes[n]) for n in names}
     out = {}
     for n in names:

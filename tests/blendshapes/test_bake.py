@@ -78,3 +78,12 @@ def test_bad_arkit_take_is_one_line_exit_2(invoke, tmp_path):
 def test_bake_rejects_an_unknown_suffix(invoke, tmp_path):
     result = invoke("--workdir", tmp_path / "w", "bake", "-o", tmp_path / "x.fbx")
     assert result.exit_code == 2 and "bake writes .glb, .usda or .npz" in result.stderr
+
+
+def test_a_bad_arkit_mapping_fails_before_anything_runs(invoke, tmp_path):
+    bad = tmp_path / "map.yaml"
+    bad.write_text("shapes:\n  jawOpen: {faps: {3: 100}, controls: [jaw.pitch]}\n")
+    result = invoke("--workdir", tmp_path / "w", "bake", "--mapping", bad)
+    assert result.exit_code == 2
+    assert "map.yaml: shapes: no entry for eyeBlinkLeft, eyeLookDownLeft, eyeLookInLeft and 48 more" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

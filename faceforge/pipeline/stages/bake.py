@@ -52,6 +52,7 @@ def run_bake(ctx):
 
     t_start = time.perf_counter()
     kinds = Path(ctx.param("bake_shapes")).read_text().split()
+    specs = load_arkit_mapping(ctx.param("arkit_mapping")) if "arkit" in kinds else {}
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, mapping_path = _mapping(ctx)
     fps = float(ctx.config.get("animate.fps"))
@@ -71,7 +72,6 @@ def run_bake(ctx):
     names, frames, c, jaw, lid_faps, gaze, made, report = [], [], [], [], [], [], [], {}
     out = {"mapping": mapping_path, "settle_frames": settle, "shapes": report}
     if "arkit" in kinds:
-        specs = load_arkit_mapping(ctx.param("arkit_mapping"))
         space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
                               mapping.max_contraction)
         eyes = eye_pieces(head.rest, head.faces, head.landmarks)
@@ -259,7 +259,12 @@ def bake_command(app, output, shapes, mapping, force):
 
     if output and Path(output).suffix.lower() not in (".glb", ".usda", ".usd", ".npz"):
         raise StageError("bake writes .glb, .usda or .npz", output)
-    app.run_stage("bake", params=bake_params(app, shapes, mapping), force=force)
+    params = bake_params(app, shapes, mapping)
+    if shapes in ("arkit", "all"):
+        from faceforge.blendshapes.arkit import load_arkit_mapping
+
+        load_arkit_mapping(params["arkit_mapping"])     # a bad mapping fails before anything runs
+    app.run_stage("bake", params=params, force=force)
     out = app.workspace.stage_dir("bake")
     app.log(f"bake: {out / 'shapes.npz'}, {out / 'report.json'}, {out / 'shapes.png'}")
     if output:
