@@ -776,7 +776,8 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, arkit, cu
     from faceforge.exceptions import StageError
 
     if sum(x is not None for x in (fap, expression, visemes, arkit)) != 1:
-        raise StageError("give exactly one of --fap FILE, --expression NAME, --visemes V1,V2,... or --arkit FILE")
+        raise StageError("give exactly one of --fap FILE, --expression NAME or --visemes V1,V2,..., "
+                         "or --arkit FILE")
     if curves and Path(curves).suffix.lower() not in (".csv", ".json"):
         raise StageError("--curves writes .csv or .json", curves)
     if output or preview or curves:

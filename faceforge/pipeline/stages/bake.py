@@ -259,11 +259,11 @@ def bake_command(app, output, shapes, mapping, force):
 
     if output and Path(output).suffix.lower() not in (".glb", ".usda", ".usd", ".npz"):
         raise StageError("bake writes .glb, .usda or .npz", output)
-    params = bake_params(app, shapes, mapping)
     if shapes in ("arkit", "all"):
-        from faceforge.blendshapes.arkit import load_arkit_mapping
+        from faceforge.blendshapes.arkit import default_mapping_path, load_arkit_mapping
 
-        load_arkit_mapping(params["arkit_mapping"])     # a bad mapping fails before anything runs
+        load_arkit_mapping(mapping or default_mapping_path())     # a bad mapping fails before anything runs
+    params = bake_params(app, shapes, mapping)
     app.run_stage("bake", params=params, force=force)
     out = app.workspace.stage_dir("bake")
     app.log(f"bake: {out / 'shapes.npz'}, {out / 'report.json'}, {out / 'shapes.png'}")
