@@ -201,6 +201,8 @@ def write_shapes_usda(path, base, shapes, names, faces, *, weights=None, fps: fl
     for n, shape in zip(names, shapes):
         d = shape.astype(np.float64) - base.astype(np.float64)
         idx = np.flatnonzero(np.linalg.norm(d, axis=1) > eps)
+        if not len(idx):
+            idx = np.zeros(1, dtype=np.int64)   # an empty shape keeps one zero offset (importers skip none)
         lines += ["", f'        def BlendShape "{n}"', "        {",
                   f"            uniform vector3f[] offsets = {_points(d[idx])}",
                   f"            uniform int[] pointIndices = {_ints(idx)}", "        }"]
