@@ -9,8 +9,8 @@ stage's format, plus ``weights (F, k)`` and ``names``) and ``report.json``.
 
 ``animate ... --curves out.csv|json`` solves per-frame ARKit weights of the track just played
 against the baked shapes (:func:`faceforge.blendshapes.curves.solve_weights`, bounded least
-squares in [0, 1]) and writes them; with ``-o x.glb`` the GLB carries the named targets and that
-weights animation instead of one target per frame.
+squares in [0, 1]) and writes them; with ``-o x.glb`` (or ``x.usda``) the file carries the named
+targets (USD blend shapes) and that weights animation instead of one target per frame.
 """
 
 from __future__ import annotations
@@ -120,7 +120,7 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
                 "--set animate.head_rotation=false)")
     if curves:
         app.log(f"animate: wrote {write_weights(curves, names, w, fps)}")
-    if output and Path(output).suffix.lower() == ".glb":
+    if output and Path(output).suffix.lower() in (".glb", ".usda", ".usd"):
         full = np.zeros((len(w), len(made)))
         full[:, made] = w
         app.log(f"animate: wrote {export_shapes(app, output, weights=full, fps=fps)} "
