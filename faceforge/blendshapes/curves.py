@@ -32,8 +32,10 @@ from faceforge.blendshapes.arkit import ARKIT_NAMES
 LIVE_LINK_EXTRA = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
                    "RightEyeYaw", "RightEyePitch", "RightEyeRoll")
 _BY_LOWER = {n.lower(): n for n in ARKIT_NAMES}
-#: the rate of a Live Link timecode's frame field (the app's 60 fps timecode)
+#: the rate of the timecode's frame field :func:`write_weights` writes (Live Link Face's 60)
 TIMECODE_RATE = 60.0
+#: the timecode rates a take's frame field is matched against (:func:`timecode_rate`)
+TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 120)
 _TOLERANCE = 1e-6   # weights written with 6 decimals may round a hair past 1
 
 
@@ -43,23 +45,29 @@ def _error(path, line, msg):
     return FapError(msg, f"{path}:{line}" if line else path)
 
 
-def _timecode_seconds(text: str, fps: float) -> float | None:
-    """``HH:MM:SS:FF(.fff)`` (Live Link Face) -> seconds at ``fps``; None if not a timecode."""
+def _timecode(text: str):
+    """``HH:MM:SS:FF(.fff)`` (Live Link Face) -> (whole seconds, frame field); None if not one."""
     parts = text.strip().split(":")
     if len(parts) != 4:
         return None
     try:
-        h, m, s, f = int(parts[0]), int(parts[1]), int(parts[2]), float(parts[3])
+        return 3600 * int(parts[0]) + 60 * int(parts[1]) + int(parts[2]), float(parts[3])
     except ValueError:
         return None
-    return 3600 * h + 60 * m + s + f / fps
 
 
-def read_weights(path, default_fps: float = TIMECODE_RATE) -> tuple[list, np.ndarray, float]:
+def timecode_rate(frame_fields) -> float:
+    """The timecode rate of a take: the smallest of :data:`TIMECODE_RATES` above every frame field
+    (exact for takes of a second or more; Live Link Face writes 60 or 30)."""
+    top = max(frame_fields, default=0.0)
+    return next((float(r) for r in TIMECODE_RATES if r > top), float(TIMECODE_RATES[-1]))
+
+
+def read_weights(path, default_fps: float = 60.0) -> tuple[list, np.ndarray, float]:
     """(names [k] ARKit names in the file's column order, weights (F, k) float in [0, 1], fps).
 
-    fps: the JSON's ``fps``; for a Live Link CSV the rate its timecodes step at (the frame field
-    counts :data:`TIMECODE_RATE` per second), else ``default_fps``."""
+    fps: the JSON's ``fps``; for a Live Link CSV the rate its timecodes step at (the frame field's
+    rate from :func:`timecode_rate`), else ``default_fps``."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
@@ -112,12 +120,13 @@ def _read_csv(path, text, default_fps):
             raise _error(path, k, f"{bad[0][0]} = {bad[0][1]:g} is outside [0, 1]")
         out.append(values)
         if tc >= 0:
-            stamps.append(_timecode_seconds(row[tc], TIMECODE_RATE))
+            stamps.append(_timecode(row[tc]))
     if not out:
         raise _error(path, 2, "no frames")
     fps = default_fps
     if len(stamps) > 2 and all(s is not None for s in stamps):
-        step = np.median(np.diff(stamps))
+        rate = timecode_rate([f for _, f in stamps])
+        step = np.median(np.diff([sec + f / rate for sec, f in stamps]))
         if step > 0:
             fps = float(round(1.0 / step, 3))
     return names, np.clip(np.asarray(out, dtype=float), 0.0, 1.0), fps

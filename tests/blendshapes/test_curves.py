@@ -22,14 +22,14 @@ def _live_link_row(frame: int, weights: dict) -> str:
 
 def test_live_link_csv_is_read_with_its_rate(tmp_path):
     p = tmp_path / "take.csv"
-    rows = [_live_link_row(2 * k, {"jawOpen": k / 10, "eyeBlinkLeft": 1.0}) for k in range(6)]
-    # frame field at 60 per second stepping by 2: 30 fps (the milliseconds are sub-frame noise)
-    rows = [f"12:00:01:{2 * k:02d}.000" + r[r.index(","):] for k, r in enumerate(rows)]
+    rows = [_live_link_row(2 * k, {"jawOpen": k / 40, "eyeBlinkLeft": 1.0}) for k in range(40)]
+    # a 60 Hz timecode stepping by 2 frames over 1.3 s: 30 fps
+    rows = [f"12:00:{1 + 2 * k // 60:02d}:{2 * k % 60:02d}.000" + r[r.index(","):] for k, r in enumerate(rows)]
     p.write_text(LIVE_LINK_HEADER + "\n" + "\n".join(rows) + "\n")
     names, w, fps = read_weights(p)
     assert names == list(ARKIT_NAMES)
     assert fps == pytest.approx(30.0)
-    assert np.allclose(w[:, names.index("jawOpen")], np.arange(6) / 10)
+    assert np.allclose(w[:, names.index("jawOpen")], np.arange(40) / 40)
     assert np.all(w[:, names.index("eyeBlinkLeft")] == 1.0)
 
 
@@ -107,3 +107,13 @@ def test_a_bad_template_is_named(tmp_path):
     p.write_text("shapes:\n  jawOpn: {lids: {19: 10}}\n")
     with pytest.raises(TemplateError, match="unknown name 'jawOpn'"):
         load_arkit_mapping(p, names=("jawOpen",))
+
+
+def test_a_30_hz_timecode_is_told_from_a_60_hz_one(tmp_path):
+    from faceforge.blendshapes.curves import timecode_rate
+
+    assert timecode_rate([0.0, 12.5, 29.9]) == 30.0 and timecode_rate([0.0, 59.2]) == 60.0
+    p = tmp_path / "t30.csv"
+    rows = [f"00:00:{k // 30:02d}:{k % 30:02d}.000,61," + ",".join(["0"] * 61) for k in range(0, 90, 1)]
+    p.write_text(LIVE_LINK_HEADER + "\n" + "\n".join(rows) + "\n")
+    assert read_weights(p)[2] == pytest.approx(30.0)
