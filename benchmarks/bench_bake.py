@@ -154,20 +154,30 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdirs", type=Path, nargs="*", default=None)
     ap.add_argument("--round-trip-only", action="store_true", help="keep the heads of the last results.json")
+    ap.add_argument("--heads", nargs="*", default=None, help="rebake only these heads (the others and the "
+                    "round trips kept from the last results.json)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as t:
         tmp = Path(t)
         works = {p.name: p for p in (args.workdirs or [])}
+        last = json.loads((HERE / "results" / "bake.json").read_text()) if (
+            args.round_trip_only or args.heads) else {}
         for name, rel in SAMPLES.items():
+            if args.heads and name not in args.heads:
+                continue
             if name not in works and not (args.round_trip_only and name != "makehuman"):
                 works[name] = tmp / name
                 cli(works[name], "fit", ROOT / "samples" / rel)
                 cli(works[name], "bind")
         if args.round_trip_only:
-            out = {"heads": json.loads((HERE / "results" / "bake.json").read_text())["heads"]}
+            out = {"heads": last["heads"]}
         else:
-            out = {"heads": {n: bake_head(n, works[n], tmp) for n in SAMPLES if n in works}}
-        if "makehuman" in works:
+            out = {"heads": {**last.get("heads", {}),
+                             **{n: bake_head(n, works[n], tmp) for n in SAMPLES
+                                if n in works and (not args.heads or n in args.heads)}}}
+        if args.heads:
+            out["round_trip_makehuman"] = last.get("round_trip_makehuman")
+        elif "makehuman" in works:
             out["round_trip_makehuman"] = round_trips(works["makehuman"], tmp)
         write_results("bake", out)
         return out
