@@ -3,8 +3,8 @@
 Run: ``python benchmarks/bench_units.py [--workdir DIR]`` (DIR: the MakeHuman sample fitted and
 bound; default: fitted and bound here in a temporary folder through the CLI).
 
-For each unit of ``tests/data/makehuman_units.npz`` (units that one or a few muscles or the jaw
-produce; CC0, tests/data/README.md) the activation solve (:mod:`faceforge.blendshapes.solve`)
+For each unit of :data:`CHOSEN` (MakeHuman's units that one or a few muscles or the jaw produce,
+from ``tests/data/mh_head_expression_units_caucasian.npz``; CC0, tests/data/README.md) the activation solve (:mod:`faceforge.blendshapes.solve`)
 finds the contractions + jaw pose whose settled skin best matches the unit's displacement field
 over all the head's vertices, and reports the cosine of the two fields and the magnitude ratio
 ``|result| / |unit|`` (targets: cosine >= 0.8, ratio 0.8-1.25), the residual after the linear
@@ -31,7 +31,13 @@ sys.path.insert(0, str(ROOT))
 
 from _util import write_results  # noqa: E402
 
-UNITS = ROOT / "tests" / "data" / "makehuman_units.npz"
+UNITS = ROOT / "tests" / "data" / "mh_head_expression_units_caucasian.npz"
+#: the units one or a few muscles or the jaw produce (the eye units are the lids', not muscles')
+CHOSEN = ("mouth-open", "mouth-corner-puller", "eyebrows-left-inner-up", "eyebrows-right-inner-up",
+          "eyebrows-left-down", "eyebrows-right-down", "eyebrows-left-extern-up", "eyebrows-right-extern-up",
+          "eyebrows-left-up", "eyebrows-right-up", "mouth-depression", "mouth-elevation", "mouth-pursing",
+          "mouth-retraction", "mouth-protusion", "nose-left-elevation", "nose-right-elevation",
+          "mouth-upward-retraction")
 MESH = ROOT / "samples" / "makehuman" / "mh_head_default.obj"
 
 
@@ -55,11 +61,12 @@ def main(argv=None) -> dict:
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--passes", type=int, default=2)
     args = ap.parse_args(argv)
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.blendshapes.rigsolve import field_observer, settler
     from faceforge.blendshapes.solve import control_space, field_agreement, jacobian, solve_activations
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages.animate import BoundHead, mapping_template_path
+    from faceforge.animation.rig import BoundHead
+    from faceforge.pipeline.stages.animate import mapping_template_path
 
     with tempfile.TemporaryDirectory() as tmp:
         work = args.workdir or fitted_workdir(Path(tmp))
@@ -76,8 +83,9 @@ def main(argv=None) -> dict:
         J = jacobian(simulate, observe, space)
         t_jac = time.perf_counter() - t0
         units = np.load(UNITS)
+        names = [str(n) for n in units["names"]]
         rows, fields = {}, {}
-        for name, delta in zip(units["names"], units["deltas"]):
+        for name, delta in ((n, units["deltas"][names.index(n)]) for n in CHOSEN):
             t0 = time.perf_counter()
             res = solve_activations(delta.astype(float).ravel(), J, space, simulate, observe, passes=args.passes)
             cos, ratio = field_agreement(res.observed, delta)

@@ -13,7 +13,7 @@ A mapping entry says how one shape is made on a head:
     the muscles (``head.controls`` names) and jaw DOFs (``jaw.pitch``, ``jaw.yaw``,
     ``jaw.protrusion``) the solve may use (FACS: the muscles of the shape's action units);
 ``lids: {FAP: IRISD}``
-    eyelid FAPs 19-22, laid over the settled skin kinematically (:mod:`faceforge.anatomy.eyelids`);
+    eyelid FAPs 19-22, laid over the settled skin kinematically (:mod:`faceforge.animation.eyelids`);
 ``eye: {side: L|R, yaw: deg, pitch: deg}``
     turn that eye's eyeball piece (yaw towards +X, the subject's left; pitch up) when the mesh
     has one (:mod:`faceforge.blendshapes.eyes`), else the shape is not made;

@@ -49,7 +49,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         each shape uses its ``controls`` of it); probes : {FAP: Probe} of the head;
     simulate : (c (k, m), jaw (k, 3)) -> (k, n, 3) settled skin; observe_probes : list of Probe ->
         (frames -> (k, len) FAPU) (:func:`faceforge.blendshapes.rigsolve.probe_observer` bound to rest);
-    lids : faceforge.anatomy.eyelids.Eyelids or None (then lid-only shapes are not made);
+    lids : faceforge.animation.eyelids.Eyelids or None (then lid-only shapes are not made);
     eyes : {side: (vertex ids, centre)} (:func:`faceforge.blendshapes.eyes.eye_pieces`) or None.
     """
     from faceforge.blendshapes.eyes import rotate_eye

@@ -4,7 +4,7 @@ A mesh has an eyeball piece when a connected component other than the skin (the 
 at a pupil FDP (3.5 the subject's left, 3.6 the right): its vertices nearest the pupil within
 half the eye's corner distance (3.7-3.11, 3.8-3.12). The piece turns about the eyeball's centre:
 :data:`EYEBALL_RADIUS` x half the corner distance (a 12 mm eye in a 30 mm fissure, as
-:mod:`faceforge.anatomy.eyelids` takes it) behind the piece's centroid along the face's forward
+:mod:`faceforge.animation.eyelids` takes it) behind the piece's centroid along the face's forward
 axis (+Z). ``yaw`` turns the gaze towards +X (the subject's left), ``pitch`` up. The pieces
 have no skin attached: nothing else moves (the lids do not follow the gaze).
 

@@ -1,11 +1,11 @@
 """The activation solve on a bound head: the ``simulate`` and ``observe`` callables of
-:mod:`faceforge.blendshapes.solve` built from a rig (:class:`faceforge.anatomy.animate.Rig`),
+:mod:`faceforge.blendshapes.solve` built from a rig (:class:`faceforge.animation.playback.Rig`),
 and the two kinds of target the bake and the benchmarks use:
 
 * a **displacement field** over the user's vertices (e.g. a MakeHuman expression unit), in the
   user's frame and units: :func:`field_observer`;
 * **landmark motions in FAPU** (FAP values): each FAP's FDP displacement along the FAP's
-  direction, as calibrate measures it (:class:`faceforge.anatomy.calibrate.Probe`):
+  direction, as calibrate measures it (:class:`faceforge.animation.calibrate.Probe`):
   :func:`probe_observer`.
 """
 
@@ -13,13 +13,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.anatomy.animate import static_poses
-from faceforge.anatomy.calibrate import measure
+from faceforge.animation.calibrate import measure
+from faceforge.animation.playback import static_poses
 
 
 def settler(rig, fps: float, settle: int):
     """``simulate(contractions (k, m), jaw (k, 3)) -> (k, n, 3)``: each pose settled from rest
-    (:func:`faceforge.anatomy.animate.static_poses`, ``settle`` frames at ``fps``)."""
+    (:func:`faceforge.animation.playback.static_poses`, ``settle`` frames at ``fps``)."""
 
     def simulate(c, jaw):
         return static_poses(rig, c, jaw, fps, settle=settle)
@@ -46,7 +46,7 @@ def field_observer(rest: np.ndarray, user_index: np.ndarray, user_rotation: np.n
 
 def probe_observer(rest: np.ndarray, probes: list):
     """``observe(frames (k, n, 3)) -> (k, len(probes))``: each probe's FDP motion in FAPU
-    (:func:`faceforge.anatomy.calibrate.measure`)."""
+    (:func:`faceforge.animation.calibrate.measure`)."""
     rest = np.asarray(rest, dtype=float)
 
     def observe(frames):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceforge.anatomy.calibrate import Probe
+from faceforge.animation.calibrate import Probe
 from faceforge.blendshapes.arkit import ShapeSpec
 from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
 from faceforge.blendshapes.rigsolve import probe_observer

@@ -11,11 +11,17 @@ stage's format, plus ``weights (F, k)`` and ``names``) and ``report.json``.
 against the baked shapes (:func:`faceforge.blendshapes.curves.solve_weights`, bounded least
 squares in [0, 1]) and writes them; with ``-o x.glb`` (or ``x.usda``) the file carries the named
 targets (USD blend shapes) and that weights animation instead of one target per frame.
+
+Both options are added to the ``animate`` command from here (:func:`extend_animate`: two click
+options and a callback around the command's own), so the animate stage module knows nothing of
+blendshapes and the import direction stays one way (arkit -> animate).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+
+import click
 
 from faceforge.pipeline import Stage, register_stage
 
@@ -24,10 +30,12 @@ def run_arkit(ctx):
     """Play the take in ``ctx.params['arkit_take']`` through the baked shapes' controls."""
     import numpy as np
 
-    from faceforge.anatomy.animate import Timings, check_animation, play
+    from faceforge.animation.checks import check_animation
+    from faceforge.animation.playback import Timings, play, warm_up
+    from faceforge.animation.rig import BoundHead
     from faceforge.blendshapes.curves import read_weights
     from faceforge.io.stagefiles import load_npz, save_json, save_npz
-    from faceforge.pipeline.stages.animate import BoundHead, _mapping, warm_up
+    from faceforge.pipeline.stages.animate import _mapping
 
     take = ctx.param("arkit_take")
     names, weights, fps = read_weights(take)
@@ -80,8 +88,9 @@ def run_arkit(ctx):
 
 ARKIT = register_stage(Stage(
     name="arkit", deps=("fit", "bind", "bake"),
-    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
-    inputs=("arkit_take", "animate_mapping", "animate.fap_mapping"), outputs=("animation.npz", "report.json"),
+    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
+    inputs=("arkit_take", "animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"),
+    outputs=("animation.npz", "report.json"),
     version="1", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
 
 
@@ -127,3 +136,77 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
                 f"({int(made.size)} named targets, {len(w)} frames of weights)")
         return True
     return False
+
+
+def _arkit_or_curves(app, orig, arkit, curves, kw):
+    """The ``animate`` command with ``--arkit`` / ``--curves`` (module docstring); ``orig`` its own
+    callback, ``kw`` its other arguments."""
+    from faceforge.exceptions import StageError
+    from faceforge.pipeline.stages.animate import export_outputs
+    from faceforge.pipeline.stages.bake import bake_params
+
+    output, preview = kw.get("output"), kw.get("preview")
+    if arkit is not None and any(kw.get(k) is not None for k in ("fap", "expression", "visemes")):
+        raise StageError("give exactly one of --fap FILE, --expression NAME or --visemes V1,V2,..., "
+                         "or --arkit FILE")
+    if curves and Path(curves).suffix.lower() not in (".csv", ".json"):
+        raise StageError("--curves writes .csv or .json", curves)
+    shapes_out = bool(curves) and bool(output) and Path(output).suffix.lower() in (".glb", ".usda", ".usd")
+    from faceforge.io.export import check_output, protect_inputs
+
+    params = app.workspace.load_params()
+    inputs = {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"), "FAP track": kw.get("fap"),
+              "ARKit take": arkit}
+    if curves:                # checked before anything runs, like -o and --preview
+        protect_inputs(curves, {**inputs, "-o output": output, "--preview": preview})
+    if arkit is None:
+        orig(**{**kw, "output": None if shapes_out else output})
+        write_curves(app, "animate", curves, output if shapes_out else None)
+        return
+    from faceforge.blendshapes.curves import read_weights
+
+    if output:
+        check_output(output, inputs)
+    if preview:
+        protect_inputs(preview, {**inputs, "-o output": output})
+    read_weights(arkit)       # a bad take fails before anything runs
+    app.run_stage("arkit", params={**bake_params(app, "arkit", None), "arkit_take": str(arkit)},
+                  force=kw.get("force", False))
+    if curves:
+        write_curves(app, "arkit", curves, output if shapes_out else None)
+    export_outputs(app, None if shapes_out else output, preview, kw.get("preview_frames"), stage="arkit")
+
+
+def extend_animate(command) -> None:
+    """Add ``--arkit FILE`` and ``--curves FILE`` to the click ``animate`` command (in place)."""
+    import functools
+
+    if any(p.name == "arkit" for p in command.params):
+        return
+    at = next((i for i, p in enumerate(command.params) if p.name == "output"), len(command.params))
+    command.params[at:at] = [
+        click.Option(["--arkit"], type=click.Path(dir_okay=False, exists=True), default=None,
+                     help="Play ARKit blendshape weights instead (Live Link Face CSV, or CSV/JSON of name -> "
+                          "weight per frame) through the muscles of the baked shapes (`faceforge bake`)."),
+        click.Option(["--curves"], type=click.Path(dir_okay=False), default=None,
+                     help="Also write the track's per-frame ARKit weights (.csv Live Link Face, .json), "
+                          "solved against the baked shapes; with -o x.glb (or .usda) the file carries the "
+                          "named shapes + weights.")]
+    orig = command.callback
+
+    @functools.wraps(orig)
+    def callback(arkit=None, curves=None, **kw):
+        if arkit is None and curves is None:
+            return orig(**kw)
+        return _arkit_or_curves(click.get_current_context().obj, orig, arkit, curves, kw)
+
+    command.callback = callback
+
+
+def _extend():
+    from faceforge.pipeline.stages.animate import animate_command
+
+    extend_animate(animate_command)
+
+
+_extend()

@@ -48,7 +48,9 @@ def run_bake(ctx):
     from faceforge.blendshapes.rigsolve import probe_observer, settler
     from faceforge.blendshapes.solve import control_space
     from faceforge.io.stagefiles import save_json, save_npz
-    from faceforge.pipeline.stages.animate import BoundHead, _mapping, calibration_probes
+    from faceforge.animation.calibrate_head import calibration_probes
+    from faceforge.animation.rig import BoundHead
+    from faceforge.pipeline.stages.animate import _mapping
 
     t_start = time.perf_counter()
     kinds = Path(ctx.param("bake_shapes")).read_text().split()
@@ -128,7 +130,7 @@ def _presets(ctx, head, mapping, kind, simulate, lids, names, frames, c, jaw, li
     append them to the shape lists."""
     import numpy as np
 
-    from faceforge.pipeline.stages.animate import controls
+    from faceforge.animation.controls import controls
 
     table = mapping.visemes if kind == "visemes" else mapping.expressions
     if not table:
@@ -155,7 +157,7 @@ def _check_shapes(head, frames, jaw, names, made, report) -> None:
     """Per made shape: peak displacement (skin units) and the physical checks at full weight."""
     import numpy as np
 
-    from faceforge.anatomy.animate import check_animation
+    from faceforge.animation.checks import check_animation
 
     for i, name in enumerate(names):
         if not made[i]:
@@ -182,8 +184,10 @@ def _sheet(path, head, frames, names, made) -> None:
 
 BAKE = register_stage(Stage(
     name="bake", deps=("fit", "bind"),
-    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
-    inputs=("bake_shapes", "arkit_mapping", "animate_mapping", "animate.fap_mapping"),
+    # the bound head rebuilds the muscles from the template (faceforge.animation.rig.muscle_system)
+    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
+    inputs=("bake_shapes", "arkit_mapping", "animate_mapping", "animate.fap_mapping", "template.skull",
+            "template.muscle_map"),
     outputs=("shapes.npz", "report.json", "shapes.png"), version="1", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
