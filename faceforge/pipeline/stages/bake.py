@@ -218,7 +218,7 @@ def export_shapes(app, output: str, weights=None, fps: float = 25.0, names_only=
     from faceforge.io.export import polygons_from_fan, up_axis_of
     from faceforge.io.mesh import load_mesh
     from faceforge.io.stagefiles import load_npz
-    from faceforge.pipeline.stages.fit import user_rotation
+    from faceforge.fit.orientation import user_rotation
 
     src = app.workspace.stage_dir("bake") / "shapes.npz"
     suffix = Path(output).suffix.lower()
