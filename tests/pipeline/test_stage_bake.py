@@ -8,7 +8,10 @@ import numpy as np
 import yaml
 
 from faceforge.blendshapes.arkit import ARKIT_NAMES
-from tests.pipeline.test_stage_animate import SETS, patched, workdir  # noqa: F401  (fixtures)
+from tests.pipeline.test_stage_animate import SETS, ConfigSpy, patched, undeclared_reads, workdir  # noqa: F401
+
+
+READS = {}
 
 
 def _run(name, workdir, params, deps):
@@ -22,8 +25,9 @@ def _run(name, workdir, params, deps):
         shutil.rmtree(out)
     out.mkdir()
     sets = (*SETS, "animate.calibrate.settle_frames=12")
-    ctx = StageContext(name=name, config=load_config(None, sets), params=params, out_dir=out, workdir=workdir,
-                       deps=deps)
+    config = ConfigSpy(load_config(None, sets))
+    READS[name] = config.read
+    ctx = StageContext(name=name, config=config, params=params, out_dir=out, workdir=workdir, deps=deps)
     get_stage(name).run(ctx)
     return out
 
@@ -66,3 +70,4 @@ def test_bake_then_play_the_baked_shape_back(workdir, patched, tmp_path):  # noq
     assert a["frames"].shape[0] == 12
     assert np.allclose(a["jaw"][-1], d["jaw"][j])
     assert np.abs(a["frames"][-1] - d["shapes"][j]).max() <= 1e-6 * np.ptp(d["neutral"])
+    assert not undeclared_reads("bake", READS["bake"]) and not undeclared_reads("arkit", READS["arkit"])
