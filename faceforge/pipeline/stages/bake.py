@@ -38,134 +38,27 @@ KINDS = ("arkit", "visemes", "expressions")
 
 def run_bake(ctx):
     """Settle each selected shape, check it, write shapes.npz, report.json, shapes.png."""
-    import time
-
     import numpy as np
 
-    from faceforge.blendshapes.arkit import ARKIT_NAMES, load_arkit_mapping, mirror_name
-    from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
-    from faceforge.blendshapes.eyes import eye_pieces
-    from faceforge.blendshapes.rigsolve import probe_observer, settler
-    from faceforge.blendshapes.solve import control_space
-    from faceforge.io.stagefiles import save_json, save_npz
-    from faceforge.animation.calibrate_head import calibration_probes
     from faceforge.animation.rig import BoundHead
+    from faceforge.blendshapes.arkit import load_arkit_mapping
+    from faceforge.blendshapes.head import bake_head
+    from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.pipeline.stages.animate import _mapping
 
-    t_start = time.perf_counter()
     kinds = Path(ctx.param("bake_shapes")).read_text().split()
     specs = load_arkit_mapping(ctx.param("arkit_mapping")) if "arkit" in kinds else {}
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, mapping_path = _mapping(ctx)
-    fps = float(ctx.config.get("animate.fps"))
-    settle = int(ctx.config.get("animate.calibrate.settle_frames"))
-    settled = settler(head.rig, fps, settle)
-    poses = [0]
-
-    def simulate(c, j):
-        poses[0] += len(c)
-        return settled(c, j)
-
     lids = head.eyelids(ctx.config)
-    if lids is not None and not lids.fields:
-        lids = None                      # no eye with its four lid FDPs: lid shapes are not made
-    simulate(np.zeros((1, len(head.controls))), np.zeros((1, 3)))   # compile outside the timing
-    t0, cpu0 = time.perf_counter(), time.process_time()
-    names, frames, c, jaw, lid_faps, gaze, made, report = [], [], [], [], [], [], [], {}
-    out = {"mapping": mapping_path, "settle_frames": settle, "shapes": report}
-    if "arkit" in kinds:
-        space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
-                              mapping.max_contraction)
-        eyes = eye_pieces(head.rest, head.faces, head.landmarks)
-        if eyes:
-            ctx.log(f"eyeball pieces: {', '.join(f'{s} ({len(v[0])} vertices)' for s, v in eyes.items())}")
-        baked = bake_shapes(specs, space, calibration_probes(mapping, head), simulate,
-                            lambda probes: probe_observer(head.rest, probes), head.rest, lids, eyes, log=ctx.log)
-        index = {n: i for i, n in enumerate(baked.names)}
-        for name in ARKIT_NAMES:
-            i = index.get(name)
-            names.append(name)
-            made.append(i is not None)
-            frames.append(baked.frames[i] if i is not None else head.rest)
-            c.append(baked.contractions[i] if i is not None else np.zeros(len(head.controls)))
-            jaw.append(baked.jaw[i] if i is not None else np.zeros(3))
-            lid_faps.append(baked.faps[i] if i is not None else np.zeros(68))
-            gaze.append(baked.gaze[i] if i is not None else np.zeros(4))
-        report.update(baked.report)
-        out.update(arkit_mapping=str(ctx.param("arkit_mapping")), jacobian_seconds=round(baked.jacobian_seconds, 2),
-                   solve_seconds=round(baked.solve_seconds, 2))
-    for kind in ("visemes", "expressions"):
-        if kind in kinds:
-            _presets(ctx, head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_faps, made, report)
-            gaze += [np.zeros(4)] * (len(names) - len(gaze))
-    out["bake_seconds"] = round(time.perf_counter() - t0, 2)
-    out["bake_cpu_seconds"] = round(time.process_time() - cpu0, 2)   # all threads: honest on a busy machine
-    out["poses_settled"] = poses[0] - 1                                # the first compiles, outside the timing
-    out["frames_simulated"] = out["poses_settled"] * settle
-    frames = np.stack(frames)
-    _check_shapes(head, frames, np.stack(jaw), names, made, report)
-    user = head.to_user(np.concatenate([head.rest[None], frames])).astype(np.float32)
-    deltas = {n: user[i + 1] - user[0] for i, n in enumerate(names) if made[i]}
-    pairs = [(n, mirror_name(n)) for n in names if mirror_name(n) != n and n.endswith(("Left", "_L"))]
-    out["mirror_rel_diff"] = mirror_agreement(user[0] @ np.eye(3), deltas, pairs) if np.array_equal(
-        head.user_rotation, np.eye(3)) else mirror_agreement(user[0] @ head.user_rotation.T,
-                                                             {k: v @ head.user_rotation.T for k, v in deltas.items()},
-                                                             pairs)
-    out["made"] = int(sum(made))
-    out["not_made"] = [n for n, m in zip(names, made) if not m]
-    out["total_seconds"] = round(time.perf_counter() - t_start, 2)
-    ctx.log(f"{out['made']} of {len(names)} shapes made in {out['bake_seconds']:.1f} s "
-            f"({out['bake_cpu_seconds']:.1f} s CPU; {out['poses_settled']} poses settled, "
-            f"{1e3 * out['bake_seconds'] / max(out['frames_simulated'], 1):.1f} ms a frame)"
-            + (f"; not made: {', '.join(out['not_made'])}" if out["not_made"] else ""))
-    save_npz(ctx.out_dir / "shapes.npz", names=np.asarray(names), made=np.asarray(made), neutral=user[0],
-             shapes=user[1:], contractions=np.stack(c), controls=np.asarray(head.controls, dtype=str),
-             jaw=np.stack(jaw), lids=np.stack(lid_faps), gaze=np.stack(gaze))
-    save_json(ctx.out_dir / "report.json", out)
-    _sheet(ctx.out_dir / "shapes.png", head, frames, names, made)
-
-
-def _presets(ctx, head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_faps, made, report):
-    """Settle the FAP mapping's ``visemes`` or ``expressions`` presets (as the sheet stages do) and
-    append them to the shape lists."""
-    import numpy as np
-
-    from faceforge.animation.controls import controls
-
-    table = mapping.visemes if kind == "visemes" else mapping.expressions
-    if not table:
-        ctx.log(f"the mapping has no {kind}: none baked")
-        return
-    faps = np.stack(list(table.values()))
-    cc, jj = controls(mapping, faps, head)
-    poses = simulate(cc, jj)
-    if lids is not None:
-        poses = lids.apply(poses, faps)
-    for i, name in enumerate(table):
-        names.append(name)
-        made.append(True)
-        frames.append(poses[i])
-        c.append(cc[i])
-        jaw.append(jj[i])
-        lid_faps.append(np.where(np.isin(np.arange(1, 69), (19, 20, 21, 22)), faps[i], 0.0))
-        report[name] = {"made": True, "kind": kind[:-1],
-                        "controls": {n: round(float(v), 4) for n, v in zip(head.controls, cc[i]) if v > 1e-4},
-                        "jaw": jj[i].tolist()}
-
-
-def _check_shapes(head, frames, jaw, names, made, report) -> None:
-    """Per made shape: peak displacement (skin units) and the physical checks at full weight."""
-    import numpy as np
-
-    from faceforge.animation.checks import check_animation
-
-    for i, name in enumerate(names):
-        if not made[i]:
-            continue
-        checks = check_animation(head.rest, frames[i:i + 1], head.faces,
-                                 skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
-        report[name]["peak_displacement"] = float(np.linalg.norm(frames[i] - head.rest, axis=1).max())
-        report[name]["checks"] = checks.as_dict()
+    out = bake_head(head, mapping, specs, kinds, float(ctx.config.get("animate.fps")),
+                    int(ctx.config.get("animate.calibrate.settle_frames")),
+                    lids if lids is not None and lids.fields else None, log=ctx.log)
+    save_npz(ctx.out_dir / "shapes.npz", **out.arrays)
+    save_json(ctx.out_dir / "report.json", {"mapping": mapping_path, **({"arkit_mapping": str(
+        ctx.param("arkit_mapping"))} if specs else {}), **out.report})
+    _sheet(ctx.out_dir / "shapes.png", head, out.frames, list(map(str, out.arrays["names"])),
+           np.asarray(out.arrays["made"]))
 
 
 def _sheet(path, head, frames, names, made) -> None:
