@@ -87,19 +87,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     for spec in todo:
         c, jaw, frame, row = np.zeros(m), np.zeros(3), np.asarray(rest, dtype=float), {}
         if spec.faps:
-            rows = [faps.index(f) for f in spec.faps]
-            s_space = sub.subset(spec.controls)
-            Js = J[np.ix_(rows, [used.index(n) for n in s_space.names])]
-            target = np.array([spec.faps[f] for f in spec.faps])
-            res = solve_activations(target, Js, s_space, simulate,
-                                    lambda fr, r=rows: observe(fr)[:, r], passes=passes, ridge=ridge)
-            c, jaw, frame = res.contractions, res.jaw, res.frame
-            achieved = res.observed
-            row["targets"] = {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
-                              for f, t, a in zip(spec.faps, target, achieved)}
-            row["error"] = round(float(np.linalg.norm(achieved - target) / np.linalg.norm(target)), 3)
-            row["residuals"] = [round(r, 3) for r in res.residuals]
-            row["controls"] = {n: round(float(v), 4) for n, v in zip(s_space.names, res.x)}
+            c, jaw, frame, row = _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge)
         f68 = np.zeros(68)
         for f, v in spec.lids.items():
             f68[f - 1] = v
@@ -130,6 +118,23 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
                        np.stack(lid_faps) if lid_faps else np.zeros((0, 68)),
                        np.stack(gazes) if gazes else np.zeros((0, 4)),
                        {name: report[name] for name in specs}, t_jac, t_solve)
+
+
+def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge):
+    """One shape's activations on the rows (its FAPs) and columns (its controls) of the shared
+    Jacobian -> contractions (m,), jaw (3,), settled frame (n, 3), its report row."""
+    rows = [faps.index(f) for f in spec.faps]
+    space = sub.subset(spec.controls)
+    Js = J[np.ix_(rows, [used.index(n) for n in space.names])]
+    target = np.array([spec.faps[f] for f in spec.faps])
+    res = solve_activations(target, Js, space, simulate, lambda fr: observe(fr)[:, rows], passes=passes,
+                            ridge=ridge)
+    row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
+                       for f, t, a in zip(spec.faps, target, res.observed)},
+           "error": round(float(np.linalg.norm(res.observed - target) / np.linalg.norm(target)), 3),
+           "residuals": [round(r, 3) for r in res.residuals],
+           "controls": {n: round(float(v), 4) for n, v in zip(space.names, res.x)}}
+    return res.contractions, res.jaw, res.frame, row
 
 
 def apply_gaze(frames: np.ndarray, gaze: np.ndarray, eyes: dict) -> np.ndarray:
