@@ -261,12 +261,13 @@ def _viseme_file(app, text: str) -> Path:
     return path
 
 
-def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
-    """Write ``-o`` and ``--preview`` from the animate stage's frames."""
+def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None,
+                   stage: str = "animate") -> None:
+    """Write ``-o`` and ``--preview`` from the frames of ``stage`` (animate, or arkit)."""
     from faceforge.exceptions import StageError
     from faceforge.io.stagefiles import load_npz
 
-    d = load_npz(app.workspace.stage_dir("animate") / "animation.npz")
+    d = load_npz(app.workspace.stage_dir(stage) / "animation.npz")
     frames, fps = d["frames"], float(d["fps"])
     mesh = app.workspace.load_params().get("mesh")
     if not mesh:
