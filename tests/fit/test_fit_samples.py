@@ -45,8 +45,9 @@ def test_bone_does_not_swallow_the_skin(fitted, name):
 #: turned by the similarity. Measured with the enhancement flow (the default,
 #: enhancement_flow_steps: 8): MakeHuman 140, 10; ICT 0, 0; MediaPipe 9, 10. With the paper's
 #: exact RBF through every enhancement pair (enhancement_flow_steps: 0): 250, 64; 7, 0; 37, 5.
-TURNED_OVER = {"makehuman": (180, 20), "ict": (3, 3), "mediapipe": (20, 16)}
-TURNED_OVER_EXACT = {"makehuman": (265, 70), "ict": (10, 2), "mediapipe": (42, 8)}
+# the symmetric rig (fit_symmetry) costs a few: MakeHuman 175/18 -> 185/27, MediaPipe exact 42 -> 45
+TURNED_OVER = {"makehuman": (190, 30), "ict": (3, 3), "mediapipe": (20, 16)}
+TURNED_OVER_EXACT = {"makehuman": (265, 70), "ict": (10, 2), "mediapipe": (48, 8)}
 
 
 def turned_over_counts(result, template) -> list:
@@ -124,6 +125,12 @@ def test_fitted_skull_keeps_its_anatomy(fitted, name):
         assert np.isclose(np.linalg.norm(direction), 1.0)
         assert np.all(np.isfinite(point))
     assert result.jaw_axes["pitch"][1][0] > 0.99
+    # the jaw turns about the condyles: below the eyes, behind the outer eye corners, above the
+    # chin (the full map once put MakeHuman's pitch axis above the pupils)
+    skin = extra["landmarks"].as_dict()
+    pivot = result.jaw_axes["pitch"][0]
+    assert pivot[1] < min(skin["3.7"][1], skin["3.12"][1]) - 0.1 * abs(skin["3.7"][0] - skin["3.12"][0])
+    assert pivot[2] < min(skin["3.7"][2], skin["3.12"][2]) and pivot[1] > skin["2.1"][1]
     # Eq. 5: muscle thickness scales with the fitted skull, not with the template
     skull = np.vstack([result.cranium, result.mandible])
     ratio = np.linalg.norm(np.ptp(skull, axis=0)) / extra["template"].skull.diagonal
@@ -199,3 +206,21 @@ def test_same_inputs_same_fit(fitted, template):
         assert n1 == n2
         np.testing.assert_array_equal(v1, v2)
     assert all(report["checks"].values()) and report2["checks"] == report["checks"]
+
+
+@pytest.mark.parametrize("name", HEADS)
+def test_symmetric_skin_gets_a_symmetric_rig(fitted, name):
+    """The three samples are mirror-symmetric skins: their bones and muscle map are made so."""
+    from faceforge.anatomy.fit_symmetry import mirror_plane
+
+    result, report, extra = fitted(name)
+    assert report["symmetric_rig"]["made_symmetric"]
+    mirror, es0 = mirror_plane(extra["landmarks"].as_dict())
+    from faceforge.geometry.closest import TriangleGrid
+
+    for bone, faces in ((result.cranium, result.cranium_faces), (result.mandible, result.mandible_faces)):
+        q, _ = TriangleGrid(mirror(bone)[faces]).closest(bone)
+        assert np.linalg.norm(q - bone, axis=1).mean() < 0.005 * es0
+    for left in [n for n in result.muscle_points if n.endswith("_L")]:
+        assert np.allclose(mirror(result.muscle_points[left]), result.muscle_points[left[:-2] + "_R"])
+    assert abs(result.jaw_axes["pitch"][0] - mirror(result.jaw_axes["pitch"][0][None])[0]).max() < 1e-9 * es0

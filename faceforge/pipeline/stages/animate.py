@@ -39,6 +39,8 @@ add_rule("muscle.damping", Number(0.0, 0.99))
 add_rule("animate.orientation_guard.rounds", Integer(0))           # 0 turns the guard off
 add_rule("animate.orientation_guard.min_area", Number(0.0, 0.95))
 add_rule("animate.skull_guard.collision_reach", Number(0.0, 0.5))    # 0 turns bone collision off
+add_rule("animate.jaw_glide", Number(0.0, 2.0))                      # 0: the jaw only turns
+add_rule("animate.jaw_glide_slope", Number(-30.0, 80.0))
 
 #: FDPs on the lower lip (inner and outer contour), located on the lower side of a cut lip line
 LOWER_LIP_FDPS = ("2.3", "2.8", "2.9", "8.2", "8.7", "8.8")
@@ -144,7 +146,6 @@ class BoundHead:
         except KeyError as exc:
             raise StageError(f"fit.npz lacks the jaw axes ({exc.args[0]}); rerun `faceforge fit`",
                              fit_dir / "fit.npz") from None
-        self.skull = Skull(self.cranium, self.mandible, {}, {}, axes)
         self.landmarks = skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"],
                                                               fit["skin_landmark_positions"])}
         self.fapu = fapu_from_landmarks(skin_lm, fit_dir / "fit.npz")
@@ -152,7 +153,14 @@ class BoundHead:
         chin = skin_lm.get("2.1", self.rest[self.fdp_vertex.get("2.1", 0)])
         self.levers = JawLevers(_lever(chin, axes.pitch_point, axes.pitch_dir),
                                 _lever(chin, axes.yaw_point, axes.yaw_dir))
+        if float(config.get("animate.jaw_glide")) > 0:   # the condyles slide as the mouth opens
+            from faceforge.anatomy.skull import condylar_glide
 
+            axes = replace(axes, glide=condylar_glide(axes.protrusion_dir, axes.pitch_dir, self.levers.pitch,
+                                                      config.get("animate.jaw_glide"),
+                                                      config.get("animate.jaw_glide_slope")))
+
+        self.skull = Skull(self.cranium, self.mandible, {}, {}, axes)
         settings = SolverSettings.from_config(config.get("solver"))
         self.system = system = _muscle_system(fit, self.cranium, self.mandible, settings, config, log)
         self.muscle_names = tuple(system.muscles)
@@ -666,7 +674,8 @@ CALIBRATE = register_stage(Stage(
     # cost a recalibration
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry", "muscle", "animate.fap_mapping", "animate.fps",
-        "animate.skull_guard", "animate.orientation_guard", "animate.calibrate"),
+        "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",
+        "animate.jaw_glide_slope"),
     inputs=("animate.fap_mapping",), digests={"animate.fap_mapping": mapping_digest_without_presets},
     outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="4", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
