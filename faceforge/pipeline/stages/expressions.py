@@ -46,7 +46,7 @@ def run_expressions(ctx):
             raise StageError(f"the mapping has no preset for {', '.join(missing)}", mapping_path)
         return {name: mapping.expressions[name] for name in EXPRESSIONS}
 
-    _preset_sheet(ctx, "expressions", rows, cols=4,
+    _preset_sheet(ctx, "expressions", rows, cols=2,
                   title="the six basic expressions (template presets, full intensity)")
 
 
@@ -64,7 +64,7 @@ def run_visemes(ctx):
             ctx.log(f"the mapping has no shape for {', '.join(missing)}: left out")
         return {name: mapping.visemes[name] for name in VISEMES if name in mapping.visemes}
 
-    _preset_sheet(ctx, "visemes", rows, cols=5, title="the MPEG-4 visemes (template shapes)")
+    _preset_sheet(ctx, "visemes", rows, cols=3, title="the MPEG-4 visemes (template shapes)")
 
 
 def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
@@ -99,12 +99,32 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
                               "jaw": jaw[i].tolist()}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
+    from faceforge.anatomy.fit_tissue import units_per_mm
+
+    mm = units_per_mm(head.landmarks)   # heat maps beside each pose: 0-8 mm of motion
     contact_sheet(ctx.out_dir / f"{stem}.png", poses, head.faces, range(len(names)), 1.0,
-                  cols=cols, panel=3.2, labels=names, region=head.rest[:, 1] >= head.bone_heights()[0],
-                  title=title)
+                  cols=cols, panel=3.2, dpi=120, labels=names, title=title + ", heat map 0-8 mm",
+                  region=_face_region(head), heat=8.0 * mm, heat_label="0-8 mm")
     save_npz(ctx.out_dir / f"{stem}.npz", names=np.asarray(names), poses=head.to_user(poses).astype(np.float32),
              contractions=c, controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", report)
+
+
+def _face_region(head):
+    """(n,) bool: the face to frame in a sheet, brows to chin (FDPs 11.1 / 4.x to 2.1) and
+    between the outer eye corners widened by half the eye distance; the whole head above the
+    bone's lowest point when those landmarks are missing."""
+    import numpy as np
+
+    lm, v = head.landmarks, head.rest
+    need = ("2.1", "3.7", "3.12")
+    if not all(k in lm for k in need):
+        return v[:, 1] >= head.bone_heights()[0]
+    top = max(lm[k][1] for k in ("4.1", "4.2", "4.3", "4.4", "3.7", "3.12") if k in lm)
+    half = 0.5 * abs(lm["3.7"][0] - lm["3.12"][0])
+    cx = 0.5 * (lm["3.7"][0] + lm["3.12"][0])
+    low = lm["2.1"][1] - 0.15 * half
+    return (v[:, 1] >= low) & (v[:, 1] <= top + 0.6 * half) & (np.abs(v[:, 0] - cx) <= 1.5 * half)
 
 
 _SHEET_STAGE = dict(deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
@@ -112,11 +132,11 @@ _SHEET_STAGE = dict(deps=("fit", "bind"), config_keys=("solver", "skin.stiffness
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),
-    version="1", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
+    version="2", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
 
 VISEMES_STAGE = register_stage(Stage(
     name="visemes", **_SHEET_STAGE, outputs=("visemes.png", "visemes.npz", "report.json"),
-    version="1", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
+    version="2", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
 
 
 def _sheet_command(stem: str, help_text: str):
