@@ -224,3 +224,24 @@ def test_symmetric_skin_gets_a_symmetric_rig(fitted, name):
     for left in [n for n in result.muscle_points if n.endswith("_L")]:
         assert np.allclose(mirror(result.muscle_points[left]), result.muscle_points[left[:-2] + "_R"])
     assert abs(result.jaw_axes["pitch"][0] - mirror(result.jaw_axes["pitch"][0][None])[0]).max() < 1e-9 * es0
+
+
+def test_fapu_come_from_the_landmarks_as_given(fitted, tmp_path):
+    """ICT has no eyeballs: its pupils (3.5, 3.6) are given in the eye openings, and snapping
+    puts them on the lids; fit.npz keeps them as given, and the FAPU are measured on those."""
+    import yaml
+
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import fapu_from_landmarks
+    from faceforge.pipeline.stages.fit import write_outputs
+
+    result, report, extra = fitted("ict")
+    write_outputs(tmp_path, result, report, extra)
+    fit = load_npz(tmp_path / "fit.npz")
+    given = dict(zip(fit["given_landmark_ids"], fit["given_landmark_positions"]))
+    snapped = dict(zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"]))
+    doc = yaml.safe_load(SAMPLES["ict"].with_name(SAMPLES["ict"].stem + ".fdp.yaml").read_text())
+    assert np.allclose(given["3.5"], doc["landmarks"]["3.5"]["position"])
+    assert given["3.5"][1] - snapped["3.5"][1] > 0.3, "snapping moved the pupil down onto the lid"
+    ens_given = fapu_from_landmarks({**snapped, **given}).ens0
+    assert ens_given > 1.05 * fapu_from_landmarks(snapped).ens0

@@ -148,7 +148,8 @@ class BoundHead:
                              fit_dir / "fit.npz") from None
         self.landmarks = skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"],
                                                               fit["skin_landmark_positions"])}
-        self.fapu = fapu_from_landmarks(skin_lm, fit_dir / "fit.npz")
+        given = {str(k): p for k, p in zip(fit.get("given_landmark_ids", ()), fit.get("given_landmark_positions", ()))}
+        self.fapu = fapu_from_landmarks({**skin_lm, **given}, fit_dir / "fit.npz")   # FAPU: as given
         self.fdp_vertex = _fdp_vertices(skin_lm, self.rest, bind.get("lip_sides"))
         chin = skin_lm.get("2.1", self.rest[self.fdp_vertex.get("2.1", 0)])
         self.levers = JawLevers(_lever(chin, axes.pitch_point, axes.pitch_dir),

@@ -8,6 +8,8 @@ fit.npz (no pickle; head space, mesh units)
     ``cranium_vertices``, ``cranium_faces``, ``mandible_vertices``, ``mandible_faces``;
     ``landmark_ids (k,) str``, ``landmark_positions (k,3)``: fitted bone landmarks;
     ``skin_landmark_ids (s,) str``, ``skin_landmark_positions (s,3)``: snapped skin landmarks;
+    ``given_landmark_ids``, ``given_landmark_positions``: the positions the file gives, unsnapped
+    (the FAPU are measured on these: a pupil of an eyeless mesh is not on the skin);
     ``target_ids``, ``target_positions``: the bone-landmark targets (tissue depth, refit);
     ``jaw_<axis>_point (3,)``, ``jaw_<axis>_direction (3,)`` for each template jaw axis;
     ``muscle_names (q,) str``, ``muscle_vertices (sum,3)``, ``muscle_vertex_start (q+1,)``,
@@ -262,7 +264,7 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
                                "skin_asymmetry_es0": None if mirror is None else mirror.asymmetry_es0}
     report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
     return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template,
-                            "orientation": orientation}
+                            "orientation": orientation, "raw_landmarks": raw}
 
 
 def _skin_mirror(lm, vertices, tolerance: float, log):
@@ -379,14 +381,30 @@ def head_orientation(setting: str, raw, vertices) -> HeadOrientation:
     return HeadOrientation(frame_rotation(up, forward), axis_name(up), axis_name(forward), source, tilt)
 
 
+def _given_positions(raw, rotation) -> dict:
+    """{fdp: (3,)} the positions the landmark file gives (head space), before snapping: a pupil
+    of an eyeless mesh lies in the eye opening, and snapped it lands on a lid (FAPU use these)."""
+    import numpy as np
+
+    if raw is None:
+        return {}
+    return {str(k): np.asarray(p, dtype=float) @ np.asarray(rotation, dtype=float).T
+            for k, p in zip(raw.ids, raw.position) if np.all(np.isfinite(p))}
+
+
 def write_outputs(out_dir, result, report, extra) -> None:
     """fit.npz, report.json and fit.png into ``out_dir``."""
+    import numpy as np
+
     from faceforge.anatomy.fit_report import npz_arrays, save_fit_png
     from faceforge.io.stagefiles import save_json, save_npz
 
     checked, lm = extra["checked"], extra["landmarks"]
     out_dir = Path(out_dir)
+    given = _given_positions(extra.get("raw_landmarks"), extra["orientation"].rotation)
     save_npz(out_dir / "fit.npz", user_rotation=extra["orientation"].rotation,
+             given_landmark_ids=np.asarray(list(given), dtype=str),
+             given_landmark_positions=np.asarray(list(given.values()), dtype=float).reshape(-1, 3),
              **npz_arrays(result, checked.vertices, checked.faces, checked.user_to_internal, lm,
                           extra["template"].layers))
     save_json(out_dir / "report.json", report)
