@@ -28,8 +28,8 @@ import expr_measure as em  # noqa: E402
 
 def head_figures(workdir: Path) -> dict:
     """All figures of one head."""
-    from faceforge.anatomy import fit_tissue
-    from faceforge.anatomy.fit_symmetry import mirror_plane
+    from faceforge.anatomy import tissue as fit_tissue
+    from faceforge.fit.symmetry import mirror_plane
 
     t0 = time.perf_counter()
     head, mapping, _ = em.load_head(workdir)

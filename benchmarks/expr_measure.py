@@ -3,8 +3,8 @@
 expression the muscles used and the peak displacement by region.
 
 All poses are settled as ``faceforge expressions`` settles them
-(:func:`faceforge.anatomy.animate.static_poses`). Distances in mm use the fit's own scale
-(:func:`faceforge.anatomy.fit_tissue.units_per_mm`); FAP-unit figures the head's FAPU.
+(:func:`faceforge.animation.playback.static_poses`). Distances in mm use the fit's own scale
+(:func:`faceforge.anatomy.tissue.units_per_mm`); FAP-unit figures the head's FAPU.
 """
 
 from __future__ import annotations
@@ -31,12 +31,13 @@ REGIONS = {"brows": ("4.1", "4.2", "4.3", "4.4", "4.5", "4.6"),
 def load_head(workdir: Path, sets=(), mapping_path=None):
     """(BoundHead, FapMapping, config) of a fitted and bound workdir; the mapping the
     workdir plays (its calibration when there is one, else the template) unless given."""
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.fap_mapping import load_fap_mapping
+    from faceforge.animation.rig import BoundHead
     from faceforge.io.config import load_config
     from faceforge.pipeline.stages import animate as stage
 
     config = load_config(remembered=workdir / "config.yaml", sets=list(sets))
-    head = stage.BoundHead(workdir / "fit", workdir / "bind", config)
+    head = BoundHead(workdir / "fit", workdir / "bind", config)
     head._bench_lids = head.eyelids(config)
     if mapping_path is None:
         cal = stage.calibrated_mapping_path(workdir)
@@ -52,10 +53,10 @@ def load_head(workdir: Path, sets=(), mapping_path=None):
 def settle(head, mapping, faps: np.ndarray, settle_frames: int = 30, lids=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Settled skins (k, n, 3), contractions (k, m) and jaw (k, 3) for FAP rows (k, 68),
     eyelids laid over."""
-    from faceforge.anatomy.animate import static_poses
-    from faceforge.pipeline.stages import animate as stage
+    from faceforge.animation.controls import controls
+    from faceforge.animation.playback import static_poses
 
-    c, jaw = stage.controls(mapping, faps, head)
+    c, jaw = controls(mapping, faps, head)
     skins = static_poses(head.rig, c, jaw, 25.0, settle=settle_frames)
     lids = lids if lids is not None else getattr(head, "_bench_lids", None)
     if lids is not None:

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.fit import SkinSurface
-from faceforge.anatomy.fit_orbits import (OrbitHollow, fibonacci_directions, find_hollow, fit_hollow,
+from faceforge.fit.surface import SkinSurface
+from faceforge.fit.orbits import (OrbitHollow, fibonacci_directions, find_hollow, fit_hollow,
                                           radial_profile)
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import vertex_normals

@@ -19,7 +19,7 @@ report.json
 ... u, those it has) into ``<workdir>/visemes/`` (``visemes.png``, five columns;
 ``visemes.npz``; ``report.json``).
 
-Each pose is reached as ``calibrate`` reaches its probes (:func:`faceforge.anatomy.animate.
+Each pose is reached as ``calibrate`` reaches its probes (:func:`faceforge.animation.playback.
 static_poses`: eased in, then held for ``animate.calibrate.settle_frames`` frames), with the
 eyelids (``animate.eyelids``) laid over it.
 """
@@ -74,9 +74,12 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     ``jaw``) and ``report.json`` (per pose: checks, largest contraction, jaw DOFs)."""
     import numpy as np
 
-    from faceforge.anatomy.animate import check_animation, static_poses
+    from faceforge.animation.checks import check_animation
+    from faceforge.animation.playback import static_poses
     from faceforge.io.stagefiles import save_json, save_npz
-    from faceforge.pipeline.stages.animate import BoundHead, _mapping, controls
+    from faceforge.animation.controls import controls
+    from faceforge.animation.rig import BoundHead
+    from faceforge.pipeline.stages.animate import _mapping
     from faceforge.viz.contact_sheet import contact_sheet
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
@@ -99,7 +102,7 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
                               "jaw": jaw[i].tolist()}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
-    from faceforge.anatomy.fit_tissue import units_per_mm
+    from faceforge.anatomy.tissue import units_per_mm
 
     mm = units_per_mm(head.landmarks)   # heat maps beside each pose: 0-8 mm of motion
     contact_sheet(ctx.out_dir / f"{stem}.png", poses, head.faces, range(len(names)), 1.0,
@@ -127,8 +130,9 @@ def _face_region(head):
     return (v[:, 1] >= low) & (v[:, 1] <= top + 0.6 * half) & (np.abs(v[:, 0] - cx) <= 1.5 * half)
 
 
-_SHEET_STAGE = dict(deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
-                    inputs=("animate_mapping", "animate.fap_mapping"))
+_SHEET_STAGE = dict(deps=("fit", "bind"),
+                    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
+                    inputs=("animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"))
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),

@@ -1,0 +1,89 @@
+"""Fitting a head from its files: the mesh and its landmarks, checked and turned into head
+space, then :func:`faceforge.fit.head.fit_head` with the template (§7)."""
+
+from __future__ import annotations
+
+from faceforge.fit.orientation import head_orientation
+from faceforge.fit.template import Template
+
+
+def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lambda m: None):
+    """Load and check the skin and its landmarks, fit ``template``.
+
+    Returns ``(FitResult, report dict, extra)``; ``extra`` holds the checked mesh and the
+    landmarks for :func:`write_outputs`.
+    """
+    import time
+
+    from faceforge.fit.head import FitSettings, fit_head
+    from faceforge.fit.surface import SkinSurface, orient_outward
+    from faceforge.fit.report import build_report
+    from faceforge.io.landmarks import load_landmarks, read_landmarks
+    from faceforge.io.mesh import load_mesh
+    from faceforge.io.mesh_check import check_mesh
+
+    t = time.perf_counter()
+    v, f, _ = load_mesh(mesh_path)
+    checked = check_mesh(v, f, str(mesh_path))
+    raw = read_landmarks(lm_path)
+    orientation = head_orientation(fit_config.get("orientation", "auto"), raw, v)
+    if not orientation.identity:   # exact (a signed permutation): same head space bits as an upright mesh
+        checked.vertices = checked.vertices @ orientation.rotation.T
+        log(f"{mesh_path}: {orientation.describe()}")
+    checked.faces = orient_outward(checked.vertices, checked.faces)   # stage files: outward winding
+    for w in checked.report.warnings:
+        log(f"{mesh_path}: {w}")
+    lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
+                        rotation=None if orientation.identity else orientation.rotation, raw=raw)
+    t_load = time.perf_counter() - t
+    t = time.perf_counter()
+    settings = FitSettings.from_config(fit_config)
+    skin = SkinSurface.build(checked.vertices, checked.faces)
+    mirror = _skin_mirror(lm, checked.vertices, float(fit_config.get("symmetric_tolerance", 0.01)), log)
+    try:
+        result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles,
+                          mirror=mirror)
+    except ValueError as exc:   # too few usable landmark pairs, degenerate configuration
+        from faceforge.exceptions import LandmarkError
+
+        raise LandmarkError(f"cannot fit the template: {exc}", lm_path) from None
+    t_fit = time.perf_counter() - t
+    t = time.perf_counter()
+    mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
+    report = build_report(result, skin, lm, mesh_report, settings.front_offset_es0)
+    report["settings"] = dict(settings.__dict__)
+    report["orientation"] = orientation.as_dict()
+    report["symmetric_rig"] = {"made_symmetric": mirror is not None,
+                               "skin_asymmetry_es0": None if mirror is None else mirror.asymmetry_es0}
+    report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
+    return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template,
+                            "orientation": orientation, "raw_landmarks": raw}
+
+
+def _skin_mirror(lm, vertices, tolerance: float, log):
+    """The skin's mirror (:class:`faceforge.fit.symmetry.Mirror`) when it is symmetric: its
+    vertices' mirror images lie within ``tolerance`` ES0 of it on average; else None (also
+    for ``tolerance`` 0: never)."""
+    from faceforge.fit.symmetry import mirror_plane, skin_asymmetry
+
+    plane = mirror_plane(dict(zip(lm.ids, lm.positions))) if tolerance > 0 else None
+    if plane is None:
+        return None
+    mirror, es0 = plane
+    off = skin_asymmetry(vertices, mirror) / es0
+    if off > tolerance:
+        log(f"the skin is asymmetric ({off:.3f} ES0 from its mirror image): the rig is fitted as it is")
+        return None
+    mirror.asymmetry_es0 = off
+    return mirror
+
+
+def given_positions(raw, rotation) -> dict:
+    """{fdp: (3,)} the positions the landmark file gives (head space), before snapping: a pupil
+    of an eyeless mesh lies in the eye opening, and snapped it lands on a lid (FAPU use these)."""
+    import numpy as np
+
+    if raw is None:
+        return {}
+    return {str(k): np.asarray(p, dtype=float) @ np.asarray(rotation, dtype=float).T
+            for k, p in zip(raw.ids, raw.position) if np.all(np.isfinite(p))}
