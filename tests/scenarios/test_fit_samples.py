@@ -75,7 +75,8 @@ def test_fitted_bone_turns_over_few_triangles(fitted, template, name):
     assert all(c <= limit for c, limit in zip(counts, TURNED_OVER[name])), (name, counts)
     mesh = SAMPLES[name]
     exact, report, _ = fit_files(mesh, mesh.with_name(mesh.stem + ".fdp.yaml"), template,
-                                 {"enhancement_flow_steps": 0})
+                                 {"enhancement_flow_steps": 0, "symmetric_tolerance": 0})
+    # (the exact RBF's own folds; made symmetric as well it left 2 MakeHuman skin vertices in the bone)
     counts = turned_over_counts(exact, template)
     assert all(c <= limit for c, limit in zip(counts, TURNED_OVER_EXACT[name])), (name, counts)
     assert all(report["checks"].values()) and report["skin_inside_bone"]["count"] == 0
