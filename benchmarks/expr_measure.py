@@ -21,7 +21,7 @@ MIRROR_FAPS = (("raise_cornerlip", 12, 13, 150.0), ("stretch_cornerlip", 6, 7, 1
 
 #: FDPs of each region for the peak displacement (both sides where there are two)
 REGIONS = {"brows": ("4.1", "4.2", "4.3", "4.4", "4.5", "4.6"),
-           "lids": ("3.9", "3.10", "3.13", "3.14"),
+           "lids": ("3.1", "3.2", "3.3", "3.4"),
            "cheeks": ("5.1", "5.2", "5.3", "5.4"),
            "nose": ("9.1", "9.2", "9.4", "9.5"),
            "mouth_corners": ("8.3", "8.4"),

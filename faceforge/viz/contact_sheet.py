@@ -29,6 +29,22 @@ def pick_frames(n_frames: int, count: int = 6, spec: str | None = None) -> list[
     return sorted(set(np.linspace(0, n_frames - 1, count).round().astype(int).tolist()))
 
 
+def face_region(vertices: np.ndarray, landmarks: dict) -> np.ndarray | None:
+    """(n,) bool: the vertices of ``vertices (n, 3)`` (head frame, +Y up) in the face's box:
+    from a little below the chin (FDP 2.1) to above the brows (4.x, else the outer eye corners
+    3.7 / 3.12), within three half eye distances of the eyes' middle; None without those FDPs."""
+    if not all(k in landmarks for k in ("2.1", "3.7", "3.12")):
+        return None
+    lm = {k: np.asarray(p, dtype=float) for k, p in landmarks.items()}
+    v = np.asarray(vertices, dtype=float)
+    top = max(lm[k][1] for k in ("4.1", "4.2", "4.3", "4.4", "3.7", "3.12") if k in lm)
+    half = 0.5 * abs(lm["3.7"][0] - lm["3.12"][0])
+    cx = 0.5 * (lm["3.7"][0] + lm["3.12"][0])
+    keep = (v[:, 1] >= lm["2.1"][1] - 0.15 * half) & (v[:, 1] <= top + 0.6 * half) & \
+        (np.abs(v[:, 0] - cx) <= 1.5 * half)
+    return keep if keep.any() else None
+
+
 def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: float,
                   view: str = "front", cols: int | None = None, title: str | None = None,
                   panel: float = 2.6, dpi: int = 110, focus: bool = False,

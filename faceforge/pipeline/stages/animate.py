@@ -262,6 +262,35 @@ def _viseme_file(app, text: str) -> Path:
     return path
 
 
+def _preview_face(app, first):
+    """(region (n,) bool or None, track name) of a --preview: the face's box from the fit's
+    landmarks (:func:`faceforge.viz.contact_sheet.face_region`; the user's vertex order, head
+    frame ``first (n, 3)``), so a turning head is framed by its face, and the played track's
+    file name from the animate stage's report."""
+    import json
+
+    import numpy as np
+
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.viz.contact_sheet import face_region
+
+    region, track = None, "animation"
+    try:
+        fit = load_npz(app.workspace.stage_dir("fit") / "fit.npz")
+        u2i = np.asarray(fit["skin_user_to_internal"], dtype=np.int64)
+        lm = dict(zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"]))
+        if len(u2i) == len(first):
+            inner = np.zeros((int(u2i.max()) + 1, 3))
+            inner[u2i] = first
+            region = face_region(inner, lm)
+            region = None if region is None else region[u2i]
+        report = json.loads((app.workspace.stage_dir("animate") / "report.json").read_text())
+        track = Path(str(report.get("fap", track))).name
+    except (OSError, KeyError, ValueError) as exc:   # an older workdir: the moving part, untitled
+        app.log(f"animate: preview framed by its motion ({exc})")
+    return region, track
+
+
 def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
     """Write ``-o`` and ``--preview`` from the animate stage's frames."""
     from faceforge.exceptions import StageError
@@ -295,7 +324,9 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
         frames = frames @ rotation.T.astype(frames.dtype)   # drawn upright, in head space
-        contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name, focus=True)
+        region, track = _preview_face(app, frames[0])
+        contact_sheet(preview, frames, faces, idx, fps, focus=region is None, region=region, panel=3.0, dpi=120,
+                      title=f"{track}" + (f" -> {Path(output).name}" if output else ""))
         app.log(f"animate: wrote {preview}")
 
 

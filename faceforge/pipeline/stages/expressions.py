@@ -114,20 +114,12 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
 
 
 def _face_region(head):
-    """(n,) bool: the face to frame in a sheet, brows to chin (FDPs 11.1 / 4.x to 2.1) and
-    between the outer eye corners widened by half the eye distance; the whole head above the
-    bone's lowest point when those landmarks are missing."""
-    import numpy as np
+    """(n,) bool: the face to frame in a sheet (:func:`faceforge.viz.contact_sheet.face_region`),
+    else the whole head above the bone's lowest point."""
+    from faceforge.viz.contact_sheet import face_region
 
-    lm, v = head.landmarks, head.rest
-    need = ("2.1", "3.7", "3.12")
-    if not all(k in lm for k in need):
-        return v[:, 1] >= head.bone_heights()[0]
-    top = max(lm[k][1] for k in ("4.1", "4.2", "4.3", "4.4", "3.7", "3.12") if k in lm)
-    half = 0.5 * abs(lm["3.7"][0] - lm["3.12"][0])
-    cx = 0.5 * (lm["3.7"][0] + lm["3.12"][0])
-    low = lm["2.1"][1] - 0.15 * half
-    return (v[:, 1] >= low) & (v[:, 1] <= top + 0.6 * half) & (np.abs(v[:, 0] - cx) <= 1.5 * half)
+    region = face_region(head.rest, head.landmarks)
+    return region if region is not None else head.rest[:, 1] >= head.bone_heights()[0]
 
 
 _SHEET_STAGE = dict(deps=("fit", "bind"),
