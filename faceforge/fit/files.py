@@ -39,7 +39,7 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)
     skin = SkinSurface.build(checked.vertices, checked.faces)
-    mirror = _skin_mirror(lm, checked.vertices, float(fit_config.get("symmetric_tolerance", 0.01)), log)
+    mirror = _skin_mirror(lm, checked.vertices, float(fit_config.get("symmetric_tolerance", 0.0)), log)
     try:
         result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles,
                           mirror=mirror)
