@@ -178,6 +178,9 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     without it the muscle map points are morphed only and there is no refit. ``mirror``
     (:class:`faceforge.fit.symmetry.Mirror`, for a mirror-symmetric skin): the rig is made
     symmetric about it before the bone is cleared off the skin.
+
+    Length (124 lines): the steps of §7 in the order of the module docstring, each a call; left
+    as it is (issue 24).
     """
     from faceforge.fit import muscles as fit_muscles
 

@@ -262,7 +262,7 @@ def _viseme_file(app, text: str) -> Path:
     return path
 
 
-def _preview_face(app, first):
+def _preview_face(app, first, stage: str = "animate"):
     """(region (n,) bool or None, track name) of a --preview: the face's box from the fit's
     landmarks (:func:`faceforge.viz.contact_sheet.face_region`; the user's vertex order, head
     frame ``first (n, 3)``), so a turning head is framed by its face, and the played track's
@@ -284,19 +284,20 @@ def _preview_face(app, first):
             inner[u2i] = first
             region = face_region(inner, lm)
             region = None if region is None else region[u2i]
-        report = json.loads((app.workspace.stage_dir("animate") / "report.json").read_text())
+        report = json.loads((app.workspace.stage_dir(stage) / "report.json").read_text())
         track = Path(str(report.get("fap", track))).name
     except (OSError, KeyError, ValueError) as exc:   # an older workdir: the moving part, untitled
         app.log(f"animate: preview framed by its motion ({exc})")
     return region, track
 
 
-def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
-    """Write ``-o`` and ``--preview`` from the animate stage's frames."""
+def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None,
+                   stage: str = "animate") -> None:
+    """Write ``-o`` and ``--preview`` from the frames of ``stage`` (animate, or arkit)."""
     from faceforge.exceptions import StageError
     from faceforge.io.stagefiles import load_npz
 
-    d = load_npz(app.workspace.stage_dir("animate") / "animation.npz")
+    d = load_npz(app.workspace.stage_dir(stage) / "animation.npz")
     frames, fps = d["frames"], float(d["fps"])
     mesh = app.workspace.load_params().get("mesh")
     if not mesh:
@@ -324,7 +325,7 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
         frames = frames @ rotation.T.astype(frames.dtype)   # drawn upright, in head space
-        region, track = _preview_face(app, frames[0])
+        region, track = _preview_face(app, frames[0], stage)
         contact_sheet(preview, frames, faces, idx, fps, focus=region is None, region=region, panel=3.0, dpi=120,
                       title=f"{track}" + (f" -> {Path(output).name}" if output else ""))
         app.log(f"animate: wrote {preview}")
