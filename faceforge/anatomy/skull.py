@@ -37,6 +37,9 @@ class JawAxes:
     pitch_dir, yaw_dir, protrusion_dir : (3,) float, unit vectors
     limits : {"pitch": (lo, hi) rad, "yaw": (lo, hi) rad, "protrusion": (lo, hi) units}
     condyles : (2, 3) float, left and right condyle points (on the pitch axis)
+    glide : (3,) float or None, the condyles' glide down the articular eminence per radian of
+        opening (units per rad; :func:`condylar_glide`): a real jaw opens by turning about the
+        condyles while they slide forward and down, so the chin drops rather than swings back
     """
 
     pitch_point: np.ndarray
@@ -46,6 +49,7 @@ class JawAxes:
     protrusion_dir: np.ndarray
     limits: dict
     condyles: np.ndarray
+    glide: np.ndarray | None = None
 
     def clamp(self, pitch: float, yaw: float, protrusion: float) -> tuple[float, float, float]:
         """The pose with each DOF clipped to its limits."""
@@ -138,14 +142,36 @@ def rotation_about_axis(point: np.ndarray, direction: np.ndarray, angle: float) 
 def jaw_transform(skull: Skull, pitch: float, yaw: float, protrusion: float) -> np.ndarray:
     """(4, 4) float64 rigid transform of the mandible for a jaw pose (three DOFs, §6.1).
 
-    ``T = translate(protrusion * protrusion_dir) @ R(yaw_axis, yaw) @ R(pitch_axis, pitch)``.
-    pitch, yaw in radians; protrusion in template units. The zero pose is the identity.
+    ``T = translate(protrusion * protrusion_dir + max(pitch, 0) * glide) @ R(yaw_axis, yaw)
+    @ R(pitch_axis, pitch)``. pitch, yaw in radians; protrusion in template units; ``glide``
+    (JawAxes.glide, absent: none) is the condyles' slide as the mouth opens. The zero pose is
+    the identity.
     """
     j = skull.jaw
     r, t = _compose(_rigid_about_axis(j.yaw_point, j.yaw_dir, float(yaw)),
                     _rigid_about_axis(j.pitch_point, j.pitch_dir, float(pitch)))
-    shift = (float(protrusion) * np.asarray(j.protrusion_dir, dtype=np.float64)).tolist()
+    shift = float(protrusion) * np.asarray(j.protrusion_dir, dtype=np.float64)
+    if j.glide is not None and pitch > 0.0:
+        shift = shift + float(pitch) * np.asarray(j.glide, dtype=np.float64)
+    shift = shift.tolist()
     return _matrix((r, tuple(a + b for a, b in zip(t, shift))))
+
+
+def condylar_glide(protrusion_dir, pitch_dir, lever: float, ratio: float, slope_deg: float) -> np.ndarray:
+    """(3,) glide of the condyles per radian of opening (:attr:`JawAxes.glide`).
+
+    The condyles slide ``ratio * lever`` per radian (``lever``: condyle axis to chin, units;
+    ``ratio`` 0.5: half the chin's arc, about what a real jaw's condyles travel, 15-20 mm for a
+    50 mm opening) along the occlusal plane's forward direction ``protrusion_dir (3,)`` turned
+    ``slope_deg`` downwards about ``pitch_dir (3,)`` (the articular eminence's slope).
+    """
+    f = np.asarray(protrusion_dir, dtype=np.float64)
+    f = f / np.linalg.norm(f)
+    a = np.asarray(pitch_dir, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    down = np.cross(a, f)                     # pitch_dir = subject's left, f forward -> down
+    t = np.radians(float(slope_deg))
+    return float(ratio) * float(lever) * (np.cos(t) * f + np.sin(t) * down)
 
 
 def apply_transform(transform: np.ndarray, points: np.ndarray) -> np.ndarray:

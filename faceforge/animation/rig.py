@@ -83,6 +83,15 @@ class BoundHead:
         fit = load_npz(Path(fit_dir) / "fit.npz")
         bind = load_npz(Path(bind_dir) / "bind.npz")
         self._load_head(fit, bind, Path(fit_dir))
+        if float(config.get("animate.jaw_glide")) > 0:   # the condyles slide as the mouth opens
+            from dataclasses import replace
+
+            from faceforge.anatomy.skull import condylar_glide
+
+            jaw = self.skull.jaw
+            glide = condylar_glide(jaw.protrusion_dir, jaw.pitch_dir, self.levers.pitch,
+                                   config.get("animate.jaw_glide"), config.get("animate.jaw_glide_slope"))
+            self.skull = replace(self.skull, jaw=replace(jaw, glide=glide))
         settings = SolverSettings.from_config(config.get("solver"))
         self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log)
         self.muscle_names = tuple(system.muscles)
@@ -125,7 +134,8 @@ class BoundHead:
         self.skull = Skull(self.cranium, self.mandible, {}, {}, axes)
         self.landmarks = skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"],
                                                               fit["skin_landmark_positions"])}
-        self.fapu = fapu_from_landmarks(skin_lm, fit_dir / "fit.npz")
+        given = {str(k): p for k, p in zip(fit.get("given_landmark_ids", ()), fit.get("given_landmark_positions", ()))}
+        self.fapu = fapu_from_landmarks({**skin_lm, **given}, fit_dir / "fit.npz")   # FAPU: as given
         self.fdp_vertex = fdp_vertices(skin_lm, self.rest, bind.get("lip_sides"))
         chin = skin_lm.get("2.1", self.rest[self.fdp_vertex.get("2.1", 0)])
         self.levers = JawLevers(lever_arm(chin, axes.pitch_point, axes.pitch_dir),

@@ -39,8 +39,10 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)
     skin = SkinSurface.build(checked.vertices, checked.faces)
+    mirror = _skin_mirror(lm, checked.vertices, float(fit_config.get("symmetric_tolerance", 0.0)), log)
     try:
-        result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles)
+        result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles,
+                          mirror=mirror)
     except ValueError as exc:   # too few usable landmark pairs, degenerate configuration
         from faceforge.exceptions import LandmarkError
 
@@ -51,6 +53,37 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     report = build_report(result, skin, lm, mesh_report, settings.front_offset_es0)
     report["settings"] = dict(settings.__dict__)
     report["orientation"] = orientation.as_dict()
+    report["symmetric_rig"] = {"made_symmetric": mirror is not None,
+                               "skin_asymmetry_es0": None if mirror is None else mirror.asymmetry_es0}
     report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
     return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template,
-                            "orientation": orientation}
+                            "orientation": orientation, "raw_landmarks": raw}
+
+
+def _skin_mirror(lm, vertices, tolerance: float, log):
+    """The skin's mirror (:class:`faceforge.fit.symmetry.Mirror`) when it is symmetric: its
+    vertices' mirror images lie within ``tolerance`` ES0 of it on average; else None (also
+    for ``tolerance`` 0: never)."""
+    from faceforge.fit.symmetry import mirror_plane, skin_asymmetry
+
+    plane = mirror_plane(dict(zip(lm.ids, lm.positions))) if tolerance > 0 else None
+    if plane is None:
+        return None
+    mirror, es0 = plane
+    off = skin_asymmetry(vertices, mirror) / es0
+    if off > tolerance:
+        log(f"the skin is asymmetric ({off:.3f} ES0 from its mirror image): the rig is fitted as it is")
+        return None
+    mirror.asymmetry_es0 = off
+    return mirror
+
+
+def given_positions(raw, rotation) -> dict:
+    """{fdp: (3,)} the positions the landmark file gives (head space), before snapping: a pupil
+    of an eyeless mesh lies in the eye opening, and snapped it lands on a lid (FAPU use these)."""
+    import numpy as np
+
+    if raw is None:
+        return {}
+    return {str(k): np.asarray(p, dtype=float) @ np.asarray(rotation, dtype=float).T
+            for k, p in zip(raw.ids, raw.position) if np.all(np.isfinite(p))}

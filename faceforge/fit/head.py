@@ -80,7 +80,7 @@ from typing import Callable
 import numpy as np
 
 from faceforge.anatomy import tissue as fit_tissue
-from faceforge.fit.align import Warp, similarity_transform
+from faceforge.fit.align import Warp, apply_affine, similarity_transform
 from faceforge.fit.skull import fit_skull, skull_targets
 from faceforge.fit.surface import SkinSurface
 
@@ -166,7 +166,8 @@ class FitResult:
 
 
 def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
-             settings: FitSettings = FitSettings(), build_muscles: Callable | None = None) -> FitResult:
+             settings: FitSettings = FitSettings(), build_muscles: Callable | None = None,
+             mirror=None) -> FitResult:
     """Fit the skull and muscle map into the skin (steps 1-5 of the module docstring).
 
     skin_ids (n,) FDP ids, skin_points (n, 3): the validated skin landmarks
@@ -174,7 +175,9 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     ``build_muscles(cranium (v, f), mandible (v, f), warp, shift) -> [(name, vertices, faces)]``
     builds the muscles on the fitted skull (Eq. 5 thickness), ``shift`` the mouth's
     (:class:`faceforge.fit.mouth.MouthField` or None, weighted per muscle particle);
-    without it the muscle map points are morphed only and there is no refit.
+    without it the muscle map points are morphed only and there is no refit. ``mirror``
+    (:class:`faceforge.fit.symmetry.Mirror`, for a mirror-symmetric skin): the rig is made
+    symmetric about it before the bone is cleared off the skin.
 
     Length (124 lines): the steps of §7 in the order of the module docstring, each a call; left
     as it is (issue 24).
@@ -225,6 +228,10 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
                 targets = rf.skull_targets
                 info["refit"] = True
                 info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
+    if mirror is not None:   # a symmetric skin gets a symmetric rig (the template skull is lopsided)
+        from faceforge.fit.symmetry import symmetrize_bones
+
+        skull_fit, muscles = symmetrize_bones(skull_fit, len(cv), cf, mf, muscles, mirror)
     # 6a. a modelled eye socket is hollow (fit_orbits): bone inside it moves out along rays from
     # the socket's centre, by a one-to-one map that cannot fold the orbital walls
     if settings.skin_clearance_mm > 0 and settings.orbit_hollow:
@@ -262,9 +269,12 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         warp = Warp(warp.similarity, warp.rbfs + fields)
         info["clearance_fields"] = len(fields)
         info["clearance_points"] = int(sum(len(g.centres) for g in fields))
-    # axes: points by the map; directions turned by the rotation that best carries the template
-    # mandible onto the fitted one (least squares over all its vertices): the jaw is one rigid
-    # body, so its axes follow the mandible as a whole rather than the map's local Jacobian
+    # axes: points by the fit's similarity (the least-squares scale, turn and shift of all the
+    # landmarks), not by the full map: the condyles lie far behind the face's landmarks, where the
+    # RBFs extrapolate (MakeHuman: the map put the pitch axis 0.2 cm above the pupils, the
+    # similarity 1.3 cm below them, in front of the ear); directions turned by the rotation that
+    # best carries the template mandible onto the fitted one (least squares over all its
+    # vertices): the jaw is one rigid body, so its axes follow the mandible as a whole
     jaw = {}
     if len(mv) >= 3:
         m = similarity_transform(np.asarray(mv, dtype=np.float64), skull_fit[len(cv):])
@@ -273,7 +283,8 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         rot = warp.similarity[:3, :3] / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
     for name, (point, direction) in template.jaw_axes.items():
         d = rot @ np.asarray(direction, dtype=np.float64)
-        jaw[name] = (warp(np.asarray(point, dtype=np.float64)[None])[0], d / np.linalg.norm(d))
+        jaw[name] = (apply_affine(warp.similarity, np.asarray(point, dtype=np.float64)[None])[0],
+                     d / np.linalg.norm(d))
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
     enhancement = sk.reached[sk.n_landmarks + len(pairs.anchors):]
     later = warp.rbfs[len(sk.warp.rbfs):]   # the refit, orbit and clearance maps carry them on
@@ -289,6 +300,11 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
             out = g(out)
         return out
 
-    return FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
-                     {n: muscle_map(n, p) for n, p in template.muscle_points.items()}, muscles, warp, info,
-                     np.asarray(cf), np.asarray(mf), pairs.target, enhancement)
+    result = FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
+                       {n: muscle_map(n, p) for n, p in template.muscle_points.items()}, muscles, warp, info,
+                       np.asarray(cf), np.asarray(mf), pairs.target, enhancement)
+    if mirror is not None:
+        from faceforge.fit.symmetry import symmetrize_fit
+
+        result = symmetrize_fit(result, mirror)
+    return result

@@ -29,10 +29,27 @@ def pick_frames(n_frames: int, count: int = 6, spec: str | None = None) -> list[
     return sorted(set(np.linspace(0, n_frames - 1, count).round().astype(int).tolist()))
 
 
+def face_region(vertices: np.ndarray, landmarks: dict) -> np.ndarray | None:
+    """(n,) bool: the vertices of ``vertices (n, 3)`` (head frame, +Y up) in the face's box:
+    from a little below the chin (FDP 2.1) to above the brows (4.x, else the outer eye corners
+    3.7 / 3.12), within three half eye distances of the eyes' middle; None without those FDPs."""
+    if not all(k in landmarks for k in ("2.1", "3.7", "3.12")):
+        return None
+    lm = {k: np.asarray(p, dtype=float) for k, p in landmarks.items()}
+    v = np.asarray(vertices, dtype=float)
+    top = max(lm[k][1] for k in ("4.1", "4.2", "4.3", "4.4", "3.7", "3.12") if k in lm)
+    half = 0.5 * abs(lm["3.7"][0] - lm["3.12"][0])
+    cx = 0.5 * (lm["3.7"][0] + lm["3.12"][0])
+    keep = (v[:, 1] >= lm["2.1"][1] - 0.15 * half) & (v[:, 1] <= top + 0.6 * half) & \
+        (np.abs(v[:, 0] - cx) <= 1.5 * half)
+    return keep if keep.any() else None
+
+
 def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: float,
                   view: str = "front", cols: int | None = None, title: str | None = None,
                   panel: float = 2.6, dpi: int = 110, focus: bool = False,
-                  labels=None, region: np.ndarray | None = None) -> Path:
+                  labels=None, region: np.ndarray | None = None, smooth: bool = True,
+                  heat: float | None = None, heat_label: str | None = None) -> Path:
     """Write a grid of shaded renders of ``frames[indices]``.
 
     Parameters
@@ -49,7 +66,11 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     panels is visible as motion. ``focus`` zooms on the vertices that move (>= 35 % of the
     largest displacement between the first drawn frame and the others), padded by 30 %;
     ``region`` ((n,) bool) frames those vertices instead (e.g. the head without its neck).
-    ``labels``: one title per panel instead of its frame and time.
+    ``labels``: one title per panel instead of its frame and time. ``smooth``: Gouraud shading
+    with vertex normals (:mod:`faceforge.viz.smooth`); else one flat colour a triangle. ``heat``
+    (units of the frames, e.g. 5 mm): each panel after the first gets a displacement heat map
+    of that scale beside it (distance from the first drawn frame; ``heat_label`` names the
+    scale in its title, e.g. "0-8 mm").
     """
     import matplotlib
 
@@ -58,10 +79,15 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
 
     from faceforge.viz.render import Layer, draw_layers, view_matrix
 
+    from faceforge.viz.smooth import draw_heat, draw_smooth
+
     indices = list(indices)
     frames = np.asarray(frames, dtype=float)
     cols = cols or min(len(indices), 6)
-    rows = -(-len(indices) // cols)
+    if heat is not None:
+        cols *= 2   # each pose with its heat map beside it
+    per = 2 if heat is not None else 1
+    rows = -(-len(indices) * per // cols)
     fig, axes = plt.subplots(rows, cols, figsize=(panel * cols, panel * 1.15 * rows), dpi=dpi,
                              squeeze=False)
     r = view_matrix(view)
@@ -78,11 +104,21 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     for ax in axes.ravel():
         ax.axis("off")
     names = list(labels) if labels is not None else [f"frame {i}  ({i / fps:.2f} s)" for i in indices]
-    for ax, i, name in zip(axes.ravel(), indices, names):
-        draw_layers(ax, [Layer(frames[i], faces)], view, labels=False)
-        ax.set_xlim(lo[0] - pad, hi[0] + pad)
-        ax.set_ylim(lo[1] - pad, hi[1] + pad)
-        ax.set_title(name, fontsize=8)
+    flat = axes.ravel()
+    for k, (i, name) in enumerate(zip(indices, names)):
+        pair = flat[per * k:per * k + per]
+        if smooth:
+            draw_smooth(pair[0], frames[i], faces, view)
+        else:
+            draw_layers(pair[0], [Layer(frames[i], faces)], view, labels=False)
+        pair[0].set_title(name, fontsize=8)
+        if heat is not None:
+            draw_heat(pair[1], frames[i], frames[indices[0]], faces, heat, view)
+            pair[1].set_title(f"{name}: moved ({heat_label or f'0-{heat:.3g}'})", fontsize=7)
+        for ax in pair:
+            ax.set_xlim(lo[0] - pad, hi[0] + pad)
+            ax.set_ylim(lo[1] - pad, hi[1] + pad)
+            ax.set_aspect("equal")
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()

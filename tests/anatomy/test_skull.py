@@ -217,3 +217,26 @@ def test_malformed_yaml_names_file_and_line(tmp_path):
     (d / "jaw.yaml").write_text("units: cm\npitch_axis: {point: [0, 1\n")
     with pytest.raises(TemplateError, match=r"jaw.yaml:\d+"):
         load_skull(d)
+
+
+def test_condylar_glide_moves_the_chin_down_rather_than_back(skull):
+    """Turning about the condyles alone swings the template's chin back as far as down; with
+    the condyles gliding forward and down the eminence the chin mostly drops."""
+    from dataclasses import replace
+
+    from faceforge.anatomy.skull import condylar_glide
+
+    j = skull.jaw
+    chin = skull.landmarks["2.1"][None]
+    lever = float(np.linalg.norm((chin[0] - j.pitch_point)[1:]))
+    glide = condylar_glide(j.protrusion_dir, j.pitch_dir, lever, 0.6, 35.0)
+    assert np.isclose(np.linalg.norm(glide), 0.6 * lever)
+    assert glide[2] > 0 and glide[1] < 0 and abs(glide[0]) < 1e-9, "forward and down, in the midplane"
+    glided = replace(skull, jaw=replace(j, glide=glide))
+    turn = apply_transform(jaw_transform(skull, 0.3, 0.0, 0.0), chin)[0] - chin[0]
+    slide = apply_transform(jaw_transform(glided, 0.3, 0.0, 0.0), chin)[0] - chin[0]
+    assert -turn[2] > 0.8 * -turn[1], "a pure turn: back about as far as down"
+    assert -slide[2] < 0.34 * -slide[1], "with the glide: back at most a third of the way down"
+    # closing past rest and the zero pose: no glide
+    assert np.array_equal(jaw_transform(glided, 0.0, 0.0, 0.0), np.eye(4))
+    assert np.allclose(jaw_transform(glided, -0.02, 0.0, 0.0), jaw_transform(skull, -0.02, 0.0, 0.0))

@@ -74,7 +74,8 @@ def test_fitted_bone_turns_over_few_triangles(fitted, template, name):
     assert all(c <= limit for c, limit in zip(counts, TURNED_OVER[name])), (name, counts)
     mesh = SAMPLES[name]
     exact, report, _ = fit_files(mesh, mesh.with_name(mesh.stem + ".fdp.yaml"), template,
-                                 {"enhancement_flow_steps": 0})
+                                 {"enhancement_flow_steps": 0, "symmetric_tolerance": 0})
+    # (the exact RBF's own folds; made symmetric as well it left 2 MakeHuman skin vertices in the bone)
     counts = turned_over_counts(exact, template)
     assert all(c <= limit for c, limit in zip(counts, TURNED_OVER_EXACT[name])), (name, counts)
     assert all(report["checks"].values()) and report["skin_inside_bone"]["count"] == 0
@@ -124,6 +125,12 @@ def test_fitted_skull_keeps_its_anatomy(fitted, name):
         assert np.isclose(np.linalg.norm(direction), 1.0)
         assert np.all(np.isfinite(point))
     assert result.jaw_axes["pitch"][1][0] > 0.99
+    # the jaw turns about the condyles: below the eyes, behind the outer eye corners, above the
+    # chin (the full map once put MakeHuman's pitch axis above the pupils)
+    skin = extra["landmarks"].as_dict()
+    pivot = result.jaw_axes["pitch"][0]
+    assert pivot[1] < min(skin["3.7"][1], skin["3.12"][1]) - 0.1 * abs(skin["3.7"][0] - skin["3.12"][0])
+    assert pivot[2] < min(skin["3.7"][2], skin["3.12"][2]) and pivot[1] > skin["2.1"][1]
     # Eq. 5: muscle thickness scales with the fitted skull, not with the template
     skull = np.vstack([result.cranium, result.mandible])
     ratio = np.linalg.norm(np.ptp(skull, axis=0)) / extra["template"].skull.diagonal
@@ -199,3 +206,45 @@ def test_same_inputs_same_fit(fitted, template):
         assert n1 == n2
         np.testing.assert_array_equal(v1, v2)
     assert all(report["checks"].values()) and report2["checks"] == report["checks"]
+
+
+def test_symmetric_skin_gets_a_symmetric_rig(template):
+    """With ``fit.symmetric_tolerance`` (off by default) a mirror-symmetric skin (MediaPipe's)
+    gets its bones, muscle map and jaw axes made mirror-symmetric."""
+    from faceforge.fit.files import fit_files
+    from faceforge.fit.symmetry import mirror_plane
+    from faceforge.geometry.closest import TriangleGrid
+
+    mesh = SAMPLES["mediapipe"]
+    result, report, extra = fit_files(mesh, mesh.with_name(mesh.stem + ".fdp.yaml"), template,
+                                      {"symmetric_tolerance": 0.01})
+    assert report["symmetric_rig"]["made_symmetric"]
+    mirror, es0 = mirror_plane(extra["landmarks"].as_dict())
+    for bone, faces in ((result.cranium, result.cranium_faces), (result.mandible, result.mandible_faces)):
+        q, _ = TriangleGrid(mirror(bone)[faces]).closest(bone)
+        assert np.linalg.norm(q - bone, axis=1).mean() < 0.005 * es0
+    for left in [n for n in result.muscle_points if n.endswith("_L")]:
+        assert np.allclose(mirror(result.muscle_points[left]), result.muscle_points[left[:-2] + "_R"])
+    assert abs(result.jaw_axes["pitch"][0] - mirror(result.jaw_axes["pitch"][0][None])[0]).max() < 1e-9 * es0
+    assert report["skin_inside_bone"]["count"] == 0
+
+
+def test_fapu_come_from_the_landmarks_as_given(fitted, tmp_path):
+    """ICT has no eyeballs: its pupils (3.5, 3.6) are given in the eye openings, and snapping
+    puts them on the lids; fit.npz keeps them as given, and the FAPU are measured on those."""
+    import yaml
+
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.mpeg4 import fapu_from_landmarks
+    from faceforge.pipeline.stages.fit import write_outputs
+
+    result, report, extra = fitted("ict")
+    write_outputs(tmp_path, result, report, extra)
+    fit = load_npz(tmp_path / "fit.npz")
+    given = dict(zip(fit["given_landmark_ids"], fit["given_landmark_positions"]))
+    snapped = dict(zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"]))
+    doc = yaml.safe_load(SAMPLES["ict"].with_name(SAMPLES["ict"].stem + ".fdp.yaml").read_text())
+    assert np.allclose(given["3.5"], doc["landmarks"]["3.5"]["position"])
+    assert given["3.5"][1] - snapped["3.5"][1] > 0.3, "snapping moved the pupil down onto the lid"
+    ens_given = fapu_from_landmarks({**snapped, **given}).ens0
+    assert ens_given > 1.05 * fapu_from_landmarks(snapped).ens0

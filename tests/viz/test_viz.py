@@ -155,3 +155,33 @@ def test_template_render_command_simulates_the_map(invoke, tmp_path):
     assert matplotlib.image.imread(out).std() > 0.05
     bad = invoke("-w", tmp_path, "template", "render", "-o", tmp_path / "x.png", "--contract", "nope=0.5")
     assert bad.exit_code == 2 and "unknown muscle(s) nope" in bad.stderr and len(bad.stderr.splitlines()) == 1
+
+
+def test_smooth_sheet_with_heat_maps(tmp_path):
+    """Smooth-shaded panels with a heat map beside each: a face region frames part of the
+    mesh, and a vertex that moves shows in the heat map's colours."""
+    import numpy as np
+    from PIL import Image
+
+    from faceforge.viz.contact_sheet import contact_sheet, face_region
+
+    g = np.linspace(-1.0, 1.0, 21)
+    x, y = np.meshgrid(g, g)
+    v = np.stack([x.ravel(), y.ravel(), 0.3 * (1 - x.ravel() ** 2 - y.ravel() ** 2)], axis=1)
+    f = []
+    for i in range(20):
+        for j in range(20):
+            a = i * 21 + j
+            f += [[a, a + 1, a + 22], [a, a + 22, a + 21]]
+    f = np.asarray(f)
+    moved = v.copy()
+    moved[np.linalg.norm(v[:, :2], axis=1) < 0.3, 2] += 0.2
+    lm = {"2.1": [0, -0.8, 0], "3.7": [0.4, 0.3, 0], "3.12": [-0.4, 0.3, 0]}
+    region = face_region(v, lm)
+    assert region is not None and 0 < region.sum() < len(v)
+    out = contact_sheet(tmp_path / "s.png", np.stack([v, moved]), f, [0, 1], 1.0, cols=2,
+                        heat=0.2, heat_label="0-0.2", region=region, labels=["rest", "moved"])
+    img = np.asarray(Image.open(out).convert("RGB"), dtype=float)
+    assert img.shape[1] >= 4 * 250
+    hot = (img[:, :, 0] > 200) & (img[:, :, 1] > 200) & (img[:, :, 2] < 200)   # inferno's top: yellow
+    assert hot.sum() > 50, "the moved patch shows in the heat map"

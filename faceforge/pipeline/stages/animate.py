@@ -219,7 +219,8 @@ CALIBRATE = register_stage(Stage(
     # cost a recalibration
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry", "muscle", "animate.fap_mapping", "animate.fps",
-        "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "template"),
+        "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",
+        "animate.jaw_glide_slope", "template"),
     inputs=("animate.fap_mapping", "template.skull", "template.muscle_map"), digests={"animate.fap_mapping": mapping_digest_without_presets},
     outputs=("fap_mapping.yaml", "report.json", "report.txt"),
     version="4", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
@@ -261,6 +262,35 @@ def _viseme_file(app, text: str) -> Path:
     return path
 
 
+def _preview_face(app, first, stage: str = "animate"):
+    """(region (n,) bool or None, track name) of a --preview: the face's box from the fit's
+    landmarks (:func:`faceforge.viz.contact_sheet.face_region`; the user's vertex order, head
+    frame ``first (n, 3)``), so a turning head is framed by its face, and the played track's
+    file name from the animate stage's report."""
+    import json
+
+    import numpy as np
+
+    from faceforge.io.stagefiles import load_npz
+    from faceforge.viz.contact_sheet import face_region
+
+    region, track = None, "animation"
+    try:
+        fit = load_npz(app.workspace.stage_dir("fit") / "fit.npz")
+        u2i = np.asarray(fit["skin_user_to_internal"], dtype=np.int64)
+        lm = dict(zip(fit["skin_landmark_ids"], fit["skin_landmark_positions"]))
+        if len(u2i) == len(first):
+            inner = np.zeros((int(u2i.max()) + 1, 3))
+            inner[u2i] = first
+            region = face_region(inner, lm)
+            region = None if region is None else region[u2i]
+        report = json.loads((app.workspace.stage_dir(stage) / "report.json").read_text())
+        track = Path(str(report.get("fap", track))).name
+    except (OSError, KeyError, ValueError) as exc:   # an older workdir: the moving part, untitled
+        app.log(f"animate: preview framed by its motion ({exc})")
+    return region, track
+
+
 def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None,
                    stage: str = "animate") -> None:
     """Write ``-o`` and ``--preview`` from the frames of ``stage`` (animate, or arkit)."""
@@ -295,7 +325,9 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
         frames = frames @ rotation.T.astype(frames.dtype)   # drawn upright, in head space
-        contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name, focus=True)
+        region, track = _preview_face(app, frames[0], stage)
+        contact_sheet(preview, frames, faces, idx, fps, focus=region is None, region=region, panel=3.0, dpi=120,
+                      title=f"{track}" + (f" -> {Path(output).name}" if output else ""))
         app.log(f"animate: wrote {preview}")
 
 

@@ -81,7 +81,8 @@ BAKE = register_stage(Stage(
     # not the playback-only keys (head rotation, previews, presets' timing): they cost no rebake
     config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.calibrate.settle_frames",
-                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth"),
+                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.jaw_glide",
+                 "animate.jaw_glide_slope"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
     outputs=("shapes.npz", "report.json", "shapes.png"), version="1", run=run_bake,

@@ -46,7 +46,7 @@ def run_expressions(ctx):
             raise StageError(f"the mapping has no preset for {', '.join(missing)}", mapping_path)
         return {name: mapping.expressions[name] for name in EXPRESSIONS}
 
-    _preset_sheet(ctx, "expressions", rows, cols=4,
+    _preset_sheet(ctx, "expressions", rows, cols=2,
                   title="the six basic expressions (template presets, full intensity)")
 
 
@@ -64,7 +64,7 @@ def run_visemes(ctx):
             ctx.log(f"the mapping has no shape for {', '.join(missing)}: left out")
         return {name: mapping.visemes[name] for name in VISEMES if name in mapping.visemes}
 
-    _preset_sheet(ctx, "visemes", rows, cols=5, title="the MPEG-4 visemes (template shapes)")
+    _preset_sheet(ctx, "visemes", rows, cols=3, title="the MPEG-4 visemes (template shapes)")
 
 
 def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
@@ -102,12 +102,24 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
                               "jaw": jaw[i].tolist()}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
+    from faceforge.anatomy.tissue import units_per_mm
+
+    mm = units_per_mm(head.landmarks)   # heat maps beside each pose: 0-8 mm of motion
     contact_sheet(ctx.out_dir / f"{stem}.png", poses, head.faces, range(len(names)), 1.0,
-                  cols=cols, panel=3.2, labels=names, region=head.rest[:, 1] >= head.bone_heights()[0],
-                  title=title)
+                  cols=cols, panel=3.2, dpi=120, labels=names, title=title + ", heat map 0-8 mm",
+                  region=_face_region(head), heat=8.0 * mm, heat_label="0-8 mm")
     save_npz(ctx.out_dir / f"{stem}.npz", names=np.asarray(names), poses=head.to_user(poses).astype(np.float32),
              contractions=c, controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", report)
+
+
+def _face_region(head):
+    """(n,) bool: the face to frame in a sheet (:func:`faceforge.viz.contact_sheet.face_region`),
+    else the whole head above the bone's lowest point."""
+    from faceforge.viz.contact_sheet import face_region
+
+    region = face_region(head.rest, head.landmarks)
+    return region if region is not None else head.rest[:, 1] >= head.bone_heights()[0]
 
 
 _SHEET_STAGE = dict(deps=("fit", "bind"),
@@ -116,11 +128,11 @@ _SHEET_STAGE = dict(deps=("fit", "bind"),
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),
-    version="1", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
+    version="2", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
 
 VISEMES_STAGE = register_stage(Stage(
     name="visemes", **_SHEET_STAGE, outputs=("visemes.png", "visemes.npz", "report.json"),
-    version="1", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
+    version="2", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
 
 
 def _sheet_command(stem: str, help_text: str):

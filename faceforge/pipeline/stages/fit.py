@@ -8,6 +8,8 @@ fit.npz (no pickle; head space, mesh units)
     ``cranium_vertices``, ``cranium_faces``, ``mandible_vertices``, ``mandible_faces``;
     ``landmark_ids (k,) str``, ``landmark_positions (k,3)``: fitted bone landmarks;
     ``skin_landmark_ids (s,) str``, ``skin_landmark_positions (s,3)``: snapped skin landmarks;
+    ``given_landmark_ids``, ``given_landmark_positions``: the positions the file gives, unsnapped
+    (the FAPU are measured on these: a pupil of an eyeless mesh is not on the skin);
     ``target_ids``, ``target_positions``: the bone-landmark targets (tissue depth, refit);
     ``jaw_<axis>_point (3,)``, ``jaw_<axis>_direction (3,)`` for each template jaw axis;
     ``muscle_names (q,) str``, ``muscle_vertices (sum,3)``, ``muscle_vertex_start (q+1,)``,
@@ -73,9 +75,16 @@ def write_outputs(out_dir, result, report, extra) -> None:
     from faceforge.viz.fit import save_fit_png
     from faceforge.io.stagefiles import save_json, save_npz
 
+    import numpy as np
+
+    from faceforge.fit.files import given_positions
+
     checked, lm = extra["checked"], extra["landmarks"]
     out_dir = Path(out_dir)
+    given = given_positions(extra.get("raw_landmarks"), extra["orientation"].rotation)
     save_npz(out_dir / "fit.npz", user_rotation=extra["orientation"].rotation,
+             given_landmark_ids=np.asarray(list(given), dtype=str),
+             given_landmark_positions=np.asarray(list(given.values()), dtype=float).reshape(-1, 3),
              **npz_arrays(result, checked.vertices, checked.faces, checked.user_to_internal, lm,
                           extra["template"].layers))
     save_json(out_dir / "report.json", report)
@@ -89,8 +98,6 @@ def write_outputs(out_dir, result, report, extra) -> None:
     layers = [("cranium", result.cranium, result.cranium_faces, (0.93, 0.91, 0.84)),
               ("mandible", result.mandible, result.mandible_faces, (0.88, 0.86, 0.78))]
     layers += [(n, v, f, (0.78, 0.25, 0.22)) for n, v, f in result.muscles]
-    import numpy as np
-
     targets = np.vstack([result.targets, result.enhancement_targets])
     save_fit_png(out_dir / "fit.png", checked.vertices, checked.faces, layers, points=targets,
                  title=f"fit: {Path(report['mesh']['path']).name} ({len(result.targets)} landmark and "

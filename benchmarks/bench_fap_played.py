@@ -1,0 +1,136 @@
+"""FAP accuracy as a user plays them: each mapped FAP alone, at the largest magnitude the
+Xface files in samples/fap/ use (both signs for a bidirectional FAP the mapping can drive
+both ways), written as a FAP file, played by ``faceforge animate -o track.pc2`` (the workdir's
+own mapping: its calibration when there is one) and measured on the exported PC2 frames:
+the FDP's displacement along the FAP's axis, in the head's FAPU, at the end of a 20-frame
+hold after a 10-frame ramp.
+
+Usage::
+
+    python benchmarks/bench_fap_played.py WORKDIR [WORKDIR ...]   # full and half the Xface magnitude
+
+Writes ``benchmarks/results/fap_played.json``: per head the rows (FAP, requested, achieved,
+relative error), the median and worst error, and left/right pairs (how far the two sides'
+achieved values differ, relative to the larger).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _util import write_results  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+RAMP, HOLD = 10, 20
+#: left/right FAP twins compared
+PAIRS = ((31, 32), (33, 34), (35, 36), (37, 38), (41, 42), (53, 54), (59, 60), (55, 56), (57, 58),
+         (6, 7), (12, 13), (8, 9), (10, 11), (19, 20), (21, 22))
+
+
+def xface_magnitudes() -> dict:
+    """FAP -> largest |value| any samples/fap/*.fap file gives it (FAPU)."""
+    from faceforge.mpeg4 import read_fap
+
+    top = {}
+    for path in sorted((ROOT / "samples/fap").glob("*.fap")):
+        t = read_fap(path)
+        v = np.abs(np.where(t.mask, t.values, 0.0)).max(axis=0)
+        for k in np.flatnonzero(v):
+            top[k + 1] = max(top.get(k + 1, 0.0), float(v[k]))
+    return top
+
+
+def requests(mapping, probes, top, fraction: float = 1.0) -> list[tuple[int, float]]:
+    """(FAP, value) pairs to play: the Xface magnitude, and its negative where the FAP is
+    bidirectional and its entry drives that way."""
+    from faceforge.mpeg4 import fap_record
+
+    out = []
+    for e in mapping.entries:
+        for fap in e.faps:
+            if fap not in probes or fap not in top:
+                continue
+            out.append((fap, fraction * top[fap]))
+            if fap_record(fap).bidirectional and (e.negative or (e.jaw is not None and e.jaw[0] == "yaw")):
+                out.append((fap, -fraction * top[fap]))
+    return out
+
+
+def head_rows(workdir: Path, fraction: float = 1.0) -> dict:
+    from faceforge.animation.calibrate import measure
+    from faceforge.animation.calibrate_head import calibration_probes
+    from faceforge.io.export_cache import read_pc2
+    from faceforge.mpeg4 import FapTrack, write_fap
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import expr_measure as em
+
+    head, mapping, _ = em.load_head(workdir)
+    probes = calibration_probes(mapping, head)
+    asked = requests(mapping, probes, xface_magnitudes(), fraction)
+    per = RAMP + HOLD + 5
+    n = 2 + per * len(asked)
+    values, mask = np.zeros((n, 68)), np.zeros((n, 68), dtype=bool)
+    ends = []
+    for k, (fap, v) in enumerate(asked):
+        s = 2 + k * per
+        ramp = np.concatenate([np.linspace(0, v, RAMP + 1)[1:], np.full(HOLD, v), np.zeros(5)])
+        values[s:s + per, fap - 1] = ramp
+        ends.append(s + RAMP + HOLD - 1)
+    mask[:, 2:] = True
+    track = FapTrack.from_given(25.0, mask, values, name="bench_fap_played")
+    fap_path = workdir / "bench_fap_played.fap"
+    out = workdir / "bench_fap_played.pc2"
+    write_fap(fap_path, track)
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "from faceforge.cli import main; main()", "-q", "--workdir",
+                    str(workdir), "animate", "--fap", str(fap_path), "-o", str(out)], check=True)
+    seconds = time.perf_counter() - t0
+    frames, _, _ = read_pc2(out)
+    internal = np.zeros(len(head.rest), dtype=np.int64)
+    internal[head.user_index[::-1]] = np.arange(len(head.user_index))[::-1]   # first user vertex
+    skins = frames[:, internal].astype(float) @ np.asarray(head.user_rotation).T
+    rest = skins[0]
+    rows = []
+    for (fap, v), end in zip(asked, ends):
+        got = float(measure(rest, skins[end], probes[fap]))
+        rows.append({"fap": fap, "requested": v, "achieved": round(got, 2),
+                     "relative_error": round(abs(got - v) / abs(v), 4)})
+    err = np.array([r["relative_error"] for r in rows])
+    by = {(r["fap"], np.sign(r["requested"])): r["achieved"] for r in rows}
+    lr = []
+    for a, b in PAIRS:
+        for sgn in (1.0, -1.0):
+            if (a, sgn) in by and (b, sgn) in by:
+                x, y = abs(by[(a, sgn)]), abs(by[(b, sgn)])
+                lr.append({"faps": f"{a}/{b}", "sign": int(sgn), "left": by[(a, sgn)], "right": by[(b, sgn)],
+                           "differs": round(abs(x - y) / max(x, y, 1e-9), 4)})
+    worst = rows[int(np.argmax(err))] if rows else None
+    return {"rows": rows, "median_error": float(np.median(err)) if len(err) else None,
+            "within_10_percent": int((err <= 0.1).sum()), "over_30_percent": int((err > 0.3).sum()),
+            "count": len(rows), "worst": worst, "left_right": lr,
+            "left_right_within_10_percent": int(sum(p["differs"] <= 0.1 for p in lr)),
+            "animate_seconds": round(seconds, 1), "mapping": mapping.source}
+
+
+def main(argv=None) -> None:
+    dirs = [Path(a) for a in (argv if argv is not None else sys.argv[1:])]
+    results = {}
+    for fraction in (1.0, 0.5):
+        for d in dirs:
+            r = results[f"{d.name} x{fraction:g}"] = head_rows(d, fraction)
+            print(f"{d.name} x{fraction:g} Xface magnitude: median {r['median_error']:.1%}, "
+                  f"{r['within_10_percent']}/{r['count']} within 10 %, {r['over_30_percent']} over 30 %, "
+                  f"worst {r['worst']}; L/R within 10 %: {r['left_right_within_10_percent']}/{len(r['left_right'])}")
+    write_results("fap_played", {"heads": results})
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,159 @@
+"""A symmetric rig for a symmetric head: the fitted skull, muscles and jaw made mirror-symmetric.
+
+The template skull is a real, asymmetric skull, and the fit's enhancement landmarks are chosen
+vertex by vertex, so even an exactly symmetric skin (MakeHuman) gets a lopsided rig: the
+orbicularis oris lowered MakeHuman's upper lip 81 MNS on the right at c = 0.57 and 13 MNS on
+the left at full contraction. When the skin is symmetric about the plane its left/right
+landmark pairs span (:func:`skin_asymmetry` below ``fit.symmetric_tolerance``),
+:func:`symmetrize_fit` replaces the fit by its mirror average:
+
+* each right muscle (and muscle-map curve) is the mirror image of the mean of its left twin
+  and its own mirror image (the twins share their topology: ``mirror_of`` in the map);
+* every other point set (cranium, mandible, the orbicularis oris, midline muscles) moves each
+  point halfway to its mirror partner: the closest point of the mirrored surface (bones) or
+  the nearest mirrored point (point sets), twice;
+* the jaw's pivot goes onto the plane, the pitch axis across it, the other axes into it.
+
+Everything is in head space (mesh units). No template file changes: an asymmetric head (a
+scan) keeps the fit as it is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+#: left/right FDP pairs that span the midsagittal plane (ISO/IEC 14496-2 Annex C)
+FDP_PAIRS = (("3.5", "3.6"), ("3.7", "3.12"), ("3.11", "3.8"), ("4.1", "4.2"), ("4.3", "4.4"),
+             ("4.5", "4.6"), ("8.3", "8.4"), ("2.4", "2.5"), ("9.1", "9.2"), ("9.5", "9.4"),
+             ("5.1", "5.2"), ("5.3", "5.4"), ("2.13", "2.14"), ("10.9", "10.10"), ("8.5", "8.6"),
+             ("8.7", "8.8"), ("2.6", "2.7"), ("2.8", "2.9"))
+
+
+class Mirror:
+    """Reflection about the plane through ``point (3,)`` with unit ``normal (3,)``."""
+
+    def __init__(self, point, normal):
+        n = np.asarray(normal, dtype=np.float64)
+        self.normal = n / np.linalg.norm(n)
+        self.point = np.asarray(point, dtype=np.float64)
+
+    def __call__(self, p: np.ndarray) -> np.ndarray:
+        """Points (k, 3) reflected."""
+        p = np.asarray(p, dtype=np.float64)
+        return p - 2.0 * ((p - self.point) @ self.normal)[..., None] * self.normal
+
+    def direction(self, d: np.ndarray) -> np.ndarray:
+        """Directions (..., 3) reflected (no translation)."""
+        d = np.asarray(d, dtype=np.float64)
+        return d - 2.0 * (d @ self.normal)[..., None] * self.normal
+
+
+def mirror_plane(landmarks: dict) -> tuple[Mirror, float] | None:
+    """The head's midsagittal plane from its left/right FDP pairs, and ES0 (pupils, else outer
+    eye corners; mesh units). ``landmarks`` {fdp: (3,)}; None with fewer than three pairs."""
+    pairs = [(np.asarray(landmarks[a], float), np.asarray(landmarks[b], float))
+             for a, b in FDP_PAIRS if a in landmarks and b in landmarks]
+    if len(pairs) < 3:
+        return None
+    left, right = np.array([p[0] for p in pairs]), np.array([p[1] for p in pairs])
+    normal = (left - right).sum(axis=0)
+    mirror = Mirror(0.5 * (left + right).mean(axis=0), normal)
+    eyes = ("3.5", "3.6") if "3.5" in landmarks and "3.6" in landmarks else ("3.7", "3.12")
+    es0 = float(np.linalg.norm(np.asarray(landmarks[eyes[0]], float) - landmarks[eyes[1]])) \
+        if eyes[0] in landmarks and eyes[1] in landmarks else float(np.linalg.norm(left - right, axis=1).mean())
+    return mirror, es0
+
+
+def skin_asymmetry(vertices: np.ndarray, mirror: Mirror) -> float:
+    """Mean distance (mesh units) from each mirrored vertex (n, 3) to the nearest vertex."""
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=np.float64)
+    return float(cKDTree(v).query(mirror(v))[0].mean())
+
+
+def _points_halfway(p: np.ndarray, mirror: Mirror, rounds: int = 2) -> np.ndarray:
+    """Each point (k, 3) moved halfway to the nearest point of the mirrored set, ``rounds`` times."""
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(p, dtype=np.float64)
+    for _ in range(rounds):
+        m = mirror(p)
+        j = cKDTree(m).query(p)[1]
+        p = 0.5 * (p + m[j])
+    return p
+
+
+def _surface_halfway(v: np.ndarray, f: np.ndarray, mirror: Mirror, rounds: int = 6,
+                     smooth: int = 4) -> np.ndarray:
+    """Each vertex (n, 3) of the mesh (v, f) moved halfway to the closest point of the mirrored
+    surface, ``rounds`` times (the mirrored surface taken afresh each time), the move smoothed
+    by ``smooth`` sweeps of the neighbours' average."""
+    from scipy.sparse import coo_matrix, diags
+
+    from faceforge.geometry.closest import TriangleGrid
+
+    v = np.asarray(v, dtype=np.float64)
+    f = np.asarray(f)
+    # the move is smoothed over the mesh (a few Jacobi sweeps of the umbrella average), so a
+    # thin plate whose two sides find different partners is not folded through itself
+    i, j = f.ravel(), f[:, [1, 2, 0]].ravel()
+    adj = coo_matrix((np.ones(len(i)), (i, j)), shape=(len(v), len(v))).tocsr()
+    adj = adj + adj.T
+    adj.data[:] = 1.0
+    avg = diags(1.0 / np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)) @ adj
+    for _ in range(rounds):
+        q, _ = TriangleGrid(mirror(v)[f]).closest(v)
+        move = 0.5 * (q - v)
+        for _ in range(smooth):
+            move = 0.5 * (move + avg @ move)
+        v = v + move
+    return v
+
+
+def _twins(named: dict, mirror: Mirror) -> dict:
+    """{name: (k, 3)} with ``*_L`` / ``*_R`` twins of equal shape averaged through the mirror
+    (right = mirror of left), the rest moved halfway to their mirror images."""
+    out = {}
+    for name, p in named.items():
+        p = np.asarray(p, dtype=np.float64)
+        if name.endswith("_L") and name[:-2] + "_R" in named and np.shape(named[name[:-2] + "_R"]) == p.shape:
+            left = 0.5 * (p + mirror(named[name[:-2] + "_R"]))
+            out[name], out[name[:-2] + "_R"] = left, mirror(left)
+        elif name.endswith("_R") and name[:-2] + "_L" in named and np.shape(named[name[:-2] + "_L"]) == p.shape:
+            continue
+        else:
+            out[name] = _points_halfway(p, mirror) if len(p) > 1 else p
+    return out
+
+
+def _axis(point, direction, mirror: Mirror, across: bool):
+    """A jaw axis made symmetric: the point onto the plane; the direction across the plane
+    (``across``: the pitch axis) or into it."""
+    p = np.asarray(point, dtype=np.float64)
+    p = p - ((p - mirror.point) @ mirror.normal) * mirror.normal
+    d = np.asarray(direction, dtype=np.float64)
+    d = 0.5 * (d - mirror.direction(d)) if across else 0.5 * (d + mirror.direction(d))
+    return p, d / np.linalg.norm(d)
+
+
+def symmetrize_bones(skull: np.ndarray, n_cranium: int, cranium_faces, mandible_faces, muscles,
+                     mirror: Mirror) -> tuple[np.ndarray, list]:
+    """The fitted skull ``(n, 3)`` (cranium rows first, ``n_cranium`` of them) and muscles
+    ``[(name, vertices, faces)]`` made mirror-symmetric (module docstring); new arrays.
+    :func:`faceforge.fit.head.fit_head` calls it before the bone is cleared off the skin."""
+    cranium = _surface_halfway(skull[:n_cranium], cranium_faces, mirror)
+    mandible = _surface_halfway(skull[n_cranium:], mandible_faces, mirror)
+    built = _twins({n: v for n, v, _ in muscles}, mirror)
+    return np.vstack([cranium, mandible]), [(n, built[n], f) for n, _, f in muscles]
+
+
+def symmetrize_fit(result, mirror: Mirror):
+    """The :class:`faceforge.fit.head.FitResult` ``result``'s muscle map and jaw axes made
+    mirror-symmetric about ``mirror`` (its bones and muscles: :func:`symmetrize_bones`); a new
+    FitResult, ``result`` is not changed."""
+    jaw = {name: _axis(p, d, mirror, across=(name == "pitch")) for name, (p, d) in result.jaw_axes.items()}
+    info = dict(result.info, symmetric=True)
+    return replace(result, jaw_axes=jaw, muscle_points=_twins(result.muscle_points, mirror), info=info)
