@@ -112,8 +112,9 @@ def _check_ints(text: str, source: str, error) -> None:
         raise error(f"number with more than {MAX_INT_DIGITS} digits", source, text.count("\n", 0, m.start()) + 1)
 
 
-def construct_guarded(make, source: str, error=ConfigError) -> Any:
-    """``make()`` (a YAML construction), its exceptions turned into ``error(message, source[, line])``."""
+def construct_guarded(make, source: str, error=ConfigError, what: str = "YAML") -> Any:
+    """``make()`` (a YAML construction, or a JSON one: ``what``), its exceptions turned into
+    ``error(message, source[, line])``."""
     try:
         return make()
     except FaceforgeError:
@@ -122,10 +123,10 @@ def construct_guarded(make, source: str, error=ConfigError) -> Any:
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise error(f"not valid YAML: {problem}", source, _line(exc)) from None
     except RecursionError:
-        raise error(f"YAML nested too deeply", source) from None
+        raise error(f"{what} nested too deeply", source) from None
     except (ValueError, OverflowError, TypeError) as exc:
         first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise error(f"cannot read YAML: {first[:200]}", source) from None
+        raise error(f"cannot read {what}: {first[:200]}", source) from None
 
 
 def load_user_yaml(text: str, source: str, error=ConfigError, loader=UserLoader) -> Any:

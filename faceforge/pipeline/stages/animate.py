@@ -520,7 +520,11 @@ def run_animate(ctx):
     if np.any(angles):
         low, high = head.bone_heights()
         span = float(ctx.config.get("animate.neck_fade")) * (high - low)
-        frames = turn_head(frames, angles, head.skull.jaw.yaw_point, neck_weights(head.rest, low, span))
+        weights = neck_weights(head.rest, low, span)
+        from faceforge.anatomy.head_parts import detached_vertices
+
+        weights[detached_vertices(head.rest, head.faces, list(head.fdp_vertex.values()))] = 0.0  # another head
+        frames = turn_head(frames, angles, head.skull.jaw.yaw_point, weights)
     user = head.to_user(frames).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
              controls=np.asarray(head.controls, dtype=str), jaw=jaw)
@@ -773,6 +777,18 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, output, p
         from faceforge.io.export import check_output
 
         check_output(output)      # an output it cannot write fails before the simulation
+    if fap is not None:   # a malformed FAP file fails in milliseconds, before the head is loaded
+        import warnings
+
+        from faceforge.mpeg4 import read_fap
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # the stage reads it again and warns then
+            read_fap(fap)
+    if preview:
+        from faceforge.io.writable import check_writable
+
+        check_writable(preview, "--preview")
     if expression is not None:
         seconds = seconds or float(app.config.get("animate.expression_seconds"))
         fap = _expression_file(app, expression, intensity, seconds)
