@@ -75,7 +75,7 @@ class Timings:
 
 
 def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progress=None,
-         timings: Timings | None = None, settle: int = 0) -> np.ndarray:
+         timings: Timings | None = None, settle: int = 0, sink=None, chunk: int = 64) -> np.ndarray | None:
     """Simulate every frame and return the weighted skin.
 
     Parameters
@@ -89,10 +89,13 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
     timings : optional Timings, accumulated in place
     settle : extra frames simulated at each frame's controls before it is recorded (0 for
         playback; static poses such as calibration use more)
+    sink : optional ``sink(start, frames (k, n, 3) float64)``: the frames are handed over
+        ``chunk`` at a time (``start``: the first one's index; the array is reused, copy what
+        you keep) and not returned, so a take's memory does not grow with its length
 
     Returns
     -------
-    (F, n, 3) float64 skin positions of the working mesh, influence-weighted.
+    (F, n, 3) float64 skin positions of the working mesh, influence-weighted (None with ``sink``).
 
     Raises
     ------
@@ -109,7 +112,8 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
     w = np.ones(len(rest)) if rig.influence is None else np.asarray(rig.influence, dtype=float)
     if w.shape != (len(rest),):
         raise ValueError(f"influence must be ({len(rest)},), got {w.shape}")
-    out = np.empty((len(jaw), len(rest), 3))
+    size = len(jaw) if sink is None else max(1, min(int(chunk), len(jaw)))
+    out = np.empty((size, len(rest), 3))
     w3 = w[:, None]
     frames = range(len(jaw))
     if progress is not None:
@@ -131,13 +135,16 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
         skin = np.asarray(skin, dtype=float)
         if not np.all(np.isfinite(skin)):
             raise FloatingPointError(f"frame {i}: the simulation produced non-finite skin positions")
-        frame = out[i]   # rest + w (skin - rest), in place
+        j = i % size
+        frame = out[j]   # rest + w (skin - rest), in place
         np.subtract(skin, rest, out=frame)
         np.multiply(w3, frame, out=frame)
         np.add(rest, frame, out=frame)
         if rig.finish is not None:
-            rig.finish(out[i])
-    return out
+            rig.finish(out[j])
+        if sink is not None and (j == size - 1 or i == len(jaw) - 1):
+            sink(i - j, out[:j + 1])
+    return out if sink is None else None
 
 
 def ease_in(settle: int = 30, ramp: int | None = None) -> np.ndarray:

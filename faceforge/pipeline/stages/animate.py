@@ -431,7 +431,7 @@ def controls(mapping, faps, head):
     return (c if head.controls else np.zeros((len(c), 0))), jaw
 
 
-def warm_up(rig, contractions, jaw, fps: float, log) -> float:
+def warm_up(rig, contractions, jaw, fps: float, log, guards=()) -> float:
     """Play the track's first frame once and put the rig back at rest, so that the timed
     playback does not count numba's compilation of the kernels (about 35 s on the first run
     after an install or an upgrade; cached on disk afterwards). Logs the compilation when the
@@ -446,6 +446,9 @@ def warm_up(rig, contractions, jaw, fps: float, log) -> float:
         return 0.0
     t0 = time.perf_counter()
     play(rig, contractions[:1], jaw[:1], fps)
+    for guard in guards:   # kernels frame 0 does not reach (the orientation guard's rescans)
+        if guard is not None:
+            guard.warm_up()
     seconds = time.perf_counter() - t0
     rig.reset()
     if seconds > 1.0:
@@ -470,13 +473,50 @@ def _mapping(ctx):
     return mapping, str(path)
 
 
+def write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings, mapping_path):
+    """Play the track and stream its frames, a chunk at a time, through the lids, the checks,
+    the head turn and the user's vertex order into ``animation.npz`` (issue 28: a take's
+    memory does not grow with its length). Returns the
+    :class:`~faceforge.anatomy.check_stream.StreamChecker` that saw every frame."""
+    import numpy as np
+
+    from faceforge.anatomy.animate import play
+    from faceforge.anatomy.check_stream import StreamChecker
+    from faceforge.anatomy.head_motion import turn_head
+    from faceforge.io.frame_stream import FrameNpzWriter
+
+    checker = StreamChecker(head.rest, head.faces, track.n_frames)
+
+    def sink(start, frames):
+        stop = start + len(frames)
+        if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
+            frames = lids.apply(frames, faps[start:stop])
+        checker.add(frames)
+        if weights is not None:
+            frames = turn_head(frames, angles[start:stop], head.skull.jaw.yaw_point, weights)
+        writer.write(head.to_user(frames))
+
+    with FrameNpzWriter(ctx.out_dir / "animation.npz", track.n_frames, len(head.user_index)) as writer:
+        try:
+            warm_up(head.rig, c, jaw, track.fps, ctx.log, guards=(head.orientation,))   # leaves the rig at rest
+            play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings, sink=sink)
+        except FloatingPointError as exc:
+            from faceforge.exceptions import StageError
+
+            raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
+                             "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
+        writer.close(fps=np.float64(track.fps), contractions=c, controls=np.asarray(head.controls, dtype=str),
+                     jaw=jaw)
+    return checker
+
+
 def run_animate(ctx):
     """Simulate the FAP track in ``ctx.params['fap']``; write animation.npz and report.json."""
     import numpy as np
 
-    from faceforge.anatomy.animate import Timings, check_animation, play
-    from faceforge.anatomy.head_motion import HEAD_FAPS, head_angles, neck_weights, turn_head
-    from faceforge.io.stagefiles import save_json, save_npz
+    from faceforge.anatomy.animate import Timings
+    from faceforge.anatomy.head_motion import HEAD_FAPS, head_angles, neck_weights
+    from faceforge.io.stagefiles import save_json
     from faceforge.mpeg4 import read_fap
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
@@ -502,36 +542,24 @@ def run_animate(ctx):
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
     timings = Timings()
-    try:
-        warm_up(head.rig, c, jaw, track.fps, ctx.log)   # leaves the rig at rest; a divergence: same error
-        frames = play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings)
-    except FloatingPointError as exc:
-        from faceforge.exceptions import StageError
-
-        raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
-                         "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
-    if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
-        frames = lids.apply(frames, faps)
-    checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
-    threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     # the head turns as a whole about the top of the spine (approximated by the midpoint of the
     # jaw's condyles), the skin below the skull fading out of the turn; after the checks, which
     # look at the skin in the skull's own frame
+    weights = None
     if np.any(angles):
+        from faceforge.anatomy.head_parts import detached_vertices
+
         low, high = head.bone_heights()
         span = float(ctx.config.get("animate.neck_fade")) * (high - low)
         weights = neck_weights(head.rest, low, span)
-        from faceforge.anatomy.head_parts import detached_vertices
-
         weights[detached_vertices(head.rest, head.faces, list(head.fdp_vertex.values()))] = 0.0  # another head
-        frames = turn_head(frames, angles, head.skull.jaw.yaw_point, weights)
-    user = head.to_user(frames).astype(np.float32)
-    save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
-             controls=np.asarray(head.controls, dtype=str), jaw=jaw)
+    checker = write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings, mapping_path)
+    checks = checker.report(skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
+    threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     save_json(ctx.out_dir / "report.json", {
         "fap": str(ctx.param("fap")), "frames": track.n_frames, "fps": track.fps,
         "mapping": mapping_path, "unmapped_faps": unmapped,
-        "user_vertices": int(user.shape[1]), "working_vertices": int(len(head.rest)),
+        "user_vertices": int(len(head.user_index)), "working_vertices": int(len(head.rest)),
         "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
         "max_contraction": float(c.max()) if c.size else 0.0,
         "eyes_with_lids": len(lids.fields) if lids is not None else 0, "visemes": visemes,
@@ -714,11 +742,14 @@ def _viseme_file(app, text: str) -> Path:
 
 def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
     """Write ``-o`` and ``--preview`` from the animate stage's frames."""
-    from faceforge.exceptions import StageError
-    from faceforge.io.stagefiles import load_npz
+    import numpy as np
 
-    d = load_npz(app.workspace.stage_dir("animate") / "animation.npz")
-    frames, fps = d["frames"], float(d["fps"])
+    from faceforge.exceptions import StageError
+    from faceforge.io.frame_stream import open_frames
+
+    # a read-only map of the stage file: an hour-long take is read a chunk at a time
+    frames = open_frames(app.workspace.stage_dir("animate") / "animation.npz")
+    fps = float(open_frames(app.workspace.stage_dir("animate") / "animation.npz", "fps"))
     mesh = app.workspace.load_params().get("mesh")
     if not mesh:
         raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
@@ -744,8 +775,10 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
             idx = pick_frames(len(frames), int(app.config.get("animate.preview_frames")), preview_frames)
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
-        frames = frames @ rotation.T.astype(frames.dtype)   # drawn upright, in head space
-        contact_sheet(preview, frames, faces, idx, fps, title=Path(output or "animation").name, focus=True)
+        # only the drawn frames are read, turned upright (head space)
+        shown = np.stack([np.asarray(frames[i]) @ rotation.T.astype(frames.dtype) for i in idx])
+        contact_sheet(preview, shown, faces, range(len(idx)), fps, title=Path(output or "animation").name,
+                      focus=True, labels=[f"frame {i}  ({i / fps:.2f} s)" for i in idx])
         app.log(f"animate: wrote {preview}")
 
 
