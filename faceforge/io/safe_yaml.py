@@ -61,12 +61,13 @@ def _line(exc) -> int | None:
 
 
 def check_structure(text: str, source: str, error=ConfigError) -> None:
-    """Raise ``error(message, source, line)`` when ``text`` is too big, nested deeper than
-    :data:`MAX_DEPTH` or expands (aliases followed) to more than :data:`MAX_NODES` nodes.
+    """Raise ``error(message, source, line)`` when ``text`` is too big, holds a number of more
+    than :data:`MAX_INT_DIGITS` digits, is nested deeper than :data:`MAX_DEPTH` or expands (aliases followed) to more than :data:`MAX_NODES` nodes.
     Walks the parser's events only: nothing is built, so a bomb is refused in milliseconds.
     Syntax errors are raised as ``error`` too."""
     if len(text) > MAX_BYTES:
         raise error(f"YAML file too large ({len(text)} characters, at most {MAX_BYTES})", source)
+    _check_ints(text, source, error)
     sizes: dict[str, int] = {}      # anchor -> expanded node count of its node
     stack: list[list] = []          # open collections: [anchor, count so far]
     total = 0
@@ -132,5 +133,4 @@ def construct_guarded(make, source: str, error=ConfigError, what: str = "YAML") 
 def load_user_yaml(text: str, source: str, error=ConfigError, loader=UserLoader) -> Any:
     """``text`` parsed by ``loader`` after :func:`check_structure`; every failure is ``error``."""
     check_structure(text, source, error)
-    _check_ints(text, source, error)
     return construct_guarded(lambda: yaml.load(text, Loader=loader), source, error)

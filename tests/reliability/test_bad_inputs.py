@@ -96,7 +96,7 @@ CASES = {
     "landmarks nested deep": ({"lm.yaml": "landmarks: " + "[" * 3000 + "]" * 3000 + "\n"},
                               ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml", "nest"]),
     "landmarks 5000 digits": ({"lm.yaml": 'landmarks:\n  "2.1": {vertex: ' + "9" * 5000 + "}\n"},
-                              ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml", "digits"]),
+                              ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml:2", "more than 100 digits"]),
     "landmarks alias bomb": ({"lm.yaml": BOMB}, ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"],
                              ["lm.yaml", "alias"]),
     "landmarks json deep": ({"lm.json": "[" * 100000 + "]" * 100000},
