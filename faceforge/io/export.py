@@ -57,6 +57,7 @@ rate to ``fps`` (before a glTF import), Start to 0 and End to ``n_frames - 1``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 from . import export_cache, export_gltf, export_obj, export_usd  # noqa: F401  (each registers its suffixes)
@@ -92,9 +93,48 @@ def exporter_for(path: str | Path):
         raise ExportError(f"unknown output format {suffix!r}; valid: {valid_suffixes()}", path) from None
 
 
-def check_output(path: str | Path) -> None:
-    """Fail early (before any simulation) on an output the export could not write: an
-    unknown suffix, or binary USD without ``usd-core``. Raises ExportError."""
+def _same_file(a: Path, b: Path) -> bool:
+    """``a`` and ``b`` name one file (or folder): the same inode when both exist, else the
+    same absolute path after resolving links."""
+    try:
+        if a.exists() and b.exists():
+            return a.samefile(b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def protect_inputs(path: str | Path, inputs: Mapping[str, str | Path | None]) -> None:
+    """Refuse an output path that is one of the user's input files or a folder holding one
+    (an OBJ-sequence folder replaces what it names).
+
+    Parameters
+    ----------
+    path : the output path.
+    inputs : what each input is called in the message -> its path; ``None`` entries are skipped.
+
+    Raises
+    ------
+    ExportError
+    """
+    out = Path(path)
+    for what, given in inputs.items():
+        if not given:
+            continue
+        given = Path(given)
+        if _same_file(out, given):
+            raise ExportError(f"is your {what}; faceforge never overwrites its inputs: choose another "
+                              "output path", path)
+        if any(_same_file(out, parent) for parent in given.absolute().parents):
+            raise ExportError(f"holds your {what} ({given.name}); faceforge never overwrites its inputs: "
+                              "choose another output path", path)
+
+
+def check_output(path: str | Path, inputs: Mapping[str, str | Path | None] | None = None) -> None:
+    """Fail early (before any simulation) on an output the export could not write or must not
+    write: one of ``inputs`` (see :func:`protect_inputs`), an unknown suffix, or binary USD
+    without ``usd-core``. Raises ExportError."""
+    protect_inputs(path, inputs or {})
     exporter_for(path)
     if Path(path).suffix.lower() in (".usdc", ".usd"):
         export_usd.require_usd_core(path)
@@ -187,6 +227,7 @@ __all__ = [
     "ExportError",
     "blender_notes",
     "check_output",
+    "protect_inputs",
     "export_animation",
     "export_for_mesh",
     "exporter_for",

@@ -178,12 +178,23 @@ class SharedOptions:
             exporter_for(output_path(Path("."), "x", self.output))
 
 
+def folder_name(stem: str) -> str:
+    """A workdir folder name from a mesh's stem: path separators and leading dots dropped (a
+    mesh ``...obj`` has the stem ``..``, which would name ``<out>``'s parent), ``head`` when
+    nothing is left."""
+    cleaned = stem.replace("/", "_").replace("\\", "_").lstrip(".").strip()
+    return cleaned or "head"
+
+
 def make_job(mesh: str | Path, out: str | Path, shared: SharedOptions, name: str | None = None,
              landmarks: str | Path | None = None, overrides: Mapping[str, Any] | None = None,
              base: str | Path = ".") -> HeadJob:
-    """A :class:`HeadJob` for ``mesh`` in ``<out>/<name>/`` (paths made absolute)."""
-    name = name or Path(mesh).stem
+    """A :class:`HeadJob` for ``mesh`` in ``<out>/<name>/`` (paths made absolute; ``name``
+    defaults to :func:`folder_name` of the mesh's stem)."""
+    name = name or folder_name(Path(mesh).stem)
     workdir = Path(out).absolute() / name
+    if workdir.parent != Path(out).absolute() or name in (".", ".."):
+        raise StageError(f"head name {name!r} is not a folder name inside --out", str(mesh))
     return HeadJob(name=name, mesh=str(Path(mesh).absolute()), workdir=str(workdir),
                    landmarks=None if landmarks is None else str(Path(landmarks).absolute()),
                    fap=None if shared.fap is None else str(Path(shared.fap).absolute()),

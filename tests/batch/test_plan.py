@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pickle
 import textwrap
+from pathlib import Path
 
 import pytest
 
@@ -110,3 +111,27 @@ def test_overrides_are_checked_against_the_schema(tmp_path):
     assert batch.validate_overrides({"fit.refit": False}, "m.yaml", tmp_path) == {"fit.refit": False}
     with pytest.raises(FaceforgeError, match=r"m.yaml:9: fit.refitt: unknown key"):
         batch.validate_overrides({"fit.refitt": False}, "m.yaml", tmp_path, {"fit.refitt": 9})
+
+
+@pytest.mark.parametrize("stem", ["..", ".", ".hidden"])
+def test_a_mesh_stem_never_names_a_workdir_outside_out(tmp_path, heads_dir, short_fap, stem):
+    """A mesh ``...obj`` (stem ``..``) made its workdir ``<out>/..``: faceforge then wrote its stage
+    folders into the parent and replaced a ``config.yaml`` of the user's there."""
+    mesh = tmp_path / f"{stem}.obj"
+    mesh.write_bytes((heads_dir / "anna.obj").read_bytes())
+    out = tmp_path / "runs"
+    for job in (batch.make_job(mesh, out, batch.SharedOptions(fap=str(short_fap))),
+                batch.jobs_from_meshes([mesh], out, batch.SharedOptions(fap=str(short_fap)))[0]):
+        assert Path(job.workdir).parent == out
+        assert job.name not in (".", "..") and not job.name.startswith(".")
+
+
+def test_a_manifest_head_without_a_name_stays_inside_out(tmp_path, heads_dir, short_fap):
+    (tmp_path / "...obj").write_bytes((heads_dir / "anna.obj").read_bytes())
+    path = _manifest(tmp_path, f"""\
+        fap: {short_fap}
+        heads:
+          - mesh: {tmp_path / '...obj'}
+        """)
+    (job,) = batch.load_manifest(path, tmp_path / "runs", batch.SharedOptions())
+    assert job.workdir == str(tmp_path / "runs" / "head")

@@ -806,10 +806,15 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, output, p
 
     if sum(x is not None for x in (fap, expression, visemes)) != 1:
         raise StageError("give exactly one of --fap FILE, --expression NAME or --visemes V1,V2,...")
-    if output:
-        from faceforge.io.export import check_output
+    if output or preview:
+        from faceforge.io.export import check_output, protect_inputs
 
-        check_output(output)      # an output it cannot write fails before the simulation
+        params = app.workspace.load_params()
+        inputs = {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"), "FAP track": fap}
+        if output:
+            check_output(output, inputs)      # an output it cannot or must not write fails before the simulation
+        if preview:
+            protect_inputs(preview, {**inputs, "-o output": output})
     if fap is not None:   # a malformed FAP file fails in milliseconds, before the head is loaded
         import warnings
 
