@@ -19,7 +19,7 @@ from statistics import median
 #: steps of each way tried at the start, alternating
 FIRST_STEPS = 4
 #: every this many steps, the way not in use is timed again ...
-EXPLORE_EVERY = 50
+EXPLORE_EVERY = 100
 #: ... for this many steps
 EXPLORE_STEPS = 2
 #: the recent step times kept per way (their median decides)
