@@ -81,8 +81,11 @@ def write_pc2(path: str | Path, frames: object, faces: object, fps: float, *, st
 def _chunks(data, dtype):
     """The bytes of ``data (F, n, 3)`` as ``dtype``, 64 frames at a time, made as they are
     written (a long take, e.g. a map of the stage file, is never copied whole)."""
+    from faceforge.io.frame_stream import release
+
     for start in range(0, len(data), 64):
         yield data[start:start + 64].astype(dtype, copy=False).tobytes()
+        release(data)
 
 
 def read_pc2(path: str | Path) -> tuple[np.ndarray, float, float]:

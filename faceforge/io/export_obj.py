@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .export_common import ExportError, faces_to_csr, register_exporter, validate_animation
+from .frame_stream import release
 
 
 def _sequence_pattern(name: str) -> re.Pattern[str]:
@@ -95,6 +96,8 @@ def write_obj_sequence(path: str | Path, frames: object, faces: object, fps: flo
             header = f"# faceforge OBJ sequence: frame {k + 1} of {data.shape[0]} at {float(fps):g} fps\n"
             text = header + f"o {name}\n" + _vertex_text(positions) + face_text
             (staging / f"{name}_{k + 1:0{width}d}.obj").write_text(text, encoding="ascii")
+            if k % 64 == 63:
+                release(data)   # a long take read through a file map: keep only a chunk resident
         if folder.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{name}.{os.getpid()}.", suffix=".old", dir=folder.parent))
             folder.rename(old / name)
