@@ -104,6 +104,11 @@ class App:
                                      "edit, or forget them with `faceforge config reset`")
         self.debug(f"remembered overrides in {path}")
 
+    def params(self) -> dict:
+        """The remembered inputs as this command will leave them (its stage runs' params, not
+        yet written: :meth:`commit_remembered`)."""
+        return dict(self._pending_params) if self._pending_params is not None else self.workspace.load_params()
+
     def commit_remembered(self) -> None:
         """Write what the command's stage runs are to remember (``faceforge.yaml`` and the
         overrides in ``config.yaml``), once the whole command has succeeded: a failed command

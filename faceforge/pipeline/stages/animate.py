@@ -750,7 +750,7 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
     # a read-only map of the stage file: an hour-long take is read a chunk at a time
     frames = open_frames(app.workspace.stage_dir("animate") / "animation.npz")
     fps = float(open_frames(app.workspace.stage_dir("animate") / "animation.npz", "fps"))
-    mesh = app.workspace.load_params().get("mesh")
+    mesh = app.params().get("mesh")
     if not mesh:
         raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
     from faceforge.pipeline.stages.fit import user_rotation
