@@ -190,6 +190,9 @@ class FaceforgeGroup(click.Group):
                 warnings.showwarning = _show_warning
                 rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.ClickException as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":   # bare `faceforge`: the help, as click gives it
+                exc.show()
+                sys.exit(exc.exit_code)
             click.echo(f"faceforge: error: {one_line(exc.format_message())}", err=True)
             sys.exit(2 if isinstance(exc, click.UsageError) else exc.exit_code)
         except click.exceptions.Abort:
