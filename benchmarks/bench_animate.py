@@ -6,7 +6,7 @@ Measures the per-frame time of skull + muscles + skin, broken down by layer, at 
 * ``synthetic`` (always): a Mesh_D-sized head (UV-sphere skin of 4,874 vertices / 9,744
   triangles vs the paper's Mesh_D 4,904 / 9,541) with a closed cranium and mandible, one
   active zygomaticus and 25 passive sheets (26 muscles, like the paper's map), bound by the
-  real bind stage and simulated by the real layered system (``tests/animate/synthetic.py``);
+  real bind stage and simulated by the real layered system (``tests/animation/synthetic.py``);
 * ``--workdir DIR`` (optional): a real head already fitted and bound in DIR;
 * ``--sweep`` (optional, slow): every ``samples/fap/*.fap``, and a generated track of the
   fourteen visemes (``visemes_all_fourteen.fap``, :func:`faceforge.mpeg4.viseme_track`), on
@@ -49,34 +49,35 @@ def synthetic_head(tmp: Path, count, extra: int, sets=()):
     config overrides (``"solver.partitions=1"``) for the simulation."""
     import yaml
 
-    import faceforge.pipeline.stages.animate as stage
-    from faceforge.anatomy.fap_mapping import mapping_from_dict
+    import faceforge.animation.rig as rig
+    from faceforge.animation.fap_mapping import mapping_from_dict
     from faceforge.io.config import load_config
     from faceforge.pipeline import StageContext
     from faceforge.pipeline.stages.bind import run as run_bind
-    from tests.animate import synthetic as S
+    from tests.animation import synthetic as S
 
     S.write_fit(tmp / "fit", count=count, extra_muscles=extra)
     (tmp / "bind").mkdir()
     run_bind(StageContext(name="bind", config=load_config(), params={}, out_dir=tmp / "bind",
                           workdir=tmp, deps=("fit",)))
-    real = stage._muscle_system
-    stage._muscle_system = functools.partial(S.muscle_system, extra=extra)
+    real = rig.muscle_system
+    rig.muscle_system = functools.partial(S.muscle_system, extra=extra)
     try:
-        head = stage.BoundHead(tmp / "fit", tmp / "bind", load_config(sets=sets))
+        head = rig.BoundHead(tmp / "fit", tmp / "bind", load_config(sets=sets))
     finally:
-        stage._muscle_system = real
+        rig.muscle_system = real
     (tmp / "mapping.yaml").write_text(yaml.safe_dump(S.MAPPING))
     return head, mapping_from_dict(S.MAPPING)
 
 
 def real_head(workdir: Path, sets=()):
     import faceforge.pipeline.stages.animate as stage
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.fap_mapping import load_fap_mapping
+    from faceforge.animation.rig import BoundHead
     from faceforge.io.config import load_config
 
     config = load_config(remembered=workdir / "config.yaml", sets=sets)
-    head = stage.BoundHead(workdir / "fit", workdir / "bind", config)
+    head = BoundHead(workdir / "fit", workdir / "bind", config)
     cal = stage.calibrated_mapping_path(workdir)
     return head, load_fap_mapping(cal if cal.exists() else stage.mapping_template_path(config))
 
@@ -86,12 +87,12 @@ def measure(head, mapping, frames: int, repeats: int, rival=None) -> dict:
 
     ``rival``: the same head built with other settings (one partition); its repeats alternate
     with ``head``'s, and its figures and the ratio go under ``"one_partition"``."""
-    import faceforge.pipeline.stages.animate as stage
-    from faceforge.anatomy.animate import Timings, play
+    from faceforge.animation.controls import track_controls
+    from faceforge.animation.playback import Timings, play
     from faceforge.mpeg4 import read_fap
 
     track = read_fap(ROOT / "samples" / "fap" / "joy.fap")
-    c, jaw, _, _ = stage.track_controls(track, mapping, head)
+    c, jaw, _, _ = track_controls(track, mapping, head)
     c, jaw = c[:frames], jaw[:frames]
     heads = [head] + ([rival] if rival is not None else [])
     for h in heads:

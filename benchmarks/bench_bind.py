@@ -1,8 +1,8 @@
 """Benchmark of the bind stage's work (§8): ~5,000 and ~50,000 skin vertices.
 
-Times, end to end, :func:`faceforge.anatomy.binding.bind_head` (lip cut, ray-cast
+Times, end to end, :func:`faceforge.skin.head.bind_head` (lip cut, ray-cast
 binding, geodesic influence map, report) plus building the skin layer into a PBD
-model (:func:`faceforge.anatomy.skin.add_skin` + ``finalize``). Targets: < 5 s for
+model (:func:`faceforge.skin.layer.add_skin` + ``finalize``). Targets: < 5 s for
 ~5k vertices (the paper), < 60 s for ~50k.
 
 Heads: the MakeHuman sample (4,295 v) and the ICT sample subdivided once by
@@ -28,8 +28,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from faceforge.anatomy.binding import bind_head  # noqa: E402
-from faceforge.anatomy.skin import SkinStiffness, add_skin  # noqa: E402
+from faceforge.skin.head import bind_head  # noqa: E402
+from faceforge.skin.layer import SkinStiffness, add_skin  # noqa: E402
 from faceforge.geometry.rays import has_embree  # noqa: E402
 
 SAMPLES = ROOT / "samples"
@@ -97,7 +97,7 @@ def run_case(name, v, f, head, repeats=3):
 def rest_drift(name, work: Path, frames=1000):
     """Max skin drift over ``frames`` rest frames of the whole bound head (BoundHead), / diagonal."""
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages.animate import BoundHead
+    from faceforge.animation.rig import BoundHead
 
     head = BoundHead(work / "fit", work / "bind", load_config())
     diag = float(np.linalg.norm(np.ptp(head.rest, axis=0)))

@@ -1,7 +1,7 @@
 """Benchmark of `faceforge fit` (issue 5): time to fit a ~5,000-vertex head.
 
 The paper fits in under 1 s. Measured: the fit proper (skin surface + similarity + RBF +
-enhancement rounds + muscles with Eq. 5 + refit, :func:`faceforge.anatomy.fit.fit_head`)
+enhancement rounds + muscles with Eq. 5 + refit, :func:`faceforge.fit.head.fit_head`)
 on the MakeHuman head (4,295 v), with the template already loaded (it is loaded once per
 process and its muscles are cached on disk); for context the mesh check + landmark
 reading, the report (inside tests), the template load, and the other sample heads.
@@ -31,12 +31,13 @@ HEADS = {
 
 
 def main() -> None:
-    from faceforge.anatomy.fit import FitSettings, SkinSurface, fit_head
-    from faceforge.anatomy.fit_report import build_report
+    from faceforge.fit.head import FitSettings, fit_head
+    from faceforge.fit.surface import SkinSurface
+    from faceforge.fit.report import build_report
     from faceforge.io.landmarks import load_landmarks
     from faceforge.io.mesh import load_mesh
     from faceforge.io.mesh_check import check_mesh
-    from faceforge.pipeline.stages.fit import load_template
+    from faceforge.fit.template import load_template
 
     t0 = time.perf_counter()
     template = load_template(ROOT / "templates/skull", ROOT / "templates/muscle_map.yaml")

@@ -64,7 +64,7 @@ def set_mode(mode: str) -> None:
 
 def play_ms(head, c, jaw, fps) -> float:
     """ms a frame of one playback of the track (the rig reset first)."""
-    from faceforge.anatomy.animate import Timings, play
+    from faceforge.animation.playback import Timings, play
 
     head.rig.reset()
     t = Timings()
@@ -80,8 +80,9 @@ def main() -> None:
     from faceforge.io.config import load_config
     from faceforge.mpeg4 import read_fap
     from faceforge.pipeline import stage as registry
-    from faceforge.pipeline.stages.animate import BoundHead, track_controls
-    from faceforge.anatomy.fap_mapping import load_fap_mapping
+    from faceforge.animation.controls import track_controls
+    from faceforge.animation.fap_mapping import load_fap_mapping
+    from faceforge.animation.rig import BoundHead
 
     registry.discover()
     tmp = Path(tempfile.mkdtemp(prefix="load-"))

@@ -49,9 +49,10 @@ def on_sphere(pts):
 
 def scene(h=6, w=3):
     """Skull + 25 linear muscles (12 / 9 / 4 in layers 0 / 1 / 2) + a sphincter (layer 2)."""
-    from faceforge.anatomy.action_line import ActionLine
+    from faceforge.anatomy.muscles.action_line import ActionLine
     from faceforge.anatomy.layers import underlying_mesh
-    from faceforge.anatomy.muscle import align_loops, build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.muscle import build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.sphincter import align_loops
 
     cranium, mandible = skull()
     centres = [(x, y) for y in (0.55, 0.2, -0.55) for x in (-0.45, -0.15, 0.15, 0.45)]
@@ -95,8 +96,8 @@ def template_scene():
     """The real template (templates/skull + templates/muscle_map.yaml) via the public loaders."""
     import yaml
 
-    from faceforge.anatomy.fit_muscles import build_muscles_on
-    from faceforge.anatomy.muscle_map import load_muscle_map
+    from faceforge.anatomy.muscles.build import build_muscles_on
+    from faceforge.anatomy.muscles.muscle_map import load_muscle_map
     from faceforge.anatomy.skull import load_skull
 
     root = Path(__file__).resolve().parents[1]
@@ -142,7 +143,7 @@ def main():
 
     def targets_only():
         for layer in system._layers:
-            system._set_targets(layer, {n: 0.5 for n in names})
+            system._set_targets(layer, system.contraction_array({n: 0.5 for n in names}))
 
     def solver_only():
         for layer in system._layers:

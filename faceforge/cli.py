@@ -43,7 +43,7 @@ class App:
         from faceforge.io.config import load_config, parse_sets, read_config_file
         from faceforge.pipeline.runner import Workspace
 
-        registry.discover()  # stage modules may add config rules (faceforge.io.config.add_rule)
+        registry.discover()  # the stage modules register their stages and commands
         self.workspace = Workspace(workdir)
         self.verbosity = verbosity
         self.progress = (sys.stderr.isatty() and verbosity >= 0) if progress is None else progress

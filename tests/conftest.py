@@ -64,3 +64,7 @@ def subprocess_env() -> dict:
 
 
 PYTHON = sys.executable
+
+
+# the sample heads fitted once per session, shared by the fit, io, pipeline and scenario tests
+from tests.fit.heads import ellipsoid, fitted, template  # noqa: E402,F401  (fixtures)

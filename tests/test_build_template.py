@@ -1,8 +1,10 @@
 """tools/build_template.py: the committed template is its output (to the last printed
 decimal), and the dental warp is one-to-one.
 
-The build reads the shared assets (``/work/shared/assets``); without them the build tests
-skip. The warp's own properties are checked on synthetic points and need no assets.
+The build reads an assets tree laid out as the shared assets (``--assets``): the fixture
+:func:`assets` assembles one from the repository (the skull of tests/data/skull-yahoojapan, the ICT
+head of samples/ict, the FDP table of faceforge/mpeg4/data). The warp's own properties are checked
+on synthetic points.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ import pytest
 import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
-ASSETS = Path("/work/shared/assets")
 FILES = ("cranium.obj", "mandible.obj", "landmarks.yaml", "jaw.yaml")
 
 
@@ -28,7 +29,18 @@ def bt():
     return module
 
 
-needs_assets = pytest.mark.skipif(not (ASSETS / "anatomy").is_dir(), reason="shared assets not on this machine")
+@pytest.fixture(scope="module")
+def assets(tmp_path_factory):
+    """An assets tree (as ``tools/build_template.py --assets`` reads it) of repository files."""
+    root = tmp_path_factory.mktemp("assets")
+    files = {"anatomy/skull-yahoojapan/skull_low_resolution.obj": "tests/data/skull-yahoojapan/skull_low_resolution.obj",
+             "heads/ict/ict_face_headneck_neutral.obj": "samples/ict/ict_face_headneck_neutral.obj",
+             "heads/ict/ict_face_headneck_neutral.fdp.yaml": "samples/ict/ict_face_headneck_neutral.fdp.yaml",
+             "mpeg4/fdp_feature_points.csv": "faceforge/mpeg4/data/fdp_feature_points.csv"}
+    for dst, src in files.items():
+        (root / dst).parent.mkdir(parents=True, exist_ok=True)
+        (root / dst).symlink_to(ROOT / src)
+    return root
 
 
 _NUMBER = re.compile(r"(-?\d+\.\d+)")
@@ -54,9 +66,8 @@ def _same_to_the_printed_digit(built: str, committed: str) -> list[str]:
     return bad
 
 
-@needs_assets
-def test_the_build_reproduces_the_committed_template_to_the_printed_digit(bt, tmp_path):
-    summary = bt.build(ASSETS, tmp_path)
+def test_the_build_reproduces_the_committed_template_to_the_printed_digit(bt, assets, tmp_path):
+    summary = bt.build(assets, tmp_path)
     assert summary["dental_drop"] == 0.0
     for name in FILES:
         bad = _same_to_the_printed_digit((tmp_path / name).read_text(),
@@ -83,11 +94,10 @@ def _turned(v0, v1, f):
     return int((np.einsum("ij,ij->i", normals(v0), normals(v1)) <= 0).sum())
 
 
-@needs_assets
-def test_the_dental_warp_puts_the_incisal_edge_on_the_lips_and_folds_nothing(bt, tmp_path):
-    plain = bt.build(ASSETS, tmp_path / "plain")
-    warped = bt.build(ASSETS, tmp_path / "dental", dental=True)
-    fdp = yaml.safe_load((ASSETS / "heads/ict/ict_face_headneck_neutral.fdp.yaml").read_text())["landmarks"]
+def test_the_dental_warp_puts_the_incisal_edge_on_the_lips_and_folds_nothing(bt, assets, tmp_path):
+    plain = bt.build(assets, tmp_path / "plain")
+    warped = bt.build(assets, tmp_path / "dental", dental=True)
+    fdp = yaml.safe_load((assets / "heads/ict/ict_face_headneck_neutral.fdp.yaml").read_text())["landmarks"]
     stomion = (fdp["2.2"]["position"][1] + fdp["2.3"]["position"][1]) / 2.0
     assert 1.0 < warped["dental_drop"] < bt.DENTAL_DOWN
     for bone in ("cranium", "mandible"):

@@ -236,7 +236,8 @@ def test_animate_visemes_are_checked_before_any_work(invoke, tmp_path):
 def test_animate_visemes_write_the_track_they_name(tmp_path):
     from types import SimpleNamespace
 
-    from faceforge.anatomy.fap_mapping import VISEME_IDS, viseme_weights
+    from faceforge.animation.fap_mapping import viseme_weights
+    from faceforge.mpeg4 import VISEME_CODES
     from faceforge.io.config import load_config
     from faceforge.mpeg4 import read_fap
     from faceforge.pipeline.stages.animate import _viseme_file
@@ -247,5 +248,5 @@ def test_animate_visemes_write_the_track_they_name(tmp_path):
     w = viseme_weights(read_fap(path).viseme)
     said = [k + 1 for k in np.argmax(w, axis=1)[w.max(axis=1) == 1.0]]
     assert [k for i, k in enumerate(said) if i == 0 or said[i - 1] != k] == \
-        [VISEME_IDS["p_b_m"], VISEME_IDS["a"], VISEME_IDS["u"]]
+        [VISEME_CODES["p_b_m"], VISEME_CODES["a"], VISEME_CODES["u"]]
     assert _viseme_file(app, "p_b_m a,u") == path        # the same visemes, the same file

@@ -56,7 +56,7 @@ def _layer_of(system, name):
 def probe(workdir: Path, c: float = 1.0, frames: int = 40, sets=()) -> list[dict]:
     """One dict per case of :data:`CASES` (keys as the module docstring's links)."""
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages.animate import BoundHead
+    from faceforge.animation.rig import BoundHead
 
     head = BoundHead(workdir / "fit", workdir / "bind", load_config(sets=list(sets)))
     system, names, binding = head.system, list(head.muscle_names), head.skin.binding

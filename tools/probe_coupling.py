@@ -62,9 +62,10 @@ def plan(muscle: str):
 
 def probe(workdir: Path, c: float = 0.5, frames: int = 40, muscles=None, sets=()) -> dict:
     """Coverage and per-muscle FDP displacement (see the module docstring) as a dict."""
-    from faceforge.anatomy.animate import inverted_triangles, static_poses
+    from faceforge.animation.checks import inverted_triangles
+    from faceforge.animation.playback import static_poses
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages.animate import BoundHead
+    from faceforge.animation.rig import BoundHead
 
     cfg = load_config(sets=list(sets))
     head = BoundHead(workdir / "fit", workdir / "bind", cfg)

@@ -10,7 +10,7 @@ midplane taken as x = 0) lie: the skin (each vertex to the nearest mirrored vert
 exactly symmetric mesh such as MakeHuman's), the fitted skull (each vertex to the mirrored
 surface), each right muscle of the fit (``fit.npz``, morphed from the template; vertex by
 vertex against its mirrored left twin) and of the rig the animate stage builds from the
-fitted muscle map (:func:`faceforge.pipeline.stages.animate._muscle_system`), and the
+fitted muscle map (:func:`faceforge.animation.rig.muscle_system`), and the
 orbicularis oris (each particle to the nearest mirrored particle). On a symmetric head,
 what is not ~0 was put there by the template or the fit. MakeHuman at 585e8da: fit.npz
 zygomaticus / risorius 0.079 / 0.079 ES mean, rig-built 0.061 / 0.084, skull 0.02.
@@ -36,14 +36,14 @@ def _muscles(fit: dict) -> dict:
 def _rig_muscles(workdir: Path, fit: dict) -> dict:
     """{name: rest positions (k, 3)} of the muscles the animate stage builds (no solver)."""
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages.animate import _muscle_system
+    from faceforge.animation.rig import muscle_system
 
     cfg = load_config()
     cranium = (fit["cranium_vertices"], fit["cranium_faces"])
     mandible = (fit["mandible_vertices"], fit["mandible_faces"])
     from faceforge.pbd.settings import SolverSettings
 
-    system = _muscle_system(fit, cranium, mandible, SolverSettings(), cfg, lambda m: None)
+    system = muscle_system(fit, cranium, mandible, SolverSettings(), cfg, lambda m: None)
     return {n: system.rest_positions(n) for n in system.names}
 
 
@@ -62,7 +62,7 @@ def probe(workdir: Path, rig: bool = True) -> dict:
     import trimesh
     from scipy.spatial import cKDTree
 
-    from faceforge.anatomy import fit_tissue
+    from faceforge.anatomy import tissue as fit_tissue
     from faceforge.io.stagefiles import load_npz
 
     fit = load_npz(workdir / "fit" / "fit.npz")

@@ -48,13 +48,15 @@ surface points of the skull and muscles at rest, then follows them:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from faceforge.anatomy.action_line import ActionLine
-from faceforge.anatomy.layer_targets import LinearTargets, bary_points
-from faceforge.anatomy.muscle import Muscle, add_muscles_to_builder, protrusion_control
+from faceforge.anatomy.muscles.action_line import ActionLine
+from faceforge.anatomy.muscles.targets import LinearTargets, bary_points
+from faceforge.anatomy.muscles.muscle import Muscle, add_muscles_to_builder
+from faceforge.anatomy.muscles.sphincter import protrusion_control
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
 from faceforge.geometry.surface_points import SurfacePoints
@@ -110,6 +112,8 @@ class _Layer:
     linear_direct: bool = False  # its slots are every position slot of the layer, in order
     pts: np.ndarray = None     # (k, 3) scratch: the gathered surface points
     copies: list = None        # (world slice, layer state slice) pairs written back each step
+    columns: np.ndarray = None  # (muscles,) each muscle's column in the system's contraction array
+    protrusion_columns: np.ndarray = None  # (muscles,) its protrusion drive's column, or -1
 
     def gather(self):
         """Precompute one gather for all surface points of all lines of the layer."""
@@ -171,6 +175,14 @@ class MusculoskeletalSystem:
         self._muscles = {m.name: m for layer in layers for m in layer.muscles}
         self._controls = tuple(self._muscles) + tuple(protrusion_control(n) for n, m in self._muscles.items()
                                                       if m.kind == "sphincter")
+        self._column = {name: i for i, name in enumerate(self._controls)}
+        for layer in layers:   # each layer reads its muscles' columns of the contraction array
+            layer.columns = np.array([self._column[m.name] for m in layer.muscles], dtype=INT)
+            layer.protrusion_columns = np.array(
+                [self._column.get(protrusion_control(m.name), -1) for m in layer.muscles], dtype=INT)
+            if layer.linear is not None:
+                layer.linear.columns = np.array([self._column[n] for n in layer.linear.names], dtype=INT)
+        self._rest_controls = np.zeros(len(self._controls))
         self.settings = settings
         self._extra: list = []
         self._jaw = np.eye(4)
@@ -232,7 +244,7 @@ class MusculoskeletalSystem:
             layer.bary = np.ascontiguousarray(layer.bary, dtype=FLOAT)
             layer.plan_copies(system._vslice)
         for layer in layers:  # rest targets: the rest state is a fixed point
-            system._set_targets(layer, {})
+            system._set_targets(layer, system._rest_controls)
         return system
 
     # -- reading --------------------------------------------------------------------
@@ -249,7 +261,7 @@ class MusculoskeletalSystem:
     @property
     def controls(self) -> tuple[str, ...]:
         """What :meth:`step` drives: every muscle by name, then each sphincter's protrusion
-        (:func:`faceforge.anatomy.muscle.protrusion_control`)."""
+        (:func:`faceforge.anatomy.muscles.sphincter.protrusion_control`)."""
         return self._controls
 
     @property
@@ -341,24 +353,46 @@ class MusculoskeletalSystem:
         out += T[:3, 3]
         self._jaw = T.copy()
 
+    def contraction_array(self, contractions=None) -> np.ndarray:
+        """``(m,)`` float64 contractions in :attr:`controls` order from a dict (control -> c;
+        missing ones 0; unknown names raise ``KeyError`` listing the controls), None (all 0)
+        or an array already in that order (or of the muscles alone, which come first: the
+        protrusion drives then stay at rest)."""
+        if contractions is None:
+            return self._rest_controls
+        if isinstance(contractions, Mapping):
+            unknown = sorted(set(contractions).difference(self._controls))
+            if unknown:
+                raise KeyError(f"unknown muscle(s) {unknown}; controls: {', '.join(self.controls)}")
+            out = np.zeros(len(self._controls))
+            for name, c in contractions.items():
+                out[self._column[name]] = c
+            return out
+        c = np.asarray(contractions, dtype=FLOAT)
+        if c.shape == (len(self._muscles),) and len(self._muscles) < len(self._controls):
+            out = np.zeros(len(self._controls))   # the muscles alone: the protrusion drives at rest
+            out[:len(c)] = c
+            return out
+        if c.shape != (len(self._controls),):
+            raise ValueError(f"contractions must be ({len(self._controls)},) in controls order "
+                             f"(or ({len(self._muscles)},), the muscles alone), got {c.shape}")
+        return c
+
     def step(self, contractions=None, jaw_matrix=None, dt: float = 1.0 / 25.0) -> None:
         """Advance one frame.
 
         Parameters
         ----------
-        contractions : dict[str, float], optional
-            Control (:attr:`controls`: a muscle's name, or a sphincter's protrusion) -> c in
-            [0, 1] (Eq. 4); missing ones are at rest (0). Unknown names raise ``KeyError``
-            listing the controls.
+        contractions : (m,) float array in :attr:`controls` order, or dict, optional
+            c in [0, 1] (Eq. 4) per control (a muscle's name, or a sphincter's protrusion);
+            a dict names them (missing ones at rest, 0; unknown names raise ``KeyError``
+            listing the controls). See :meth:`contraction_array`.
         jaw_matrix : (4, 4) float, optional
             Rigid transform of the mandible from its rest pose; None keeps the last.
         dt : float
             Frame time in seconds.
         """
-        contractions = dict(contractions or {})
-        unknown = sorted(set(contractions).difference(self._controls))
-        if unknown:
-            raise KeyError(f"unknown muscle(s) {unknown}; controls: {', '.join(self.controls)}")
+        contractions = self.contraction_array(contractions)
         if jaw_matrix is not None:
             self.set_jaw(jaw_matrix)
         for layer in self._layers:
@@ -369,7 +403,8 @@ class MusculoskeletalSystem:
         for extra in self._extra:
             extra.step(self, dt)
 
-    def _set_targets(self, layer: _Layer, contractions) -> None:
+    def _set_targets(self, layer: _Layer, contractions: np.ndarray) -> None:
+        """The layer's position targets for ``contractions (m,)`` in :attr:`controls` order."""
         # every surface point of every line of the layer in one gather
         pts = bary_points(layer.bary, layer.vids, self._world_v, layer.pts)
         if layer.linear is not None:   # every linear muscle in one compiled call
@@ -378,11 +413,12 @@ class MusculoskeletalSystem:
                 layer.linear(pts, contractions, out=targets)
             else:
                 targets[layer.linear.slots] = layer.linear(pts, contractions)
-        for m, s, own in zip(layer.muscles, layer.slots, layer.pieces):
+        for i, (m, s, own) in enumerate(zip(layer.muscles, layer.slots, layer.pieces)):
             if len(s) and m.kind != "linear":          # the sphincter, in numpy
                 lp = {key: pts[sl] for key, sl in own.items()}
-                c = contractions.get(m.name, 0.0)
-                p = contractions.get(protrusion_control(m.name), 0.0)
+                c = contractions[layer.columns[i]]
+                k = layer.protrusion_columns[i]
+                p = contractions[k] if k >= 0 else 0.0
                 layer.control.position_targets[s] = m.targets_from_line_points(c, lp, p)
 
     def reset(self) -> None:
@@ -393,7 +429,7 @@ class MusculoskeletalSystem:
             fresh = layer.model.state()
             layer.state.positions[:] = fresh.positions
             layer.state.velocities[:] = fresh.velocities
-            self._set_targets(layer, {})
+            self._set_targets(layer, self._rest_controls)
 
     def folded_faces(self, rest: bool = False) -> dict[str, int]:
         """Muscle name -> number of sheet faces turned over (:meth:`Muscle.inverted_faces`)

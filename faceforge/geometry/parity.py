@@ -16,8 +16,8 @@ functions are evaluated with the edge's endpoints in vertex-id order, so a share
 the two triangles exactly opposite values, whatever the rounding. Triangles parallel to X
 (zero projected area) are skipped: a ray only grazes them.
 
-This is what :class:`faceforge.anatomy.animate` checks and what
-:class:`faceforge.anatomy.bone_collision.BoneCollision` pushes out with: the skin's
+This is what :mod:`faceforge.animation.checks` checks and what
+:class:`faceforge.animation.guards.bone_collision.BoneCollision` pushes out with: the skin's
 vertices against each bone, every frame, with no ray-tracing library and no repeated casts
 to collect multiple hits. Points exactly on the surface (crossing at their own x) are outside.
 """

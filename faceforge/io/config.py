@@ -121,6 +121,24 @@ class Choice(Rule):
 
 
 @dataclass(frozen=True)
+class AxesPair(Rule):
+    """``auto``, or two signed axes ``UP,FORWARD`` on different axes (e.g. ``+Z,-Y``)."""
+
+    def check(self, value, base):
+        return check_orientation(value, base)
+
+
+def check_orientation(value, base=None):
+    """``fit.orientation``: ``auto`` or ``UP,FORWARD`` (two signed axes, e.g. ``+Z,-Y``);
+    returns it, or raises ValueError saying what is expected."""
+    axes = {"+x", "-x", "+y", "-y", "+z", "-z", "x", "y", "z"}
+    words = [w.strip().lower() for w in value.split(",")] if isinstance(value, str) else []
+    if value == "auto" or (len(words) == 2 and set(words) <= axes and words[0][-1] != words[1][-1]):
+        return value
+    raise ValueError("auto, or the mesh's up and forward axes as UP,FORWARD (e.g. +Z,-Y)")
+
+
+@dataclass(frozen=True)
 class String(Rule):
     def check(self, value, base):
         if not isinstance(value, str):
@@ -159,6 +177,12 @@ _DEFAULT_CACHE: dict[str, tuple[dict, dict[str, int], str]] = {}
 
 #: (glob over the dotted key, rule); the first match wins, else the default's type decides
 RULES: list[tuple[str, Rule]] = [
+    ("fit.orientation", AxesPair()),
+    ("skin.carry", Choice(("muscles", "all", "none"))),
+    ("muscle.damping", Number(0.0, 0.99)),
+    ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
+    ("animate.orientation_guard.min_area", Number(0.0, 0.95)),
+    ("animate.skull_guard.collision_reach", Number(0.0, 0.5)),     # 0 turns bone collision off
     ("*.stiffness.*", Number(0.0, 1.0)),
     ("solver.damping", Number(0.0, 1.0)),
     ("muscle.sphincter.carry_inner", Number(0.0, 1.0)),
@@ -192,10 +216,9 @@ NUMBER_CAP_FACTOR = 1e6
 
 
 def add_rule(pattern: str, rule: Rule) -> None:
-    """Give keys matching ``pattern`` a rule, ahead of the built-in ones.
-
-    For stage modules (``faceforge/pipeline/stages/``): the CLI imports them before it
-    validates, e.g. ``add_rule("animate.fps", Number(1, 240))``.
+    """Give keys matching ``pattern`` a rule, ahead of the built-in ones (for tests and
+    plug-ins; faceforge's own rules are all in :data:`RULES`, so importing a module never
+    changes validation), e.g. ``add_rule("animate.fps", Number(1, 240))``.
     """
     RULES.insert(0, (pattern, rule))
     _DEFAULT_CACHE.clear()

@@ -35,23 +35,8 @@ import numpy as np
 import yaml
 
 from faceforge.exceptions import LandmarkError
+from faceforge.mpeg4.tables import FDP_IDS, LEFT_RIGHT_PAIRS
 from faceforge.io.safe_yaml import add_yaml12_floats, check_structure, construct_guarded
-
-#: number of feature points per MPEG-4 FDP group (ISO/IEC 14496-2 Annex C): 84 in all
-FDP_GROUP_SIZES = {2: 14, 3: 14, 4: 6, 5: 4, 6: 4, 7: 1, 8: 10, 9: 15, 10: 10, 11: 6}
-#: every valid FDP id, in standard order
-ALL_FDPS = tuple(f"{g}.{i}" for g, n in FDP_GROUP_SIZES.items() for i in range(1, n + 1))
-
-#: (subject-left FDP, subject-right FDP) mirror pairs of the standard
-LEFT_RIGHT_PAIRS = (
-    ("2.4", "2.5"), ("2.6", "2.7"), ("2.8", "2.9"), ("2.11", "2.12"), ("2.13", "2.14"),
-    ("3.1", "3.2"), ("3.3", "3.4"), ("3.5", "3.6"), ("3.7", "3.12"), ("3.11", "3.8"),
-    ("3.9", "3.10"), ("3.13", "3.14"), ("4.1", "4.2"), ("4.3", "4.4"), ("4.5", "4.6"),
-    ("5.1", "5.2"), ("5.3", "5.4"), ("6.3", "6.4"), ("8.3", "8.4"), ("8.5", "8.6"),
-    ("8.7", "8.8"), ("8.10", "8.9"), ("9.1", "9.2"), ("9.5", "9.4"), ("9.7", "9.6"),
-    ("9.13", "9.14"), ("10.1", "10.2"), ("10.3", "10.4"), ("10.5", "10.6"),
-    ("10.7", "10.8"), ("10.9", "10.10"), ("11.3", "11.2"),
-)
 
 #: FDPs every skin must provide. The fit needs the face's frame and extent: the eye
 #: corners (width, ES0 fallback, left/right check), the brows (forehead), the nose
@@ -294,7 +279,7 @@ def _to_raw(entries: list, path) -> RawLandmarks:
     dup = sorted({k for k in ids if ids.count(k) > 1}, key=ids.index)
     if dup:
         raise LandmarkError(f"FDP {', '.join(dup)} given twice", path)
-    unknown = [k for k in ids if k not in ALL_FDPS]
+    unknown = [k for k in ids if k not in FDP_IDS]
     if unknown:
         raise LandmarkError(f"unknown FDP id {', '.join(unknown)} (MPEG-4 ids run 2.1 ... 11.6)", path)
     vertex = np.full(len(ids), -1, dtype=np.int64)

@@ -193,6 +193,19 @@ FAP_BY_NAME: dict[str, FapRecord] = {r.name: r for r in FAP_TABLE}
 FDP_TABLE: tuple[FdpRecord, ...] = _load_fdp_table()
 #: FDP id -> record
 FDP_BY_ID: dict[str, FdpRecord] = {r.id: r for r in FDP_TABLE}
+#: every valid FDP id (84), in the standard's order
+FDP_IDS: tuple[str, ...] = tuple(r.id for r in FDP_TABLE)
+#: (subject-left FDP, subject-right FDP) mirror pairs of the standard
+LEFT_RIGHT_PAIRS = (
+    ("2.4", "2.5"), ("2.6", "2.7"), ("2.8", "2.9"), ("2.11", "2.12"), ("2.13", "2.14"),
+    ("3.1", "3.2"), ("3.3", "3.4"), ("3.5", "3.6"), ("3.7", "3.12"), ("3.11", "3.8"),
+    ("3.9", "3.10"), ("3.13", "3.14"), ("4.1", "4.2"), ("4.3", "4.4"), ("4.5", "4.6"),
+    ("5.1", "5.2"), ("5.3", "5.4"), ("6.3", "6.4"), ("8.3", "8.4"), ("8.5", "8.6"),
+    ("8.7", "8.8"), ("8.10", "8.9"), ("9.1", "9.2"), ("9.5", "9.4"), ("9.7", "9.6"),
+    ("9.13", "9.14"), ("10.1", "10.2"), ("10.3", "10.4"), ("10.5", "10.6"),
+    ("10.7", "10.8"), ("10.9", "10.10"), ("11.3", "11.2"),
+)
+
 #: FAPU name -> the standard's formula on FDPs, e.g. ``"ES0 = 3.5.x - 3.6.x"``
 FAPU_FORMULAS: dict[str, str] = _load_fapu_formulas()
 

@@ -11,7 +11,7 @@ Adding a stage and its command (one file, ``faceforge/pipeline/stages/<name>.py`
     def run(ctx):                                   # ctx: StageContext
         from faceforge.io.stagefiles import load_npz, save_json, save_npz   # heavy imports here
         fit = load_npz(ctx.input("fit") / "fit.npz")
-        k = ctx.config.get("skin.stiffness.bending")
+        reach = ctx.config.get("bind.max_ray_distance")     # read only keys under config_keys
         for _ in ctx.progress(range(10), desc="anchors"):
             ...
         save_npz(ctx.out_dir / "bind.npz", anchors=...)
@@ -19,7 +19,7 @@ Adding a stage and its command (one file, ``faceforge/pipeline/stages/<name>.py`
 
 
     STAGE = register_stage(Stage(
-        name="bind", deps=("fit",), config_keys=("skin.stiffness", "bind"),
+        name="bind", deps=("fit",), config_keys=("bind",),   # a bind.* change reruns bind
         inputs=(), outputs=("bind.npz", "report.json"), version="1", run=run,
         description="bind the skin to muscles and bone (§8)"))
 

@@ -179,7 +179,7 @@ def _export(job: HeadJob, root: Path, log: Callable[[str], None]) -> str:
     """Write the animate stage's frames to ``job.output`` with the user's polygons."""
     from faceforge.io.export import export_for_mesh, up_axis_of
     from faceforge.io.stagefiles import load_npz
-    from faceforge.pipeline.stages.fit import user_rotation
+    from faceforge.fit.orientation import user_rotation
 
     animation = root / "animate" / "animation.npz"
     if not animation.exists():

@@ -3,7 +3,7 @@
 A stage's record holds exactly what its key hashes::
 
     {"stage": "bind", "version": "1",
-     "config": {"skin.stiffness": {...}, "bind": {...}},      # values of its config keys
+     "config": {"bind": {...}},                                # values of its config keys
      "inputs": {"mesh": {"path": "/abs/head.obj", "sha256": "..."}},
      "upstream": {"fit": "<fit's key>"}}
 

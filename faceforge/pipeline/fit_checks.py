@@ -1,6 +1,6 @@
 """A fit that fails its own checks is an error, unless the user keeps it on purpose.
 
-The fit report (:func:`faceforge.anatomy.fit_report.build_report`) carries four named
+The fit report (:func:`faceforge.fit.report.build_report`) carries four named
 checks. A fit whose skull ended up outside the skin used to exit 0, and bind and animate
 then ran on it (issue 28); now the fit stage stops with exit 2 naming each failed check and
 its figure, and ``fit.allow_failed_checks: true`` (``--set fit.allow_failed_checks=true``)

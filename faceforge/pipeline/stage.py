@@ -2,7 +2,7 @@
 
 A stage is declared once, at the bottom of its module in ``faceforge/pipeline/stages/``::
 
-    STAGE = register_stage(Stage(name="bind", deps=("fit",), config_keys=("skin.stiffness", "bind"),
+    STAGE = register_stage(Stage(name="bind", deps=("fit",), config_keys=("bind",),
                                  outputs=("bind.npz", "report.json"), version="1", run=run))
 
 The registries are plain dicts filled by one line per module; :func:`discover`

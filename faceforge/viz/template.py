@@ -8,7 +8,7 @@ because each sample is a surface point (triangle + barycentric coordinates) of t
 skull. Contractions are drawn the way the action lines move them: a linear muscle's
 samples slide towards the origin with step' = step (1 - c) (Eq. 4); the sphincter's
 loops close towards their centre (§5.2.2, cosine fall-off across the loop's width).
-The physical muscle model (faceforge.anatomy.muscle) is not run here.
+The physical muscle model (faceforge.anatomy.muscles.muscle) is not run here.
 """
 
 from __future__ import annotations
@@ -220,7 +220,7 @@ def render_template(skull, muscles, out_png, jaw=(0.0, 0.0, 0.0), contractions=N
     Parameters
     ----------
     skull : anatomy.skull.Skull
-    muscles : list of anatomy.muscle_map.MuscleSpec
+    muscles : list of anatomy.muscles.muscle_map.MuscleSpec
     out_png : path of the PNG to write
     jaw : (pitch rad, yaw rad, protrusion template units)
     contractions : {muscle name: c in [0, 1]} or None (passive muscles ignore theirs)

@@ -24,9 +24,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceforge.anatomy.action_line import ActionLine
+from faceforge.anatomy.muscles.action_line import ActionLine
 from faceforge.anatomy.layers import underlying_mesh
-from faceforge.anatomy.muscle import align_loops, build_linear_muscle, build_sphincter_muscle
+from faceforge.anatomy.muscles.muscle import build_linear_muscle, build_sphincter_muscle
+from faceforge.anatomy.muscles.sphincter import align_loops
 from faceforge.geometry.triangles import concatenate_meshes
 
 PIVOT = np.array([0.0, 0.0, 0.0])

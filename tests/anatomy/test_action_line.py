@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.action_line import ActionLine, polyline_parameters, sample_polyline, sample_positions
+from faceforge.anatomy.muscles.action_line import ActionLine, polyline_parameters, sample_polyline, sample_positions
 from faceforge.geometry.surface_points import SurfacePoints
 
-from conftest import icosphere, on_sphere
+from tests.anatomy.conftest import icosphere, on_sphere
 
 
 def rotation_x(a):
@@ -134,7 +134,7 @@ def test_outermost_projection_lands_on_the_top_of_a_deeper_muscle():
     muscle's bottom (they touch); "outermost" picks the muscle's top sheet, normal outward."""
     from faceforge.anatomy.layers import underlying_mesh
 
-    from conftest import linear_on, split_skull
+    from tests.anatomy.conftest import linear_on, split_skull
 
     cranium, mandible = split_skull(3)
     from faceforge.geometry.triangles import concatenate_meshes

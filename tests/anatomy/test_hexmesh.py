@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.hexmesh import hex_topology, morph_hex, signed_volume, template_positions
+from faceforge.anatomy.muscles.hexmesh import hex_topology, morph_hex, signed_volume, template_positions
 
 
 @pytest.mark.parametrize("h,w,closed", [(2, 2, False), (5, 3, False), (7, 4, False), (3, 2, True), (16, 3, True)])

@@ -6,7 +6,7 @@ import pytest
 from faceforge.anatomy.layers import MusculoskeletalSystem, expand_lies_on
 from faceforge.exceptions import TemplateError
 
-from conftest import jaw_matrix, linear_on, split_skull
+from tests.anatomy.conftest import jaw_matrix, linear_on, split_skull
 
 
 @pytest.fixture
@@ -34,7 +34,7 @@ def test_layers_and_world(system, head):
 def test_compiled_surface_gather_matches_its_einsum_twin():
     """``bary_points`` (the per-frame gather of action lines and skin anchors) gives the bits
     of ``np.einsum("ij,ijk->ik", bary, v[ids])``, which the rest targets were computed with."""
-    from faceforge.anatomy.layer_targets import bary_points
+    from faceforge.anatomy.muscles.targets import bary_points
 
     rng = np.random.default_rng(7)
     v = rng.normal(size=(500, 3)) * 10.0 ** rng.uniform(-3, 3, size=(500, 1))

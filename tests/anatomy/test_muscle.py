@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.hexmesh import hex_topology, signed_volume
-from faceforge.anatomy.muscle import (
-    STIFFNESS_KEYS, bending_quads, distance_network, fit_ellipse, sphincter_displacement)
+from faceforge.anatomy.muscles.hexmesh import hex_topology, signed_volume
+from faceforge.anatomy.muscles.muscle import STIFFNESS_KEYS, bending_quads, distance_network
+from faceforge.anatomy.muscles.sphincter import fit_ellipse, sphincter_displacement
 from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
-from conftest import LINEAR_STIFFNESS, SPHINCTER_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
+from tests.anatomy.conftest import LINEAR_STIFFNESS, SPHINCTER_STIFFNESS, icosphere, linear_on, on_sphere, sphincter_on
 
 
 @pytest.fixture(scope="module")
@@ -98,8 +98,8 @@ def test_muscle_build_commutes_with_scaling(sphere):
     vertices are projected onto the faceted sphere from slightly inside it, and a point
     exactly under a mesh edge is equidistant from two faces, so round-off picks either.)
     """
-    from faceforge.anatomy.action_line import ActionLine
-    from faceforge.anatomy.muscle import build_linear_muscle
+    from faceforge.anatomy.muscles.action_line import ActionLine
+    from faceforge.anatomy.muscles.muscle import build_linear_muscle
 
     v, f = sphere
     origin, insertion = [(-0.17, 0.4), (0.23, 0.4)], [(-0.17, 0.0), (0.23, 0.0)]
@@ -372,7 +372,7 @@ def test_sphincter_carry_faces_give_per_row_weights(sphere):
     v, f = sphere
     plain = sphincter_on("oris", v, f, (0.0, -0.3), (0.15, 0.07), (0.32, 0.17))
     assert plain.carry_inner is None
-    from faceforge.anatomy.muscle import build_sphincter_muscle
+    from faceforge.anatomy.muscles.muscle import build_sphincter_muscle
 
     mask = v[f].mean(axis=1)[:, 0] > 0.0                      # the faces on the +x half
     m = build_sphincter_muscle("oris", plain.lines["A1"], plain.lines["A3"], v, f, plain.topology.h,
@@ -385,7 +385,7 @@ def test_sphincter_carry_faces_give_per_row_weights(sphere):
 
 
 def test_conic_least_squares_matches_lstsq():
-    from faceforge.anatomy.muscle import _conic_lstsq
+    from faceforge.anatomy.muscles.sphincter import _conic_lstsq
 
     rng = np.random.default_rng(6)
     for a, b in ((1.0, 1.0), (3.0, 0.5), (0.01, 0.002)):
@@ -398,7 +398,7 @@ def test_conic_least_squares_matches_lstsq():
 
 def test_compiled_sphincter_targets_survive_collinear_loops():
     """No conic through collinear samples: the PCA fallback, finite targets (no LinAlgError)."""
-    from faceforge.anatomy.muscle import _sphincter_grid
+    from faceforge.anatomy.muscles.sphincter import _sphincter_grid
 
     p = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], 1)
     seg, t = np.arange(5), np.full(5, 0.5)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.muscle_map import (BONES, MuscleSpec, SkullProjector, layers, load_muscle_map,
+from faceforge.anatomy.muscles.muscle_map import (BONES, MuscleSpec, SkullProjector, layers, load_muscle_map,
                                           mirrored_name)
 from faceforge.anatomy.skull import load_skull
 from faceforge.exceptions import TemplateError

@@ -3,7 +3,7 @@
 import numpy as np
 import trimesh
 
-from faceforge.anatomy.fit_clearance import BumpField, clearance_fields, swallowed, wendland_c2
+from faceforge.fit.clearance import BumpField, clearance_fields, swallowed, wendland_c2
 
 
 def test_wendland_is_one_at_the_centre_zero_at_the_radius_and_monotone():

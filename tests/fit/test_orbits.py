@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.fit import SkinSurface
-from faceforge.anatomy.fit_orbits import (REACH_SLACK, OrbitHollow, chord_sag, fibonacci_directions, find_hollow,
-                                          fit_hollow,
-                                          radial_profile)
+from faceforge.fit.surface import SkinSurface
+from faceforge.fit.orbits import (REACH_SLACK, OrbitHollow, chord_sag, fibonacci_directions, find_hollow,
+                                  fit_hollow,
+                                  radial_profile)
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import vertex_normals
 

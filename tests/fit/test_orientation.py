@@ -19,7 +19,7 @@ from faceforge.exceptions import LandmarkError
 from faceforge.geometry.orientation import (AXES, estimate_frame, frame_rotation, parse_axis,
                                             snap_to_axes)
 
-from .conftest import SAMPLES
+from .heads import SAMPLES
 
 #: every axis-aligned (up, forward) pair: 24 frames
 FRAMES = [(u, f) for u, f in itertools.permutations(AXES, 2) if u[1] != f[1]]

@@ -11,8 +11,10 @@ import yaml
 from faceforge.exceptions import LandmarkError
 from faceforge.mpeg4 import Fapu, fap_displacement, fapu_from_landmarks
 
-HEADS = Path("/work/shared/assets/heads")
-ICT = HEADS / "ict" / "ict_face_headneck_neutral.fdp.yaml"
+ROOT = Path(__file__).resolve().parents[2]
+ICT = ROOT / "samples" / "ict" / "ict_face_headneck_neutral.fdp.yaml"
+#: the three sample heads and a MakeHuman identity (tests/data/makehuman-identities)
+FDP_FILES = sorted(ROOT.glob("samples/*/*.fdp.yaml")) + sorted(ROOT.glob("tests/data/makehuman-identities/*.fdp.yaml"))
 
 
 def load_positions(path: Path) -> dict[str, np.ndarray]:
@@ -23,8 +25,6 @@ def load_positions(path: Path) -> dict[str, np.ndarray]:
 
 @pytest.fixture(scope="module")
 def ict():
-    if not ICT.exists():
-        pytest.skip("shared assets not available")
     return load_positions(ICT)
 
 
@@ -56,9 +56,10 @@ def test_ict_fapu_match_the_asset_readme(ict):
 
 
 @pytest.mark.parametrize(
-    "path", sorted(HEADS.glob("*/*.fdp.yaml")) if HEADS.exists() else [], ids=lambda p: p.parent.name
+    "path", FDP_FILES, ids=lambda p: p.parent.name
 )
 def test_every_sample_head_gives_positive_fapu(path):
+    assert len(FDP_FILES) == 4
     fapu = fapu_from_landmarks(load_positions(path), source=path)
     per_fap = fapu.per_fap()
     assert np.all(np.isnan(per_fap[:2])) and np.all(per_fap[2:] > 0)

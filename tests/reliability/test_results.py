@@ -8,8 +8,8 @@ import warnings
 import numpy as np
 import pytest
 
-from faceforge.anatomy.animate import FrameReport, fold_limit
-from faceforge.anatomy.head_parts import detached_vertices
+from faceforge.animation.checks import FrameReport, fold_limit
+from faceforge.animation.head_parts import detached_vertices
 from faceforge.exceptions import FapError, StageError
 from faceforge.mpeg4 import FapWarning, parse_fap
 from faceforge.mpeg4.fap_range import LIMITS, MAX_ANGLE_UNITS, MAX_LENGTH_UNITS

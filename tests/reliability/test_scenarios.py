@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceforge.anatomy.influence import influence_weights
+from faceforge.skin.influence import influence_weights
 
 from .conftest import MEDIAPIPE, cli_run
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "mh_identity"
+DATA = Path(__file__).resolve().parents[1] / "data" / "makehuman-identities"
 
 
 def test_an_anchored_vertex_no_face_references_does_not_stop_bind():

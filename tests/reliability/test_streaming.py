@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceforge.anatomy.animate import check_animation
-from faceforge.anatomy.check_stream import StreamChecker
+from faceforge.animation.checks import check_animation
+from faceforge.animation.check_stream import StreamChecker
 from faceforge.io.export_cache import read_mdd, read_pc2, write_mdd, write_pc2
 from faceforge.io.frame_stream import FrameNpzWriter, iter_chunks, open_frames
 from faceforge.pbd import thread_choice
@@ -102,7 +102,7 @@ def test_the_thread_chooser_runs_the_faster_way_and_keeps_looking(monkeypatch):
 
 
 def test_the_orientation_guard_warms_every_kernel():
-    from faceforge.anatomy import orientation_guard as og
+    from faceforge.animation.guards import orientation as og
 
     rest, faces = grid(4)
     guard = og.OrientationGuard(rest, faces)

@@ -1,17 +1,17 @@
 """The bind stage: skin constraints, anchors and influence map (paper §8).
 
 Reads the fit stage's folder, cuts the lips where they are joined
-(:mod:`faceforge.anatomy.mouth`), binds every skin vertex to a muscle or the
-skull by ray casting (:mod:`faceforge.anatomy.binding`) and computes the
-influence map (:mod:`faceforge.anatomy.influence`). Writes:
+(:mod:`faceforge.skin.mouth`), binds every skin vertex to a muscle or the
+skull by ray casting (:mod:`faceforge.skin.binding`) and computes the
+influence map (:mod:`faceforge.skin.influence`). Writes:
 
 ``bind.npz``
-    :meth:`faceforge.anatomy.binding.BoundSkin.as_arrays`: the working skin
+    :meth:`faceforge.skin.head.BoundSkin.as_arrays`: the working skin
     (``vertices``, ``faces``; the first ``n_user`` vertices are the user's, in
     order, appended vertex ``n_user + i`` duplicates ``duplicate_source[i]``),
     the anchors (``anchor_*``, ``status``, ``body_names``), ``lip_sides``,
     ``influence``, ``geodesic``, ``front``. The skin constraint topology is a
-    pure function of ``faces`` (:func:`faceforge.anatomy.skin.skin_topology`), so it
+    pure function of ``faces`` (:func:`faceforge.skin.layer.skin_topology`), so it
     is rebuilt by whoever assembles the model, not stored.
 ``report.json``
     fractions bound to muscle / cranium / mandible / nothing by region, rays
@@ -83,13 +83,12 @@ def head_from_fit_arrays(d: dict) -> dict:
 
 def run(ctx):
     """Bind the fitted head in ``ctx.input("fit")``; write bind.npz, report.json, influence.png."""
-    from faceforge.anatomy.binding import bind_head, match_insertions
-    from faceforge.anatomy.influence import save_influence_png
-    from faceforge.anatomy.skin import SkinStiffness
+    from faceforge.skin.head import bind_head
+    from faceforge.skin.rules import match_insertions
+    from faceforge.skin.influence import save_influence_png
     from faceforge.io.stagefiles import save_json, save_npz
 
     head = load_fit(ctx.input("fit"))
-    SkinStiffness.from_config(ctx.config)  # validates the keys this stage hashes
     insertions = tuple(str(n) for n in ctx.config.get("bind.insertions"))
     names = [str(m[0]) for m in head["muscles"]]
     _, unknown = match_insertions(insertions, names)

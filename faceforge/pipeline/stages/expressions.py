@@ -19,7 +19,7 @@ report.json
 ... u, those it has) into ``<workdir>/visemes/`` (``visemes.png``, five columns;
 ``visemes.npz``; ``report.json``).
 
-Each pose is reached as ``calibrate`` reaches its probes (:func:`faceforge.anatomy.animate.
+Each pose is reached as ``calibrate`` reaches its probes (:func:`faceforge.animation.playback.
 static_poses`: eased in, then held for ``animate.calibrate.settle_frames`` frames), with the
 eyelids (``animate.eyelids``) laid over it.
 """
@@ -74,9 +74,12 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     ``jaw``) and ``report.json`` (per pose: checks, largest contraction, jaw DOFs)."""
     import numpy as np
 
-    from faceforge.anatomy.animate import check_animation, static_poses
+    from faceforge.animation.checks import check_animation
+    from faceforge.animation.playback import static_poses
     from faceforge.io.stagefiles import save_json, save_npz
-    from faceforge.pipeline.stages.animate import BoundHead, _mapping, controls
+    from faceforge.animation.controls import controls
+    from faceforge.animation.rig import BoundHead
+    from faceforge.pipeline.stages.animate import _mapping
     from faceforge.viz.contact_sheet import contact_sheet
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
@@ -107,8 +110,9 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     save_json(ctx.out_dir / "report.json", report)
 
 
-_SHEET_STAGE = dict(deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate"),
-                    inputs=("animate_mapping", "animate.fap_mapping"))
+_SHEET_STAGE = dict(deps=("fit", "bind"),
+                    config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
+                    inputs=("animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"))
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),

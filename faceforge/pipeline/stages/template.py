@@ -39,7 +39,7 @@ def simulate_template(skull, specs, muscle: dict, solver: dict, contractions: di
     """
     from dataclasses import replace
 
-    from faceforge.anatomy.fit_muscles import build_muscles_on
+    from faceforge.anatomy.muscles.build import build_muscles_on
     from faceforge.anatomy.layers import MusculoskeletalSystem
     from faceforge.pbd import SolverSettings
 
@@ -91,15 +91,15 @@ faceforge template render -o open.png --jaw 0.3 --contract zygomaticus_major_L=0
 @click.option("--landmarks", is_flag=True, help="Mark the skull's FDP landmarks.")
 @click.pass_obj
 def render(app, output, pitch, yaw, protrusion, contract, frames, proxy, landmarks):
-    from faceforge.anatomy.muscle_map import load_muscle_map
+    from faceforge.anatomy.muscles.muscle_map import load_muscle_map
     from faceforge.anatomy.skull import load_skull
     from faceforge.exceptions import TemplateError
-    from faceforge.pipeline.stages.fit import _resolve
+    from faceforge.fit.template import resolve_template_path
     from faceforge.viz.template import render_template
 
     config = app.config
-    skull = load_skull(_resolve(config.get("template.skull")))
-    specs = load_muscle_map(_resolve(config.get("template.muscle_map")), skull)
+    skull = load_skull(resolve_template_path(config.get("template.skull")))
+    specs = load_muscle_map(resolve_template_path(config.get("template.muscle_map")), skull)
     contractions = _parse_contractions(contract)
     unknown = sorted(set(contractions) - {s.name for s in specs})
     if unknown:

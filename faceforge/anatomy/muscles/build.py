@@ -1,0 +1,72 @@
+"""Building a muscle map on a skull, deepest layer first, thickness by Eq. 5 (§6, §7).
+
+The template stores a muscle's thickness as a fraction of the template skull's diagonal, so
+Eq. 5 (``t_head = (d_head / d_skull) t``) reads ``t_head = fraction * d``, ``d`` the diagonal of
+the skull the muscles are built on.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def eq5_thickness(fraction: float, skull_diagonal: float) -> float:
+    """Muscle thickness in head units from the template's fraction of the skull diagonal (Eq. 5)."""
+    return float(fraction) * float(skull_diagonal)
+
+
+def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
+                     carry_inner: float = 0.0, protrusion: float = 0.0) -> list:
+    """Build every muscle of ``specs`` on the given skull, deepest layer first.
+
+    Each muscle's action lines are projected (outermost surface) onto the concatenation of
+    the bodies it lies on (cranium, mandible, deeper muscles); thickness is Eq. 5:
+    ``spec.thickness * skull_diagonal``. ``stiffness``: ``{"linear": {...}, "sphincter":
+    {...}}`` of the config (empty: geometry only); ``carry_inner``: the sphincter's
+    ``carry_inner`` of :func:`build_sphincter_muscle` (``muscle.sphincter.carry_inner``, on
+    the skull's faces; it does not change the rest geometry); ``protrusion``: the sphincter's
+    ``protrusion`` (``muscle.sphincter.protrusion``). Returns ``[Muscle]`` in build order.
+    Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
+    """
+    from faceforge.anatomy.muscles.action_line import ActionLine
+    from faceforge.anatomy.layers import expand_lies_on
+    from faceforge.anatomy.muscles.muscle import build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.sphincter import align_loops
+    from faceforge.exceptions import TemplateError
+
+    stiffness = stiffness or {}
+    bodies = {"cranium": cranium, "mandible": mandible}
+    built = []
+    for spec in sorted(specs, key=lambda s: s.layer):
+        parts = []
+        for name in expand_lies_on(spec.lies_on):
+            if name not in bodies:
+                raise TemplateError(f"muscle {spec.name!r} lies on {name!r}, which is not built before it")
+            parts.append(bodies[name])
+        offsets = np.cumsum([0] + [len(v) for v, _ in parts])
+        v = np.vstack([p[0] for p in parts])
+        f = np.vstack([p[1] + o for p, o in zip(parts, offsets)])
+        t = eq5_thickness(spec.thickness, skull_diagonal)
+        kw = dict(lies_on=tuple(spec.lies_on), layer=spec.layer, active=spec.active)
+        lines = spec.action_lines()
+
+        def line(points, closed=False):
+            return ActionLine.from_points(points, v, f, closed=closed, project="outermost")
+
+        try:
+            if spec.type == "linear":
+                m = build_linear_muscle(spec.name, line(lines["A3"]), line(lines["A1"]), line(lines["A0"]),
+                                        line(lines["A2"]), v, f, spec.h, spec.w, t,
+                                        stiffness.get("linear", {}), **kw)
+            else:
+                inner, outer = align_loops(spec.inner, spec.outer)
+                bone = np.concatenate([np.full(len(p[1]), n in ("cranium", "mandible"))
+                                       for n, p in zip(expand_lies_on(spec.lies_on), parts)])
+                m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h,
+                                           spec.w, t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
+                                           carry_faces=bone, protrusion=protrusion, **kw)
+        except ValueError as exc:   # e.g. an action line collapsing to one point on these surfaces
+            raise TemplateError(f"muscle {spec.name!r} cannot be built on this skull: {exc}") from exc
+        bodies[spec.name] = (m.rest_positions, m.faces)
+        built.append(m)
+    return built

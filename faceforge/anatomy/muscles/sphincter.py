@@ -1,0 +1,260 @@
+"""The sphincter muscle's contraction (§5.2.2): the orifice closes along the fitted ellipse.
+
+Sphincter contraction (§5.2.2). The paper's
+``delta = (o - s1) (1 - c) cos(pi/2 (1 - sqrt(y^2 b^2 + x^2 a^2) / (ab)))``
+moves every sample to the centre at c = 0, contradicting "c = 0 is rest". We
+read ``(1 - c)`` as the *remaining* fraction of the orifice and use
+``delta = c kappa P (o - s1) cos(pi/2 (1 - r))``: c = 0 is the rest state and c = 1
+the maximal contraction, which moves each inner sample the fraction ``kappa``
+(``max_contraction``, default :data:`SPHINCTER_MAX_CONTRACTION` = 0.5) of the
+way to the centre, times the fall-off. kappa = 1 (a fully closed orifice)
+collapses the inner loop to a point; its wall triangles degenerate and the
+dihedral bending projection diverges (observed from kappa c ~ 0.6 on the
+synthetic mouth), so the default stops half way (a puckered mouth). ``P`` projects onto
+the ellipse's plane (dir_a, dir_b): the loops wrap around the face, so their mean ``o`` lies
+behind the lips, and the literal ``o - s1`` pulled the lips into the head (on the MakeHuman
+head the lower lip went down and back at c = 1 instead of up); the paper's ellipse is planar
+and its (x, y) are in-plane coordinates, so the contraction is taken in that plane. ``r`` is the ellipse
+radius of the outer sample ``s3 = o + x dir_a + y dir_b``, written correctly as
+``r = sqrt(x^2 / a^2 + y^2 / b^2) = sqrt(x^2 b^2 + y^2 a^2) / (ab)`` (the paper
+swaps a and b, which would give r != 1 on the ellipse itself), clipped so that
+``|1 - r| <= 1``. The ellipse is fitted by linear least squares
+(``q11 x^2 + 2 q12 x y + q22 y^2 = 1`` about the centre ``o`` = mean of all
+inner and outer samples) in the plane of best fit (PCA) of those samples,
+recomputed every frame from the current, uncontracted samples. The same delta
+moves the pair's inner and outer samples (with a protrusion drive it also has a part along
+the plane's normal: :func:`build_sphincter_muscle`, ``protrusion``); the interior (``0 < j < w-1``)
+bottom particles are not bound, as in the linear muscle. With material sampling the
+per-frame targets are compiled (:func:`_sphincter_grid`: the plane from the eigenvectors of
+the 3 x 3 scatter matrix, the conic by Gram-Schmidt); :meth:`Muscle._grid_targets` is its
+numpy twin, equal to round-off.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from faceforge.constants import FLOAT, NUMBA_OPTIONS
+
+
+def fit_ellipse(points) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """Least-squares ellipse of ``points (k, 3)`` in their plane of best fit.
+
+    Returns ``(o (3,), dir_a (3,), dir_b (3,), a, b)``: centre (the mean, as
+    §5.2.2 prescribes), unit semi-major / semi-minor directions and semi-axis
+    lengths (a >= b > 0). The conic ``q11 x^2 + 2 q12 xy + q22 y^2 = 1`` about
+    ``o`` is solved by linear least squares; if it is not positive definite
+    (nearly collinear points) the PCA standard deviations scaled by sqrt(2)
+    are used instead.
+    """
+    p = np.asarray(points, dtype=FLOAT)
+    o = p.mean(axis=0)
+    d = p - o
+    _, sv, vt = np.linalg.svd(d, full_matrices=False)
+    e1, e2 = vt[0], vt[1]
+    x, y = d @ e1, d @ e2
+    A = np.stack([x * x, 2 * x * y, y * y], 1)
+    q, *_ = np.linalg.lstsq(A, np.ones(len(p)), rcond=None)
+    Q = np.array([[q[0], q[1]], [q[1], q[2]]])
+    lam, vec = np.linalg.eigh(Q)
+    if lam[0] > 0:
+        a, b = 1.0 / np.sqrt(lam[0]), 1.0 / np.sqrt(lam[1])
+        ua, ub = vec[:, 0], vec[:, 1]
+    else:
+        n = max(len(p), 1)
+        a, b = sv[0] * np.sqrt(2.0 / n), max(sv[1] * np.sqrt(2.0 / n), 1e-300)
+        ua, ub = np.array([1.0, 0.0]), np.array([0.0, 1.0])
+    dir_a = ua[0] * e1 + ua[1] * e2
+    dir_b = ub[0] * e1 + ub[1] * e2
+    return o, dir_a, dir_b, float(a), float(b)
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _loop_samples(p, seg, t, out, col):  # pragma: no cover - numba
+    """``eval_polyline(p, None, seg, t, closed=True)`` into ``out[:, col]`` (``out (h, w, 3)``)."""
+    m = p.shape[0]
+    for i in range(seg.shape[0]):
+        a = seg[i]
+        b = a + 1 if a + 1 < m else 0
+        for d in range(3):
+            out[i, col, d] = (1.0 - t[i]) * p[a, d] + t[i] * p[b, d]
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _conic_lstsq(x, y):  # pragma: no cover - numba
+    """Least-squares ``q (3,)`` of ``q0 x^2 + 2 q1 x y + q2 y^2 = 1`` over the points ``x, y
+    (k,)``: modified Gram-Schmidt on the columns and the right-hand side together (backward
+    stable, as ``np.linalg.lstsq`` for a full-rank system)."""
+    k = x.shape[0]
+    m = np.empty((4, k))
+    for i in range(k):
+        m[0, i] = x[i] * x[i]
+        m[1, i] = 2.0 * x[i] * y[i]
+        m[2, i] = y[i] * y[i]
+        m[3, i] = 1.0
+    r = np.zeros((3, 4))
+    for j in range(3):
+        r[j, j] = np.sqrt(np.sum(m[j] * m[j]))
+        m[j] /= r[j, j]
+        for l in range(j + 1, 4):
+            r[j, l] = np.sum(m[j] * m[l])
+            m[l] -= r[j, l] * m[j]
+    q = np.empty(3)
+    for j in range(2, -1, -1):
+        acc = r[j, 3]
+        for l in range(j + 1, 3):
+            acc -= r[j, l] * q[l]
+        q[j] = acc / r[j, j]
+    return q
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd):  # pragma: no cover - numba
+    """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
+    fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
+    at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
+    :func:`sphincter_displacement` with ``c`` (already times the maximal closure) and ``lift``
+    (``fwd (3,)``: :attr:`Muscle.forward`) when either is > 0; before that, with ``carry
+    (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
+    r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples. Same values as the numpy code to
+    round-off (LAPACK's, summation order)."""
+    h = grid.shape[0]
+    w1 = grid.shape[1] - 1
+    _loop_samples(p1, seg1, t1, grid, 0)
+    _loop_samples(p3, seg3, t3, grid, w1)
+    if carry.shape[0]:   # the inner loop follows the outer one's drag (see Muscle.carry_inner)
+        for i in range(h):
+            for j in range(3):
+                grid[i, 0, j] += carry[i] * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
+    if not (c > 0.0 or lift > 0.0):
+        return
+    # fit_ellipse of the 2h samples (inner then outer)
+    k = 2 * h
+    d = np.empty((k, 3))
+    for i in range(h):
+        for j in range(3):
+            d[i, j] = grid[i, 0, j]
+            d[h + i, j] = grid[i, w1, j]
+    o = np.empty(3)
+    for j in range(3):
+        o[j] = np.mean(d[:, j])
+    for i in range(k):
+        for j in range(3):
+            d[i, j] -= o[j]
+    # the plane of best fit: the right singular vectors of d are the eigenvectors of d^T d
+    gram = d.T @ d
+    ev, evec = np.linalg.eigh(gram)                  # ascending
+    e1 = evec[:, 2].copy()
+    e2 = evec[:, 1].copy()
+    sv0 = np.sqrt(max(ev[2], 0.0))
+    sv1 = np.sqrt(max(ev[1], 0.0))
+    x = d @ e1
+    y = d @ e2
+    q = _conic_lstsq(x, y)
+    lam = np.full(2, -1.0)      # no conic (collinear samples: q is not finite): the PCA fallback
+    vec = np.eye(2)
+    if np.all(np.isfinite(q)):
+        Q = np.empty((2, 2))
+        Q[0, 0] = q[0]
+        Q[0, 1] = q[1]
+        Q[1, 0] = q[1]
+        Q[1, 1] = q[2]
+        lam, vec = np.linalg.eigh(Q)
+    if lam[0] > 0:
+        a, b = 1.0 / np.sqrt(lam[0]), 1.0 / np.sqrt(lam[1])
+        ua0, ua1, ub0, ub1 = vec[0, 0], vec[1, 0], vec[0, 1], vec[1, 1]
+    else:
+        a, b = sv0 * np.sqrt(2.0 / k), max(sv1 * np.sqrt(2.0 / k), 1e-300)
+        ua0, ua1, ub0, ub1 = 1.0, 0.0, 0.0, 1.0
+    da = ua0 * e1 + ua1 * e2
+    db = ub0 * e1 + ub1 * e2
+    # sphincter_displacement: delta = (c P (o - s1) + lift b n) cos(pi/2 (1 - r)), r of the
+    # outer sample, n the plane's normal on the side of fwd
+    nrm = np.empty(3)
+    nrm[0] = da[1] * db[2] - da[2] * db[1]
+    nrm[1] = da[2] * db[0] - da[0] * db[2]
+    nrm[2] = da[0] * db[1] - da[1] * db[0]
+    if nrm[0] * fwd[0] + nrm[1] * fwd[1] + nrm[2] * fwd[2] < 0.0:
+        for j in range(3):
+            nrm[j] = -nrm[j]
+    lift = lift * b
+    for i in range(h):
+        xo = 0.0
+        yo = 0.0
+        ta = 0.0
+        tb = 0.0
+        for j in range(3):
+            xo += (grid[i, w1, j] - o[j]) * da[j]
+            yo += (grid[i, w1, j] - o[j]) * db[j]
+            ta += (o[j] - grid[i, 0, j]) * da[j]
+            tb += (o[j] - grid[i, 0, j]) * db[j]
+        r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
+        fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
+        for j in range(3):
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * nrm[j]) * fall
+            grid[i, 0, j] += dj
+            grid[i, w1, j] += dj
+
+
+#: suffix of a sphincter's protrusion control (:func:`protrusion_control`)
+PROTRUSION_SUFFIX = ".protrude"
+
+
+def protrusion_control(name: str) -> str:
+    """The control name of sphincter ``name``'s protrusion drive (``orbicularis_oris.protrude``):
+    a contraction-like value in [0, 1] that FAP mappings and ``MusculoskeletalSystem.step`` take
+    alongside the muscles' own (:attr:`Muscle.protrusion`)."""
+    return name + PROTRUSION_SUFFIX
+
+
+#: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
+SPHINCTER_MAX_CONTRACTION = 0.5
+#: fraction of the fibre length that c = 1 removes from a linear muscle
+def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None) -> np.ndarray:
+    """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
+
+    ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
+    multiplied by the maximal closure. ``delta = (c P (o - s1) + lift b n) cos(pi/2 (1 -
+    r))``, ``P`` the projection onto the ellipse's plane, ``b`` its semi-minor axis and ``n``
+    its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
+    ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
+    maximal closure.
+    """
+    s1 = np.asarray(inner, dtype=FLOAT)
+    s3 = np.asarray(outer, dtype=FLOAT)
+    o, da, db, a, b = fit_ellipse(np.concatenate([s1, s3]))
+    x = (s3 - o) @ da
+    y = (s3 - o) @ db
+    r = np.sqrt(x * x * b * b + y * y * a * a) / (a * b)
+    fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
+    to = o - s1
+    d = float(c) * (np.outer(to @ da, da) + np.outer(to @ db, db))      # in the ellipse's plane
+    if lift:
+        n = np.cross(da, db)
+        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
+            n = -n
+        d = d + lift * b * n
+    return d * fall[:, None]
+
+
+def align_loops(inner, outer) -> tuple[np.ndarray, np.ndarray]:
+    """Reorder the closed point loop ``outer (q, 3)`` to match ``inner (p, 3)``.
+
+    Makes both loops turn the same way about their common mean (in the plane of
+    best fit) and rotates ``outer`` to start at its point nearest ``inner[0]``.
+    """
+    p = np.asarray(inner, FLOAT)
+    q = np.asarray(outer, FLOAT)
+    o = np.concatenate([p, q]).mean(axis=0)
+    _, _, vt = np.linalg.svd(np.concatenate([p, q]) - o, full_matrices=False)
+    n = vt[2]
+
+    def turn(loop):
+        d = loop - o
+        return np.sum(np.cross(d, np.roll(d, -1, axis=0)) @ n)
+
+    if np.sign(turn(p)) != np.sign(turn(q)):
+        q = q[::-1]
+    start = int(np.argmin(np.linalg.norm(q - p[0], axis=1)))
+    return p, np.roll(q, -start, axis=0)

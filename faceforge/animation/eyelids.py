@@ -1,0 +1,311 @@
+"""Kinematic eyelids for the MPEG-4 eyelid FAPs 19-22 (close_t_l/r_eyelid, close_b_l/r_eyelid).
+
+The paper's muscle map has no eyelid muscle, and none of the sample heads has an eyeball to
+slide a lid over, so the lids are not simulated: their motion is a displacement field laid
+over the simulated skin, like a blend shape, built for each eye from its four FDPs.
+
+**The eye's frame.** The eye corners (outer, inner) and the lid FDPs (upper, lower) of the
+neutral face: ``u`` along the corners towards the subject's left (+X), ``v`` up, ``w``
+forward; origin at the corners' midpoint. ``half`` is half the corner distance, ``upper``
+and ``lower`` the lid FDPs' heights (``upper > 0 > lower``); the lid opening ``gap`` is
+their difference (IRISD0 when both eyes are alike).
+
+**The margins.** Each lid margin is taken as a curve through both corners and its lid FDP:
+heights ``top * s(u)`` and ``bottom * s(u)``, depth ``lid_depth * s(u)``, with the taper
+``s(u) = 1 - |(u - peak) / (half -+ peak)|^TAPER``: 1 at ``peak``, the lid FDPs' mean ``u``,
+0 at and beyond the corners (:data:`TAPER` 3, an almond rather than a parabola); ``top`` and
+``bottom`` put each lid FDP on its margin. A lid FAP of ``d`` IRISD moves its margin
+vertically in proportion to ``s(u)``, by exactly ``d * IRISD`` at its FDP (upper lid down,
+lower lid up; both FAPs are bidirectional); at about 1024 + 0 the upper margin lies on the
+lower. The lids stop where they meet: when the two requests
+together exceed the opening, both are scaled back to leave :data:`MIN_OPENING` of it. A lid
+opening wider is held at half its fade's height (below).
+
+**The skin around them.** A vertex between the margins moves as the affine blend of the two
+margins' moves at its height: the cover of a closed eye (a mask's triangles, a socket's
+lining, the rim of an eye hole) is gathered to where the lids meet. Above the upper margin the
+move fades linearly to 0 at ``reach * gap`` above it (the lid's skin up to its crease), below
+the lower margin at ``reach / 2 * gap`` below it. Skin behind the margins fades out from
+``depth * gap`` behind them to twice that: the inside of a closed socket stays, and the back
+of the head is never in reach.
+
+**Over the eyeball.** A lid closing over the eye rides forward over the eyeball: a vertex in
+front of the eyeball's horizontal axis (along ``u``) keeps its distance from the axis as it
+moves vertically, when that brings it forward; it never moves back (a lid opening wider
+retracts straight up or down). The eyeball's radius is taken as :data:`EYEBALL_RADIUS` times
+``half`` (a 12 mm eye in a 30 mm fissure), its centre behind the corners' midpoint, one
+radius from the upper lid FDP.
+
+**Gathered skin stays upright.** Where the lids meet, the skin between them is squeezed to
+:data:`MIN_OPENING` of its height, and a few slivers near the corners (where the taper bends
+fastest) can turn over. :class:`Eyelids` runs an
+:class:`~faceforge.animation.guards.orientation.OrientationGuard` over the triangles in the lids'
+reach, with a floor of half :data:`MIN_OPENING`, on each frame the lids moved.
+
+All lengths are in the skin's units; frames are in the head's frame (+X the subject's left,
++Y up, +Z forward).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+#: FAP numbers of close_t_l_eyelid, close_t_r_eyelid, close_b_l_eyelid, close_b_r_eyelid
+EYELID_FAPS = (19, 20, 21, 22)
+
+#: per eye: (upper lid FDP, lower lid FDP, outer corner, inner corner, upper FAP, lower FAP)
+EYES = (("3.1", "3.3", "3.7", "3.11", 19, 21),    # the subject's left eye
+        ("3.2", "3.4", "3.12", "3.8", 20, 22))    # the subject's right eye
+
+#: fraction of an eye's rest opening left between the margins when its lids meet
+MIN_OPENING = 0.02
+
+#: exponent of the margins' taper ``s(u)`` (module docstring)
+TAPER = 3.0
+
+#: eyeball radius as a fraction of half the eye's corner distance
+EYEBALL_RADIUS = 0.8
+
+
+@dataclass(frozen=True)
+class Eye:
+    """One eye's frame from its FDPs (see the module docstring).
+
+    centre : (3,) the corners' midpoint; axes : (3, 3) rows u (towards +X), v (up), w
+    (forward), orthonormal and right-handed; half : half the corner distance; upper, lower :
+    heights of the upper and lower lid FDP above ``centre`` along v; upper_u, lower_u : their
+    places along u; lid_depth : their mean w; upper_fap, lower_fap : FAP numbers of the upper
+    and lower lid.
+    """
+
+    centre: np.ndarray
+    axes: np.ndarray
+    half: float
+    upper: float
+    lower: float
+    upper_u: float
+    lower_u: float
+    lid_depth: float
+    upper_fap: int
+    lower_fap: int
+
+    @property
+    def peak(self) -> float:
+        """Where along u the margins are highest and lowest: the lid FDPs' mean u."""
+        return 0.5 * (self.upper_u + self.lower_u)
+
+    def taper(self, u) -> np.ndarray:
+        """``s(u)`` in [0, 1] at places ``u`` along the corners (skin units from ``centre``):
+        1 at :attr:`peak`, 0 at and beyond the corners (module docstring)."""
+        u = np.asarray(u, dtype=np.float64)
+        reach = np.where(u >= self.peak, self.half - self.peak, self.half + self.peak)
+        return np.clip(1.0 - np.abs((u - self.peak) / reach) ** TAPER, 0.0, None)
+
+    @property
+    def margins(self) -> tuple[float, float]:
+        """(top, bottom): heights of the upper and lower margin at :attr:`peak`, so that each
+        margin ``top * s(u)``, ``bottom * s(u)`` passes through its lid FDP."""
+        return (self.upper / float(self.taper(self.upper_u)),
+                self.lower / float(self.taper(self.lower_u)))
+
+    @property
+    def gap(self) -> float:
+        """The rest opening between the lid FDPs (skin units)."""
+        return self.upper - self.lower
+
+    @property
+    def eyeball_centre(self) -> np.ndarray:
+        """(3,) the centre of the eyeball the lids slide over."""
+        r = EYEBALL_RADIUS * self.half
+        ahead = np.sqrt(max(r * r - self.upper * self.upper, 0.0))
+        return self.centre + (self.lid_depth - ahead) * self.axes[2]
+
+
+def find_eyes(landmarks: dict) -> list[Eye]:
+    """The eyes whose four FDPs ``landmarks {fdp: (3,)}`` holds (head frame, +Y up), 0, 1 or 2.
+
+    An eye is skipped when its corners coincide, its upper lid FDP is not above its lower one
+    (no opening to close), or a lid FDP lies out near a corner (the taper below 1/2 there).
+    """
+    eyes = []
+    for upper, lower, outer, inner, upper_fap, lower_fap in EYES:
+        if not all(f in landmarks for f in (upper, lower, outer, inner)):
+            continue
+        up, lo, o, i = (np.asarray(landmarks[f], dtype=np.float64).reshape(3)
+                        for f in (upper, lower, outer, inner))
+        u = o - i
+        half = 0.5 * float(np.linalg.norm(u))
+        if not half > 0.0:
+            continue
+        u = u / (2.0 * half)
+        if u[0] < 0.0:
+            u = -u
+        v = np.array([0.0, 1.0, 0.0]) - u[1] * u
+        if not np.linalg.norm(v) > 1e-9:
+            continue
+        v /= np.linalg.norm(v)
+        w = np.cross(u, v)
+        centre = 0.5 * (o + i)
+        hu, hl = float((up - centre) @ v), float((lo - centre) @ v)
+        if not hu > hl:
+            continue
+        depth = 0.5 * float((up - centre) @ w + (lo - centre) @ w)
+        uu, ul = float((up - centre) @ u), float((lo - centre) @ u)
+        eye = Eye(centre, np.stack([u, v, w]), half, hu, hl, uu, ul, depth, upper_fap, lower_fap)
+        if not (abs(eye.peak) < half and eye.taper([uu, ul]).min() > 0.5):
+            continue                            # a lid FDP out near a corner: no lid to move
+        eyes.append(eye)
+    return eyes
+
+
+@dataclass(frozen=True)
+class LidField:
+    """How the skin near one eye follows its lids: a vertex ``i`` moves vertically (along the
+    eye's v) by ``-up_share[i] * drop + low_share[i] * rise`` for an upper-lid drop and a
+    lower-lid rise at the lid FDPs (skin units), see :func:`lid_field`. ``index (k,)``: the
+    vertices in reach; the shares are (k,) >= 0 at those vertices (1 at the lid FDPs);
+    ``reach``: the fade's height above the upper margin, in rest openings (half of it below the
+    lower margin)."""
+
+    eye: Eye
+    index: np.ndarray
+    up_share: np.ndarray
+    low_share: np.ndarray
+    reach: float
+
+
+def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5) -> LidField:
+    """The share of each lid's move that each rest vertex ``rest (n, 3)`` takes.
+
+    reach : how far above the upper margin the move fades to 0, in rest openings (half of it
+    below the lower margin); depth : how far behind the margins skin starts to fade out, in
+    rest openings (gone at twice that).
+    """
+    if not (reach > 0.0 and depth > 0.0):
+        raise ValueError(f"reach and depth must be > 0, got {reach}, {depth}")
+    rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
+    x = (rest - eye.centre) @ eye.axes.T
+    g = eye.gap
+    s = eye.taper(x[:, 0])
+    top, bottom = eye.margins
+    hu, hl = top * s, bottom * s
+    behind = np.clip(2.0 - (eye.lid_depth * s - x[:, 2]) / (depth * g), 0.0, 1.0)
+    above = np.clip(1.0 - (x[:, 1] - hu) / (reach * g), 0.0, 1.0)
+    below = np.clip(1.0 - (hl - x[:, 1]) / (0.5 * reach * g), 0.0, 1.0)
+    t = np.clip((x[:, 1] - hl) / np.maximum(hu - hl, 1e-300), 0.0, 1.0)   # 0 lower margin, 1 upper
+    up = np.where(x[:, 1] >= hu, above, np.where(x[:, 1] <= hl, 0.0, t))
+    low = np.where(x[:, 1] <= hl, below, np.where(x[:, 1] >= hu, 0.0, 1.0 - t))
+    s_up, s_low = eye.taper([eye.upper_u, eye.lower_u])
+    up, low = up * s * behind / s_up, low * s * behind / s_low
+    index = np.flatnonzero((up > 0.0) | (low > 0.0))
+    return LidField(eye, index, up[index], low[index], float(reach))
+
+
+def lid_moves(field: LidField, faps: np.ndarray, irisd: float) -> np.ndarray:
+    """``(F, 2)`` (upper-lid drop, lower-lid rise) at the lid FDPs, skin units, from FAP frames
+    ``faps (F, 68)`` (column k = FAP k + 1; NaN counts as 0) and one IRISD unit ``irisd``.
+
+    Where the two would close more than the opening less :data:`MIN_OPENING`, both are scaled
+    back to meet there (the margins' opening ``(top - bottom) s(u)`` is left that fraction
+    everywhere along them). A lid that opens wider is held at half its fade's height
+    (``reach / 2`` openings up for the upper lid, ``reach / 4`` down for the lower one), where
+    the skin it pushes into has been squeezed to half its height."""
+    faps = np.nan_to_num(np.atleast_2d(np.asarray(faps, dtype=np.float64)))
+    eye = field.eye
+    g = eye.gap
+    move = faps[:, [eye.upper_fap - 1, eye.lower_fap - 1]] * irisd
+    move = np.maximum(move, [-0.5 * field.reach * g, -0.25 * field.reach * g])
+    top, bottom = eye.margins
+    per_s = move / eye.taper([eye.upper_u, eye.lower_u])      # the moves at the margins' peak
+    closing = per_s.sum(axis=1)
+    most = (1.0 - MIN_OPENING) * (top - bottom)
+    over = closing > most
+    move[over] *= (most / closing[over])[:, None]
+    return move
+
+
+def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, irisd: float,
+              rest: np.ndarray) -> np.ndarray:
+    """Frames ``(F, n, 3)`` with the lids moved by FAPs 19-22 of ``faps (F, 68)``.
+
+    fields : one :class:`LidField` per eye (of the same ``rest (n, 3)``); irisd : one IRISD
+    unit (skin units). Each vertex in a field's reach is displaced by its vertical move, turned
+    over the eyeball (module docstring), computed on its rest position and added to the frame.
+    A new array; frames without lid FAPs are copied bit for bit. No guard (:class:`Eyelids`).
+    """
+    out = np.array(frames, copy=True)
+    rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
+    for field in fields:
+        eye, idx = field.eye, field.index
+        moves = lid_moves(field, faps, irisd)
+        live = np.flatnonzero(np.any(moves != 0.0, axis=1))
+        if not len(idx) or not len(live):
+            continue
+        x = (rest[idx] - eye.eyeball_centre) @ eye.axes.T       # (k, 3) about the eyeball
+        dv = -np.outer(moves[live, 0], field.up_share) + np.outer(moves[live, 1], field.low_share)
+        y0, z0 = x[:, 1], x[:, 2]
+        y1 = y0 + dv                                               # (L, k)
+        rho2 = y0 * y0 + z0 * z0
+        z1 = np.where(z0 > 0.0, np.maximum(np.sqrt(np.maximum(rho2 - y1 * y1, 0.0)), z0), z0)
+        d = dv[..., None] * eye.axes[1] + (z1 - z0)[..., None] * eye.axes[2]
+        out[np.ix_(live, idx)] += d.astype(out.dtype)
+    return out
+
+
+class Eyelids:
+    """The lids of a head's eyes, moved by FAPs 19-22 over finished frames.
+
+    Parameters
+    ----------
+    rest : (n, 3) skin at rest; faces : (m, 3) int, its triangles
+    landmarks : {fdp: (3,)} the neutral skin's FDPs (eyes without their four FDPs are skipped)
+    irisd : one IRISD unit (skin units)
+    reach, depth : see :func:`lid_field`
+    """
+
+    def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
+                 depth: float = 0.5):
+        from faceforge.animation.guards.orientation import OrientationGuard
+        from faceforge.geometry.triangles import vertex_components
+
+        self.rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
+        self.irisd = float(irisd)
+        faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+        piece = vertex_components(len(self.rest), faces)
+        self.fields = []
+        for eye in find_eyes(landmarks):
+            field = lid_field(eye, self.rest, reach, depth)
+            # only the skin the lids belong to: an eyeball or a lash in the same mesh stays put
+            fdps = next(e[:2] for e in EYES if e[4] == eye.upper_fap)
+            lids = [int(np.argmin(np.linalg.norm(self.rest - np.asarray(landmarks[f], dtype=np.float64),
+                                                 axis=1))) for f in fdps]
+            keep = np.isin(piece[field.index], piece[lids])
+            self.fields.append(replace(field, index=field.index[keep], up_share=field.up_share[keep],
+                                       low_share=field.low_share[keep]))
+        moving = np.zeros(len(self.rest), dtype=bool)
+        for field in self.fields:
+            moving[field.index] = True
+        near = faces[moving[faces].any(axis=1)]
+        self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING) if len(near) else None
+
+    @property
+    def faps(self) -> tuple[int, ...]:
+        """The lid FAPs this head plays (those of the eyes it has)."""
+        return tuple(sorted(f for field in self.fields for f in (field.eye.upper_fap, field.eye.lower_fap)))
+
+    def apply(self, frames: np.ndarray, faps: np.ndarray) -> np.ndarray:
+        """Frames ``(F, n, 3)`` (head frame) with the lids moved by ``faps (F, 68)``: a new
+        array; frames where no lid moves are copied bit for bit."""
+        out = move_lids(frames, self.fields, faps, self.irisd, self.rest)
+        if self._guard is None:
+            return out
+        live = np.zeros(len(out), dtype=bool)
+        for field in self.fields:
+            live |= np.any(lid_moves(field, faps, self.irisd) != 0.0, axis=1)
+        for f in np.flatnonzero(live):
+            frame = np.ascontiguousarray(out[f], dtype=np.float64)
+            self._guard.apply(frame)
+            out[f] = frame
+        return out

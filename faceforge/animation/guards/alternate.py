@@ -1,0 +1,79 @@
+"""One guarded skin step (beyond the paper): the §8 skin step, then the guards in turn.
+
+:class:`GuardedSkinStep` is the rig's ``skin`` step (:class:`faceforge.animation.playback.Rig`):
+it steps the skin layer on the muscles and bones, then
+
+1. alternates the skull guard (:class:`faceforge.animation.guards.skull.SkullGuard`) and the
+   orientation guard (:class:`faceforge.animation.guards.orientation.OrientationGuard`) until
+   the orientation pass has nothing left to do (at most ``rounds`` rounds);
+2. puts skin that slid into a bone back out (:class:`faceforge.animation.guards.bone_collision.
+   BoneCollision`), again alternating with the orientation guard.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class GuardedSkinStep:
+    """The rig's skin step with its guards.
+
+    Parameters
+    ----------
+    system : faceforge.anatomy.layers.MusculoskeletalSystem (its world mesh starts with the
+        bones, cranium then mandible, in the guard's order: ``from_parts`` puts them there)
+    skin : faceforge.skin.layer.SkinSimulation
+    guard : SkullGuard over ``{"cranium", "mandible"}``
+    orientation : OrientationGuard or None (off)
+    collision : BoneCollision or None (off)
+    rounds : int >= 0, ``animate.orientation_guard.rounds`` (0: one skull-guard pass, no
+        orientation guard)
+    jaw : object whose ``transform`` is the mandible's current (4, 4) transform or None
+        (:class:`faceforge.animation.rig.JawDrive`)
+    """
+
+    def __init__(self, system, skin, guard, orientation, collision, rounds: int, jaw):
+        self.system, self.skin, self.guard = system, skin, guard
+        self.orientation, self.collision, self.rounds, self.jaw = orientation, collision, rounds, jaw
+        self.bone_rows = system.vertex_range("mandible").stop
+        self.pushed = np.empty(len(guard.vertex), dtype=np.int64)
+
+    def __call__(self, _bones, _muscles, dt: float) -> np.ndarray:
+        """Step the skin by ``dt`` s and guard it; returns the simulated skin (n, 3)."""
+        self.skin.step(self.system, dt)
+        x = self.skin.layer.skin_positions(self.skin.state.positions)
+        self._skull_and_orientation(x)
+        self._collision(x)
+        return self.skin.simulated()
+
+    def _skull_and_orientation(self, x: np.ndarray) -> None:
+        """The skull guard pushes vertices one by one along the bone's normals, which can turn
+        a sliver over; the orientation guard moves them sideways, which can sink one below its
+        floor: alternate until the orientation pass has nothing left to do. After the first
+        round each looks again only where the other moved something (and the skull guard at
+        what it pushed itself, which round-off may push again): a full pass's result."""
+        guard, orientation, pushed = self.guard, self.orientation, self.pushed
+        bones = self.system.world_view()[:self.bone_rows]
+        k = 0
+        for r in range(max(self.rounds, 1)):
+            only = None if r == 0 else np.concatenate([pushed[:k], orientation.touched])
+            k = guard.apply_stacked(x, bones, pushed, only)
+            if orientation is None or not orientation.apply(x, None if r == 0 else pushed[:k]):
+                break
+
+    def _collision(self, x: np.ndarray) -> None:
+        """Skin that slid into a bone beyond the triangle the skull guard holds it above (the
+        lips onto the other jaw's teeth, the cheek over the cheekbone) is put back out. A vertex
+        pushed out of one jaw's bone can land in the other's, and the orientation pass that
+        follows can move one sideways into a bone again: the collision looks again until it
+        finds nothing (at most ``rounds`` times), after the first pass only at what the last two
+        passes moved (the rest was outside and has not moved since)."""
+        collision, orientation = self.collision, self.orientation
+        jaw = np.eye(4) if self.jaw.transform is None else self.jaw.transform
+        again = None
+        for _ in range(max(self.rounds, 1) if collision is not None else 0):
+            if not collision.apply(x, {"mandible": jaw}, again):
+                break
+            again = collision.moved
+            if orientation is not None and orientation.apply(x, collision.moved):
+                again = np.concatenate([again, orientation.touched])

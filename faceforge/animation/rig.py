@@ -1,0 +1,297 @@
+"""The rig of a fitted and bound head (paper §9): assembled from the fit and bind arrays.
+
+:class:`BoundHead` loads ``fit.npz`` and ``bind.npz``, rebuilds the layered muscles on the
+fitted skull (§6, :func:`muscle_system`), the skin layer on its anchors (§8) and the guards,
+and exposes them as a :class:`faceforge.animation.playback.Rig` of three steps:
+
+* skull: :class:`JawDrive` (jaw DOFs -> the mandible's transform, held poses reuse it);
+* muscles: :class:`MuscleDrive` (contractions in :attr:`BoundHead.controls` order);
+* skin: :class:`faceforge.animation.guards.alternate.GuardedSkinStep`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+#: FDPs on the lower lip (inner and outer contour), located on the lower side of a cut lip line
+LOWER_LIP_FDPS = ("2.3", "2.8", "2.9", "8.2", "8.7", "8.8")
+UPPER_LIP_FDPS = ("2.2", "2.6", "2.7", "8.1", "8.5", "8.6")
+
+
+class JawDrive:
+    """The rig's skull step: jaw DOFs (3,) -> the mandible's transform, set on the system.
+
+    A held pose repeats its DOFs: the transform is recomputed only when their bits change
+    (``-0.0`` is not ``0.0`` here). :attr:`transform` is the last one (None before the first
+    frame); the step returns None (the muscles read the bones from the system)."""
+
+    def __init__(self, skull, system):
+        self.skull, self.system = skull, system
+        self._key = None
+        self.transform = None
+
+    def __call__(self, jaw):
+        key = np.asarray(jaw, dtype=float).tobytes()
+        if key != self._key:
+            self._key, self.transform = key, self.skull.jaw_transform(*jaw)
+        self.system.set_jaw(self.transform)  # returns at once when the mandible is already there
+
+
+class MuscleDrive:
+    """The rig's muscle step: contractions (m,) in the system's ``controls`` order, passed on as
+    they are (each layer reads its muscles' columns)."""
+
+    def __init__(self, system):
+        self.system = system
+
+    def __call__(self, c, _bones, dt: float):
+        self.system.step(c, None, dt)
+
+
+class BoundHead:
+    """Everything animate and calibrate need, loaded from the fit and bind stages.
+
+    Attributes
+    ----------
+    rig : faceforge.animation.playback.Rig (working skin)
+    muscle_names : tuple of str, the muscles
+    controls : tuple of str, column order of the contractions: the muscles, then the
+        sphincter's protrusion drive (``MusculoskeletalSystem.controls``)
+    skull : faceforge.anatomy.skull.Skull (fitted; jaw_transform); levers : JawLevers
+    fapu : faceforge.mpeg4.Fapu
+    rest : (n, 3) working skin at rest; faces : (m, 3) working faces
+    user_index : (n_user,) int, working vertex of each of the user's vertices
+    user_rotation : (3, 3) head space = the user's frame ``@ user_rotation.T`` (fit.npz)
+    fdp_vertex : dict FDP -> working vertex index
+    landmarks : dict FDP -> (3,) position on the neutral skin (head frame)
+    cranium, mandible : (vertices, faces) at rest
+    system : faceforge.anatomy.layers.MusculoskeletalSystem; skin : SkinSimulation
+    guard : faceforge.animation.guards.skull.SkullGuard; collision : BoneCollision or None
+    orientation : faceforge.animation.guards.orientation.OrientationGuard, or None when
+        ``animate.orientation_guard.rounds`` is 0; after each skin step it alternates with
+        the skull guard, and it is the rig's ``finish`` on each weighted frame
+    """
+
+    def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
+        from faceforge.animation.playback import Rig
+        from faceforge.io.stagefiles import load_npz
+        from faceforge.pbd import SolverSettings
+
+        fit = load_npz(Path(fit_dir) / "fit.npz")
+        bind = load_npz(Path(bind_dir) / "bind.npz")
+        self._load_head(fit, bind, Path(fit_dir))
+        settings = SolverSettings.from_config(config.get("solver"))
+        self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log)
+        self.muscle_names = tuple(system.muscles)
+        self.controls = system.controls
+        self.skin = self._skin(bind, Path(bind_dir), settings, config)
+        self._guards(config)
+        jaw = JawDrive(self.skull, system)
+        skin_step = self._skin_step(jaw, int(config.get("animate.orientation_guard.rounds")))
+
+        def reset():
+            system.reset()
+            self.skin.reset()
+
+        self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
+                       influence=np.asarray(bind["influence"], dtype=float), reset=reset,
+                       finish=None if self.orientation is None else self.orientation.apply)
+
+    def _load_head(self, fit: dict, bind: dict, fit_dir: Path) -> None:
+        """The skin, bones, jaw axes, landmarks, FAPU and jaw levers of fit.npz and bind.npz."""
+        from faceforge.anatomy.skull import JawAxes, Skull
+        from faceforge.animation.fap_mapping import JawLevers
+        from faceforge.exceptions import StageError
+        from faceforge.mpeg4 import fapu_from_landmarks
+
+        self.cranium = (fit["cranium_vertices"], fit["cranium_faces"])
+        self.mandible = (fit["mandible_vertices"], fit["mandible_faces"])
+        self.rest = np.asarray(bind["vertices"], dtype=float)
+        self.faces = np.asarray(bind["faces"], dtype=np.int64)
+        n_internal = int(bind["n_user"])
+        u2i = fit["skin_user_to_internal"] if "skin_user_to_internal" in fit else np.arange(n_internal)
+        self.user_index = np.asarray(u2i, dtype=np.int64)
+        self.user_rotation = np.asarray(fit["user_rotation"], dtype=float) if "user_rotation" in fit else np.eye(3)
+        try:
+            axes = JawAxes(*(np.asarray(fit[f"jaw_{k}"], dtype=float) for k in (
+                "pitch_point", "pitch_direction", "yaw_point", "yaw_direction",
+                "protrusion_direction")), limits={}, condyles=np.zeros((2, 3)))
+        except KeyError as exc:
+            raise StageError(f"fit.npz lacks the jaw axes ({exc.args[0]}); rerun `faceforge fit`",
+                             fit_dir / "fit.npz") from None
+        self.skull = Skull(self.cranium, self.mandible, {}, {}, axes)
+        self.landmarks = skin_lm = {str(k): p for k, p in zip(fit["skin_landmark_ids"],
+                                                              fit["skin_landmark_positions"])}
+        self.fapu = fapu_from_landmarks(skin_lm, fit_dir / "fit.npz")
+        self.fdp_vertex = fdp_vertices(skin_lm, self.rest, bind.get("lip_sides"))
+        chin = skin_lm.get("2.1", self.rest[self.fdp_vertex.get("2.1", 0)])
+        self.levers = JawLevers(lever_arm(chin, axes.pitch_point, axes.pitch_dir),
+                                lever_arm(chin, axes.yaw_point, axes.yaw_dir))
+
+    def _skin(self, bind: dict, bind_dir: Path, settings, config):
+        """The §8 skin layer on the binding's anchors, checked against the rebuilt system."""
+        from faceforge.exceptions import StageError
+        from faceforge.skin.binding import Binding
+        from faceforge.skin.layer import SkinSimulation, SkinStiffness
+
+        system = self.system
+        binding = Binding.from_arrays(bind)
+        missing = [n for n in binding.body_names if n not in system.names]
+        if missing:
+            raise StageError(f"bind.npz binds the skin to {missing}, which the fitted head lacks; "
+                             "rerun `faceforge bind`", bind_dir / "bind.npz")
+        for b, name in enumerate(binding.body_names):
+            ids = binding.face_ids[binding.body == b]
+            if len(ids) and ids.max() >= len(system.faces(name)):
+                raise StageError(f"bind.npz binds the skin to faces of {name!r} that the fitted head does "
+                                 "not have (the muscle map changed?); rerun `faceforge bind`",
+                                 bind_dir / "bind.npz")
+        # anchors on the system's own rest bodies (the rebuilt muscles may differ from the meshes
+        # bind saw by a projection): then the rest pose is an exact fixed point
+        binding = replace(binding, points=binding.targets([system.surface(n) for n in binding.body_names]))
+        return SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
+                              settings, carried=carried_anchors(binding, config.get("skin.carry")))
+
+    def _guards(self, config) -> None:
+        """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""
+        from faceforge.animation.guards.bone_collision import BoneCollision
+        from faceforge.animation.guards.orientation import OrientationGuard
+        from faceforge.animation.guards.skull import SkullGuard
+
+        bones = {"cranium": self.cranium, "mandible": self.mandible}
+        diag = float(np.linalg.norm(np.ptp(self.rest, axis=0)))
+        keep = float(config.get("animate.skull_guard.keep"))
+        self.guard = SkullGuard(self.rest, bones, reach=float(config.get("animate.skull_guard.reach")) * diag,
+                                keep=keep)
+        reach = float(config.get("animate.skull_guard.collision_reach")) * diag
+        self.collision = BoneCollision(self.rest, bones, reach=reach, keep=keep) if reach > 0 else None
+        rounds = int(config.get("animate.orientation_guard.rounds"))
+        self.orientation = OrientationGuard(
+            self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \
+            if rounds > 0 else None
+
+    def _skin_step(self, jaw: JawDrive, rounds: int):
+        from faceforge.animation.guards.alternate import GuardedSkinStep
+
+        return GuardedSkinStep(self.system, self.skin, self.guard, self.orientation, self.collision,
+                               rounds, jaw)
+
+    def bone_heights(self) -> tuple[float, float]:
+        """(lowest, highest) height (+Y) of the bones at rest (cranium and mandible)."""
+        y = np.concatenate([self.cranium[0][:, 1], self.mandible[0][:, 1]])
+        return float(y.min()), float(y.max())
+
+    def eyelids(self, config):
+        """The lids of this head's eyes (:class:`faceforge.animation.eyelids.Eyelids`) as the
+        config sets them (``animate.eyelids``, ``.eyelid_reach``, ``.eyelid_depth``); None when
+        ``animate.eyelids`` is off."""
+        from faceforge.animation.eyelids import Eyelids
+
+        if not config.get("animate.eyelids"):
+            return None
+        return Eyelids(self.rest, self.faces, self.landmarks, self.fapu.unit("IRISD"),
+                       config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"))
+
+    def skull_at(self, jaw_dofs):
+        """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
+        t = self.skull.jaw_transform(*jaw_dofs)
+        v, f = self.mandible
+        return [self.cranium, (v @ t[:3, :3].T + t[:3, 3], f)]
+
+    def to_user(self, frames):
+        """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order and frame."""
+        out = frames[:, self.user_index]
+        return out if np.array_equal(self.user_rotation, np.eye(3)) else out @ self.user_rotation
+
+
+def carried_anchors(binding, carry: str):
+    """(k,) bool: the anchors that carry their skin vertex (``skin.carry``: muscles | all | none;
+    :class:`faceforge.skin.layer.SkinSimulation`)."""
+    bone = np.isin(np.asarray(binding.body_names, dtype=object)[binding.body], ("cranium", "mandible"))
+    return {"muscles": ~bone, "all": np.ones(len(bone), bool), "none": np.zeros(len(bone), bool)}[carry]
+
+
+def lever_arm(point, axis_point, axis_dir) -> float:
+    """Distance from ``point`` (3,) to the line through ``axis_point`` along ``axis_dir``."""
+    d = np.asarray(axis_dir, dtype=float) / np.linalg.norm(axis_dir)
+    r = np.asarray(point, dtype=float) - axis_point
+    return float(np.linalg.norm(r - (r @ d) * d))
+
+
+def fdp_vertices(landmarks: dict, rest, lip_sides) -> dict:
+    """FDP -> nearest working vertex.
+
+    Where the lip line was cut by duplicating a shared ring, an upper and a lower vertex sit
+    at the same place: lower-lip FDPs then take the lower copy (``lip_sides < 0``) and
+    upper-lip FDPs the upper one (``lip_sides > 0``), whenever such a vertex is as near as the
+    nearest vertex overall.
+    """
+    sides = np.zeros(len(rest), dtype=np.int8) if lip_sides is None else np.asarray(lip_sides)
+    out = {}
+    for fdp, p in landmarks.items():
+        d = np.linalg.norm(rest - np.asarray(p, dtype=float), axis=1)
+        want = -1 if fdp in LOWER_LIP_FDPS else 1 if fdp in UPPER_LIP_FDPS else 0
+        if want and np.any(sides == want):
+            side = np.where(sides == want, d, np.inf)
+            if side.min() <= d.min() * (1.0 + 1e-9) + 1e-12:
+                d = side
+        out[fdp] = int(np.argmin(d))
+    return out
+
+
+def muscle_system(fit, cranium, mandible, settings, config, log):
+    """The layered muscles of the fitted head (§6), rebuilt from fit.npz.
+
+    The muscle map's specs (``template.muscle_map`` on ``template.skull``) get the fitted
+    points the fit stage stored (``muscle_map_points``, in ``MuscleSpec.points()`` order) and
+    are built on the fitted skull (Eq. 5 thickness from its diagonal), deepest layer first.
+    Without muscles in fit.npz the system is the skull alone.
+    """
+    from faceforge.anatomy.layers import MusculoskeletalSystem
+    from faceforge.anatomy.muscles.muscle_map import load_muscle_map
+    from faceforge.anatomy.skull import load_skull
+    from faceforge.exceptions import StageError, TemplateError
+    from faceforge.anatomy.muscles.build import build_muscles_on
+
+    if "muscle_map_names" not in fit or not len(fit["muscle_map_names"]):
+        log("fit.npz has no muscles: animating the skull alone")
+        return MusculoskeletalSystem.from_parts(cranium, mandible, [], settings)
+    specs = load_muscle_map(template_path(config.get("template.muscle_map")),
+                            load_skull(template_path(config.get("template.skull"))))
+    start = fit["muscle_map_start"]
+    points = {str(n): fit["muscle_map_points"][start[i]:start[i + 1]]
+              for i, n in enumerate(fit["muscle_map_names"])}
+    fitted = []
+    for spec in specs:
+        p = points.get(spec.name)
+        if p is None or len(p) != len(spec.points()):
+            raise StageError(f"fit.npz has no fitted points for muscle {spec.name!r} of the muscle map; "
+                             "rerun `faceforge fit`")
+        fitted.append(spec.with_points(p))
+    diagonal = float(np.linalg.norm(np.ptp(np.vstack([cranium[0], mandible[0]]), axis=0)))
+    stiffness = {"linear": dict(config.get("muscle.linear.stiffness")),
+                 "sphincter": dict(config.get("muscle.sphincter.stiffness"))}
+    try:
+        muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness,
+                                   float(config.get("muscle.sphincter.carry_inner")),
+                                   float(config.get("muscle.sphincter.protrusion")))
+    except TemplateError as exc:
+        raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
+                         "another muscle map)") from None
+    settings = replace(settings, damping=float(config.get("muscle.damping")))
+    return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
+
+
+def template_path(raw) -> Path:
+    """A template file's path: as given when it exists (or is absolute), else under the
+    repository, else under the package."""
+    p = Path(str(raw))
+    if p.exists() or p.is_absolute():
+        return p
+    for root in (Path(__file__).resolve().parents[2], Path(__file__).resolve().parents[1]):
+        if (root / p).exists():
+            return root / p
+    return p

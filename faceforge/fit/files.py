@@ -1,0 +1,61 @@
+"""Fitting a head from its files: the mesh and its landmarks, checked and turned into head
+space, then :func:`faceforge.fit.head.fit_head` with the template (§7)."""
+
+from __future__ import annotations
+
+from faceforge.fit.orientation import head_orientation
+from faceforge.fit.template import Template
+
+
+def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lambda m: None):
+    """Load and check the skin and its landmarks, fit ``template``.
+
+    Returns ``(FitResult, report dict, extra)``; ``extra`` holds the checked mesh and the
+    landmarks for :func:`write_outputs`.
+    """
+    import time
+
+    from faceforge.fit.head import FitSettings, fit_head
+    from faceforge.fit.surface import SkinSurface, orient_outward
+    from faceforge.fit.report import build_report
+    from faceforge.io.landmarks import load_landmarks, read_landmarks
+    from faceforge.io.mesh import load_mesh
+    from faceforge.io.mesh_check import check_mesh
+
+    t = time.perf_counter()
+    v, f, _ = load_mesh(mesh_path)
+    checked = check_mesh(v, f, str(mesh_path))
+    raw = read_landmarks(lm_path)
+    orientation = head_orientation(fit_config.get("orientation", "auto"), raw, v)
+    if not orientation.identity:   # exact (a signed permutation): same head space bits as an upright mesh
+        checked.vertices = checked.vertices @ orientation.rotation.T
+        log(f"{mesh_path}: {orientation.describe()}")
+    checked.faces = orient_outward(checked.vertices, checked.faces)   # stage files: outward winding
+    for w in checked.report.warnings:
+        log(f"{mesh_path}: {w}")
+    lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
+                        rotation=None if orientation.identity else orientation.rotation, raw=raw)
+    # animate measures the FAP units on these landmarks (pupils, eyelids, nose, mouth): a file
+    # without them must fail here, not after fit and bind ran (issue 28)
+    from faceforge.mpeg4 import fapu_from_landmarks
+
+    fapu_from_landmarks(dict(zip(lm.ids, lm.positions)), lm_path)
+    t_load = time.perf_counter() - t
+    t = time.perf_counter()
+    settings = FitSettings.from_config(fit_config)
+    skin = SkinSurface.build(checked.vertices, checked.faces)
+    try:
+        result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles)
+    except ValueError as exc:   # too few usable landmark pairs, degenerate configuration
+        from faceforge.exceptions import LandmarkError
+
+        raise LandmarkError(f"cannot fit the template: {exc}", lm_path) from None
+    t_fit = time.perf_counter() - t
+    t = time.perf_counter()
+    mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
+    report = build_report(result, skin, lm, mesh_report, settings.front_offset_es0)
+    report["settings"] = dict(settings.__dict__)
+    report["orientation"] = orientation.as_dict()
+    report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
+    return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template,
+                            "orientation": orientation}

@@ -1,0 +1,180 @@
+"""The whole §8 binding of one head: cut the lips, bind the skin by rays and the rules beyond
+the paper, the influence map (Fig. 9) and the report (:func:`bind_head`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+from faceforge.geometry.triangles import check_mesh
+from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, bind_skin
+from faceforge.skin.mouth import AROUND_MOUTH
+from faceforge.skin.regions import bind_report, face_front_mask
+from faceforge.skin.rules import (MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
+                                  modiolus_mask)
+
+
+@dataclass(frozen=True)
+class BoundSkin:
+    """Everything :func:`bind_head` finds (the content of the bind stage).
+
+    Attributes
+    ----------
+    cut : faceforge.skin.mouth.MouthCut
+        The working skin mesh (``cut.vertices``, ``cut.faces``) and the mapping
+        back to the user's vertices.
+    binding : Binding
+        Anchors over the working vertices.
+    lip_sides : (n,) int8
+        +1 upper lip, -1 lower lip, 0 elsewhere (working vertices).
+    weights : (n,) float64
+        Influence map in [0, 1] (working vertices).
+    geodesic : (n,) float64
+        Geodesic distance from the anchored region.
+    scale : float
+        The influence normalisation (distance to the back of the head).
+    front : (n,) bool
+        The face-front region (in front of the ears, below the hairline).
+    report : dict
+        The bind report (JSON-ready).
+    """
+
+    cut: object
+    binding: Binding
+    lip_sides: np.ndarray
+    weights: np.ndarray
+    geodesic: np.ndarray
+    scale: float
+    front: np.ndarray
+    report: dict
+
+    def as_arrays(self) -> dict:
+        """Flat arrays for ``bind.npz`` (no pickle). Anchor arrays are prefixed ``anchor_``."""
+        c = self.cut
+        out = {
+            "n_user": np.int64(c.n_user), "vertices": c.vertices, "faces": c.faces,
+            "duplicate_source": c.source, "removed_faces": c.removed_faces,
+            "lip_upper": c.upper, "lip_lower": c.lower, "lip_sides": self.lip_sides,
+            "influence": self.weights, "geodesic": self.geodesic,
+            "influence_scale": np.float64(self.scale), "front": self.front,
+        }
+        for key, value in self.binding.as_arrays().items():
+            out[key if key in ("status", "normals", "body_names") else f"anchor_{key}"] = value
+        return out
+
+
+def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    return cKDTree(vertices).query(points)[1].astype(INT)
+
+
+def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
+              max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
+              modiolus_radius: float = MODIOLUS_RADIUS) -> BoundSkin:
+    """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        The user's skin (triangulated), skin units.
+    faces : (m, 3) int
+    landmarks : dict
+        FDP id -> (3,) position on the skin.
+    cranium, mandible : tuple (vertices (k, 3), faces (l, 3)) or None
+        The fitted skull parts (skin units).
+    muscles : sequence of tuple (name, layer, vertices, faces)
+        The fitted muscles' rest meshes; a higher layer is more superficial
+        (tested first); within one layer the nearest hit wins.
+    max_ray_fraction : float
+        ``bind.max_ray_distance``: longest ray as a fraction of the skin's
+        bounding-box diagonal.
+    insertions : sequence of str
+        ``bind.insertions``: muscles that insert into the skin through the muscles above
+        them, by name or by the name of a left/right pair without ``_L`` / ``_R``; skin
+        bound to another muscle gets a second anchor on them (:func:`bind_skin`).
+    lips_to_ring : bool
+        ``bind.lips_to_ring``: lip skin whose rays miss binds to its own arc of the orbicularis
+        oris before the teeth (:func:`bind_skin`).
+    modiolus_radius : float
+        ``bind.modiolus_radius``: the skin within this fraction of MW0 of a mouth corner
+        binds to the orbicularis oris (:func:`modiolus_mask`; 0: by its rays, as the paper).
+
+    Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): like all the face's front skin,
+    inner lip skin whose rays miss gets a closest-point anchor, across the oral vestibule
+    (1.4 cm on ICT): the upper lip on the maxilla, the lower on the mandible
+    (``lip_sides``), so every front vertex is bound. The lip corners' small triangles
+    between those and the orbicularis oris used to turn over while the jaw moved, which is
+    why this band was once left unbound; the skin's orientation guard
+    (:mod:`faceforge.animation.guards.orientation`) now keeps them upright. The band is still
+    a region of the report.
+
+    Returns
+    -------
+    BoundSkin
+    """
+    from faceforge.skin.influence import influence_weights
+    from faceforge.skin.mouth import (LIP_FDPS, cut_mouth, lip_side, muscle_lip_side,
+                                         ring_face_sides, side_of_points)
+
+    v, f = check_mesh(vertices, faces)
+    pts = {k: np.asarray(p, FLOAT) for k, p in landmarks.items()}
+    lips = [k for k in LIP_FDPS if k in pts]
+    lip_ids = dict(zip(lips, _nearest_vertex(v, np.array([pts[k] for k in lips])))) if lips else {}
+    cut = cut_mouth(v, f, lip_ids, up=up)
+    sides = lip_side(cut, up=up)
+
+    def side_of(points):
+        return side_of_points(points, cut, up=up)
+
+
+    order = sorted(range(len(muscles)), key=lambda i: -int(muscles[i][1]))  # stable
+    bodies = [Body(str(muscles[i][0]), "muscle", muscles[i][2], muscles[i][3]) for i in order]
+    rank = [-int(muscles[i][1]) for i in order]
+    if cranium is not None:
+        bodies.append(Body("cranium", "cranium", *cranium))
+        rank.append(0)
+    if mandible is not None:
+        bodies.append(Body("mandible", "mandible", *mandible))
+        rank.append(0)
+    diagonal = float(np.linalg.norm(np.ptp(v, axis=0)))
+    front, rule = face_front_mask(cut.vertices, pts)
+    band_width = lip_band_width(pts)
+    lips = lip_band(cut, band_width)
+    ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
+    corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
+    body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
+                  for b in bodies]
+    face_sides = [ring_face_sides(b.vertices, b.faces, cut, up=up) if s == AROUND_MOUTH else None
+                  for b, s in zip(bodies, body_sides)]
+    binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
+                        depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
+                        insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
+                        modiolus=corner)
+
+    sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
+    back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None
+    weights, dist, scale = influence_weights(cut.vertices, cut.faces, sources, back_vertex=back)
+
+    report = bind_report(binding, {"face_front": front, "face_front_outside_lips": front & ~lips,
+                                   "lip_band": lips, "back_and_neck": ~front})
+    report["region_rules"] = rule
+    report["max_ray_distance"] = max_ray_fraction * diagonal
+    report["lip_band_width"] = band_width
+    kind = binding.status[corner]   # the kind of each corner vertex's (first) anchor
+    first = np.r_[True, binding.vertex_ids[1:] != binding.vertex_ids[:-1]]
+    on_ring = int((np.isin(binding.vertex_ids[first], np.flatnonzero(corner)) & np.isin(
+        binding.body[first], [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH])).sum())
+    report["modiolus"] = {"radius_mw0": float(modiolus_radius), "vertices": int(corner.sum()),
+                          "on_the_ring": on_ring,
+                          "on_bone": int(np.isin(kind, (CRANIUM, MANDIBLE)).sum()),
+                          "on_other_muscles": int((kind == MUSCLE).sum()) - on_ring}
+    report["mouth"] = cut.report()
+    report["influence"] = {
+        "sources": int(len(sources)), "normalisation": float(scale),
+        "normalised_by": "geodesic distance to FDP 11.6" if back is not None else "largest distance",
+        "mean_weight": float(weights.mean()) if len(weights) else 0.0,
+    }
+    return BoundSkin(cut, binding, sides, weights, dist, float(scale), front, report)

@@ -1,0 +1,394 @@
+"""The skin as a network of PBD constraints (§8).
+
+The skin is the user's triangulated mesh. Pure functions on ``faces`` give the
+constraint index arrays of §8:
+
+* a stretch (distance) constraint on every edge,
+* for each pair of triangles sharing an interior edge, a stretch constraint
+  between the two opposite vertices (penalises bending and twisting),
+* a dihedral bending constraint on the same pair,
+* an area constraint per triangle,
+* one volume constraint over all triangles (the PBD engine closes an open
+  surface virtually).
+
+:func:`add_skin` feeds them, plus the anchors found by
+:mod:`faceforge.skin.binding`, into a :class:`faceforge.pbd.ModelBuilder`.
+Each anchor is a particle ``q`` held by a position constraint whose target is
+a surface point on a muscle or a bone (recomputed every frame from the
+deformed layer, :meth:`SkinLayer.anchor_targets`) and a stretch constraint
+``k_anchor`` between the skin vertex and ``q``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from faceforge.anatomy.muscles.targets import bary_points
+from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
+
+__all__ = [
+    "SkinTopology",
+    "SkinStiffness",
+    "SkinLayer",
+    "skin_topology",
+    "add_skin",
+]
+
+
+@dataclass(frozen=True)
+class SkinTopology:
+    """Constraint index arrays of a skin mesh (all ``int64``).
+
+    Attributes
+    ----------
+    edges : (e, 2)
+        Every undirected edge once, ``edges[:, 0] < edges[:, 1]``, sorted.
+    cross_pairs : (p, 2)
+        For every interior manifold edge, the two vertices opposite to it
+        (one per adjacent triangle).
+    bending_quads : (p, 4)
+        ``(e0, e1, o0, o1)``: the shared edge then the opposite vertices, in
+        the order the PBD engine's ``add_bending`` expects; row ``i`` is the
+        same pair as ``cross_pairs[i]``.
+    triangles : (m, 3)
+        The faces, for area and volume constraints.
+    boundary_edges : (b, 2)
+        Edges used by one triangle only (open borders).
+    nonmanifold_edges : (k, 2)
+        Edges used by more than two triangles; they get an edge stretch
+        constraint but no cross-stretch or bending (the pair is ambiguous).
+    """
+
+    edges: np.ndarray
+    cross_pairs: np.ndarray
+    bending_quads: np.ndarray
+    triangles: np.ndarray
+    boundary_edges: np.ndarray
+    nonmanifold_edges: np.ndarray
+
+
+def skin_topology(faces) -> SkinTopology:
+    """Build the §8 constraint topology of a triangle mesh.
+
+    Parameters
+    ----------
+    faces : (m, 3) int
+        Triangles; vertex ids index any vertex array.
+
+    Returns
+    -------
+    SkinTopology
+        Deterministic (sorted by edge) index arrays. For a manifold mesh
+        ``3 m = 2 * len(cross_pairs) + len(boundary_edges)``.
+    """
+    f = np.asarray(faces, dtype=INT)
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise ValueError(f"faces must have shape (m, 3), got {f.shape}")
+    m = len(f)
+    # half-edge k of face t goes f[t, k] -> f[t, k+1]; its opposite vertex is f[t, k+2]
+    a = f.reshape(-1)
+    b = np.roll(f, -1, axis=1).reshape(-1)
+    opp = np.roll(f, -2, axis=1).reshape(-1)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.lexsort((np.repeat(np.arange(m), 3), hi, lo))
+    lo, hi, opp = lo[order], hi[order], opp[order]
+    if len(lo) == 0:
+        empty2 = np.zeros((0, 2), INT)
+        return SkinTopology(empty2, empty2, np.zeros((0, 4), INT), f, empty2, empty2)
+    new = np.r_[True, (lo[1:] != lo[:-1]) | (hi[1:] != hi[:-1])]
+    start = np.flatnonzero(new)
+    count = np.diff(np.r_[start, len(lo)])
+    edges = np.stack([lo[start], hi[start]], axis=1)
+    two = start[count == 2]
+    cross = np.stack([opp[two], opp[two + 1]], axis=1)
+    quads = np.concatenate([edges[count == 2], cross], axis=1)
+    return SkinTopology(
+        edges=edges,
+        cross_pairs=cross,
+        bending_quads=quads,
+        triangles=f,
+        boundary_edges=edges[count == 1],
+        nonmanifold_edges=edges[count > 2],
+    )
+
+
+@dataclass(frozen=True)
+class SkinStiffness:
+    """PBD stiffness ``k`` in [0, 1] of each skin constraint kind (§8)."""
+
+    stretching: float = 0.15
+    bending: float = 0.95
+    area: float = 0.95
+    anchor: float = 0.2
+    volume: float = 1.0
+    #: position constraint holding each anchor particle q on its surface point
+    #: (the paper binds q "through a position constraint" without a value)
+    position: float = 1.0
+
+    @classmethod
+    def from_config(cls, config) -> "SkinStiffness":
+        """Read ``skin.stiffness.*`` from a validated config (``config.get(dotted)``)."""
+        kw = {}
+        for key in ("stretching", "bending", "area", "anchor", "volume", "position"):
+            value = config.get(f"skin.stiffness.{key}")
+            if value is not None:  # position is optional (older configs)
+                kw[key] = float(value)
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class SkinLayer:
+    """Where the skin lives in the PBD model (indices, all ``int64``).
+
+    Attributes
+    ----------
+    first : int
+        Particle index of skin vertex 0; skin vertex ``i`` is particle ``first + i``.
+    n_vertices : int
+        Number of skin particles (the working mesh, after the mouth cut).
+    anchor_vertices : (k,)
+        Skin vertex of each anchor.
+    anchor_particles : (k,)
+        Particle index of each anchor particle ``q``.
+    anchor_slots : (k,)
+        Row of each anchor's surface point in :meth:`anchor_targets` of a ``Control``.
+    kinematic_anchors : bool
+        The anchor particles are kinematic (``Control.kinematic_positions``; see
+        :func:`add_skin`), else held by position constraints (``Control.position_targets``).
+    """
+
+    first: int
+    n_vertices: int
+    anchor_vertices: np.ndarray
+    anchor_particles: np.ndarray
+    anchor_slots: np.ndarray
+    kinematic_anchors: bool = False
+
+    def anchor_targets(self, control) -> np.ndarray:
+        """The ``Control`` array whose rows :attr:`anchor_slots` hold the anchors' surface points."""
+        return control.kinematic_positions if self.kinematic_anchors else control.position_targets
+
+    def skin_positions(self, state_positions) -> np.ndarray:
+        """The skin's rows ``(n_vertices, 3)`` of a PBD positions array."""
+        return np.asarray(state_positions)[self.first : self.first + self.n_vertices]
+
+
+def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices=None,
+             anchor_points=None, inv_mass: float = 1.0) -> SkinLayer:
+    """Add the skin particles, §8 constraints and anchors to a PBD builder.
+
+    Constraints are added in the order: anchors (q position, then p-q stretch),
+    edge stretch, cross stretch, bending, area, volume; the builder projects them
+    in that order after the deeper layers added before. With ``stiffness.position`` 1 (the
+    default) each q is exactly on its surface point when the p-q stretch reads it, so q is
+    kinematic instead (``Control.kinematic_positions``) and the stretch weighs it as a
+    particle of ``inv_mass``: the same projections, without the position constraints and
+    the q's prediction (:attr:`SkinLayer.kinematic_anchors`).
+
+    Parameters
+    ----------
+    builder : faceforge.pbd.ModelBuilder
+    vertices : (n, 3) float
+        Rest positions of the skin (the working mesh).
+    faces : (m, 3) int
+    stiffness : SkinStiffness
+    anchor_vertices : (k,) int, optional
+        Skin vertices bound to a muscle or bone.
+    anchor_points : (k, 3) float, optional
+        Rest position of each anchor's surface point (the ray hit).
+    inv_mass : float
+        Inverse mass of every skin and anchor particle.
+
+    Returns
+    -------
+    SkinLayer
+    """
+    v = np.asarray(vertices, dtype=FLOAT)
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise ValueError(f"vertices must have shape (n, 3), got {v.shape}")
+    topo = skin_topology(faces)
+    if topo.triangles.size and topo.triangles.max() >= len(v):
+        raise ValueError(f"faces index vertices outside [0, {len(v)})")
+    av = np.zeros(0, INT) if anchor_vertices is None else np.asarray(anchor_vertices, INT).reshape(-1)
+    ap = np.zeros((0, 3)) if anchor_points is None else np.asarray(anchor_points, FLOAT).reshape(-1, 3)
+    if len(av) != len(ap):
+        raise ValueError(f"anchor_vertices {av.shape} and anchor_points {ap.shape} differ in length")
+
+    first = builder.add_particles(v, np.full(len(v), inv_mass, FLOAT))
+    held = stiffness.position == 1.0
+    if len(av) and held:
+        # every iteration q is exactly on its surface point (its position projection) when
+        # the p-q stretch reads it: a kinematic q, with the stretch a tether weighing it as the
+        # particle it was, gives the same projection without the position constraints
+        # (pbd.ModelBuilder.add_distance; tests/pbd/test_tether.py)
+        q_first = builder.add_particles(ap, np.zeros(len(ap)))
+        q = q_first + np.arange(len(ap), dtype=INT)
+        slots = builder.kinematic_rows(q)
+        builder.add_distance(np.stack([first + av, q], axis=1), stiffness.anchor, weight=(inv_mass, inv_mass))
+    elif len(av):
+        q_first = builder.add_particles(ap, np.full(len(ap), inv_mass, FLOAT))
+        q = q_first + np.arange(len(ap), dtype=INT)
+        slots = np.asarray(builder.add_position(q, stiffness.position), INT)
+        builder.add_distance(np.stack([first + av, q], axis=1), stiffness.anchor)
+    else:
+        q = np.zeros(0, INT)
+        slots = np.zeros(0, INT)
+    if len(topo.edges):
+        builder.add_distance(first + topo.edges, stiffness.stretching)
+    if len(topo.cross_pairs):
+        builder.add_distance(first + topo.cross_pairs, stiffness.stretching)
+        builder.add_bending(first + topo.bending_quads, stiffness.bending)
+    if len(topo.triangles):
+        builder.add_area(first + topo.triangles, stiffness.area)
+        builder.add_volume(first + topo.triangles, stiffness.volume)
+    return SkinLayer(first=int(first), n_vertices=len(v), anchor_vertices=av,
+                     anchor_particles=q, anchor_slots=slots, kinematic_anchors=bool(len(av)) and held)
+
+
+class SkinSimulation:
+    """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
+
+    Holds the skin's own PBD model (skin particles + anchor particles ``q``).
+    ``system.add_layer(sim)`` makes ``system.step`` call :meth:`step` after the
+    muscles: the anchors' position targets are recomputed from the surface
+    points on the *current* skull and muscles (``system.surface(name)``), then
+    the skin is stepped.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+        Working skin rest positions (after the mouth cut).
+    faces : (m, 3) int
+    binding : faceforge.skin.binding.Binding
+        Its ``body_names`` must be bodies of the system the layer is added to.
+    stiffness : SkinStiffness
+    settings : faceforge.pbd.SolverSettings, optional
+    weights : (n,) float, optional
+        Influence map; :meth:`positions` returns ``rest + w (simulated - rest)``.
+    carried : (k,) bool, optional
+        Anchors that *carry* their skin vertex (default: none, the paper's anchors). §8 ties
+        a skin vertex ``p`` to its anchor particle ``q`` (held on the surface point) by a
+        stretch of the rest length ``|p - q|``; that link passes on only the part of the
+        anchor's motion along ``p - q`` (to first order), so a muscle sliding under the skin
+        (the mouth corner pulled down) barely drags it. A carried anchor's ``q`` starts at
+        ``p`` (rest length 0) and is held at ``p``'s rest position moved as the surface point
+        moved (:meth:`carry_targets`): the skin goes where the tissue under it goes, as where
+        mimetic muscles insert into the skin. Bone anchors are best left uncarried (skin
+        slides over bone).
+    """
+
+    def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
+                 carried=None):
+        from faceforge.pbd import ModelBuilder, Solver, SolverSettings
+
+        self.rest = np.array(vertices, dtype=FLOAT)
+        self.faces = np.asarray(faces, dtype=INT)
+        self.binding = binding
+        k = len(binding.vertex_ids)
+        self.carried = np.zeros(k, bool) if carried is None else np.asarray(carried, bool).reshape(-1)
+        if self.carried.shape != (k,):
+            raise ValueError(f"carried must have one flag per anchor ({k}), got {self.carried.shape}")
+        self._any_carried = bool(self.carried.any())
+        q_rest = binding.points.copy()
+        q_rest[self.carried] = self.rest[binding.vertex_ids[self.carried]]
+        builder = ModelBuilder()
+        self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest)
+        self.model = builder.finalize()
+        self.solver = Solver(self.model, settings or SolverSettings())
+        self.state = self.model.state()
+        self.control = self.model.control()
+        self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)
+        slots = self.layer.anchor_slots
+        targets = self.layer.anchor_targets(self.control)
+        self._direct = bool(np.array_equal(slots, np.arange(len(slots)))
+                            and targets.shape == (len(slots), 3) and targets.flags.c_contiguous)
+        self.weights = None if weights is None else np.asarray(weights, FLOAT).reshape(-1)
+        if self.weights is not None and len(self.weights) != len(self.rest):
+            raise ValueError(f"weights {self.weights.shape} must have one entry per skin vertex")
+
+    def anchor_targets(self, system, out: np.ndarray | None = None) -> np.ndarray:
+        """Surface points of every anchor on the system's current bodies, ``(k, 3)``: the
+        same points as ``binding.targets([system.surface(n) for n in body_names])``, in one
+        compiled gather from the system's world mesh (its vertex ids are found once per
+        system). ``out`` (k, 3) float64, filled and returned when given."""
+        return bary_points(self._bary, self._gather_ids(system), system.world_view(), out)
+
+    def _gather_ids(self, system) -> np.ndarray:
+        """:meth:`_world_vertex_ids`, found once per system."""
+        if getattr(self, "_gather_for", None) is not system:
+            self._gather = self._world_vertex_ids(system)
+            self._gather_for = system
+        return self._gather
+
+    def _world_vertex_ids(self, system) -> np.ndarray:
+        """``(k, 3)`` world vertex ids of each anchor's triangle (the system's world faces)."""
+        b = self.binding
+        _, world_faces = system.world()
+        starts = np.array([system.face_range(name).start for name in b.body_names], dtype=INT)
+        return np.ascontiguousarray(world_faces[starts[b.body] + b.face_ids], dtype=INT)
+
+    def carry_targets(self, system, targets) -> np.ndarray:
+        """Targets of the carried anchors' ``q``, ``(c, 3)``, from the surface points ``targets
+        (k, 3)`` on the current bodies: the skin vertex's rest position moved as its surface
+        point moved, ``p0 + (s - s0)``; exactly ``p0`` at rest (the rest state stays a fixed
+        point). The offset is not turned with the anchor triangle: a muscle's triangles tilt
+        and shear as it contracts, and turning the ~1-2 mm offset with them threw the skin
+        about (the MakeHuman chin moved 1.5 mm down and back while the mentalis under it rose
+        3 mm); a rigid turn of the tissue (the jaw) leaves an error of the turn angle times
+        the offset (0.2 rad x 1.5 mm = 0.3 mm), and skin on the mandible itself slides as in §8."""
+        s0, p0 = self._carry_rest(system)
+        return p0 + (targets[self.carried] - s0)
+
+    def _carry_rest(self, system):
+        """``(s0, p0)`` of :meth:`carry_targets`, ``(c, 3)`` each, computed once per system."""
+        if getattr(self, "_carry_for", None) is not system:
+            v0, _ = system.world(rest=True)
+            ids = self._gather_ids(system)[self.carried]
+            self._carry = (bary_points(np.ascontiguousarray(self._bary[self.carried]), ids, v0),
+                           np.ascontiguousarray(self.rest[self.binding.vertex_ids[self.carried]]))
+            self._carry_for = system
+            self._carried_rows = np.flatnonzero(self.carried).astype(INT)
+        return self._carry
+
+    def step(self, system, dt: float) -> None:
+        """One frame: anchor targets from ``system``, then a PBD step of the skin."""
+        if len(self.layer.anchor_slots):
+            # when the anchors hold every row of their Control array, in order, it is filled in place
+            targets = self.layer.anchor_targets(self.control)
+            t = self.anchor_targets(system, targets if self._direct else None)
+            if self._any_carried:   # t[carried] = carry_targets(system, t), compiled, in place
+                s0, p0 = self._carry_rest(system)
+                _carry(t, self._carried_rows, s0, p0)
+            if not self._direct:
+                targets[self.layer.anchor_slots] = t
+        self.solver.step(self.state, self.state, self.control, dt)
+
+    def simulated(self) -> np.ndarray:
+        """Current simulated skin positions ``(n, 3)`` (a copy, no influence weighting)."""
+        return self.layer.skin_positions(self.state.positions).copy()
+
+    def positions(self) -> np.ndarray:
+        """Animated skin ``(n, 3)``: the simulation weighted by the influence map."""
+        sim = self.simulated()
+        if self.weights is None:
+            return sim
+        return self.rest + self.weights[:, None] * (sim - self.rest)
+
+    def reset(self) -> None:
+        """Back to the rest state."""
+        fresh = self.model.state()
+        self.state.positions[:] = fresh.positions
+        self.state.velocities[:] = fresh.velocities
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _carry(t, rows, s0, p0):  # pragma: no cover - numba
+    """``t[rows] = p0 + (t[rows] - s0)`` in place (:meth:`SkinSimulation.carry_targets`, whose
+    numpy is the plain twin): ``t (k, 3)``, ``rows (c,)`` ascending, ``s0, p0 (c, 3)``."""
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for d in range(3):
+            t[r, d] = p0[i, d] + (t[r, d] - s0[i, d])

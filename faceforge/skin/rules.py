@@ -1,0 +1,85 @@
+"""Binding rules beyond the paper (§8): the inner lip band, the muscles inserting through
+others (``bind.insertions``) and the modiolus at the mouth corners (``bind.modiolus_radius``);
+:mod:`faceforge.skin.binding` explains each."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+from faceforge.geometry.triangles import vertex_normals
+
+
+#: soft tissue depth at the mouth corners, mm (Rhine 1983 ``ecm2_sup``, the deepest of the
+#: mouth region in :data:`faceforge.anatomy.tissue.DEPTH_MM`): the width of the lip band
+LIP_BAND_MM = 18.0
+
+
+def lip_band_width(landmarks: dict) -> float | None:
+    """:data:`LIP_BAND_MM` in skin units (scaled by the eye separation, ``ES0 / 63 mm``);
+    None when the eye FDPs that give ES0 are missing."""
+    from faceforge.anatomy.tissue import units_per_mm
+
+    try:
+        return LIP_BAND_MM * units_per_mm(landmarks)
+    except KeyError:
+        return None
+
+
+#: inner lip skin faces more than 60 degrees away from the front (cosine below this)
+INNER_LIP_COS = 0.5
+
+
+def lip_band(cut, width: float | None, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """(n,) bool: the inner lip skin -- working vertices within ``width`` (skin units,
+    shortest edge path over the skin) of the inner-lip contours, corners included, whose
+    normal turns more than 60 degrees away from ``forward`` (the face's front): where the
+    lips touch each other and roll into the mouth. None, or no contours: no vertex."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from faceforge.skin.mouth import _graph
+
+    n = len(cut.vertices)
+    if width is None or len(cut.upper) < 2 or len(cut.lower) < 2:
+        return np.zeros(n, bool)
+    v, f = np.asarray(cut.vertices, FLOAT), np.asarray(cut.faces, INT)
+    seeds = np.unique(np.r_[cut.upper, cut.lower]).astype(INT)
+    d = dijkstra(_graph(v, f), indices=seeds, min_only=True, limit=float(width) * (1.0 + 1e-9))
+    fwd = np.asarray(forward, FLOAT) / np.linalg.norm(forward)
+    return (d <= width) & (vertex_normals(v, f) @ fwd < INNER_LIP_COS)
+
+
+def match_insertions(insertions, names) -> tuple[list[int], list[str]]:
+    """Which of ``names`` (muscle names; None for a body that is no muscle) ``insertions``
+    (``bind.insertions``: a muscle's name, or a left/right pair's name without ``_L`` / ``_R``)
+    selects: ``(indices into names, the insertion names that match none)``."""
+    wanted = set(insertions)
+    hits, used = [], set()
+    for i, n in enumerate(names):
+        if n is None:
+            continue
+        key = n if n in wanted else (n[:-2] if n[-2:] in ("_L", "_R") and n[:-2] in wanted else None)
+        if key is not None:
+            hits.append(i)
+            used.add(key)
+    return hits, [n for n in insertions if n not in used]
+
+
+#: FDPs of the mouth corners: outer lip contour (8.3 left, 8.4 right), inner (2.4, 2.5)
+CORNER_FDPS = ("8.3", "8.4", "2.4", "2.5")
+
+#: ``bind.modiolus_radius``: the skin within this fraction of MW0 (the mouth width, FDP 8.3 to
+#: 8.4) of a mouth corner binds to the orbicularis oris (module docstring, the modiolus)
+MODIOLUS_RADIUS = 0.12
+
+
+def modiolus_mask(vertices, landmarks: dict, radius: float = MODIOLUS_RADIUS) -> np.ndarray:
+    """(n,) bool: the vertices within ``radius`` x MW0 of one of the mouth corners'
+    FDPs (:data:`CORNER_FDPS`, those given); MW0 = |FDP 8.3 - FDP 8.4|. No vertex
+    without 8.3 and 8.4 or with ``radius`` 0."""
+    v = np.asarray(vertices, FLOAT)
+    if radius <= 0.0 or "8.3" not in landmarks or "8.4" not in landmarks:
+        return np.zeros(len(v), bool)
+    reach = radius * float(np.linalg.norm(np.subtract(landmarks["8.3"], landmarks["8.4"])))
+    corners = np.array([landmarks[k] for k in CORNER_FDPS if k in landmarks], FLOAT)
+    return (np.linalg.norm(v[:, None, :] - corners[None], axis=2) <= reach).any(axis=1)
