@@ -8,6 +8,7 @@ import is still a dependency); ``if TYPE_CHECKING:`` blocks do not count.
 from __future__ import annotations
 
 import ast
+import sys
 from pathlib import Path
 
 import pytest
@@ -166,6 +167,6 @@ def test_the_direction_check_sees_an_upward_import(tmp_path, monkeypatch):
     (tmp_path / "faceforge" / "pipeline").mkdir()
     (tmp_path / "faceforge" / "pipeline" / "__init__.py").write_text("")
     (fake / "up.py").write_text("def f():\n    from faceforge.pipeline import Stage\n")
-    monkeypatch.setattr(__import__(__name__), "PKG", tmp_path / "faceforge")
+    monkeypatch.setattr(sys.modules[__name__], "PKG", tmp_path / "faceforge")
     with pytest.raises(AssertionError, match=r"faceforge\.geometry\.up -> faceforge\.pipeline"):
         test_packages_import_only_downwards()

@@ -241,6 +241,9 @@ def calibrate_mapping(mapping: FapMapping, simulate, rest: np.ndarray, probes: d
     Returns
     -------
     (calibrated FapMapping, list of CalibrationRow for every (FAP of the entry, requested))
+
+    Length (119 lines): the per-entry measure-fit-refine loop with its bookkeeping; left as it
+    is (issue 24).
     """
     rows = []
     calibrated = mapping

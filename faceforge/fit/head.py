@@ -175,6 +175,9 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     builds the muscles on the fitted skull (Eq. 5 thickness), ``shift`` the mouth's
     (:class:`faceforge.fit.mouth.MouthField` or None, weighted per muscle particle);
     without it the muscle map points are morphed only and there is no refit.
+
+    Length (124 lines): the steps of §7 in the order of the module docstring, each a call; left
+    as it is (issue 24).
     """
     from faceforge.fit import muscles as fit_muscles
 

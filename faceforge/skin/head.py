@@ -114,6 +114,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     Returns
     -------
     BoundSkin
+
+    Length (107 lines, half of it docstring and report): the §8 steps in order; left as it is
+    (issue 24).
     """
     from faceforge.skin.influence import influence_weights
     from faceforge.skin.mouth import (LIP_FDPS, cut_mouth, lip_side, muscle_lip_side,

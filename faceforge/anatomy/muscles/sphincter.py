@@ -118,7 +118,11 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
     (``fwd (3,)``: :attr:`Muscle.forward`) when either is > 0; before that, with ``carry
     (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
     r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples. Same values as the numpy code to
-    round-off (LAPACK's, summation order)."""
+    round-off (LAPACK's, summation order).
+
+    Length: one compiled kernel (ellipse fit and the per-sample displacement in one pass); kept
+    whole for speed.
+    """
     h = grid.shape[0]
     w1 = grid.shape[1] - 1
     _loop_samples(p1, seg1, t1, grid, 0)

@@ -83,6 +83,9 @@ def _solve_bending(x, w, i0, i1, i2, i3, rest_cos, rest_sin, k, c, lam, xpbd):
 
     The rest angle enters as its cosine and sine: the deviation is
     ``atan2(sin(theta - theta0), cos(theta - theta0))``, so no wrapping is needed.
+
+    Length: one compiled kernel; split into calls, the hot loop would depend on numba inlining
+    them.
     """
     w0 = w[i0]
     w1 = w[i1]
@@ -202,6 +205,9 @@ def _project_bending_batched(x, idx, inv_mass, rest_cs, k, seg, buf, start, stop
     branch, giving per-particle displacements per unit multiplier), fixed up with libm
     atan2 where the deviation is large, then scattered. Constraints of a batch share no
     particle, so the result is that of the sequential sweep in the same order.
+
+    Length: one compiled sweep (gather, three branch-free vector loops, scalar fix-up, scatter
+    per batch); split into calls, the hot loop would depend on numba inlining them.
     """
     for q in range(seg.shape[0] - 1):
         lo = max(seg[q], start)

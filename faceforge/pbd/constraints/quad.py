@@ -249,7 +249,10 @@ def _quad_math(buf, t, j, inv_mass, rest_cs, k):
     in the ``_FIX`` row), else 0.0; the 12 bending displacements per unit multiplier; the
     bending denominator and the rotated pair ``(y, x)`` whose atan2 is the deviation. The
     vectorised loop uses the first 13 (LLVM drops the rest); the fix-up loop recomputes
-    the rare lanes that need the rest."""
+    the rare lanes that need the rest.
+
+    Length: the vectorised body of the compiled quad sweep, kept whole for speed.
+    """
     p0x = buf[_S0X + t]
     p0y = buf[_S0Y + t]
     p0z = buf[_S0Z + t]
@@ -390,6 +393,9 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
     math per quad is that of ``distance._project_distance_pbd`` twice, then
     ``bending._solve_bending`` (PBD), then ``area._area_increments``, each on the updated
     positions.
+
+    Length: the compiled quad sweep (issue 24 allows it to stay whole: splitting would cost
+    speed).
     """
     for q in range(seg.shape[0] - 1):
         lo = max(seg[q], start)
