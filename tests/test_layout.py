@@ -28,8 +28,11 @@ ALLOWED = {
     "fit": {"anatomy", "geometry", "pbd", "io", "mpeg4"},
     "skin": {"anatomy", "geometry", "pbd", "io"},
     "animation": {"anatomy", "skin", "geometry", "pbd", "io", "mpeg4"},
+    "landmarks": {"geometry", "io", "mpeg4"},
+    "blendshapes": {"animation", "anatomy", "skin", "geometry", "pbd", "io", "mpeg4"},
     "viz": {"anatomy", "fit", "skin", "animation", "geometry", "pbd", "io", "mpeg4"},
-    "pipeline": {"anatomy", "fit", "skin", "animation", "geometry", "pbd", "io", "mpeg4", "viz"},
+    "pipeline": {"anatomy", "fit", "skin", "animation", "blendshapes", "geometry", "pbd", "io", "mpeg4", "viz",
+                 "landmarks"},
     "cli": {"pipeline", "io"},
 }
 BASE = {"constants", "exceptions", "__init__", "__main__"}

@@ -117,8 +117,10 @@ def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> di
     from faceforge.io.landmarks import default_landmark_path
     from faceforge.pipeline.stage import stage_order
 
+    landmarks = Path(job.landmarks or default_landmark_path(job.mesh)).absolute()
+    # no file next to the mesh: the landmarks stage detects them (an explicit, absent file stays an error)
     params = {"mesh": str(Path(job.mesh).absolute()),
-              "landmarks": str(Path(job.landmarks or default_landmark_path(job.mesh)).absolute())}
+              "landmarks": str(landmarks) if job.landmarks or landmarks.exists() else None}
     needed = {n.rstrip("?") for s in stage_order(targets) for n in s.inputs}
     if "fap" in needed:
         params["fap"] = str(Path(job.fap).absolute()) if job.fap else str(_expression_fap(job, config, root))

@@ -177,6 +177,17 @@ def test_too_few_landmarks_to_tell_the_frame_is_reported_as_the_missing_fdps(inv
     data.pop("orientation")
     data["landmarks"] = {k: v for k, v in data["landmarks"].items() if k not in ("2.1", "2.10")}
     (tmp_path / "head.fdp.yaml").write_text(yaml.safe_dump(data))
+    from faceforge.io.landmarks import load_landmarks, read_landmarks
+    from faceforge.io.mesh import load_mesh
+    from faceforge.fit.orientation import head_orientation
+
+    v, f, _ = load_mesh(mesh)
+    raw = read_landmarks(tmp_path / "head.fdp.yaml")
+    assert head_orientation("auto", raw, v).source == "default"
+    with pytest.raises(LandmarkError, match="required FDP 2.1 missing") as err:
+        load_landmarks(tmp_path / "head.fdp.yaml", v, f, raw=raw)
+    assert "orientation" not in str(err.value)
+    # `fit` no longer stops there (issue 26): the partial file is completed by detection
     result = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
-    assert result.exit_code == 2
-    assert "required FDP 2.1 missing" in result.stderr and "orientation" not in result.stderr
+    assert result.exit_code == 0, result.stderr
+    assert "using the completed landmarks" in result.stderr

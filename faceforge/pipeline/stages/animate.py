@@ -289,16 +289,17 @@ def _viseme_file(app, text: str) -> Path:
     return path
 
 
-def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None) -> None:
-    """Write ``-o`` and ``--preview`` from the animate stage's frames."""
+def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None,
+                   stage: str = "animate") -> None:
+    """Write ``-o`` and ``--preview`` from the frames of ``stage`` (animate, or arkit)."""
     import numpy as np
 
     from faceforge.exceptions import StageError
     from faceforge.io.frame_stream import open_frames
 
     # a read-only map of the stage file: an hour-long take is read a chunk at a time
-    frames = open_frames(app.workspace.stage_dir("animate") / "animation.npz")
-    fps = float(open_frames(app.workspace.stage_dir("animate") / "animation.npz", "fps"))
+    frames = open_frames(app.workspace.stage_dir(stage) / "animation.npz")
+    fps = float(open_frames(app.workspace.stage_dir(stage) / "animation.npz", "fps"))
     mesh = app.params().get("mesh")
     if not mesh:
         raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)

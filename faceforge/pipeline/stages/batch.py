@@ -20,8 +20,8 @@ _EXPRESSIONS = ("joy", "sadness", "surprise", "anger", "disgust", "fear")
 faceforge batch heads/*.obj --fap track.fap --jobs 4 --out runs
 faceforge batch manifest.yaml --scheduler tcp://host:8786
 
-INPUTS are head meshes (landmarks: <mesh stem>.fdp.yaml next to each) or one manifest
-(.yaml). A rerun skips stages already done. --config/--set of the faceforge group apply
+INPUTS are head meshes (landmarks: <mesh stem>.fdp.yaml next to each, found
+automatically where there is none) or one manifest (.yaml). A rerun skips stages already done. --config/--set of the faceforge group apply
 to every head. Exit status: 0 all heads ok, 1 some failed, 2 bad invocation or manifest.
 Writes <out>/batch_report.json.""")
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))

@@ -40,7 +40,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "6"
+VERSION = "7"
 
 
 def run(ctx) -> None:
@@ -49,11 +49,13 @@ def run(ctx) -> None:
 
     from faceforge.fit.files import fit_files
     from faceforge.fit.template import load_template
-    from faceforge.io.landmarks import default_landmark_path
+    from faceforge.pipeline.stages.landmarks import landmark_file
 
     t0 = time.perf_counter()
     mesh_path = ctx.param("mesh")
-    lm_path = ctx.params.get("landmarks") or str(default_landmark_path(mesh_path))
+    lm_path, source = landmark_file(ctx.input("landmarks"))
+    if source != "given":
+        ctx.log(f"no complete landmark file for {mesh_path}: using the {source} landmarks {lm_path}")
     template = load_template(ctx.config.get("template.skull"), ctx.config.get("template.muscle_map"))
     result, report, extra = fit_files(mesh_path, lm_path, template, dict(ctx.config.get("fit") or {}),
                                       log=ctx.log)
@@ -99,7 +101,7 @@ def write_outputs(out_dir, result, report, extra) -> None:
 
 
 STAGE = register_stage(Stage(
-    name="fit", deps=(), config_keys=("fit", "template"),
+    name="fit", deps=("landmarks",), config_keys=("fit", "template"),
     inputs=("mesh", "landmarks?", "template.skull", "template.muscle_map"),
     outputs=("fit.npz", "report.json", "fit.png", "muscle_map.yaml"), version=VERSION, run=run,
     description="fit the skull and muscle map into the skin (§7)"))
@@ -117,8 +119,8 @@ STAGE = register_stage(Stage(
 def command(app, mesh, landmarks, orientation, force):
     from faceforge.io.landmarks import default_landmark_path
 
-    if landmarks is None:
-        landmarks = str(default_landmark_path(mesh))
+    if landmarks is None:   # the file next to the mesh, if any; else the landmarks are detected
+        landmarks = str(default_landmark_path(mesh)) if default_landmark_path(mesh).exists() else None
     if orientation is not None:
         app.add_sets(f"fit.orientation={orientation}")
     statuses = app.run_stage("fit", params={"mesh": mesh, "landmarks": landmarks}, force=force)

@@ -1,0 +1,119 @@
+"""Whole-face agreement with the MakeHuman expression units (issue 25 item 2).
+
+Run: ``python benchmarks/bench_units.py [--workdir DIR]`` (DIR: the MakeHuman sample fitted and
+bound; default: fitted and bound here in a temporary folder through the CLI).
+
+For each unit of :data:`CHOSEN` (MakeHuman's units that one or a few muscles or the jaw produce,
+from ``tests/data/mh_head_expression_units_caucasian.npz``; CC0, tests/data/README.md) the activation solve (:mod:`faceforge.blendshapes.solve`)
+finds the contractions + jaw pose whose settled skin best matches the unit's displacement field
+over all the head's vertices, and reports the cosine of the two fields and the magnitude ratio
+``|result| / |unit|`` (targets: cosine >= 0.8, ratio 0.8-1.25), the residual after the linear
+solve and each Gauss-Newton pass, the controls used, and the solve's time. Also: each left unit
+against its mirrored right unit (the relative difference of the solved fields, mirrored in x).
+Writes ``benchmarks/results/units.json``. Not a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT))
+
+from _util import write_results  # noqa: E402
+
+UNITS = ROOT / "tests" / "data" / "mh_head_expression_units_caucasian.npz"
+#: the units one or a few muscles or the jaw produce (the eye units are the lids', not muscles')
+CHOSEN = ("mouth-open", "mouth-corner-puller", "eyebrows-left-inner-up", "eyebrows-right-inner-up",
+          "eyebrows-left-down", "eyebrows-right-down", "eyebrows-left-extern-up", "eyebrows-right-extern-up",
+          "eyebrows-left-up", "eyebrows-right-up", "mouth-depression", "mouth-elevation", "mouth-pursing",
+          "mouth-retraction", "mouth-protusion", "nose-left-elevation", "nose-right-elevation",
+          "mouth-upward-retraction")
+MESH = ROOT / "samples" / "makehuman" / "mh_head_default.obj"
+
+
+def fitted_workdir(tmp: Path) -> Path:
+    cli = [sys.executable, "-c", "from faceforge.cli import main; main()", "-q", "--workdir", str(tmp)]
+    subprocess.run(cli + ["fit", str(MESH)], check=True)
+    subprocess.run(cli + ["bind"], check=True)
+    return tmp
+
+
+def mirror_index(rest: np.ndarray) -> np.ndarray:
+    """(n,) the vertex nearest each vertex's mirror image in x (user frame)."""
+    from scipy.spatial import cKDTree
+
+    m = rest * np.array([-1.0, 1.0, 1.0])
+    return cKDTree(rest).query(m)[1]
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--passes", type=int, default=2)
+    args = ap.parse_args(argv)
+    from faceforge.animation.fap_mapping import load_fap_mapping
+    from faceforge.blendshapes.rigsolve import field_observer, settler
+    from faceforge.blendshapes.solve import control_space, field_agreement, jacobian, solve_activations
+    from faceforge.io.config import load_config
+    from faceforge.animation.rig import BoundHead
+    from faceforge.pipeline.stages.animate import mapping_template_path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        work = args.workdir or fitted_workdir(Path(tmp))
+        cfg = load_config()
+        head = BoundHead(work / "fit", work / "bind", cfg)
+        mapping = load_fap_mapping(mapping_template_path(cfg))
+        settle = int(cfg.get("animate.calibrate.settle_frames"))
+        simulate = settler(head.rig, float(cfg.get("animate.fps")), settle)
+        observe = field_observer(head.rest, head.user_index, head.user_rotation)
+        space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
+                              mapping.max_contraction)
+        simulate(*space.pose(np.zeros(len(space.names))))   # compile outside the timing
+        t0 = time.perf_counter()
+        J = jacobian(simulate, observe, space)
+        t_jac = time.perf_counter() - t0
+        units = np.load(UNITS)
+        names = [str(n) for n in units["names"]]
+        rows, fields = {}, {}
+        for name, delta in ((n, units["deltas"][names.index(n)]) for n in CHOSEN):
+            t0 = time.perf_counter()
+            res = solve_activations(delta.astype(float).ravel(), J, space, simulate, observe, passes=args.passes)
+            cos, ratio = field_agreement(res.observed, delta)
+            used = {n: round(float(v), 3) for n, v in zip(space.names, res.x) if abs(v) > 1e-3}
+            fields[str(name)] = res.observed.reshape(-1, 3)
+            rows[str(name)] = {"cosine": round(cos, 3), "ratio": round(ratio, 3),
+                               "ok": bool(cos >= 0.8 and 0.8 <= ratio <= 1.25),
+                               "residuals": [round(r, 3) for r in res.residuals], "controls": used,
+                               "peak_unit": float(np.linalg.norm(delta, axis=1).max()),
+                               "seconds": round(time.perf_counter() - t0, 2)}
+            print(f"{name:30s} cos {cos:6.3f} ratio {ratio:6.3f} residuals {rows[str(name)]['residuals']} {used}")
+        user_rest = (head.rest[head.user_index] @ head.user_rotation)
+        mi = mirror_index(user_rest)
+        mirror = {}
+        for left in [n for n in fields if "-left-" in n]:
+            right = left.replace("-left-", "-right-")
+            if right in fields:
+                a, b = fields[left], fields[right][mi] * np.array([-1.0, 1.0, 1.0])
+                mirror[left] = round(float(np.linalg.norm(a - b) / max(np.linalg.norm(a), 1e-12)), 3)
+        worst = min(rows, key=lambda n: (rows[n]["cosine"], -abs(np.log(max(rows[n]["ratio"], 1e-9)))))
+        out = {"head": str(MESH.relative_to(ROOT)), "controls": list(space.names), "settle_frames": settle,
+               "jacobian_seconds": round(t_jac, 2), "units": rows, "worst_unit": worst,
+               "passing": sum(r["ok"] for r in rows.values()), "of": len(rows),
+               "mirror_rel_diff": mirror}
+        print(f"worst {worst}; {out['passing']}/{len(rows)} pass; jacobian {t_jac:.1f} s; mirror {mirror}")
+        write_results("units", out)
+        return out
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,219 @@
+"""ARKit weight tracks in and out (issue 27).
+
+In: :func:`read_weights` reads
+
+* the CSV that Unreal's Live Link Face app records: ``Timecode,BlendShapeCount,EyeBlinkLeft,...``
+  (ARKit's names with a capital first letter), then one row per frame; the head and eye
+  rotation columns it appends (``HeadYaw``, ... ``RightEyeRoll``) are read and ignored;
+* a plain CSV ``frame`` or ``time`` (optional) then one column per shape (ARKit's names, either
+  capitalisation);
+* JSON: ``{"fps": 60, "frames": [{"jawOpen": 0.3, ...}, ...]}`` or a list of such objects, or
+  ``{"names": [...], "weights": [[...], ...]}``.
+
+Every weight must lie in [0, 1], every name be one of ARKit's 52, every row have the header's
+length: otherwise a :class:`faceforge.exceptions.FapError` naming ``file:line``.
+
+Out: :func:`solve_weights` finds per frame the weights in [0, 1] of baked shapes whose sum best
+matches a frame's displacement (bounded least squares); :func:`write_weights` writes them as a
+Live Link Face CSV (``.csv``) or JSON (``.json``).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from faceforge.blendshapes.arkit import ARKIT_NAMES
+
+#: the columns Live Link Face appends after the 52 shapes (read, ignored)
+LIVE_LINK_EXTRA = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
+                   "RightEyeYaw", "RightEyePitch", "RightEyeRoll")
+_BY_LOWER = {n.lower(): n for n in ARKIT_NAMES}
+#: the rate of the timecode's frame field :func:`write_weights` writes (Live Link Face's 60)
+TIMECODE_RATE = 60.0
+#: the timecode rates a take's frame field is matched against (:func:`timecode_rate`)
+TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 120)
+_TOLERANCE = 1e-6   # weights written with 6 decimals may round a hair past 1
+
+
+def _error(path, line, msg):
+    from faceforge.exceptions import FapError
+
+    return FapError(msg, f"{path}:{line}" if line else path)
+
+
+def _timecode(text: str):
+    """``HH:MM:SS:FF(.fff)`` (Live Link Face) -> (whole seconds, frame field); None if not one."""
+    parts = text.strip().split(":")
+    if len(parts) != 4:
+        return None
+    try:
+        return 3600 * int(parts[0]) + 60 * int(parts[1]) + int(parts[2]), float(parts[3])
+    except ValueError:
+        return None
+
+
+def timecode_rate(frame_fields) -> float:
+    """The timecode rate of a take: the smallest of :data:`TIMECODE_RATES` above every frame field
+    (exact for takes of a second or more; Live Link Face writes 60 or 30)."""
+    top = max(frame_fields, default=0.0)
+    return next((float(r) for r in TIMECODE_RATES if r > top), float(TIMECODE_RATES[-1]))
+
+
+def read_weights(path, default_fps: float = 60.0) -> tuple[list, np.ndarray, float]:
+    """(names [k] ARKit names in the file's column order, weights (F, k) float in [0, 1], fps).
+
+    fps: the JSON's ``fps``; for a Live Link CSV the rate its timecodes step at (the frame field's
+    rate from :func:`timecode_rate`), else ``default_fps``."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise _error(path, 0, f"cannot read the weights: {exc.__class__.__name__}") from None
+    if path.suffix.lower() == ".json":
+        return _read_json(path, text, default_fps)
+    return _read_csv(path, text, default_fps)
+
+
+def _name(path, line, raw: str) -> str | None:
+    raw = raw.strip()
+    if raw in LIVE_LINK_EXTRA:
+        return None
+    name = _BY_LOWER.get(raw.lower())
+    if name is None:
+        raise _error(path, line, f"unknown blendshape name {raw!r} (ARKit's 52 names, e.g. eyeBlinkLeft)")
+    return name
+
+
+def _read_csv(path, text, default_fps):
+    rows = list(csv.reader(text.splitlines()))
+    if not rows or not rows[0]:
+        raise _error(path, 1, "empty file: expected a header of blendshape names")
+    header = [h.strip() for h in rows[0]]
+    skip = [i for i, h in enumerate(header) if h.lower() in ("timecode", "blendshapecount", "frame", "time")]
+    cols, names = [], []
+    for i, h in enumerate(header):
+        if i in skip:
+            continue
+        name = _name(path, 1, h)
+        if name is not None:
+            if name in names:
+                raise _error(path, 1, f"blendshape {name} given twice")
+            cols.append(i)
+            names.append(name)
+    out, stamps = [], []
+    tc = header.index("Timecode") if "Timecode" in header else -1
+    for k, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != len(header):
+            raise _error(path, k, f"{len(row)} fields, the header has {len(header)}")
+        try:
+            values = [float(row[i]) for i in cols]
+        except ValueError:
+            raise _error(path, k, "a weight is not a number") from None
+        bad = [(names[j], v) for j, v in enumerate(values) if not (-_TOLERANCE <= v <= 1 + _TOLERANCE)]
+        if bad:
+            raise _error(path, k, f"{bad[0][0]} = {bad[0][1]:g} is outside [0, 1]")
+        out.append(values)
+        if tc >= 0:
+            stamps.append(_timecode(row[tc]))
+    if not out:
+        raise _error(path, 2, "no frames")
+    fps = default_fps
+    if len(stamps) > 2 and all(s is not None for s in stamps):
+        rate = timecode_rate([f for _, f in stamps])
+        step = np.median(np.diff([sec + f / rate for sec, f in stamps]))
+        if step > 0:
+            fps = float(round(1.0 / step, 3))
+    return names, np.clip(np.asarray(out, dtype=float), 0.0, 1.0), fps
+
+
+def _read_json(path, text, default_fps):
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise _error(path, exc.lineno, f"not JSON: {exc.msg}") from None
+    fps = default_fps
+    if isinstance(data, dict) and "names" in data:
+        names = [_name(path, 0, n) for n in data["names"]]
+        w = np.asarray(data.get("weights", []), dtype=float)
+        fps = float(data.get("fps", fps))
+        if w.ndim != 2 or w.shape[1] != len(names):
+            raise _error(path, 0, f"weights must be (frames, {len(names)})")
+    else:
+        frames = data.get("frames") if isinstance(data, dict) else data
+        if isinstance(data, dict):
+            fps = float(data.get("fps", fps))
+        if not isinstance(frames, list) or not frames or not all(isinstance(f, dict) for f in frames):
+            raise _error(path, 0, "expected {\"frames\": [{name: weight, ...}, ...]}")
+        names = []
+        for f in frames:
+            for n in f:
+                name = _name(path, 0, n)
+                if name is not None and name not in names:
+                    names.append(name)
+        w = np.zeros((len(frames), len(names)))
+        for i, f in enumerate(frames):
+            for n, v in f.items():
+                name = _name(path, 0, n)
+                if name is not None:
+                    w[i, names.index(name)] = float(v)
+    bad = np.argwhere(~((w >= -_TOLERANCE) & (w <= 1 + _TOLERANCE)))
+    if len(bad):
+        i, j = bad[0]
+        raise _error(path, 0, f"frame {i}: {names[j]} = {w[i, j]:g} is outside [0, 1]")
+    return names, np.clip(w, 0.0, 1.0), fps
+
+
+def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray) -> np.ndarray:
+    """Per frame the weights ``w`` in [0, 1] minimising ``|neutral + sum_k w_k (shape_k - neutral)
+    - frame|`` (bounded least squares, scipy ``lsq_linear``).
+
+    frames : (F, n, 3); neutral : (n, 3); shapes : (k, n, 3) -> (F, k) float.
+    """
+    from scipy.optimize import lsq_linear
+
+    D = (np.asarray(shapes, float) - neutral).reshape(len(shapes), -1).T   # (3n, k)
+    Y = (np.asarray(frames, float) - neutral).reshape(len(frames), -1)
+    live = np.linalg.norm(D, axis=0) > 0
+    out = np.zeros((len(Y), len(shapes)))
+    if not live.any():
+        return out
+    # the normal equations' QR once, then per frame a small bounded solve: (3n, k) -> (k, k)
+    q, r = np.linalg.qr(D[:, live])
+    for i, y in enumerate(Y):
+        out[i, live] = lsq_linear(r, q.T @ y, bounds=(0.0, 1.0), method="bvls").x
+    return np.clip(out, 0.0, 1.0)
+
+
+def write_weights(path, names, weights: np.ndarray, fps: float) -> Path:
+    """Write ``weights (F, k)`` of ``names`` as a Live Link Face CSV (``.csv``: timecode at
+    ``fps``, BlendShapeCount, one column per ARKit name, all 52 in ARKit's order, absent ones 0,
+    then the nine rotation columns as 0) or JSON (``.json``: ``{"fps", "names", "weights"}``)."""
+    from faceforge.io.export_common import atomic_write_bytes
+
+    path = Path(path)
+    w = np.asarray(weights, dtype=float)
+    if path.suffix.lower() == ".json":
+        body = json.dumps({"fps": fps, "names": list(names), "weights": np.round(w, 6).tolist()})
+        return atomic_write_bytes(path, body.encode("utf-8"))
+    if path.suffix.lower() != ".csv":
+        raise ValueError(f"{path}: curves are written as .csv or .json")
+    full = np.zeros((len(w), len(ARKIT_NAMES)))
+    for j, n in enumerate(names):
+        full[:, ARKIT_NAMES.index(n)] = w[:, j]
+    lines = [",".join(["Timecode", "BlendShapeCount", *(n[0].upper() + n[1:] for n in ARKIT_NAMES),
+                       *LIVE_LINK_EXTRA])]
+    for f, row in enumerate(full):
+        t = f / fps
+        h, rem = divmod(t, 3600)
+        m, s = divmod(rem, 60)
+        frame = (s - int(s)) * TIMECODE_RATE
+        tc = f"{int(h):02d}:{int(m):02d}:{int(s):02d}:{frame:06.3f}"
+        lines.append(",".join([tc, str(len(ARKIT_NAMES) + len(LIVE_LINK_EXTRA)),
+                               *(f"{x:.6f}" for x in row), *("0" for _ in LIVE_LINK_EXTRA)]))
+    return atomic_write_bytes(path, ("\n".join(lines) + "\n").encode("utf-8"))

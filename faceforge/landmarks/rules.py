@@ -1,0 +1,338 @@
+"""Geometric rules that place FDPs where the mesh itself defines them better than a face
+detector trained on photos (which sees neither bone nor a grey mesh's chin shadow).
+
+All work in the face's frame (left, up, forward unit (3,)) from the detection:
+
+* chin, on the midline profile (the mesh cut by the mid-sagittal plane):
+  2.10 pogonion = the most anterior profile point between the labiomental fold (the most
+  posterior forward-facing point between the lower lip 8.2 and the chin) and the detected
+  menton;
+  2.1 menton = below the pogonion, the first profile point whose surface normal points
+  :data:`MENTON_NORMAL_DEG` below the forward direction (the convention of the sample heads'
+  hand files).
+* cheeks (the MPEG-4 standard gives no construction; the rule of the sample heads' files):
+  5.1/5.2 below the outer eye corner, at the height midway between the subnasale 9.15 and
+  the outer lip corner; 5.3/5.4 below the outer eye corner, 45 % of the way down to the alare
+  9.1/9.2; each put on the skin by a ray along -forward.
+* eyes whose opening is a recess in the frontal render (a closed socket behind the lids):
+  :func:`eye_openings`;
+* eyes that are holes in the mesh (an open boundary loop around the detected eye): the
+  corners 3.7/3.11 (3.12/3.8) are the loop's extremes along the left axis, the lid centres
+  3.1/3.3 (3.2/3.4) its top and bottom vertices nearest the pupil's vertical, the pupil
+  3.5 (3.6) the loop's centre at the depth of those lids.
+
+Each rule returns new positions only where its construction succeeds; the caller keeps
+the detected point otherwise and records which rule moved which point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+MENTON_NORMAL_DEG = 50.0
+#: an eye boundary loop must lie this close to the detected pupil (fraction of the eye width)
+EYE_LOOP_REACH = 0.6
+
+
+def midline_profile(vertices, faces, origin, normal):
+    """Points and in-plane unit normals of the mesh cut by the plane (``origin``, ``normal``):
+    ``(points (k, 3), normals (k, 3))``, one per cut triangle (segment midpoints; the normals
+    interpolated from the vertex normals)."""
+    import trimesh
+
+    from faceforge.geometry.triangles import barycentric, vertex_normals
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
+    segs, fids = trimesh.intersections.mesh_plane(mesh, normal, origin, return_faces=True)
+    if len(segs) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    pts = segs.mean(axis=1)
+    bary = barycentric(pts, vertices, faces, fids)          # smooth normals: a low-poly chin still turns gradually
+    n = np.einsum("kj,kjd->kd", bary, vertex_normals(vertices, faces)[faces[fids]])
+    n = n - np.outer(n @ normal, normal)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return pts, n
+
+
+def _crossing(pts, angle, order, level):
+    """The lowest place along ``order`` (profile indices, top to bottom) where ``angle`` rises
+    through ``level`` (linear between the two profile points), or None."""
+    a = angle[order] - level
+    ups = np.flatnonzero((a[:-1] <= 0) & (a[1:] > 0))
+    if len(ups) == 0:
+        return None
+    j = ups[-1]
+    t = -a[j] / (a[j + 1] - a[j])
+    return pts[order[j]] * (1 - t) + pts[order[j + 1]] * t
+
+
+def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal) -> dict:
+    """{"2.10": (3,), "2.1": (3,)} from the midline profile (module docstring); {} if it fails.
+
+    Along the profile from the lower lip down, the surface normal tilts up most in the
+    labiomental fold; below it the most anterior profile point is the pogonion, and the
+    normal then turns down through :data:`MENTON_NORMAL_DEG` at the menton.
+    """
+    left, up, fwd = frame
+    if not all(k in pos for k in ("2.1", "8.2")):
+        return {}
+    pts, nrm = midline_profile(vertices, faces, plane_point, plane_normal)
+    if len(pts) == 0:
+        return {}
+    u, w = pts @ up, pts @ fwd
+    u_lip, u_men = pos["8.2"] @ up, pos["2.1"] @ up
+    front = w > min(pos["2.1"] @ fwd, pos["8.2"] @ fwd) - 0.06 * diagonal
+    band = front & (nrm @ fwd > 0.2) & (u <= u_lip) & (u >= u_men - 0.03 * diagonal)
+    order = np.flatnonzero(band)
+    order = order[np.argsort(-u[order])]
+    if len(order) < 4:
+        return {}
+    angle = np.degrees(np.arctan2(-(nrm @ up), nrm @ fwd))        # degrees below forward
+    upper = order[u[order] >= u_men + 0.25 * (u_lip - u_men)]
+    if len(upper) == 0:
+        return {}
+    fold = upper[np.argmin(angle[upper])]                         # the most back-tilted tangent
+    chin_pts = order[u[order] < u[fold]]
+    if len(chin_pts) == 0:
+        return {}
+    pog = pts[chin_pts[np.argmax(w[chin_pts])]]
+    out = {"2.10": pog}
+    low = order[u[order] < pog @ up]
+    if len(low) >= 2:
+        men = _crossing(pts, angle, np.concatenate([order[u[order] >= pog @ up][-1:], low]), MENTON_NORMAL_DEG)
+        if men is not None:
+            out["2.1"] = men
+    return out
+
+
+def _onto_skin(caster, points, fwd, diagonal):
+    """(k, 3) points moved onto the skin along -forward (from in front); NaN where missed.
+    ``caster``: a :class:`faceforge.geometry.rays.RayCaster`, or the frontal render (its
+    buffers are that ray cast, to a pixel)."""
+    from faceforge.landmarks.raster import Render, surface_at
+
+    if isinstance(caster, tuple) and isinstance(caster[0], Render):
+        render_, vertices, faces = caster
+        px = render_.view.project(points)
+        n = render_.depth.shape[0]
+        rows = np.clip(np.floor(px[:, 1]).astype(np.int64), 0, n - 1)
+        cols = np.clip(np.floor(px[:, 0]).astype(np.int64), 0, n - 1)
+        return surface_at(render_, faces, vertices, rows, cols)
+    origins = points + fwd * 0.3 * diagonal
+    fid, hit, _ = caster.first_hit(origins, np.repeat(-fwd[None], len(points), axis=0), 0.6 * diagonal)
+    hit = np.asarray(hit, dtype=np.float64)
+    hit[np.asarray(fid) < 0] = np.nan
+    return hit
+
+
+def cheeks(caster, pos: dict, frame, diagonal) -> dict:
+    """{"5.1".."5.4": (3,)} by the sample heads' construction rules (module docstring)."""
+    left, up, fwd = frame
+    out = {}
+    sides = (("5.1", "5.3", "3.7", "8.3", "9.1"), ("5.2", "5.4", "3.12", "8.4", "9.2"))
+    for cheek, bone, eye, lip, ala in sides:
+        if not all(k in pos for k in (eye, lip, ala, "9.15")):
+            continue
+        e = pos[eye]
+        h_cheek = 0.5 * (pos["9.15"] @ up + pos[lip] @ up)
+        h_bone = e @ up + 0.45 * (pos[ala] @ up - e @ up)
+        targets = np.array([e + up * (h_cheek - e @ up), e + up * (h_bone - e @ up)])
+        hits = _onto_skin(caster, targets, fwd, diagonal)
+        for k, p in zip((cheek, bone), hits):
+            if np.isfinite(p).all():
+                out[k] = p
+    return out
+
+
+def _loops_near(vertices, faces, centres: np.ndarray, reach: float) -> list:
+    """Open boundary loops (vertex-id arrays) of the mesh with every vertex within ``reach``
+    of one of ``centres (k, 3)``: the boundary edges (used by one triangle, found on 1D
+    integer keys: fast on big meshes) near the eyes, chained."""
+    from scipy.spatial import cKDTree
+
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    n = int(f.max()) + 1
+    keys, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    edges = np.column_stack([keys[counts == 1] // n, keys[counts == 1] % n])
+    if len(edges) == 0 or reach <= 0:
+        return []
+    dist, _ = cKDTree(centres).query(vertices[edges.ravel()])
+    edges = edges[(dist.reshape(-1, 2) <= reach).all(axis=1)]
+    nbr: dict = {}
+    for a, b in edges.tolist():
+        nbr.setdefault(a, []).append(b)
+        nbr.setdefault(b, []).append(a)
+    loops, seen = [], set()
+    for start in nbr:
+        if start in seen or len(nbr[start]) != 2:
+            continue
+        loop, prev, cur = [start], None, start
+        seen.add(start)
+        while True:
+            nxt = [c for c in nbr[cur] if c != prev]
+            if not nxt or len(nbr[cur]) != 2:
+                loop = None
+                break
+            prev, cur = cur, nxt[0]
+            if cur == start:
+                break
+            if cur in seen:
+                loop = None
+                break
+            seen.add(cur)
+            loop.append(cur)
+        if loop is not None and len(loop) >= 6:
+            loops.append(np.asarray(loop, dtype=np.int64))
+    return loops
+
+
+def eye_loops(vertices, faces, pos: dict, frame) -> dict:
+    """Corners and lid centres from open boundary loops around the eyes (module docstring)."""
+    left, up, fwd = frame
+    eyes = [pos[k] for k in ("3.5", "3.6", "3.7", "3.12") if k in pos]
+    if len(eyes) < 2:
+        return {}
+    reach = 1.5 * max(np.linalg.norm(pos["3.7"] - pos["3.11"]), np.linalg.norm(pos["3.12"] - pos["3.8"])) \
+        if all(k in pos for k in ("3.7", "3.11", "3.12", "3.8")) else 0.0
+    loops = _loops_near(vertices, faces, np.array(eyes), reach)
+    if not loops:
+        return {}
+    out = {}
+    for outer, inner, upper, lower, pupil in (("3.7", "3.11", "3.1", "3.3", "3.5"), ("3.12", "3.8", "3.2", "3.4", "3.6")):
+        if not all(k in pos for k in (outer, inner, pupil)):
+            continue
+        width = np.linalg.norm(pos[outer] - pos[inner])
+        centre = pos[pupil]
+        best = None
+        for lp in loops:
+            p = vertices[lp]
+            span = np.ptp(p @ left)
+            d = np.linalg.norm(p.mean(axis=0) - centre)
+            if d < EYE_LOOP_REACH * width and 0.6 * width < span < 1.5 * width:
+                if best is None or d < best[0]:
+                    best = (d, p)
+        if best is None:
+            continue
+        p = best[1]
+        x = p @ left
+        sign = 1.0 if pos[outer] @ left > pos[inner] @ left else -1.0
+        out[outer] = p[np.argmax(sign * x)]
+        out[inner] = p[np.argmin(sign * x)]
+        near = np.abs(x - centre @ left) < 0.15 * width
+        if near.sum() >= 2:
+            q = p[near]
+            out[upper] = q[np.argmax(q @ up)]
+            out[lower] = q[np.argmin(q @ up)]
+            c = p.mean(axis=0)      # the opening's centre, at the depth of its lids
+            out[pupil] = c + fwd * (0.5 * (out[upper] + out[lower]) @ fwd - c @ fwd)
+    return out
+
+
+#: a pixel recessed this much (fraction of the eye's width) behind the skin bridged over it
+#: belongs to the eye opening (a socket behind the lids, or a hole)
+RECESS = 0.1
+
+
+def _recess(depth: np.ndarray, size: int) -> np.ndarray:
+    """How far each pixel of ``depth (h, w)`` lies behind the skin bridged over it: a grey
+    closing of the height (-depth) with a ``size`` square fills pits narrower than ``size``
+    and leaves slopes (the nose's flank) as they are; background counts as deepest."""
+    from scipy import ndimage
+
+    finite = np.isfinite(depth)
+    far = np.max(depth[finite]) if finite.any() else 0.0
+    height = -np.where(finite, depth, far)
+    return ndimage.grey_closing(height, size=(size, size)) - height
+
+
+def _opening_ends(comp: np.ndarray, pupil_col: int, step: int, narrowest: bool) -> int | None:
+    """Column where the opening ``comp (h, w) bool`` ends walking from ``pupil_col`` by
+    ``step`` (+1/-1): where it stops or, with ``narrowest``, at its narrowest column once it
+    widens again (toward the nose the opening runs into the hollow beside it: the inner
+    canthus is the waist between the two)."""
+    extent = comp.sum(axis=0)
+    best, last = None, None
+    for c in range(pupil_col, comp.shape[1] if step > 0 else -1, step):
+        if extent[c] == 0:
+            break
+        last = c
+        if best is None or extent[c] <= extent[best]:
+            best = c
+        elif narrowest and extent[c] > extent[best] + max(2, 0.3 * extent[best]):
+            return best
+    return last
+
+
+def eye_openings(render_, vertices, faces, pos: dict) -> dict:
+    """Corners, lid centres and pupil of eyes whose opening is a recess in the frontal render
+    (a closed socket behind the lids): the opening is the connected region of pixels
+    recessed :data:`RECESS` of the eye's width behind the skin bridged over it
+    (:func:`_recess`), around the detected pupil; its ends along the picture's width are the
+    corners (the inner one at the narrowest column before the nose's hollow), its top and
+    bottom at the pupil's column the lid centres, each taken at the nearest pixel of skin
+    (the lid margin, not the socket behind it); its centre at the lids' depth is the pupil.
+    An opening that is not eye-sized is ignored."""
+    from scipy import ndimage
+
+    from faceforge.landmarks.raster import surface_at
+
+    view = render_.view
+    n = render_.depth.shape[0]
+    out = {}
+    for outer, inner, upper, lower, pupil in (("3.7", "3.11", "3.1", "3.3", "3.5"), ("3.12", "3.8", "3.2", "3.4", "3.6")):
+        if not all(k in pos for k in (outer, inner, pupil)):
+            continue
+        px = view.project(np.array([pos[outer], pos[inner], pos[pupil]]))[:, :2]
+        width = float(np.linalg.norm(px[0] - px[1]))
+        if width < 12:
+            continue
+        c = px[2]
+        c0, c1 = int(max(c[0] - 0.9 * width, 0)), int(min(c[0] + 0.9 * width, n))
+        r0, r1 = int(max(c[1] - 0.5 * width, 0)), int(min(c[1] + 0.5 * width, n))
+        win = render_.depth[r0:r1, c0:c1]
+        mask = _recess(win, max(3, int(0.6 * width) | 1)) > RECESS * width / view.scale
+        labels, _ = ndimage.label(mask)
+        near = np.argwhere(labels > 0)
+        if len(near) == 0:
+            continue
+        pr, pc = int(c[1]) - r0, int(c[0]) - c0
+        d = np.hypot(near[:, 0] - pr, near[:, 1] - pc)
+        if d.min() > 0.2 * width:
+            continue
+        comp = labels == labels[tuple(near[np.argmin(d)])]
+        col = int(np.clip(pc, 0, comp.shape[1] - 1))
+        if not comp[:, col].any():
+            continue
+        sign = 1 if px[0, 0] > px[1, 0] else -1          # the outer corner's side in the picture
+        end_out, end_in = _opening_ends(comp, col, sign, False), _opening_ends(comp, col, -sign, True)
+        if end_out is None or end_in is None or not 0.6 * width < abs(end_out - end_in) < 1.4 * width:
+            continue
+        rows = np.flatnonzero(comp[:, col])
+        if rows.max() - rows.min() > 0.8 * width:
+            continue
+        picks = {outer: (np.flatnonzero(comp[:, end_out]).mean(), end_out),
+                 inner: (np.flatnonzero(comp[:, end_in]).mean(), end_in),
+                 upper: (rows.min(), col), lower: (rows.max(), col)}
+        rim = np.argwhere(~mask & np.isfinite(win))       # the skin around: the lid margins
+        if len(rim) == 0:
+            continue
+        rr, cc = [], []
+        for r_, c_ in picks.values():     # each on the nearest skin pixel, not in the recess
+            j = int(np.argmin(np.hypot(rim[:, 0] - r_, rim[:, 1] - c_)))
+            rr.append(rim[j, 0] + r0)
+            cc.append(rim[j, 1] + c0)
+        pts = surface_at(render_, faces, vertices, np.array(rr), np.array(cc))
+        found = {k: p for k, p in zip(picks, pts) if np.isfinite(p).all()}
+        if len(found) < 4:
+            continue
+        out.update(found)
+        lo, hi = sorted((end_in, end_out))
+        part = comp.copy()
+        part[:, :lo] = False
+        part[:, hi + 1:] = False
+        ys, xs = np.nonzero(part)
+        lids_depth = np.mean(view.project(np.array([found[upper], found[lower]]))[:, 2])
+        out[pupil] = view.unproject(np.array([[xs.mean() + c0 + 0.5, ys.mean() + r0 + 0.5]]),
+                                    np.array([lids_depth]))[0]
+    return out

@@ -1,0 +1,89 @@
+"""The bake on a stand-in head (linear skin response, known probes) and the CLI's bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from faceforge.animation.calibrate import Probe
+from faceforge.blendshapes.arkit import ShapeSpec
+from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
+from faceforge.blendshapes.rigsolve import probe_observer
+from faceforge.blendshapes.solve import control_space
+
+COLUMNS = ("zyg_L", "zyg_R", "frontalis")
+
+
+def _head():
+    """Six skin vertices, symmetric in x; each control moves one or two of them."""
+    rest = np.array([[1, 0, 0], [-1, 0, 0], [0.5, 1, 0], [-0.5, 1, 0], [0, 2, 0], [0, -1, 0]], dtype=float)
+    B = np.zeros((4, 6, 3))                       # response per unit control (zyg_L, zyg_R, frontalis, pitch)
+    B[0, 0] = (0.1, 0.2, 0)
+    B[1, 1] = (-0.1, 0.2, 0)
+    B[2, 4] = (0, 0.3, 0)
+    B[3, 5] = (0, -1.0, 0)
+
+    def simulate(c, jaw):
+        x = np.hstack([c, jaw[:, :1]])
+        return rest + np.einsum("kq,qnd->knd", x, B)
+
+    probes = {12: Probe(12, 0, -1, np.array([0.0, 1, 0]), 0.01),    # left corner up, 0.01 a FAPU
+              13: Probe(13, 1, -1, np.array([0.0, 1, 0]), 0.01),
+              31: Probe(31, 4, -1, np.array([0.0, 1, 0]), 0.01),
+              3: Probe(3, 5, -1, np.array([0.0, -1, 0]), 0.01)}
+    space = control_space(COLUMNS, set(COLUMNS), {"pitch": (0.0, 0.4)}, pitch_lever=1.0)
+    return rest, simulate, probes, space
+
+
+def test_each_shape_reaches_its_target_with_its_own_controls():
+    rest, simulate, probes, space = _head()
+    specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",)),
+             "smileR": ShapeSpec("smileR", {13: 10.0}, ("zyg_R",), mirror_of="smileL"),
+             "brow": ShapeSpec("brow", {31: 60.0}, ("frontalis",)),      # needs c = 2: clipped at 1
+             "open": ShapeSpec("open", {3: 30.0}, ("jaw.pitch",)),
+             "look": ShapeSpec("look", not_made="no eyeballs"),
+             "nose": ShapeSpec("nose", {61: 5.0}, ("zyg_L",))}          # FAP 61 has no probe here
+    out = bake_shapes(specs, space, probes, simulate, lambda ps: probe_observer(rest, ps), rest)
+    assert out.names == ["smileL", "smileR", "brow", "open"]
+    assert list(out.report) == list(specs)                                 # every shape reported
+    assert out.report["look"] == {"made": False, "reason": "no eyeballs"}
+    assert not out.report["nose"]["made"] and "FAP 61" in out.report["nose"]["reason"]
+    sl = out.report["smileL"]
+    assert sl["error"] < 1e-3 and sl["targets"]["12"]["achieved"] == pytest.approx(10.0, abs=0.05)
+    assert out.contractions[0] == pytest.approx([0.5, 0, 0], abs=1e-4)    # only its own muscle
+    assert out.contractions[2, 2] == pytest.approx(1.0)                    # the bound holds
+    assert out.report["brow"]["error"] == pytest.approx(0.5, abs=1e-3)    # and the miss is reported
+    assert out.jaw[3, 0] == pytest.approx(0.3, abs=1e-4)
+    deltas = {n: f - rest for n, f in zip(out.names, out.frames)}
+    assert mirror_agreement(rest, deltas, [("smileL", "smileR")]) == {"smileL": 0.0}
+
+
+def test_bad_arkit_take_is_one_line_exit_2(invoke, tmp_path):
+    take = tmp_path / "take.csv"
+    take.write_text("Timecode,BlendShapeCount,JawOpen,EyeBlinkLeft\n00:00:00:00.000,2,0.1,0.0\n"
+                    "00:00:00:01.000,2,0.2\n")
+    result = invoke("--workdir", tmp_path / "w", "animate", "--arkit", take)
+    assert result.exit_code == 2
+    err = result.stderr.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("faceforge: error: ")
+    assert f"take.csv:3: 3 fields, the header has 4" in err
+    take.write_text("frame,JawOpen,MouthGrin\n0,0.1,0\n")
+    result = invoke("--workdir", tmp_path / "w", "animate", "--arkit", take)
+    assert result.exit_code == 2 and "take.csv:1: unknown blendshape name 'MouthGrin'" in result.stderr
+    take.write_text("frame,JawOpen\n0,1.2\n")
+    result = invoke("--workdir", tmp_path / "w", "animate", "--arkit", take)
+    assert result.exit_code == 2 and "take.csv:2: jawOpen = 1.2 is outside [0, 1]" in result.stderr
+
+
+def test_bake_rejects_an_unknown_suffix(invoke, tmp_path):
+    result = invoke("--workdir", tmp_path / "w", "bake", "-o", tmp_path / "x.fbx")
+    assert result.exit_code == 2 and "bake writes .glb, .usda or .npz" in result.stderr
+
+
+def test_a_bad_arkit_mapping_fails_before_anything_runs(invoke, tmp_path):
+    bad = tmp_path / "map.yaml"
+    bad.write_text("shapes:\n  jawOpen: {faps: {3: 100}, controls: [jaw.pitch]}\n")
+    result = invoke("--workdir", tmp_path / "w", "bake", "--mapping", bad)
+    assert result.exit_code == 2
+    assert "map.yaml: shapes: no entry for eyeBlinkLeft, eyeLookDownLeft, eyeLookInLeft and 48 more" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

@@ -1,0 +1,119 @@
+"""ARKit weight tracks: Live Link Face CSV / JSON in, bad input named by file:line, NNLS out."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from faceforge.blendshapes.arkit import ARKIT_NAMES, load_arkit_mapping, default_mapping_path, mirror_name
+from faceforge.blendshapes.curves import LIVE_LINK_EXTRA, read_weights, solve_weights, write_weights
+from faceforge.exceptions import FapError, TemplateError
+
+LIVE_LINK_HEADER = ("Timecode,BlendShapeCount," + ",".join(n[0].upper() + n[1:] for n in ARKIT_NAMES)
+                    + "," + ",".join(LIVE_LINK_EXTRA))
+
+
+def _live_link_row(frame: int, weights: dict) -> str:
+    vals = [f"{weights.get(n, 0.0):.6f}" for n in ARKIT_NAMES] + ["0.1", "-0.2", "0", "0", "0", "0", "0", "0", "0"]
+    return f"12:00:01:{frame:02d}.{frame * 7 % 1000:03d},61," + ",".join(vals)
+
+
+def test_live_link_csv_is_read_with_its_rate(tmp_path):
+    p = tmp_path / "take.csv"
+    rows = [_live_link_row(2 * k, {"jawOpen": k / 40, "eyeBlinkLeft": 1.0}) for k in range(40)]
+    # a 60 Hz timecode stepping by 2 frames over 1.3 s: 30 fps
+    rows = [f"12:00:{1 + 2 * k // 60:02d}:{2 * k % 60:02d}.000" + r[r.index(","):] for k, r in enumerate(rows)]
+    p.write_text(LIVE_LINK_HEADER + "\n" + "\n".join(rows) + "\n")
+    names, w, fps = read_weights(p)
+    assert names == list(ARKIT_NAMES)
+    assert fps == pytest.approx(30.0)
+    assert np.allclose(w[:, names.index("jawOpen")], np.arange(40) / 40)
+    assert np.all(w[:, names.index("eyeBlinkLeft")] == 1.0)
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".json"])
+def test_write_then_read_is_the_identity(tmp_path, suffix):
+    rng = np.random.default_rng(0)
+    names = ["jawOpen", "mouthSmileLeft", "browInnerUp"]
+    w = rng.uniform(0, 1, size=(40, 3))
+    p = write_weights(tmp_path / f"c{suffix}", names, w, fps=25.0)
+    got_names, got, fps = read_weights(p)
+    assert fps == pytest.approx(25.0)
+    full = np.zeros((40, len(got_names)))
+    for j, n in enumerate(names):
+        full[:, got_names.index(n)] = w[:, j]
+    assert np.abs(got - full).max() <= 5e-7      # six decimals
+
+
+def test_plain_csv_and_json_frames(tmp_path):
+    p = tmp_path / "plain.csv"
+    p.write_text("frame,JawOpen,mouthPucker\n0,0.5,0\n1,1,0.25\n")
+    names, w, _ = read_weights(p)
+    assert names == ["jawOpen", "mouthPucker"] and np.allclose(w, [[0.5, 0], [1, 0.25]])
+    j = tmp_path / "t.json"
+    j.write_text(json.dumps({"fps": 30, "frames": [{"jawOpen": 0.2}, {"eyeBlinkRight": 1.0}]}))
+    names, w, fps = read_weights(j)
+    assert fps == 30 and names == ["jawOpen", "eyeBlinkRight"] and np.allclose(w, [[0.2, 0], [0, 1]])
+
+
+@pytest.mark.parametrize("body, line, words", [
+    ("frame,JawOpen,mouthGrin\n0,0.5,0\n", 1, "unknown blendshape name 'mouthGrin'"),
+    ("frame,JawOpen\n0,0.5\n1,1.5\n", 3, "jawOpen = 1.5 is outside [0, 1]"),
+    ("frame,JawOpen\n0,0.5\n1\n", 3, "1 fields, the header has 2"),
+    ("frame,JawOpen\n0,abc\n", 2, "not a number"),
+    ("frame,JawOpen\n0,-0.2\n", 2, "outside [0, 1]"),
+])
+def test_bad_csv_names_the_line(tmp_path, body, line, words):
+    p = tmp_path / "bad.csv"
+    p.write_text(body)
+    with pytest.raises(FapError) as exc:
+        read_weights(p)
+    assert f"bad.csv:{line}" in str(exc.value) and words in str(exc.value)
+
+
+def test_solve_weights_recovers_mixes_within_bounds():
+    rng = np.random.default_rng(3)
+    neutral = rng.normal(size=(50, 3))
+    shapes = neutral + rng.normal(size=(4, 50, 3))
+    shapes[3] = neutral                                   # a shape not made: zero delta, weight 0
+    truth = np.array([[0.0, 0.5, 1.0, 0.0], [0.2, 0.0, 0.7, 0.0]])
+    frames = neutral + np.einsum("fk,knd->fnd", truth, shapes - neutral)
+    assert np.allclose(solve_weights(frames, neutral, shapes), truth, atol=1e-9)
+    over = neutral + 3.0 * (shapes[0] - neutral)          # beyond full weight: clipped to 1
+    w = solve_weights(over[None], neutral, shapes)
+    assert w[0, 0] == pytest.approx(1.0) and np.all((w >= 0) & (w <= 1))
+
+
+def test_the_template_covers_all_52_and_mirrors():
+    specs = load_arkit_mapping(default_mapping_path())
+    assert list(specs) == list(ARKIT_NAMES) and len(specs) == 52
+    right = specs["mouthSmileRight"]
+    assert right.mirror_of == "mouthSmileLeft" and set(right.controls) == {"zygomaticus_major_R", "risorius_R"}
+    assert specs["jawRight"].faps == {15: -specs["jawLeft"].faps[15]}
+    assert specs["eyeBlinkRight"].lids == {20: 900.0, 22: 124.0}
+    assert {n for n, s in specs.items() if not s.made} == {"cheekPuff", "tongueOut"}
+    assert specs["eyeLookInLeft"].eye["side"] == "L" and specs["eyeLookInLeft"].eye["yaw"] < 0   # towards -X
+    assert specs["eyeLookInRight"].eye == {"side": "R", "yaw": -specs["eyeLookInLeft"].eye["yaw"], "pitch": 0.0}
+    assert mirror_name("eyeBlinkLeft") == "eyeBlinkRight" and mirror_name("jawOpen") == "jawOpen"
+
+
+def test_a_bad_template_is_named(tmp_path):
+    p = tmp_path / "m.yaml"
+    p.write_text("shapes:\n  jawOpen: {faps: {3: 100}}\n")
+    with pytest.raises(TemplateError, match="m.yaml"):
+        load_arkit_mapping(p, names=("jawOpen",))
+    p.write_text("shapes:\n  jawOpn: {lids: {19: 10}}\n")
+    with pytest.raises(TemplateError, match="unknown name 'jawOpn'"):
+        load_arkit_mapping(p, names=("jawOpen",))
+
+
+def test_a_30_hz_timecode_is_told_from_a_60_hz_one(tmp_path):
+    from faceforge.blendshapes.curves import timecode_rate
+
+    assert timecode_rate([0.0, 12.5, 29.9]) == 30.0 and timecode_rate([0.0, 59.2]) == 60.0
+    p = tmp_path / "t30.csv"
+    rows = [f"00:00:{k // 30:02d}:{k % 30:02d}.000,61," + ",".join(["0"] * 61) for k in range(0, 90, 1)]
+    p.write_text(LIVE_LINK_HEADER + "\n" + "\n".join(rows) + "\n")
+    assert read_weights(p)[2] == pytest.approx(30.0)

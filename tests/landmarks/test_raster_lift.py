@@ -1,0 +1,131 @@
+"""The headless rasteriser (against a plain twin), cameras, quarter turns, lifting through holes,
+the mirror plane: no face detector needed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from faceforge.landmarks.lift import lift
+from faceforge.landmarks.raster import Render, View, rasterise
+from faceforge.landmarks.symmetry import mirror_plane, symmetric
+from faceforge.landmarks.views import _unrotate
+
+
+def _twin_rasterise(screen, faces, size):
+    """Plain twin of raster._rasterise: pixel centres inside (inclusive), nearest depth wins."""
+    depth = np.full((size, size), np.inf)
+    fid = np.full((size, size), -1)
+    for t, (a, b, c) in enumerate(faces):
+        (x0, y0, z0), (x1, y1, z1), (x2, y2, z2) = screen[a], screen[b], screen[c]
+        area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+        if area == 0:
+            continue
+        for r in range(size):
+            for col in range(size):
+                px, py = col + 0.5, r + 0.5
+                w0 = ((x1 - px) * (y2 - py) - (x2 - px) * (y1 - py)) / area
+                w1 = ((x2 - px) * (y0 - py) - (x0 - px) * (y2 - py)) / area
+                w2 = 1 - w0 - w1
+                if min(w0, w1, w2) < 0:
+                    continue
+                z = w0 * z0 + w1 * z1 + w2 * z2
+                if z < depth[r, col]:
+                    depth[r, col], fid[r, col] = z, t
+    return depth, fid
+
+
+def _front(size=24, scale=10.0):
+    return View(np.array([0.0, 0.0, -1.0]), np.array([0.0, 1.0, 0.0]), np.zeros(3), scale, size)
+
+
+def test_rasteriser_matches_its_twin_and_keeps_the_nearest_triangle():
+    rng = np.random.default_rng(3)
+    v = rng.uniform(-1.1, 1.1, (12, 3))
+    f = rng.integers(0, 12, (10, 3))
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+    view = _front()
+    depth, fid, bary = rasterise(v, f, view)
+    d2, f2 = _twin_rasterise(view.project(v), f, view.size)
+    assert np.array_equal(fid, f2) and np.allclose(depth[np.isfinite(depth)], d2[np.isfinite(d2)])
+    hit = fid >= 0
+    assert hit.sum() > 20
+    # barycentrics give back the pixel centre: project the surface point, land in the pixel
+    p = np.einsum("kj,kjd->kd", bary[hit], v[f[fid[hit]]])
+    rows, cols = np.nonzero(hit)
+    assert np.allclose(view.project(p)[:, :2], np.column_stack([cols + 0.5, rows + 0.5]), atol=1e-9)
+
+
+def test_view_unproject_inverts_project():
+    view = View(np.array([1.0, 0, 0]), np.array([0, 0, 1.0]), np.array([0.3, -0.2, 0.5]), 37.0, 100)
+    p = np.random.default_rng(0).normal(size=(20, 3))
+    s = view.project(p)
+    assert np.allclose(view.unproject(s[:, :2], s[:, 2]), p)
+    assert np.allclose(view.right, np.cross(view.direction, view.up))
+
+
+@pytest.mark.parametrize("quarter", [0, 1, 2, 3])
+def test_quarter_turns_map_points_back(quarter):
+    size = 16
+    img = np.zeros((size, size))
+    img[3, 11] = 1.0       # row 3, column 11: centre (11.5, 3.5)
+    turned = np.rot90(img, k=quarter)
+    r, c = np.argwhere(turned == 1.0)[0]
+    assert np.allclose(_unrotate(np.array([[c + 0.5, r + 0.5]]), quarter, size), [[11.5, 3.5]])
+
+
+def test_a_point_in_a_hole_lands_on_the_rim():
+    # a front square (z = 0) with a square hole, and a far wall behind it (z = -5)
+    outer = np.array([[-2, -2], [2, -2], [2, 2], [-2, 2]], float)
+    inner = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]], float)
+    v = np.vstack([np.column_stack([outer, np.zeros(4)]), np.column_stack([inner, np.zeros(4)]),
+                   [[-3, -3, -5], [3, -3, -5], [3, 3, -5], [-3, 3, -5]]])
+    f = []
+    for i in range(4):
+        j = (i + 1) % 4
+        f += [[i, j, 4 + j], [i, 4 + j, 4 + i]]
+    f += [[8, 9, 10], [8, 10, 11]]
+    f = np.array(f)
+    view = View(np.array([0.0, 0, -1]), np.array([0.0, 1, 0]), np.zeros(3), 20.0, 120)
+    depth, fid, bary = rasterise(v, f, view)
+    r = Render(view, np.zeros((120, 120), np.uint8), depth, fid, bary)
+    inside = view.project(np.array([[0.3, 0.0, 0.0]]))[:, :2]       # in the hole, near its right edge
+    solid = view.project(np.array([[1.2, 0.4, 0.0]]))[:, :2]
+    pts, snapped = lift(r, v, f, np.vstack([inside, solid]), diagonal=10.0, radius_px=30)
+    assert snapped.tolist() == [True, False]
+    assert abs(pts[0, 2]) < 1e-9 and 0.5 <= pts[0, 0] <= 0.56 and abs(pts[0, 1]) < 0.06   # on the rim, not the wall
+    assert np.allclose(pts[1], [1.2, 0.4, 0.0], atol=0.03)
+
+
+def test_mirror_plane_of_a_symmetric_mesh_and_of_a_lopsided_one():
+    rng = np.random.default_rng(1)
+    half = rng.uniform(0.1, 1, (200, 3))
+    v = np.vstack([half, half * [-1, 1, 1]])
+    tilt = np.radians(10)
+    rot = np.array([[np.cos(tilt), -np.sin(tilt), 0], [np.sin(tilt), np.cos(tilt), 0], [0, 0, 1]])
+    v = v @ rot.T + [0.2, 0, 0]
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    left, right = v[:5], v[200:205]            # rough pairs: the start of the search
+    plane = mirror_plane(v, left + 0.02, right, diag)
+    assert symmetric(plane)
+    assert abs(abs(plane.normal @ (rot @ [1, 0, 0])) - 1) < 1e-9
+    assert np.allclose(plane.reflect(v[:200]), v[200:])
+    assert np.array_equal(plane.partner[:200], np.arange(200, 400))
+    lopsided = v.copy()
+    lopsided[200:] += rng.normal(scale=0.05, size=(200, 3))
+    assert not symmetric(mirror_plane(lopsided, left, right, diag))
+
+
+def test_a_required_fdp_that_lands_nowhere_is_named():
+    from faceforge.exceptions import LandmarkError
+    from faceforge.landmarks.detect import _placeable, fdp_table
+
+    table = fdp_table()
+    agreed = np.zeros((478, 3))
+    agreed[table["9.3"]] = np.nan          # the nose tip fell off the mesh in every view
+    agreed[table["5.1"]] = np.nan          # an optional one is simply left out
+    with pytest.raises(LandmarkError, match=r"FDP 9\.3 could not be placed"):
+        _placeable(table, agreed, "head.obj")
+    agreed[table["9.3"]] = 0.0
+    ids = _placeable(table, agreed, "head.obj")
+    assert "5.1" not in ids and len(ids) == len(table) - 1

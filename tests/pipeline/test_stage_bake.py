@@ -1,0 +1,73 @@
+"""The bake and arkit stages on the synthetic fitted + bound head (tests/animation/synthetic.py)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import yaml
+
+from faceforge.blendshapes.arkit import ARKIT_NAMES
+from tests.pipeline.test_stage_animate import SETS, ConfigSpy, patched, undeclared_reads, workdir  # noqa: F401
+
+
+READS = {}
+
+
+def _run(name, workdir, params, deps):
+    from faceforge.io.config import load_config
+    from faceforge.pipeline import StageContext, get_stage
+
+    out = workdir / name
+    if out.exists():
+        import shutil
+
+        shutil.rmtree(out)
+    out.mkdir()
+    sets = (*SETS, "animate.calibrate.settle_frames=12")
+    config = ConfigSpy(load_config(None, sets))
+    READS[name] = config.read
+    ctx = StageContext(name=name, config=config, params=params, out_dir=out, workdir=workdir, deps=deps)
+    get_stage(name).run(ctx)
+    return out
+
+
+def test_bake_then_play_the_baked_shape_back(workdir, patched, tmp_path):  # noqa: F811
+    from faceforge.io.stagefiles import load_npz
+
+    shapes = {n: {"not_made": "not on the synthetic head"} for n in ARKIT_NAMES}
+    shapes["jawOpen"] = {"faps": {3: 120}, "controls": ["jaw.pitch"]}
+    shapes["mouthSmileLeft"] = {"faps": {59: 60}, "controls": ["zygomaticus_major_L"]}
+    shapes["eyeBlinkLeft"] = {"lids": {19: 900, 21: 124}}
+    (tmp_path / "arkit.yaml").write_text(yaml.safe_dump({"shapes": shapes}))
+    (tmp_path / "sel.txt").write_text("arkit expressions")
+    params = {"bake_shapes": str(tmp_path / "sel.txt"), "arkit_mapping": str(tmp_path / "arkit.yaml"),
+              "animate_mapping": str(workdir / "mapping.yaml")}
+    out = _run("bake", workdir, params, ("fit", "bind"))
+    d = load_npz(out / "shapes.npz")
+    names = [str(n) for n in d["names"]]
+    assert names == [*ARKIT_NAMES, "joy"]
+    made = dict(zip(names, d["made"]))
+    assert made["jawOpen"] and made["mouthSmileLeft"] and made["joy"] and not made["tongueOut"]
+    report = json.loads((out / "report.json").read_text())
+    assert report["shapes"]["tongueOut"] == {"made": False, "reason": "not on the synthetic head"}
+    jaw = report["shapes"]["jawOpen"]
+    assert jaw["error"] < 0.1 and jaw["controls"]["jaw.pitch"] > 0 and "folded_edges" in jaw["checks"]
+    i = names.index("mouthSmileLeft")
+    controls = [str(c) for c in d["controls"]]
+    assert d["contractions"][i, controls.index("zygomaticus_major_L")] > 0
+    assert np.count_nonzero(d["contractions"][i]) == 1                     # only its own muscle
+    assert np.array_equal(d["shapes"][names.index("tongueOut")], d["neutral"])   # not made: the neutral
+    assert np.linalg.norm(d["shapes"][names.index("jawOpen")] - d["neutral"], axis=1).max() > 0
+    assert (out / "shapes.png").stat().st_size > 1000
+
+    # the baked jawOpen eased in as static_poses eases it, through `animate --arkit`: the same frame
+    j = names.index("jawOpen")
+    w = np.minimum(np.arange(1, 13) / 4, 1.0)                               # ease_in(12): ramp 4, hold
+    (tmp_path / "take.json").write_text(json.dumps({"fps": 25, "frames": [{"jawOpen": float(x)} for x in w]}))
+    out2 = _run("arkit", workdir, {**params, "arkit_take": str(tmp_path / "take.json")}, ("fit", "bind", "bake"))
+    a = load_npz(out2 / "animation.npz")
+    assert a["frames"].shape[0] == 12
+    assert np.allclose(a["jaw"][-1], d["jaw"][j])
+    assert np.abs(a["frames"][-1] - d["shapes"][j]).max() <= 1e-6 * np.ptp(d["neutral"])
+    assert not undeclared_reads("bake", READS["bake"]) and not undeclared_reads("arkit", READS["arkit"])
