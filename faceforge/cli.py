@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import sys
 import traceback
+import warnings
 from pathlib import Path
 
 import click
@@ -51,7 +52,13 @@ class App:
         self._file_layer = read_config_file(config_file) if config_file else None
         self._sets = tuple(sets)
         self._set_layer = parse_sets(sets) if sets else None
-        self.config = load_config(config_file, sets, remembered=self.workspace.config_path)
+        self.own_config = self.workspace.own_config()
+        if self.own_config is False:
+            self.log(f"faceforge: note: {self.workspace.config_path} is not a faceforge config "
+                     "(not written by faceforge and not valid as one): ignored")
+        self.config = load_config(config_file, sets, remembered=self._remembered_config())
+        self._pending_params: dict | None = None   # written by commit_remembered() on success
+        self._pending_overrides = False
 
     def add_sets(self, *sets: str) -> None:
         """More ``KEY.PATH=VALUE`` overrides, as if given with ``--set`` (a command's own
@@ -60,7 +67,11 @@ class App:
 
         self._sets += tuple(sets)
         self._set_layer = parse_sets(self._sets)
-        self.config = load_config(self.config_file, self._sets, remembered=self.workspace.config_path)
+        self.config = load_config(self.config_file, self._sets, remembered=self._remembered_config())
+
+    def _remembered_config(self):
+        """``<workdir>/config.yaml`` when it is faceforge's, else None."""
+        return self.workspace.config_path if self.own_config else None
 
     def log(self, message: str) -> None:
         """A progress line on stderr (hidden with ``-q``)."""
@@ -76,16 +87,39 @@ class App:
         from faceforge.io.config import merge_trees, read_config_file
         from faceforge.io.stagefiles import save_yaml
 
+        from faceforge.pipeline.runner import CONFIG_HEADER
+
         layers = [layer for layer in (self._file_layer, self._set_layer) if layer is not None]
         if not layers:
             return
         path = self.workspace.config_path
+        if self.workspace.own_config() is False:
+            self.log(f"faceforge: note: not remembering --config/--set: {path} is not faceforge's "
+                     "(give the head a folder of its own with --workdir)")
+            return
         tree = read_config_file(path).tree if path.exists() else {}
         for layer in layers:
             tree = merge_trees(tree, layer.tree)
-        save_yaml(path, tree, header="config overrides remembered for this workdir (from --config/--set);\n"
+        save_yaml(path, tree, header=CONFIG_HEADER[2:] + " (from --config/--set);\n"
                                      "edit, or forget them with `faceforge config reset`")
         self.debug(f"remembered overrides in {path}")
+
+    def params(self) -> dict:
+        """The remembered inputs as this command will leave them (its stage runs' params, not
+        yet written: :meth:`commit_remembered`)."""
+        return dict(self._pending_params) if self._pending_params is not None else self.workspace.load_params()
+
+    def commit_remembered(self) -> None:
+        """Write what the command's stage runs are to remember (``faceforge.yaml`` and the
+        overrides in ``config.yaml``), once the whole command has succeeded: a failed command
+        leaves the workdir's remembered inputs as they were, so ``status`` and the next command
+        see the last good run (issue 28: a failing ``fit`` of a bad mesh made ``animate`` refit it)."""
+        if self._pending_params is not None:
+            self.workspace.save_params(self._pending_params)
+            self._pending_params = None
+        if self._pending_overrides:
+            self.remember_overrides()
+            self._pending_overrides = False
 
     def run_stage(self, name: str, params: dict | None = None, force: bool = False):
         """Remember ``params`` and overrides, then bring stage ``name`` and its upstream up to date.
@@ -100,15 +134,15 @@ class App:
         stage = registry.get_stage(name)
         inputs = {n.rstrip("?") for s in registry.stage_order([name]) for n in s.inputs}
         self.workspace.root.mkdir(parents=True, exist_ok=True)
-        remembered = self.workspace.load_params()
+        remembered = dict(self._pending_params) if self._pending_params is not None else self.workspace.load_params()
         for key, value in (params or {}).items():
             if value is None:
                 remembered.pop(key, None)  # given as None: forget the earlier value
             else:
                 remembered[key] = os.path.abspath(value) if key in inputs else value
         if params:
-            self.workspace.save_params(remembered)
-        self.remember_overrides()
+            self._pending_params = remembered
+        self._pending_overrides = True
         return runner.run(self.workspace, self.config, remembered, [stage.name], force=force,
                           log=self.log, progress=self.progress)
 
@@ -129,13 +163,53 @@ class FaceforgeGroup(click.Group):
 
     def invoke(self, ctx):
         try:
-            return super().invoke(ctx)
+            result = super().invoke(ctx)
+            if isinstance(ctx.obj, App):
+                ctx.obj.commit_remembered()
+            return result
         except FaceforgeError as exc:
             verbose = ctx.params.get("verbose", 0) > 0
             if verbose:
                 traceback.print_exc()
-            click.echo(f"faceforge: error: {exc}", err=True)
+            click.echo(f"faceforge: error: {one_line(str(exc))}", err=True)
             ctx.exit(exc.exit_code)
+        except OSError as exc:   # the user's file system said no (an unwritable --preview, a full disk)
+            if ctx.params.get("verbose", 0) > 0:
+                traceback.print_exc()
+            where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+            click.echo(f"faceforge: error: {where}{one_line(exc.strerror or str(exc))}", err=True)
+            ctx.exit(2)
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        """click's main, but a usage error is one line ``faceforge: error: ...`` with exit 2
+        (click prints three: usage, a hint and the error)."""
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            with warnings.catch_warnings():
+                warnings.showwarning = _show_warning
+                rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.ClickException as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":   # bare `faceforge`: the help, as click gives it
+                exc.show()
+                sys.exit(exc.exit_code)
+            click.echo(f"faceforge: error: {one_line(exc.format_message())}", err=True)
+            sys.exit(2 if isinstance(exc, click.UsageError) else exc.exit_code)
+        except click.exceptions.Abort:
+            click.echo("faceforge: aborted", err=True)
+            sys.exit(1)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def one_line(text: str, limit: int = 2000) -> str:
+    """``text`` on one line, at most ``limit`` characters (an error quoting a huge value stays short)."""
+    flat = " ".join(str(text).split())
+    return flat if len(flat) <= limit else flat[:limit - 3] + "..."
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None):
+    """Warnings (e.g. a repaired FAP file) as one line ``faceforge: warning: ...`` on stderr."""
+    click.echo(f"faceforge: warning: {one_line(str(message))}", err=True)
 
 
 @click.group(cls=FaceforgeGroup, context_settings={"help_option_names": ["-h", "--help"]})
@@ -215,6 +289,9 @@ def clean(app: App, stages, forget):
     app.log(f"removed {', '.join(removed)}" if removed else "nothing to remove")
     if forget:
         for path in (app.workspace.params_path, app.workspace.config_path):
+            if path == app.workspace.config_path and app.workspace.own_config() is False:
+                app.log(f"kept {path}: not faceforge's")
+                continue
             if path.exists():
                 path.unlink()
                 app.log(f"forgot {path.name}")
@@ -255,7 +332,9 @@ def config_validate(app: App, file):
 def config_reset(app: App):
     """Forget the overrides remembered in <workdir>/config.yaml."""
     path: Path = app.workspace.config_path
-    if path.exists():
+    if app.workspace.own_config() is False:
+        app.log(f"kept {path}: not faceforge's")
+    elif path.exists():
         path.unlink()
         app.log(f"removed {path}")
     else:

@@ -2,7 +2,9 @@
 
 Needs a Blender: ``FACEFORGE_BLENDER_PYTHON`` naming a Python that has the ``bpy`` module
 (``python3.11 -m venv /tmp/bpy-venv && /tmp/bpy-venv/bin/pip install bpy==4.5.*``), or a
-``blender`` binary on PATH. Without one every test here is skipped (CI has no Blender);
+``blender`` binary on PATH. Without one every test here is skipped; ``.ci/run`` installs
+``bpy==5.0.1`` into ``.venv-bpy`` and points this variable at it (9 tests, ~2.5 min on the
+loaded 2-core machine, after a ~2.5 min install);
 ``benchmarks/results/blender_check.json`` holds a real run on a simulated animation.
 
 The animations are synthetic (a smooth, vertex-dependent motion of each sample head), so the

@@ -133,7 +133,7 @@ def test_invalid_config_stops_before_any_work(invoke, echo_stage, tmp_path):
     bad.write_text("solver:\n  iterations: many\n")
     result = invoke("-w", tmp_path / "w", "--config", bad, "run", "t_echo")
     assert result.exit_code == 2
-    assert result.stderr == f"faceforge: error: {bad}:2: solver.iterations: expected an integer >= 1, got 'many'\n"
+    assert result.stderr == f"faceforge: error: {bad}:2: solver.iterations: expected an integer in [1, 1000], got 'many'\n"
     assert echo_stage == [] and not (tmp_path / "w").exists()
     result = invoke("-w", tmp_path, "--set", "skin.stiffness.bending=2", "status")
     assert result.exit_code == 2
@@ -196,8 +196,11 @@ def test_app_run_stage_updates_and_forgets_params(echo_stage, tmp_path):
     src.write_text("x")
     app = App(str(tmp_path / "w"), None, (), -1, False)
     app.run_stage("t_echo", {"src": str(src), "note": "kept as given"})
+    assert app.workspace.load_params() == {}            # remembered once the command succeeded
+    app.commit_remembered()
     assert app.workspace.load_params() == {"src": str(src), "note": "kept as given"}
     app.run_stage("t_echo", {"note": None})
+    app.commit_remembered()
     assert app.workspace.load_params() == {"src": str(src)}
 
 

@@ -71,7 +71,7 @@ class Timings:
 
 
 def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progress=None,
-         timings: Timings | None = None, settle: int = 0) -> np.ndarray:
+         timings: Timings | None = None, settle: int = 0, sink=None, chunk: int = 64) -> np.ndarray | None:
     """Simulate every frame and return the weighted skin.
 
     Parameters
@@ -85,10 +85,13 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
     timings : optional Timings, accumulated in place
     settle : extra frames simulated at each frame's controls before it is recorded (0 for
         playback; static poses such as calibration use more)
+    sink : optional ``sink(start, frames (k, n, 3) float64)``: the frames are handed over
+        ``chunk`` at a time (``start``: the first one's index; the array is reused, copy what
+        you keep) and not returned, so a take's memory does not grow with its length
 
     Returns
     -------
-    (F, n, 3) float64 skin positions of the working mesh, influence-weighted.
+    (F, n, 3) float64 skin positions of the working mesh, influence-weighted (None with ``sink``).
 
     Raises
     ------
@@ -105,7 +108,8 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
     w = np.ones(len(rest)) if rig.influence is None else np.asarray(rig.influence, dtype=float)
     if w.shape != (len(rest),):
         raise ValueError(f"influence must be ({len(rest)},), got {w.shape}")
-    out = np.empty((len(jaw), len(rest), 3))
+    size = len(jaw) if sink is None else max(1, min(int(chunk), len(jaw)))
+    out = np.empty((size, len(rest), 3))
     w3 = w[:, None]
     frames = range(len(jaw))
     if progress is not None:
@@ -127,13 +131,16 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
         skin = np.asarray(skin, dtype=float)
         if not np.all(np.isfinite(skin)):
             raise FloatingPointError(f"frame {i}: the simulation produced non-finite skin positions")
-        frame = out[i]   # rest + w (skin - rest), in place
+        j = i % size
+        frame = out[j]   # rest + w (skin - rest), in place
         np.subtract(skin, rest, out=frame)
         np.multiply(w3, frame, out=frame)
         np.add(rest, frame, out=frame)
         if rig.finish is not None:
-            rig.finish(out[i])
-    return out
+            rig.finish(out[j])
+        if sink is not None and (j == size - 1 or i == len(jaw) - 1):
+            sink(i - j, out[:j + 1])
+    return out if sink is None else None
 
 
 def ease_in(settle: int = 30, ramp: int | None = None) -> np.ndarray:
@@ -164,17 +171,21 @@ def static_poses(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float
     return np.stack(out) if out else np.zeros((0,) + np.shape(rig.rest))
 
 
-def warm_up(rig, contractions, jaw, fps: float, log) -> float:
+def warm_up(rig, contractions, jaw, fps: float, log, guards=()) -> float:
     """Play the track's first frame once and put the rig back at rest, so that the timed
     playback does not count numba's compilation of the kernels (about 35 s on the first run
     after an install or an upgrade; cached on disk afterwards). Logs the compilation when the
     frame took more than a second; returns its seconds. The rig is left at rest, also for an
-    empty track."""
+    empty track. ``guards``: objects with a ``warm_up()`` (the orientation guard), whose kernels
+    frame 0 does not reach (its rescans compiled at frame 9 of a first animate, issue 28)."""
     rig.reset()
     if not len(jaw):
         return 0.0
     t0 = time.perf_counter()
     play(rig, contractions[:1], jaw[:1], fps)
+    for guard in guards:
+        if guard is not None:
+            guard.warm_up()
     seconds = time.perf_counter() - t0
     rig.reset()
     if seconds > 1.0:

@@ -35,6 +35,11 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
         log(f"{mesh_path}: {w}")
     lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
                         rotation=None if orientation.identity else orientation.rotation, raw=raw)
+    # animate measures the FAP units on these landmarks (pupils, eyelids, nose, mouth): a file
+    # without them must fail here, not after fit and bind ran (issue 28)
+    from faceforge.mpeg4 import fapu_from_landmarks
+
+    fapu_from_landmarks(dict(zip(lm.ids, lm.positions)), lm_path)
     t_load = time.perf_counter() - t
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)

@@ -56,6 +56,9 @@ def fibonacci_directions(n: int) -> np.ndarray:
 
 #: the layer bone inside a socket is pressed into, as a fraction of the blend width
 LAYER = 0.2
+#: the map's rays see the socket skin up to this many times the hollow's ``reach`` (the
+#: farthest hit of the rays that found it, which sample the socket: a little slack)
+REACH_SLACK = 1.5
 
 
 def radial_profile(rho: np.ndarray, lam: float, beta: float) -> np.ndarray:
@@ -66,6 +69,19 @@ def radial_profile(rho: np.ndarray, lam: float, beta: float) -> np.ndarray:
     blend = 1.0 + delta + (rho - 1.0) * (beta - delta) / beta
     return np.where(rho < lam, rho + (1.0 - lam),
                     np.where(rho <= 1.0, pressed, np.where(rho <= 1.0 + beta, blend, rho)))
+
+
+def chord_sag(length: float, radius: float) -> float:
+    """How far a straight chord of ``length`` between two points on a circle of ``radius``
+    dips inside it (same units): ``R - sqrt(R^2 - L^2 / 4)``, about ``L^2 / (8 R)`` for a short
+    chord and never more than ``R`` (a chord longer than the diameter is taken as the diameter).
+    The small-chord formula alone grows without bound: an edge stretched to four socket
+    radii by the enhancement flows (MakeHuman ``caucasian_female_young``) asked for a
+    clearance of 2.5 head units, ten times the socket, and the map blew the skull up into a
+    sphere around the head."""
+    r = float(radius)
+    half = min(0.5 * float(length), r)
+    return r - float(np.sqrt(max(r * r - half * half, 0.0)))
 
 
 @dataclass(frozen=True)
@@ -90,12 +106,18 @@ class OrbitHollow:
     def radius(self, points: np.ndarray):
         """``(r (k,), u (k, 3), T (k,))`` of points (k, 3): distance from the centre, unit
         direction, and the bone's least distance ``t(u) + clearance`` along that direction
-        (``inf`` where the ray leaves the skin: no constraint)."""
+        (``inf`` where the ray meets no skin within :data:`REACH_SLACK` times ``reach``: no
+        constraint). Without that
+        bound a ray leaving the pocket through a gap (up to a tenth of the directions may,
+        :func:`find_hollow`) met the far side of the head, and the map pushed the bone out by
+        a head's size there: the skull blew up into a sphere around the head (MakeHuman
+        ``caucasian_female_young``, tests/fit/test_fit_orbits_reach.py)."""
         d = np.asarray(points, dtype=np.float64).reshape(-1, 3) - self.centre
         r = np.linalg.norm(d, axis=1)
         u = d / np.maximum(r, 1e-300)[:, None]
         u[r == 0] = (0.0, 0.0, -1.0)
-        _, _, t = self.caster.first_hit(np.broadcast_to(self.centre, u.shape), u)
+        _, _, t = self.caster.first_hit(np.broadcast_to(self.centre, u.shape), u,
+                                         max_distance=REACH_SLACK * self.reach)
         return r, u, t + self.clearance
 
     def near(self, points: np.ndarray) -> np.ndarray:
@@ -141,7 +163,7 @@ class OrbitHollow:
         if not near.any() or self.socket_radius <= 0.0:
             return self
         length = float(np.linalg.norm(v[e[near, 0]] - v[e[near, 1]], axis=1).max())
-        return replace(self, clearance=self.clearance + length ** 2 / (8.0 * self.socket_radius))
+        return replace(self, clearance=self.clearance + chord_sag(length, self.socket_radius))
 
     def __call__(self, points) -> np.ndarray:
         p = np.asarray(points, dtype=np.float64)

@@ -64,24 +64,39 @@ class Number(Rule):
         return f"a number in [{self.low:g}, {self.high:g}]"
 
     def check(self, value, base):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not _finite(value):
             raise ValueError(self.describe())
         if (self.low is not None and value < self.low) or (self.high is not None and value > self.high):
             raise ValueError(self.describe())
         return float(value)
 
 
+def _finite(value) -> bool:
+    """``math.isfinite`` that says False for an int too large for a float (instead of raising)."""
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 @dataclass(frozen=True)
 class Integer(Rule):
-    """An integer (not a bool) >= ``low`` (no bound when ``low`` is None)."""
+    """An integer (not a bool) >= ``low`` (no bound when ``low`` is None) and <= ``high``."""
 
     low: int | None = 1
+    high: int | None = None
+
+    def describe(self) -> str:
+        if self.high is None:
+            return "an integer" if self.low is None else f"an integer >= {self.low}"
+        return f"an integer <= {self.high}" if self.low is None else f"an integer in [{self.low}, {self.high}]"
 
     def check(self, value, base):
-        if isinstance(value, float) and value.is_integer():
+        if isinstance(value, float) and _finite(value) and value.is_integer():
             value = int(value)
-        if isinstance(value, bool) or not isinstance(value, int) or (self.low is not None and value < self.low):
-            raise ValueError("an integer" if self.low is None else f"an integer >= {self.low}")
+        if isinstance(value, bool) or not isinstance(value, int) or (self.low is not None and value < self.low) \
+                or (self.high is not None and value > self.high):
+            raise ValueError(self.describe())
         return value
 
 
@@ -184,7 +199,22 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.neck_fade", Number(0.0, 10.0)),
     ("animate.eyelid_reach", Number(0.1, 10.0)),
     ("animate.eyelid_depth", Number(0.1, 10.0)),
+    # sane upper bounds: a value past them is a typo, and 1e9 iterations hang, 1e9 s of
+    # expression tried to allocate 186 GiB (issue 28)
+    ("solver.iterations", Integer(1, 1000)),
+    ("solver.substeps", Integer(1, 100)),
+    ("solver.partitions", Integer(1, 64)),
+    ("animate.fps", Number(1.0, 1000.0)),
+    ("animate.expression_seconds", Number(0.04, 3600.0)),
+    ("animate.expression_ramp", Number(0.0, 3600.0)),
+    ("animate.preview_frames", Integer(1, 100)),
 ]
+
+#: an integer key without a rule accepts at most this many times its default (or INT_CAP_FLOOR)
+INT_CAP_FACTOR = 100
+INT_CAP_FLOOR = 1000
+#: a number key without a rule accepts magnitudes up to this many times its default (at least 1)
+NUMBER_CAP_FACTOR = 1e6
 
 
 def add_rule(pattern: str, rule: Rule) -> None:
@@ -200,7 +230,9 @@ def rule_for(key: str, default: Any) -> Rule:
     """The rule of a leaf ``key`` whose default value is ``default``.
 
     Without a matching :data:`RULES` entry: bool -> true/false; int -> an integer >= 1
-    (>= 0 if the default is 0, unbounded if negative); float -> a finite number;
+    (>= 0 if the default is 0, unbounded if negative) and at most :data:`INT_CAP_FACTOR`
+    times the default (at least :data:`INT_CAP_FLOOR`); float -> a finite number of magnitude
+    at most :data:`NUMBER_CAP_FACTOR` times the default's (at least 1);
     str -> a string; list -> a list; null -> anything.
     """
     for pattern, rule in RULES:
@@ -209,9 +241,11 @@ def rule_for(key: str, default: Any) -> Rule:
     if isinstance(default, bool):
         return Boolean()
     if isinstance(default, int):
-        return Integer(1 if default >= 1 else 0 if default == 0 else None)
+        return Integer(1 if default >= 1 else 0 if default == 0 else None,
+                       max(INT_CAP_FLOOR, INT_CAP_FACTOR * abs(default)))
     if isinstance(default, float):
-        return Number()
+        cap = NUMBER_CAP_FACTOR * max(1.0, abs(default))
+        return Number(-cap, cap)
     if isinstance(default, str):
         return String()
     if isinstance(default, list):
@@ -259,10 +293,10 @@ def _line_map(text: str, source: str) -> dict[str, int]:
 def _parse_yaml(text: str, source: str) -> tuple[Any, dict[str, int]]:
     import yaml
 
-    from faceforge.io.stagefiles import yaml_safe_load
+    from faceforge.io.safe_yaml import load_user_yaml
 
+    data = load_user_yaml(text, source, ConfigError)   # limits, YAML 1.2 floats, one-line errors
     try:
-        data = yaml_safe_load(text)
         lines = _line_map(text, source)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
@@ -414,7 +448,7 @@ def read_config_file(path: str | Path) -> Layer:
 
 def parse_sets(items: Iterable[str], base: Path | None = None) -> Layer:
     """Turn ``["a.b=1", ...]`` into one validated layer; the source is ``--set``."""
-    import yaml
+    from faceforge.io.safe_yaml import load_user_yaml
 
     tree: dict = {}
     for item in items:
@@ -423,9 +457,10 @@ def parse_sets(items: Iterable[str], base: Path | None = None) -> Layer:
         if not sep or not key or any(not part for part in key.split(".")):
             raise ConfigError(f"expected key.path=value, got {item!r}", "--set")
         try:
-            value = yaml.safe_load(raw) if raw.strip() else ""
-        except yaml.YAMLError:
-            raise ConfigError(f"{key}: value {raw!r} is not valid YAML", "--set") from None
+            value = load_user_yaml(raw, "--set", ConfigError) if raw.strip() else ""
+        except ConfigError as exc:
+            raise ConfigError(f"{key}: value {raw[:80]!r} is not a valid YAML value ({exc.message})",
+                              "--set") from None
         set_dotted(tree, key, value)
     return validate_tree(tree, "--set", {}, base or Path.cwd())
 

@@ -18,6 +18,8 @@ MDD (big endian)::
 
 from __future__ import annotations
 
+import itertools
+
 from pathlib import Path
 
 import numpy as np
@@ -73,7 +75,17 @@ def write_pc2(path: str | Path, frames: object, faces: object, fps: float, *, st
     header["start"] = start_frame
     header["sampling"] = 1.0
     header["n_samples"] = data.shape[0]
-    return atomic_write_bytes(path, [header.tobytes(), data.astype("<f4").tobytes()])
+    return atomic_write_bytes(path, itertools.chain([header.tobytes()], _chunks(data, "<f4")))
+
+
+def _chunks(data, dtype):
+    """The bytes of ``data (F, n, 3)`` as ``dtype``, 64 frames at a time, made as they are
+    written (a long take, e.g. a map of the stage file, is never copied whole)."""
+    from faceforge.io.frame_stream import release
+
+    for start in range(0, len(data), 64):
+        yield data[start:start + 64].astype(dtype, copy=False).tobytes()
+        release(data)
 
 
 def read_pc2(path: str | Path) -> tuple[np.ndarray, float, float]:
@@ -114,7 +126,7 @@ def write_mdd(path: str | Path, frames: object, faces: object, fps: float) -> Pa
     n_frames, n_points = data.shape[:2]
     times = (np.arange(n_frames, dtype=np.float64) / float(fps)).astype(">f4")
     header = np.array([n_frames, n_points], dtype=">i4")
-    return atomic_write_bytes(path, [header.tobytes(), times.tobytes(), data.astype(">f4").tobytes()])
+    return atomic_write_bytes(path, itertools.chain([header.tobytes(), times.tobytes()], _chunks(data, ">f4")))
 
 
 def read_mdd(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

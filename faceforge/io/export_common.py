@@ -46,14 +46,19 @@ def validate_animation(frames: object, fps: float) -> np.ndarray:
     ValueError
         Naming the offending shape or value.
     """
+    from faceforge.io.frame_stream import release
+
     array = np.asarray(frames)
     if array.ndim != 3 or array.shape[2] != 3 or array.shape[0] < 1 or array.shape[1] < 1:
         raise ValueError(f"frames must be (n_frames >= 1, n_verts >= 1, 3), got shape {array.shape}")
     if not np.issubdtype(array.dtype, np.floating) and not np.issubdtype(array.dtype, np.integer):
         raise ValueError(f"frames must be numeric, got dtype {array.dtype}")
-    if not np.all(np.isfinite(array)):
-        bad = np.argwhere(~np.isfinite(array))[0]
-        raise ValueError(f"frames must be finite; frame {bad[0]}, vertex {bad[1]} is not")
+    for start in range(0, array.shape[0], 64):   # by chunks: a long take may be a map of a file
+        part = array[start:start + 64]
+        if not np.all(np.isfinite(part)):
+            bad = np.argwhere(~np.isfinite(part))[0]
+            raise ValueError(f"frames must be finite; frame {start + bad[0]}, vertex {bad[1]} is not")
+        release(array)
     if not (isinstance(fps, (int, float, np.floating, np.integer)) and math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be finite and > 0, got {fps!r}")
     return np.ascontiguousarray(array, dtype=np.float32)

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .export_common import ExportError, faces_to_csr, register_exporter, validate_animation
+from .frame_stream import release
 
 
 def _sequence_pattern(name: str) -> re.Pattern[str]:
@@ -87,15 +88,18 @@ def write_obj_sequence(path: str | Path, frames: object, faces: object, fps: flo
         raise ExportError("parent folder does not exist", folder)
     width = max(4, len(str(data.shape[0])))
     face_text = _face_text(indices, starts)
-    staging = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".tmp", dir=folder.parent))
+    clean_leftovers(folder)
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.{os.getpid()}.", suffix=".tmp", dir=folder.parent))
     try:
         staging.chmod(_folder_mode())  # mkdtemp makes it 0o700; a plain mkdir would honour the umask
         for k, positions in enumerate(data):
             header = f"# faceforge OBJ sequence: frame {k + 1} of {data.shape[0]} at {float(fps):g} fps\n"
             text = header + f"o {name}\n" + _vertex_text(positions) + face_text
             (staging / f"{name}_{k + 1:0{width}d}.obj").write_text(text, encoding="ascii")
+            if k % 64 == 63:
+                release(data)   # a long take read through a file map: keep only a chunk resident
         if folder.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{name}.", suffix=".old", dir=folder.parent))
+            old = Path(tempfile.mkdtemp(prefix=f".{name}.{os.getpid()}.", suffix=".old", dir=folder.parent))
             folder.rename(old / name)
             staging.rename(folder)
             shutil.rmtree(old)
@@ -105,6 +109,40 @@ def write_obj_sequence(path: str | Path, frames: object, faces: object, fps: flo
         if staging.exists():
             shutil.rmtree(staging)
     return folder
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def clean_leftovers(folder: str | Path) -> list[Path]:
+    """Remove what a killed :func:`write_obj_sequence` to ``folder`` left beside it: its
+    staging folder ``.<name>.<pid>.<random>.tmp`` and the ``.old`` folder holding the previous
+    sequence while it was being replaced (put back first when ``folder`` itself is missing, so
+    the user's earlier sequence is not lost). Folders of a process still running are kept;
+    ``.<name>.<random>.tmp`` of faceforge versions before the pid was in the name are removed.
+    Returns the removed paths."""
+    folder = Path(folder)
+    name, parent = folder.name, folder.parent
+    if not name or not parent.is_dir():
+        return []
+    pattern = re.compile(r"\." + re.escape(name) + r"\.(?:(\d+)\.)?[A-Za-z0-9_]{8}\.(tmp|old)")
+    removed = []
+    for entry in sorted(parent.iterdir(), key=lambda p: p.name):
+        m = pattern.fullmatch(entry.name)
+        if m is None or not entry.is_dir() or (m.group(1) and _alive(int(m.group(1)))):
+            continue
+        if m.group(2) == "old" and (entry / name).is_dir() and not folder.exists():
+            (entry / name).rename(folder)      # killed between moving the old sequence aside and the new in
+        shutil.rmtree(entry, ignore_errors=True)
+        removed.append(entry)
+    return removed
 
 
 def read_obj_sequence(path: str | Path) -> tuple[np.ndarray, list[tuple[int, ...]]]:

@@ -36,6 +36,7 @@ import yaml
 
 from faceforge.exceptions import LandmarkError
 from faceforge.mpeg4.tables import FDP_IDS, LEFT_RIGHT_PAIRS
+from faceforge.io.safe_yaml import add_yaml12_floats, check_structure, construct_guarded
 
 #: FDPs every skin must provide. The fit needs the face's frame and extent: the eye
 #: corners (width, ES0 fallback, left/right check), the brows (forehead), the nose
@@ -110,13 +111,16 @@ def default_landmark_path(mesh_path: str | Path) -> Path:
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
-    """SafeLoader that refuses duplicated mapping keys (PyYAML keeps the last)."""
+    """SafeLoader that refuses duplicated mapping keys (PyYAML keeps the last); YAML 1.2 floats."""
 
 
 def _construct_unique_mapping(loader, node, deep=False):
     seen = {}
     for key_node, _ in node.value:
         key = loader.construct_object(key_node, deep=deep)
+        if not isinstance(key, (str, int, float, bool)) and key is not None:
+            raise LandmarkError(f"a key must be an FDP id or a name, got {type(key).__name__}",
+                                loader.name, key_node.start_mark.line + 1)
         if key in seen:
             raise LandmarkError(
                 f"FDP {key} given twice (lines {seen[key] + 1} and {key_node.start_mark.line + 1})",
@@ -127,6 +131,18 @@ def _construct_unique_mapping(loader, node, deep=False):
 
 _UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG,
                                  _construct_unique_mapping)
+add_yaml12_floats(_UniqueKeyLoader)
+
+
+#: a vertex id at or above this is refused before it meets a mesh (int64 and beyond)
+MAX_VERTEX_ID = 2 ** 40
+
+
+def _json_int(text: str) -> int:
+    """JSON integers of at most 100 digits (Python refuses 4,300 with a ValueError)."""
+    if len(text.lstrip("-")) > 100:
+        raise ValueError(f"number with more than 100 digits: {text[:20]}...")
+    return int(text)
 
 
 def _normalise_id(key, path) -> str:
@@ -192,13 +208,17 @@ def read_landmarks(path: str | Path) -> RawLandmarks:
     suffix = path.suffix.lower()
     try:
         if suffix in (".yaml", ".yml"):
-            with open(path, encoding="utf-8") as fh:
-                loader = _UniqueKeyLoader(fh)
+            text = path.read_text(encoding="utf-8")
+            check_structure(text, str(path), LandmarkError)   # bombs, deep nesting, huge files
+
+            def construct():
+                loader = _UniqueKeyLoader(text)
                 loader.name = str(path)
                 try:
-                    data = loader.get_single_data()
+                    return loader.get_single_data()
                 finally:
                     loader.dispose()
+            data = construct_guarded(construct, str(path), LandmarkError)
             entries, orientation = _entries_from_mapping(data, path), _orientation(data, path)
         elif suffix == ".json":
             def pairs_hook(pairs):
@@ -208,7 +228,9 @@ def read_landmarks(path: str | Path) -> RawLandmarks:
                     raise LandmarkError(f"FDP {', '.join(dup)} given twice", path)
                 return dict(pairs)
             with open(path, encoding="utf-8") as fh:
-                data = json.load(fh, object_pairs_hook=pairs_hook)
+                text = fh.read()
+            data = construct_guarded(lambda: json.loads(text, object_pairs_hook=pairs_hook,
+                                                        parse_int=_json_int), str(path), LandmarkError, "JSON")
             entries, orientation = _entries_from_mapping(data, path), _orientation(data, path)
         elif suffix == ".csv":
             entries, orientation = _read_csv(path), None
@@ -222,6 +244,10 @@ def read_landmarks(path: str | Path) -> RawLandmarks:
         raise LandmarkError(f"invalid JSON: {exc.msg}", path, exc.lineno) from None
     except UnicodeDecodeError:
         raise LandmarkError("not a text file", path) from None
+    except OSError as exc:
+        raise LandmarkError(f"cannot read landmark file: {exc.strerror or exc}", path) from None
+    except RecursionError:
+        raise LandmarkError("nested too deeply", path) from None
     return replace(_to_raw(entries, path), orientation=orientation)
 
 
@@ -266,6 +292,9 @@ def _to_raw(entries: list, path) -> RawLandmarks:
                 raise LandmarkError(f"FDP {fdp}: vertex must be an integer id, got {v!r}", path)
             if v < 0:
                 raise LandmarkError(f"FDP {fdp}: vertex id {v} is negative", path)
+            if v >= MAX_VERTEX_ID:
+                raise LandmarkError(f"FDP {fdp}: vertex id {str(v)[:20]}{'...' if len(str(v)) > 20 else ''} "
+                                    "is larger than any mesh", path)
             vertex[i] = v
         if p is not None:
             try:
@@ -352,6 +381,8 @@ def check_landmarks(lm: Landmarks, vertices: np.ndarray, required=REQUIRED_FDPS)
                             + ", ".join(f"{l}/{r}" for l, r in swapped)
                             + " (the left one should have the larger x)", path)
     back = [f for f in ("3.7", "3.12", "3.11", "3.8", "10.9", "10.10") if f in pos]
+    if "9.3" not in pos or not back or not all(f in pos for f in ("3.7", "3.12", "2.1")):
+        return   # (a caller that requires fewer FDPs than REQUIRED_FDPS: the frame checks need these)
     behind = np.mean([pos[f][2] for f in back])
     if pos["9.3"][2] <= behind:
         raise LandmarkError(f"head faces the wrong way: nose tip 9.3 (z={pos['9.3'][2]:.4g}) is not in front of "

@@ -21,11 +21,15 @@ Repairs (``strict=False``, the default; with ``strict=True`` each is a :class:`F
 
 * a non-finite value (``inf``, ``-inf``, ``nan``) is treated as if the FAP were absent from
   that frame (rule 2 or 3 fills it); one :class:`FapWarning` lists the lines;
-* a frame count that disagrees with the header: the frames present are used, with a warning.
+* a frame count that disagrees with the header: the frames present are used, with a warning;
+* a value past the range a face can take (:mod:`faceforge.mpeg4.fap_range`, e.g. a head
+  turned more than 90 degrees, a jaw opened by three mouth-nose separations) is clamped to
+  it, with one warning naming the FAPs and the largest value of each.
 
 Everything else that is malformed -- a wrong header, a mask that is not 68 zeros/ones, a data
 line with too few or too many values (e.g. a truncated file), a non-numeric token, frame
-numbers that are not increasing integers, no frames -- raises :class:`FapError` naming the
+numbers that are not increasing integers (or larger than :data:`MAX_FRAME_NUMBER`), an fps
+outside :data:`FPS_RANGE`, no frames -- raises :class:`FapError` naming the
 file and line.
 """
 
@@ -42,6 +46,7 @@ import numpy as np
 
 from faceforge.exceptions import FapError
 
+from .fap_range import clamp_to_range
 from .tables import LIP_PAIRS, N_EXPRESSION_VALUES, N_FAPS, N_VISEME_VALUES
 
 #: versions of the text format this module reads and writes
@@ -268,23 +273,37 @@ def _number(token: str, source: str, line: int, what: str) -> float:
         raise FapError(f"{what}: {token!r} is not a number", source, line) from None
 
 
+#: largest frame number (and frame count) accepted: differences of such numbers stay exact
+#: in int64 and float64 (2**53), and no take reaches it (a year at 1,000 fps is 3e10 frames)
+MAX_FRAME_NUMBER = 2 ** 53
+#: frame rates accepted, frames per second
+FPS_RANGE = (0.1, 1000.0)
+
+
 def _integer(token: str, source: str, line: int, what: str) -> int:
+    if len(token) > 30:
+        raise FapError(f"{what}: {token[:20]}... is not an integer of at most 16 digits", source, line)
     try:
-        return int(token)
+        value = int(token)
     except ValueError:
-        value = _number(token, source, line, what)
-        if math.isfinite(value) and value == int(value):
-            return int(value)
-        raise FapError(f"{what}: {token!r} is not an integer", source, line) from None
+        number = _number(token, source, line, what)
+        if not (math.isfinite(number) and number == int(number)):
+            raise FapError(f"{what}: {token!r} is not an integer", source, line) from None
+        value = int(number)
+    if abs(value) > MAX_FRAME_NUMBER:
+        raise FapError(f"{what}: {token!r} is out of range (at most {MAX_FRAME_NUMBER:,} in size)", source, line)
+    return value
 
 
-def _content_lines(text: str) -> list[tuple[int, list[str]]]:
-    """(1-based line number, tokens) of every line that is neither blank nor a comment."""
+def _content_lines(text: str) -> list[tuple[int, str]]:
+    """(1-based line number, line) of every line that is neither blank nor a comment. The
+    lines are split into tokens one frame at a time by the reader: tokens of a whole
+    10,000-frame file held at once cost ~8 KB a frame, more than the simulation keeps."""
     out = []
     for number, line in enumerate(text.lstrip("\ufeff").splitlines(), start=1):
-        tokens = line.split()
-        if tokens and not tokens[0].startswith("#"):
-            out.append((number, tokens))
+        stripped = line.strip()
+        if stripped and not stripped.startswith("#"):
+            out.append((number, stripped))
     return out
 
 
@@ -295,8 +314,9 @@ def _parse_header(tokens: list[str], source: str, line: int) -> tuple[str, str, 
     if version not in SUPPORTED_VERSIONS:
         raise FapError(f"unsupported FAP file version {version!r} (supported: 2.0, 2.1)", source, line)
     fps = _number(tokens[-2], source, line, "header fps")
-    if not (math.isfinite(fps) and fps > 0):
-        raise FapError(f"header fps must be a positive number, got {tokens[-2]!r}", source, line)
+    if not (math.isfinite(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
+        raise FapError(f"header fps must be a number in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], got {tokens[-2]!r}",
+                       source, line)
     n_frames = _integer(tokens[-1], source, line, "header frame count")
     if n_frames < 0:
         raise FapError(f"header frame count must be >= 0, got {n_frames}", source, line)
@@ -339,7 +359,7 @@ def parse_fap(text: str, source: str | Path = "<string>", *, strict: bool = Fals
     lines = _content_lines(text)
     if not lines:
         raise FapError("empty FAP file (no header line)", source)
-    header_line, header_tokens = lines[0]
+    header_line, header_tokens = lines[0][0], lines[0][1].split()
     version, name, fps, n_header = _parse_header(header_tokens, source, header_line)
     body = lines[1:]
     if len(body) % 2:
@@ -355,7 +375,8 @@ def parse_fap(text: str, source: str | Path = "<string>", *, strict: bool = Fals
     frame_numbers = np.zeros(n, dtype=np.int64)
     repaired: list[int] = []
     for frame in range(n):
-        (mask_line, mask_tokens), (data_line, data_tokens) = body[2 * frame], body[2 * frame + 1]
+        (mask_line, mask_text), (data_line, data_text) = body[2 * frame], body[2 * frame + 1]
+        mask_tokens, data_tokens = mask_text.split(), data_text.split()
         bits = _parse_mask(mask_tokens, source, mask_line)
         expected = int(_N_VALUES[bits].sum())
         if len(data_tokens) != expected + 1:
@@ -399,6 +420,11 @@ def parse_fap(text: str, source: str | Path = "<string>", *, strict: bool = Fals
             FapWarning,
             stacklevel=2,
         )
+    given, clamped = clamp_to_range(given, mask)
+    if clamped:
+        if strict:
+            raise FapError(f"FAP values past the standard's range: {clamped}", source)
+        warnings.warn(f"{source}: FAP values past the standard's range, clamped: {clamped}", FapWarning, stacklevel=2)
     if n != n_header:
         message = f"header says {n_header} frames but the file has {n}"
         if strict:

@@ -44,6 +44,7 @@ from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
 from faceforge.pbd.partition import partitioned, row_cuts
 from faceforge.pbd.settings import SolverSettings
+from faceforge.pbd.thread_choice import ThreadChooser
 from faceforge.pbd.threads import threaded, threads_used
 
 
@@ -244,6 +245,8 @@ class Solver:
         # (not when one part holds every row: a small model, partition.MIN_SLAB_CONSTRAINTS)
         busy = np.count_nonzero(np.diff(self._seg) > 0)
         self._threaded = busy > 1 and threaded()
+        # threads or the calling thread, whichever the clock says is faster (same bits)
+        self._chooser = ThreadChooser(self._threaded)
 
     def _frozen_arguments(self) -> tuple:
         """The compiled step's arguments that never change, gathered once (a step's Python
@@ -390,8 +393,8 @@ class Solver:
         if self._particle_order is not None:  # stepped in the partitioned model's numbering
             x_in = x_out = _take_rows(x_in, self._particle_order, self._x)
             v_in = v_out = _take_rows(v_in, self._particle_order, self._v)
-        _step(x_in, v_in, x_out, v_out, kin, targets, dt / s.substeps, self._threaded,
-              *self._frozen)
+        self._chooser.run(lambda threaded: _step(x_in, v_in, x_out, v_out, kin, targets, dt / s.substeps,
+                                                 threaded, *self._frozen))
         if self._particle_order is not None:
             _take_rows(self._x, self._old_order, state_out.positions)
             _take_rows(self._v, self._old_order, state_out.velocities)

@@ -34,6 +34,8 @@ from faceforge.pipeline.stage import COMMANDS, STAGES, Stage, StageContext, brok
 PARAMS_FILE = "faceforge.yaml"
 CONFIG_FILE = "config.yaml"
 _TEMP_PREFIXES = (".tmp-", ".trash-")
+#: the first line faceforge writes into a workdir's config.yaml (how it knows its own file)
+CONFIG_HEADER = "# config overrides remembered for this workdir"
 
 
 class Workspace:
@@ -52,6 +54,27 @@ class Workspace:
 
     def stage_dir(self, name: str) -> Path:
         return self.root / name
+
+    def own_config(self) -> bool | None:
+        """Whether ``config.yaml`` is faceforge's: None when absent; True when it carries the
+        header faceforge writes (:data:`CONFIG_HEADER`) or validates as a faceforge config;
+        False for a file of someone else's that merely shares the name (a foreign
+        ``config.yaml`` in the current folder must not break commands run without --workdir,
+        nor be rewritten or deleted by them)."""
+        from faceforge.exceptions import ConfigError
+        from faceforge.io.config import read_config_file
+
+        path = self.config_path
+        if not path.is_file():
+            return None if not path.exists() else False
+        try:
+            with open(path, "rb") as fh:
+                if fh.read(len(CONFIG_HEADER)).decode("utf-8", "replace") == CONFIG_HEADER:
+                    return True
+            read_config_file(path)
+        except (ConfigError, OSError):
+            return False
+        return True
 
     def load_params(self) -> dict:
         """Remembered params (``{}`` for a new workdir)."""

@@ -57,7 +57,16 @@ def influence_weights(vertices, faces, sources, back_vertex: int | None = None):
     src = np.unique(np.asarray(sources, INT).reshape(-1))
     if len(src) == 0:
         return np.zeros(len(v)), np.full(len(v), np.inf), 0.0
-    d = geodesic_distance(v, faces, src)
+    # a vertex no face references (a stray vertex, or one whose degenerate faces the mesh
+    # check dropped) spreads nothing over the surface; it keeps its own weight 1 below
+    referenced = np.zeros(len(v), bool)
+    referenced[np.asarray(faces, INT).reshape(-1)] = True
+    on_surface = src[referenced[src]]
+    if len(on_surface) == 0:
+        w = np.zeros(len(v))
+        w[src] = 1.0
+        return w, np.full(len(v), np.inf), 0.0
+    d = geodesic_distance(v, faces, on_surface)
     finite = np.isfinite(d)
     scale = 0.0
     if back_vertex is not None and np.isfinite(d[back_vertex]):

@@ -5,8 +5,9 @@ import pytest
 import trimesh
 
 from faceforge.fit.surface import SkinSurface
-from faceforge.fit.orbits import (OrbitHollow, fibonacci_directions, find_hollow, fit_hollow,
-                                          radial_profile)
+from faceforge.fit.orbits import (REACH_SLACK, OrbitHollow, chord_sag, fibonacci_directions, find_hollow,
+                                  fit_hollow,
+                                  radial_profile)
 from faceforge.geometry.rays import RayCaster
 from faceforge.geometry.triangles import vertex_normals
 
@@ -103,7 +104,8 @@ def test_the_chord_margin_covers_the_sag_of_the_longest_nearby_edge(socket):
     h = find_hollow(socket, np.array([[0.0, 0.0, 0.0]]), clearance=0.02, max_radius=2.0)
     v, f = plate(-0.4, n=9)                                        # sides 0.4, diagonals 0.4 sqrt(2)
     wide = h.with_chord_margin(v, f)
-    assert np.isclose(wide.clearance - h.clearance, 2 * 0.4 ** 2 / (8.0 * h.socket_radius), rtol=1e-9)
+    assert np.isclose(wide.clearance - h.clearance, chord_sag(0.4 * np.sqrt(2.0), h.socket_radius), rtol=1e-9)
+    assert np.isclose(chord_sag(0.4 * np.sqrt(2.0), 1.0), 1.0 - np.sqrt(1.0 - 0.08), rtol=1e-12)
     assert 0.95 < h.socket_radius <= 1.0                           # the icosphere's faces lie inside r = 1
     # after the map with the margin measured on the mapped plate, no point of any face of
     # the plate is inside the socket
@@ -111,3 +113,22 @@ def test_the_chord_margin_covers_the_sag_of_the_longest_nearby_edge(socket):
     w = np.random.default_rng(0).dirichlet(np.ones(3), size=(len(f), 20))
     inner = np.einsum("fkc,fcd->fkd", w, moved[f]).reshape(-1, 3)
     assert not h.inside(inner).any()
+
+
+def test_chord_sag_is_bounded_by_the_radius():
+    """The small-chord formula L^2 / 8R grows without bound: an edge four socket radii long
+    asked for a clearance ten times the socket and blew the skull into a sphere (issue 28)."""
+    assert np.isclose(chord_sag(0.01, 1.0), 0.01 ** 2 / 8.0, rtol=1e-4)
+    assert chord_sag(2.0, 1.0) == 1.0
+    assert chord_sag(40.0, 1.0) == 1.0
+
+
+def test_the_map_ignores_skin_beyond_the_reach_of_the_socket(socket):
+    """A ray leaving the pocket meets skin far away (the back of the head): that is no
+    constraint, and bone in that direction does not move by a head's size."""
+    h = OrbitHollow(np.zeros(3), socket.caster, 0.02, 0.4, lam=0.5)
+    r, _, big_t = h.radius(np.array([[0.0, 0.0, 0.3]]))
+    assert not np.isfinite(big_t).any()           # the socket wall (r = 1) lies beyond 1.5 x 0.4
+    h = OrbitHollow(np.zeros(3), socket.caster, 0.02, 1.0 / REACH_SLACK + 0.01, lam=0.5)
+    _, _, big_t = h.radius(np.array([[0.0, 0.0, 0.3]]))
+    assert np.isfinite(big_t).all()

@@ -72,9 +72,9 @@ def test_unknown_top_level_key_without_near_match(tmp_path):
 
 
 @pytest.mark.parametrize("text, expected", [
-    ("solver:\n  iterations: 0\n", "solver.iterations: expected an integer >= 1, got 0"),
-    ("solver:\n  iterations: 2.5\n", "solver.iterations: expected an integer >= 1, got 2.5"),
-    ("solver:\n  iterations: true\n", "solver.iterations: expected an integer >= 1, got True"),
+    ("solver:\n  iterations: 0\n", "solver.iterations: expected an integer in [1, 1000], got 0"),
+    ("solver:\n  iterations: 2.5\n", "solver.iterations: expected an integer in [1, 1000], got 2.5"),
+    ("solver:\n  iterations: true\n", "solver.iterations: expected an integer in [1, 1000], got True"),
     ("solver:\n  stiffness_mode: fast\n",
      "solver.stiffness_mode: expected one of paper, iteration_independent, xpbd, got 'fast'"),
     ("fit:\n  refit: 1\n", "fit.refit: expected true or false, got 1"),
@@ -94,7 +94,7 @@ def test_first_error_in_file_order_and_count_of_others(tmp_path):
     path = write(tmp_path, "solver:\n  iterations: x\nskin:\n  stiffness:\n    area: 7\n")
     with pytest.raises(ConfigError) as exc:
         read_config_file(path)
-    assert message(exc) == f"{path}:2: solver.iterations: expected an integer >= 1, got 'x' (and 1 more)"
+    assert message(exc) == f"{path}:2: solver.iterations: expected an integer in [1, 1000], got 'x' (and 1 more)"
     assert [e.line for e in exc.value.all_errors] == [2, 5]
 
 
@@ -181,9 +181,10 @@ def test_packaged_templates_link_resolves_like_the_default_paths(repo_root):
 def test_rules_inferred_from_default_types_and_added_rules(monkeypatch):
     from faceforge.io import config as cfg
 
-    assert cfg.rule_for("x.count", 3) == cfg.Integer(1)
-    assert cfg.rule_for("x.seed", 0) == cfg.Integer(0)
-    assert cfg.rule_for("x.offset", -2) == cfg.Integer(None)
+    assert cfg.rule_for("x.count", 3) == cfg.Integer(1, 1000)
+    assert cfg.rule_for("x.seed", 0) == cfg.Integer(0, 1000)
+    assert cfg.rule_for("x.offset", -2) == cfg.Integer(None, 1000)
+    assert cfg.rule_for("x.size", 0.5) == cfg.Number(-1e6, 1e6)
     assert cfg.rule_for("x.any.stiffness.k", 0.5) == cfg.Number(0.0, 1.0)
     monkeypatch.setattr(cfg, "RULES", list(cfg.RULES))
     cfg.add_rule("animate.fps", cfg.Number(1, 240))

@@ -313,6 +313,19 @@ class OrientationGuard:
         self.touched = np.concatenate(touched)
         return int(done)
 
+    def warm_up(self) -> None:
+        """Compile (or load from numba's cache) every kernel :meth:`apply` may call, on a copy
+        of the rest mesh, so none compiles in the middle of a playback (``_rewatched`` first ran
+        at frame 9 of a first animate and made that frame take 2.75 s, issue 28). Leaves the
+        guard as it was."""
+        x = self.rest.copy()
+        rows = _watched(x, self.faces, self.normal0, self.floor, self.cos_watch, self.active)
+        _rewatched(x, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows,
+                   np.zeros(0, INT), self._vstart, self._vtris, self._mark)
+        _guard_rounds(x, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows, AIM,
+                      1, 1, self._vstart, self._vtris, self._mark)
+        self._mark[:] = 0
+
     def _rewatched(self, positions, rows, moved) -> np.ndarray:
         return _rewatched(positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active,
                           rows, moved, self._vstart, self._vtris, self._mark)

@@ -91,16 +91,52 @@ def _mapping(ctx):
     return mapping, str(path)
 
 
+def write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings, mapping_path):
+    """Play the track and stream its frames, a chunk at a time, through the lids, the checks,
+    the head turn and the user's vertex order into ``animation.npz`` (issue 28: a take's
+    memory does not grow with its length). Returns the
+    :class:`~faceforge.animation.check_stream.StreamChecker` that saw every frame."""
+    import numpy as np
+
+    from faceforge.animation.check_stream import StreamChecker
+    from faceforge.animation.head_motion import turn_head
+    from faceforge.animation.playback import play, warm_up
+    from faceforge.io.frame_stream import FrameNpzWriter
+
+    checker = StreamChecker(head.rest, head.faces, track.n_frames)
+
+    def sink(start, frames):
+        stop = start + len(frames)
+        if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
+            frames = lids.apply(frames, faps[start:stop])
+        checker.add(frames)
+        if weights is not None:
+            frames = turn_head(frames, angles[start:stop], head.skull.jaw.yaw_point, weights)
+        writer.write(head.to_user(frames))
+
+    with FrameNpzWriter(ctx.out_dir / "animation.npz", track.n_frames, len(head.user_index)) as writer:
+        try:
+            warm_up(head.rig, c, jaw, track.fps, ctx.log, guards=(head.orientation,))   # leaves the rig at rest
+            play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings, sink=sink)
+        except FloatingPointError as exc:
+            from faceforge.exceptions import StageError
+
+            raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
+                             "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
+        writer.close(fps=np.float64(track.fps), contractions=c, controls=np.asarray(head.controls, dtype=str),
+                     jaw=jaw)
+    return checker
+
+
 def run_animate(ctx):
     """Simulate the FAP track in ``ctx.params['fap']``; write animation.npz and report.json."""
     import numpy as np
 
-    from faceforge.animation.checks import check_animation
     from faceforge.animation.controls import track_controls, visemes_played
-    from faceforge.animation.head_motion import HEAD_FAPS, head_angles, neck_weights, turn_head
-    from faceforge.animation.playback import Timings, play, warm_up
+    from faceforge.animation.head_motion import HEAD_FAPS, head_angles, neck_weights
+    from faceforge.animation.playback import Timings
     from faceforge.animation.rig import BoundHead
-    from faceforge.io.stagefiles import save_json, save_npz
+    from faceforge.io.stagefiles import save_json
     from faceforge.mpeg4 import read_fap
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
@@ -126,32 +162,24 @@ def run_animate(ctx):
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
     ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
     timings = Timings()
-    try:
-        warm_up(head.rig, c, jaw, track.fps, ctx.log)   # leaves the rig at rest; a divergence: same error
-        frames = play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings)
-    except FloatingPointError as exc:
-        from faceforge.exceptions import StageError
-
-        raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
-                         "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
-    if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
-        frames = lids.apply(frames, faps)
-    checks = check_animation(head.rest, frames, head.faces, skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
-    threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     # the head turns as a whole about the top of the spine (approximated by the midpoint of the
     # jaw's condyles), the skin below the skull fading out of the turn; after the checks, which
     # look at the skin in the skull's own frame
+    weights = None
     if np.any(angles):
+        from faceforge.animation.head_parts import detached_vertices
+
         low, high = head.bone_heights()
         span = float(ctx.config.get("animate.neck_fade")) * (high - low)
-        frames = turn_head(frames, angles, head.skull.jaw.yaw_point, neck_weights(head.rest, low, span))
-    user = head.to_user(frames).astype(np.float32)
-    save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(track.fps), contractions=c,
-             controls=np.asarray(head.controls, dtype=str), jaw=jaw)
+        weights = neck_weights(head.rest, low, span)
+        weights[detached_vertices(head.rest, head.faces, list(head.fdp_vertex.values()))] = 0.0  # another head
+    checker = write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings, mapping_path)
+    checks = checker.report(skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
+    threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     save_json(ctx.out_dir / "report.json", {
         "fap": str(ctx.param("fap")), "frames": track.n_frames, "fps": track.fps,
         "mapping": mapping_path, "unmapped_faps": unmapped,
-        "user_vertices": int(user.shape[1]), "working_vertices": int(len(head.rest)),
+        "user_vertices": int(len(head.user_index)), "working_vertices": int(len(head.rest)),
         "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
         "max_contraction": float(c.max()) if c.size else 0.0,
         "eyes_with_lids": len(lids.fields) if lids is not None else 0, "visemes": visemes,
@@ -294,12 +322,15 @@ def _preview_face(app, first, stage: str = "animate"):
 def export_outputs(app, output: str | None, preview: str | None, preview_frames: str | None,
                    stage: str = "animate") -> None:
     """Write ``-o`` and ``--preview`` from the frames of ``stage`` (animate, or arkit)."""
-    from faceforge.exceptions import StageError
-    from faceforge.io.stagefiles import load_npz
+    import numpy as np
 
-    d = load_npz(app.workspace.stage_dir(stage) / "animation.npz")
-    frames, fps = d["frames"], float(d["fps"])
-    mesh = app.workspace.load_params().get("mesh")
+    from faceforge.exceptions import StageError
+    from faceforge.io.frame_stream import open_frames
+
+    # a read-only map of the stage file: an hour-long take is read a chunk at a time
+    frames = open_frames(app.workspace.stage_dir(stage) / "animation.npz")
+    fps = float(open_frames(app.workspace.stage_dir(stage) / "animation.npz", "fps"))
+    mesh = app.params().get("mesh")
     if not mesh:
         raise StageError("no mesh remembered in the workdir; run `faceforge fit MESH` first", app.workspace.root)
     from faceforge.fit.orientation import user_rotation
@@ -324,9 +355,12 @@ def export_outputs(app, output: str | None, preview: str | None, preview_frames:
             idx = pick_frames(len(frames), int(app.config.get("animate.preview_frames")), preview_frames)
         except ValueError as exc:
             raise StageError(f"--preview-frames: {exc}") from None
-        frames = frames @ rotation.T.astype(frames.dtype)   # drawn upright, in head space
-        region, track = _preview_face(app, frames[0], stage)
-        contact_sheet(preview, frames, faces, idx, fps, focus=region is None, region=region, panel=3.0, dpi=120,
+        # only the drawn frames are read, turned upright (head space)
+        shown = np.stack([np.asarray(frames[i]) @ rotation.T.astype(frames.dtype) for i in idx])
+        first = np.asarray(frames[0]) @ rotation.T.astype(frames.dtype)
+        region, track = _preview_face(app, first, stage)
+        contact_sheet(preview, shown, faces, range(len(idx)), fps, focus=region is None, region=region,
+                      panel=3.0, dpi=120, labels=[f"frame {i}  ({i / fps:.2f} s)" for i in idx],
                       title=f"{track}" + (f" -> {Path(output).name}" if output else ""))
         app.log(f"animate: wrote {preview}")
 
@@ -364,6 +398,18 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, output, p
             check_output(output, inputs)      # an output it cannot or must not write fails before the simulation
         if preview:
             protect_inputs(preview, {**inputs, "-o output": output})
+    if fap is not None:   # a malformed FAP file fails in milliseconds, before the head is loaded
+        import warnings
+
+        from faceforge.mpeg4 import read_fap
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # the stage reads it again and warns then
+            read_fap(fap)
+    if preview:
+        from faceforge.io.writable import check_writable
+
+        check_writable(preview, "--preview")
     if expression is not None:
         seconds = seconds or float(app.config.get("animate.expression_seconds"))
         fap = _expression_file(app, expression, intensity, seconds)

@@ -67,6 +67,9 @@ def run(ctx) -> None:
     ctx.log(f"landmark residual max {report['landmarks']['max_residual']:.2%} of the diagonal, "
             f"skull inside {report['skull']['inside_fraction']:.1%}, muscles inside "
             + (f"{m['inside_fraction']:.1%}" if m["count"] else "n/a"))
+    from faceforge.pipeline.fit_checks import enforce_checks
+
+    enforce_checks(report, bool(ctx.config.get("fit.allow_failed_checks", False)), mesh_path, ctx.log)
 
 
 def write_outputs(out_dir, result, report, extra) -> None:

@@ -1,0 +1,106 @@
+"""The animation checks of :func:`faceforge.animation.checks.check_animation`, a chunk at a time.
+
+A long take is never held whole (issue 28): :class:`StreamChecker` takes the frames in
+order, in chunks of any size, keeps per-frame figures (a few numbers a frame) and copies of
+the few frames the skull test looks at, and gives the same
+:class:`~faceforge.animation.checks.FrameReport` as ``check_animation`` on all frames at
+once (the tests compare the two).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from faceforge.animation.checks import (FrameReport, _depth_below, fold_limit, folded_edges, inverted_faces,
+                                        points_inside)
+
+
+class StreamChecker:
+    """Checks of an animation of ``n_frames`` frames fed in order with :meth:`add`.
+
+    rest (n, 3), faces (m, 3) of the skin; ``sample``, ``tolerance``: as for
+    :func:`~faceforge.animation.checks.check_animation`.
+    """
+
+    def __init__(self, rest: np.ndarray, faces: np.ndarray, n_frames: int, sample: int = 8,
+                 tolerance: float | None = None):
+        self.rest = np.asarray(rest, dtype=float)
+        self.faces = np.asarray(faces, dtype=np.int64)
+        self.n_frames = int(n_frames)
+        self.tolerance = (1e-3 * float(np.linalg.norm(np.ptp(self.rest, axis=0)))
+                          if tolerance is None else tolerance)
+        self.sampled = set(np.linspace(0, self.n_frames - 1, min(sample, self.n_frames)).astype(int).tolist()) \
+            if self.n_frames else set()
+        self.kept: dict[int, np.ndarray] = {}
+        self.seen = 0
+        self.non_finite = 0
+        self.disp = np.zeros(self.n_frames)
+        self.worst = -1
+        self.worst_frame = None
+        self.inverted_total = 0
+        self.inverted_max = 0
+        self.inverted_any = np.zeros(len(self.faces), bool)
+        self.folded_any = None
+        self.folded_max = 0
+        self.n_edges = 0
+
+    def add(self, frames: np.ndarray) -> None:
+        """The next ``frames (k, n, 3)`` of the animation (copied where kept)."""
+        frames = np.asarray(frames, dtype=float)
+        k, start = len(frames), self.seen
+        if start + k > self.n_frames:
+            raise ValueError(f"more than the {self.n_frames} frames announced")
+        self.non_finite += int(np.count_nonzero(~np.isfinite(frames).all(axis=(1, 2))))
+        clean = np.nan_to_num(frames)
+        disp = np.linalg.norm(clean - self.rest, axis=2).max(axis=1)
+        self.disp[start:start + k] = disp
+        for j in range(k):
+            if self.worst < 0 or disp[j] > self.disp[self.worst]:   # np.argmax: the first of the largest
+                self.worst, self.worst_frame = start + j, frames[j].copy()
+            if start + j in self.sampled:
+                self.kept[start + j] = frames[j].copy()
+        flips = inverted_faces(self.rest, clean, self.faces)
+        inv = flips.sum(axis=1)
+        self.inverted_total += int(inv.sum())
+        self.inverted_max = max(self.inverted_max, int(inv.max()) if len(inv) else 0)
+        self.inverted_any |= flips.any(axis=0)
+        folds = folded_edges(self.rest, clean, self.faces)
+        self.n_edges = folds.shape[1]
+        self.folded_any = folds.any(axis=0) if self.folded_any is None else self.folded_any | folds.any(axis=0)
+        self.folded_max = max(self.folded_max, int(folds.sum(axis=1).max()) if len(folds) else 0)
+        self.seen += k
+
+    def report(self, skull=None) -> FrameReport:
+        """The :class:`FrameReport` of the frames added (all ``n_frames`` of them); ``skull``:
+        ``frame_index -> [(vertices, faces)]`` as for ``check_animation``."""
+        if self.seen != self.n_frames:
+            raise ValueError(f"{self.seen} frames added, {self.n_frames} announced")
+        inside_total = 0
+        if skull is not None and self.n_frames:
+            frames = dict(self.kept)
+            frames[self.worst] = self.worst_frame
+            base = None
+            for i in sorted(self.sampled | {self.worst}):
+                bodies = skull(i)
+                if base is None:
+                    base = np.zeros(len(self.rest), dtype=bool)
+                    for v, f in skull(-1):
+                        base |= points_inside(self.rest, v, f)
+                now = np.zeros(len(self.rest), dtype=bool)
+                for v, f in bodies:
+                    inside = points_inside(frames[i], v, f)
+                    if inside.any() and self.tolerance > 0:
+                        inside[inside] = _depth_below(frames[i][inside], v, f) > self.tolerance
+                    now |= inside
+                inside_total += int(np.count_nonzero(now & ~base))
+        if self.folded_any is None:   # no frame: the edge count from an empty pass
+            self.n_edges = folded_edges(self.rest, np.zeros((0,) + self.rest.shape), self.faces).shape[1]
+        return FrameReport(frames=self.n_frames, non_finite=self.non_finite,
+                           inverted_triangles=self.inverted_total, skin_inside_skull=inside_total,
+                           max_displacement=float(self.disp.max()) if self.n_frames else 0.0,
+                           worst_frame=self.worst,
+                           inverted_faces=int(self.inverted_any.sum()),
+                           inverted_max_per_frame=self.inverted_max,
+                           folded_edges=int(self.folded_any.sum()) if self.folded_any is not None else 0,
+                           folded_max_per_frame=self.folded_max,
+                           fold_limit=fold_limit(self.n_edges))

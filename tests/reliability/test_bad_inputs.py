@@ -1,0 +1,147 @@
+"""Bad input through the CLI on a good workdir (issue 28): every case exits 2 with one line
+``faceforge: error: <file>[:line]: <cause>``, and the workdir is byte-identical afterwards
+(stage files and the remembered inputs faceforge.yaml and config.yaml).
+
+Each case writes its bad file into the test's own folder (never into the workdir) and
+names what the message must contain: the file (or option) and a word of the cause. The
+table of cases and their messages is printed by ``python -m tests.reliability.table``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from .conftest import MEDIAPIPE, cli_run, snapshot
+
+GOOD_FAP = (ROOT_FAP := Path(__file__).resolve().parents[2] / "samples" / "fap" / "joy.fap")
+MASK_ONE = " ".join(["0"] * 2 + ["1"] + ["0"] * 65)      # FAP 3 (open_jaw) only
+
+
+def fap_text(rows, fps="25", header_frames=None) -> str:
+    """A FAP file giving open_jaw: ``rows`` [(frame number token, value token)]."""
+    n = len(rows) if header_frames is None else header_frames
+    body = "".join(f"{MASK_ONE}\n{frame} {value}\n" for frame, value in rows)
+    return f"2.1 t {fps} {n}\n" + body
+
+
+def landmarks_text(drop=(), extra="") -> str:
+    """The MediaPipe landmark file without the FDPs ``drop``, plus ``extra`` lines."""
+    lines = (MEDIAPIPE / "face_model_with_iris.fdp.yaml").read_text().splitlines()
+    keep = [ln for ln in lines if not any(ln.strip().startswith(f'"{d}":') for d in drop)]
+    return "\n".join(keep) + "\n" + extra
+
+
+BOMB = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{c}: &{c} [{', '.join(['*' + p] * 10)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+
+# id -> (files {name: text}, args (with {tmp}, {work} and {mesh} filled in), words the one line must hold)
+CASES = {
+    "mesh is a folder": ({}, ["fit", "{tmp}"], ["{tmp}", "is a directory"]),
+    "mesh missing": ({}, ["fit", "{tmp}/nope.obj"], ["nope.obj", "not found"]),
+    "mesh malformed": ({"bad.obj": "v 0 0 0\nv 1 x 0\nv 0 1 0\nf 1 2 3\n"}, ["fit", "{tmp}/bad.obj", "--landmarks",
+                                                                                  "{lm}"], ["bad.obj:2"]),
+    "set then a failing fit": ({"bad.obj": "v 0 0 0\nv 1 x 0\nv 0 1 0\nf 1 2 3\n"},
+                               ["--set", "solver.iterations=7", "fit", "{tmp}/bad.obj", "--landmarks", "{lm}"],
+                               ["bad.obj:2"]),
+    "fap missing": ({}, ["animate", "--fap", "{tmp}/nope.fap"], ["nope.fap", "does not exist"]),
+    "workdir is a file": ({"afile": "x"}, ["-w", "{tmp}/afile", "status"], ["afile", "is a file"]),
+    "config is a folder": ({}, ["--config", "{tmp}", "status"], ["{tmp}", "directory"]),
+    "config alias bomb": ({"bomb.yaml": BOMB}, ["--config", "{tmp}/bomb.yaml", "status"],
+                          ["bomb.yaml", "alias"]),
+    "config nested deep": ({"deep.yaml": "solver: " + "[" * 200 + "]" * 200 + "\n"},
+                           ["--config", "{tmp}/deep.yaml", "status"], ["deep.yaml", "nest"]),
+    "config 5000 digits": ({"digits.yaml": "solver:\n  iterations: " + "9" * 5000 + "\n"},
+                           ["--config", "{tmp}/digits.yaml", "status"], ["digits.yaml", "digits"]),
+    "config huge float": ({"huge.yaml": "solver:\n  damping: 1e400\n"}, ["--config", "{tmp}/huge.yaml", "status"],
+                          ["huge.yaml:2", "solver.damping"]),
+    "set iterations 1e9": ({}, ["--set", "solver.iterations=1e9", "animate", "--expression", "joy"],
+                           ["--set", "solver.iterations", "1000"]),
+    "set expression_seconds 1e9": ({}, ["--set", "animate.expression_seconds=1.0e+9", "animate",
+                                        "--expression", "joy"], ["--set", "animate.expression_seconds"]),
+    "set huge int": ({}, ["--set", "solver.iterations=" + "9" * 5000, "status"], ["--set", "solver.iterations"]),
+    "set deep nesting": ({}, ["--set", "solver.damping=" + "[" * 300 + "]" * 300, "status"],
+                         ["--set", "solver.damping"]),
+    "set alias bomb": ({}, ["--set", "solver.damping=" + BOMB.replace("\n", "; ").replace("; ", ", ", 0)[:0]
+                            + "{a: &a [1,1,1,1,1,1,1,1], b: &b [*a,*a,*a,*a,*a,*a,*a,*a], "
+                              "c: &c [*b,*b,*b,*b,*b,*b,*b,*b], d: &d [*c,*c,*c,*c,*c,*c,*c,*c], "
+                              "e: &e [*d,*d,*d,*d,*d,*d,*d,*d], f: &f [*e,*e,*e,*e,*e,*e,*e,*e], "
+                              "g: [*f,*f,*f,*f,*f,*f,*f,*f]}", "status"], ["--set", "solver.damping", "alias"]),
+    "fap frame beyond int64": ({"f.fap": fap_text([("99999999999999999999", "10")])},
+                               ["animate", "--fap", "{tmp}/f.fap"], ["f.fap:3", "frame number"]),
+    "fap frame 1e300": ({"f.fap": fap_text([("0", "1"), ("1e300", "10")])}, ["animate", "--fap", "{tmp}/f.fap"],
+                        ["f.fap:5", "frame number"]),
+    "fap frame differences overflow": ({"f.fap": fap_text([("-9223372036854775807", "1"),
+                                                           ("9223372036854775807", "2")])},
+                                       ["animate", "--fap", "{tmp}/f.fap"], ["f.fap:3", "frame number"]),
+    "fap fps 1e-300": ({"f.fap": fap_text([("0", "1")], fps="1e-300")}, ["animate", "--fap", "{tmp}/f.fap"],
+                       ["f.fap:1", "fps"]),
+    "fap fps 1e300": ({"f.fap": fap_text([("0", "1")], fps="1e300")}, ["animate", "--fap", "{tmp}/f.fap"],
+                      ["f.fap:1", "fps"]),
+    "fap truncated": ({"f.fap": fap_text([("0", "1")]) + MASK_ONE + "\n"}, ["animate", "--fap", "{tmp}/f.fap"],
+                      ["f.fap", "truncated"]),
+    "fap binary junk": ({"f.fap": "\x00\x01\x02 garbage\n"}, ["animate", "--fap", "{tmp}/f.fap"], ["f.fap"]),
+    "preview unwritable": ({}, ["animate", "--expression", "joy", "--preview", "{tmp}/no/such/p.png"],
+                           ["p.png", "does not exist"]),
+    "output unknown suffix": ({}, ["animate", "--expression", "joy", "-o", "{tmp}/a.xyz"], ["a.xyz"]),
+    # (a landmark file without pupils is no longer bad input: the landmarks stage detects the
+    # missing FDPs; the fit still refuses landmarks it cannot measure the FAP units on)
+    "landmarks huge int": ({"lm.yaml": 'landmarks:\n  "2.1": {vertex: 99999999999999999999}\n'},
+                           ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml", "vertex id"]),
+    "landmarks huge float": ({"lm.yaml": 'landmarks:\n  "2.1": {position: [1e400, 0, 0]}\n'},
+                             ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml", "finite"]),
+    "landmarks unhashable key": ({"lm.yaml": "landmarks:\n  ? [1, 2]\n  : {vertex: 1}\n"},
+                                 ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml:2", "key"]),
+    "landmarks nested deep": ({"lm.yaml": "landmarks: " + "[" * 3000 + "]" * 3000 + "\n"},
+                              ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml", "nest"]),
+    "landmarks 5000 digits": ({"lm.yaml": 'landmarks:\n  "2.1": {vertex: ' + "9" * 5000 + "}\n"},
+                              ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"], ["lm.yaml:2", "more than 100 digits"]),
+    "landmarks alias bomb": ({"lm.yaml": BOMB}, ["fit", "{mesh}", "--landmarks", "{tmp}/lm.yaml"],
+                             ["lm.yaml", "alias"]),
+    "landmarks json deep": ({"lm.json": "[" * 100000 + "]" * 100000},
+                            ["fit", "{mesh}", "--landmarks", "{tmp}/lm.json"], ["lm.json", "nested"]),
+    "landmarks csv bad number": ({"lm.csv": "fdp,vertex,x,y,z\n2.1,1,0,0,abc\n"},
+                                 ["fit", "{mesh}", "--landmarks", "{tmp}/lm.csv"], ["lm.csv:2", "2.1"]),
+    "landmarks unknown format": ({"lm.txt": "x"}, ["fit", "{mesh}", "--landmarks", "{tmp}/lm.txt"],
+                                 ["lm.txt", "format"]),
+    "unknown stage": ({}, ["run", "nosuchstage"], ["nosuchstage"]),
+    "unknown expression": ({}, ["animate", "--expression", "nosuch"], ["nosuch"]),
+    "two motion sources": ({}, ["animate", "--expression", "joy", "--fap", str(GOOD_FAP)], ["exactly one"]),
+    "unknown option": ({}, ["animate", "--no-such-option"], ["--no-such-option"]),
+    "set without value": ({}, ["--set", "solver.damping", "status"], ["--set", "key.path=value"]),
+    "set unknown key": ({}, ["--set", "solver.nosuch=1", "status"], ["--set", "solver.nosuch"]),
+}
+
+
+def _fill(text: str, tmp: Path, work: Path) -> str:
+    return (text.replace("{tmp}", str(tmp)).replace("{work}", str(work))
+            .replace("{mesh}", str(MEDIAPIPE / "face_model_with_iris.obj"))
+            .replace("{lm}", str(MEDIAPIPE / "face_model_with_iris.fdp.yaml")))
+
+
+def run_case(name: str, tmp: Path, work: Path):
+    """Run case ``name`` on ``work``; returns (result, expected words)."""
+    files, args, words = CASES[name]
+    for fname, text in files.items():
+        (tmp / fname).write_text(text, encoding="utf-8")
+    args = [_fill(a, tmp, work) for a in args]
+    if args[0] != "-w":
+        args = ["-w", str(work)] + args
+    return cli_run(*args), [_fill(w, tmp, work) for w in words]
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_bad_input_is_one_line_exit_2_and_the_workdir_is_untouched(name, fitted, tmp_path):
+    case_dir = tmp_path / "case"
+    case_dir.mkdir()
+    before = snapshot(fitted)
+    result, words = run_case(name, case_dir, fitted)
+    assert result.exit_code == 2, (result.exit_code, result.stderr, result.exception)
+    lines = result.stderr.splitlines()
+    errors = [ln for ln in lines if ln.startswith("faceforge: error: ")]
+    assert len(errors) == 1 and lines[-1] == errors[0], result.stderr
+    assert "Traceback" not in result.stderr and len(errors[0]) < 2100
+    for word in words:
+        assert word in errors[0], (word, errors[0])
+    assert snapshot(fitted) == before
