@@ -139,18 +139,29 @@ def write_glb(path: str | Path, frames: object, faces: object, fps: float, *, na
         ]
         mesh["weights"] = [0.0] * n_targets
         mesh["extras"] = {"targetNames": [f"frame_{k + 2:04d}" for k in range(n_targets)]}
-        times = (np.arange(n_frames) / float(fps)).astype(np.float32)
         weights = np.zeros((n_frames, n_targets), dtype=np.float32)
         weights[np.arange(1, n_frames), np.arange(n_targets)] = 1.0
-        time_acc = buf.accessor(buf.view(times), times, "SCALAR", _FLOAT, bounds=True)
-        weight_acc = buf.accessor(buf.view(weights.ravel()), weights.ravel(), "SCALAR", _FLOAT)
-        gltf["animations"] = [
-            {
-                "name": name,
-                "samplers": [{"input": time_acc, "output": weight_acc, "interpolation": "LINEAR"}],
-                "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
-            }
-        ]
+        gltf["animations"] = [weights_animation(buf, weights, fps, name)]
+    return write_glb_document(path, gltf, buf)
+
+
+def weights_animation(buf: "_Buffer", weights: np.ndarray, fps: float, name: str) -> dict:
+    """A glTF animation of node 0's morph weights: ``weights`` (F, k) float32, frame ``f`` at
+    ``f / fps`` seconds, linear between frames. Adds the time and weight accessors to ``buf``."""
+    times = (np.arange(len(weights)) / float(fps)).astype(np.float32)
+    time_acc = buf.accessor(buf.view(times), times, "SCALAR", _FLOAT, bounds=True)
+    flat = np.ascontiguousarray(weights, dtype=np.float32).ravel()
+    weight_acc = buf.accessor(buf.view(flat), flat, "SCALAR", _FLOAT)
+    return {
+        "name": name,
+        "samplers": [{"input": time_acc, "output": weight_acc, "interpolation": "LINEAR"}],
+        "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+    }
+
+
+def write_glb_document(path, gltf: dict, buf: "_Buffer") -> Path:
+    """Write ``gltf`` (the JSON document, without its buffer lists) and ``buf``'s binary chunk as
+    one GLB file, atomically (:func:`~faceforge.io.export_common.atomic_write_bytes`)."""
     gltf["buffers"] = [{"byteLength": buf.offset}]
     gltf["bufferViews"] = buf.views
     gltf["accessors"] = buf.accessors

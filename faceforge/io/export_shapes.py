@@ -17,15 +17,13 @@ shape (``offsets`` and ``pointIndices`` of the vertices it moves) and, with weig
 
 from __future__ import annotations
 
-import json
-import struct
 from pathlib import Path
 
 import numpy as np
 
 from .export_common import ExportError, atomic_write_bytes, faces_to_csr, triangulate
-from .export_gltf import _ARRAY_BUFFER, _CHUNK_BIN, _CHUNK_JSON, _ELEMENT_ARRAY_BUFFER, _FLOAT, _GLB_MAGIC, _UINT
-from .export_gltf import _Buffer, _exact_deltas, _read_accessor, parse_glb
+from .export_gltf import _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER, _FLOAT, _UINT
+from .export_gltf import _Buffer, _exact_deltas, _read_accessor, parse_glb, weights_animation, write_glb_document
 
 
 def _vertex_normals(v: np.ndarray, tri: np.ndarray) -> np.ndarray:
@@ -95,20 +93,8 @@ def write_shapes_glb(path, base, shapes, names, faces, *, uvs=None, weights=None
         if len(not_made):
             mesh["extras"]["notMade"] = [str(n) for n in not_made]
         if weights is not None:
-            times = (np.arange(len(weights)) / float(fps)).astype(np.float32)
-            t_acc = buf.accessor(buf.view(times), times, "SCALAR", _FLOAT, bounds=True)
-            w_acc = buf.accessor(buf.view(weights.ravel()), weights.ravel(), "SCALAR", _FLOAT)
-            gltf["animations"] = [{"name": "weights", "samplers": [{"input": t_acc, "output": w_acc,
-                                                                   "interpolation": "LINEAR"}],
-                                   "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}]
-    gltf["buffers"] = [{"byteLength": buf.offset}]
-    gltf["bufferViews"] = buf.views
-    gltf["accessors"] = buf.accessors
-    text = json.dumps(gltf, separators=(",", ":")).encode("utf-8")
-    text += b" " * ((-len(text)) % 4)
-    total = 12 + 8 + len(text) + 8 + buf.offset
-    head = struct.pack("<III", _GLB_MAGIC, 2, total) + struct.pack("<II", len(text), _CHUNK_JSON)
-    return atomic_write_bytes(path, [head, text, struct.pack("<II", buf.offset, _CHUNK_BIN), *buf.blobs])
+            gltf["animations"] = [weights_animation(buf, weights, fps, "weights")]
+    return write_glb_document(path, gltf, buf)
 
 
 def read_shapes_glb(path) -> dict:
