@@ -59,3 +59,12 @@ def test_the_fap_track_is_an_input_too(invoke, remembered, tmp_path):
     result = invoke("--workdir", work, "animate", "--fap", fap, "-o", fap)
     assert result.exit_code == 2 and "is your FAP track" in result.stderr
     assert fap.read_bytes() == FAP.read_bytes()
+
+
+def test_bake_never_writes_over_the_mesh(invoke, remembered):
+    work, mesh, landmarks = remembered
+    before = _digest(mesh)
+    result = invoke("--workdir", work, "bake", "-o", mesh)
+    assert result.exit_code == 2 and "is your mesh" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert _digest(mesh) == before and not (work / "bake").exists()

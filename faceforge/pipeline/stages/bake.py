@@ -160,6 +160,12 @@ def bake_command(app, output, shapes, mapping, force):
 
     if output and Path(output).suffix.lower() not in (".glb", ".usda", ".usd", ".npz"):
         raise StageError("bake writes .glb, .usda or .npz", output)
+    if output:
+        from faceforge.io.export import protect_inputs
+
+        params = app.workspace.load_params()
+        protect_inputs(output, {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"),
+                                "ARKit mapping": mapping})
     if shapes in ("arkit", "all"):
         from faceforge.blendshapes.arkit import default_mapping_path, load_arkit_mapping
 
