@@ -104,15 +104,15 @@ def load_arkit_mapping(path: str | Path, names=ARKIT_NAMES) -> dict:
     """Read a mapping template -> ``{shape name: ShapeSpec}`` in ``names`` order; every name in
     ``names`` must have an entry (made, mirrored or ``not_made``), an unknown name is an error.
     Errors are :class:`faceforge.exceptions.TemplateError` naming the file and the entry."""
-    import yaml
-
     from faceforge.exceptions import TemplateError
+    from faceforge.io.safe_yaml import load_user_yaml
 
     path = Path(path)
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
         raise TemplateError(f"cannot read the ARKit mapping: {exc}".splitlines()[0], path) from None
+    data = load_user_yaml(text, str(path), TemplateError)   # a user's --mapping: limits, one-line errors
     shapes = (data or {}).get("shapes") if isinstance(data, dict) else None
     if not isinstance(shapes, dict):
         raise _err(path, "expected a 'shapes:' table")

@@ -229,13 +229,10 @@ def _yaml_lines(text: str, source: str) -> tuple[Any, dict]:
     """Parsed YAML and the 1-based line of every node, keyed by its path tuple (keys and items)."""
     import yaml
 
-    try:
-        root = yaml.compose(text)
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        raise StageError(f"not valid YAML: {getattr(exc, 'problem', None) or exc}", source,
-                         None if mark is None else mark.line + 1) from None
+    from faceforge.io.safe_yaml import load_user_yaml
+
+    data = load_user_yaml(text, source, StageError)   # limits, YAML 1.2 floats, one-line errors
+    root = yaml.compose(text)                          # parses: the text passed the same parser
     lines: dict = {}
 
     def walk(node, path):

@@ -135,3 +135,20 @@ def test_a_manifest_head_without_a_name_stays_inside_out(tmp_path, heads_dir, sh
         """)
     (job,) = batch.load_manifest(path, tmp_path / "runs", batch.SharedOptions())
     assert job.workdir == str(tmp_path / "runs" / "head")
+
+
+def test_a_manifest_reads_yaml_12_numbers_and_refuses_an_alias_bomb(tmp_path, heads_dir, short_fap):
+    """The manifest is user YAML like a config file: ``5e-2`` is a number and a bomb is one line."""
+    path = _manifest(tmp_path, f"""\
+        fap: {short_fap}
+        set: {{solver.damping: 5e-2}}
+        heads:
+          - mesh: {heads_dir / 'anna.obj'}
+        """)
+    (job,) = batch.load_manifest(path, tmp_path / "out", batch.SharedOptions())
+    assert job.overrides["solver.damping"] == 0.05
+    bomb = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+        f"{c}: &{c} [{', '.join(['*' + p] * 10)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
+    path = _manifest(tmp_path, bomb + "heads: []\n")
+    with pytest.raises(StageError, match="alias bomb"):
+        batch.load_manifest(path, tmp_path / "out", batch.SharedOptions())
