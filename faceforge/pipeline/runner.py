@@ -117,6 +117,8 @@ class StageStatus:
     key: str | None
     reasons: list[str] = field(default_factory=list)
     ran: bool = False
+    #: the required inputs that are not there (bare names, e.g. ``("mesh",)``)
+    missing: tuple = ()
     seconds: float = 0.0
 
     @property
@@ -181,7 +183,7 @@ def plan(workspace: Workspace, config, params: Mapping,
                 absent = [o for o in stage.outputs if not (workspace.stage_dir(stage.name) / o).exists()]
                 if absent:
                     reasons = [f"output missing: {', '.join(absent)}"]
-        statuses.append(StageStatus(stage, record, key, reasons))
+        statuses.append(StageStatus(stage, record, key, reasons, missing=tuple(m.split(" (")[0] for m in missing)))
     if targets is None:
         statuses += [StageStatus(STAGES[n], None, None, [r]) for n, r in broken_stages().items()]
     return statuses
@@ -250,9 +252,15 @@ def run(workspace: Workspace, config, params: Mapping, targets: Iterable[str], f
         for status in statuses:
             name = status.stage.name
             if status.reasons and status.reasons[0].startswith("needs input"):
-                hint = "" if name in targets else \
-                    f"; run `faceforge {name if name in COMMANDS else 'run ' + name}` first"
-                raise StageError(f"stage {name} {status.reasons[0]}{hint}", workspace.root)
+                # said as the last stage of the plan that reads the same inputs (the mesh is read
+                # by the landmarks stage, then by fit: `bind` in a new workdir says to run fit);
+                # no hint when that is a stage asked for (the input is the user's own argument)
+                readers = [st.stage.name for st in statuses
+                           if set(status.missing) <= {n.rstrip("?") for n in st.stage.inputs}]
+                owner = readers[-1] if readers else name
+                hint = "" if owner in targets else \
+                    f"; run `faceforge {owner if owner in COMMANDS else 'run ' + owner}` first"
+                raise StageError(f"stage {owner} {status.reasons[0]}{hint}", workspace.root)
             if not status.reasons:
                 log(f"{name}: up to date")
                 continue

@@ -107,6 +107,20 @@ def test_status_reasons_without_running(chain):
     assert [s.reasons for s in statuses] == [[], [], ["output missing: c.txt"]]
 
 
+def test_a_missing_input_is_said_as_the_last_stage_that_reads_it(stage_registry, tmp_path):
+    """The mesh is read by the landmarks stage and then by fit: ``fit MISSING`` names fit with
+    no hint (it is the user's own argument), ``bind`` in a new workdir says to run fit."""
+    reg = stage_registry.register_stage
+    reg(Stage("t_find", lambda ctx: None, inputs=("src",), outputs=()))
+    reg(Stage("t_fit", lambda ctx: None, deps=("t_find",), inputs=("src",), outputs=()))
+    reg(Stage("t_bind", lambda ctx: None, deps=("t_fit",), outputs=()))
+    ws = runner.Workspace(tmp_path / "work")
+    with pytest.raises(StageError, match=r"stage t_fit needs input src \(/nonexistent/x not found\)$"):
+        runner.run(ws, load_config(), {"src": "/nonexistent/x"}, ["t_fit"], log=lambda line: None)
+    with pytest.raises(StageError, match=r"stage t_fit needs input src; run `faceforge run t_fit` first$"):
+        runner.run(ws, load_config(), {}, ["t_bind"], log=lambda line: None)
+
+
 def test_force_reruns_the_target_only(chain):
     calls, ws, params = chain
     run_chain(ws, params)
