@@ -257,14 +257,17 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
 
     The muscle map's specs (``template.muscle_map`` on ``template.skull``) get the fitted
     points the fit stage stored (``muscle_map_points``, in ``MuscleSpec.points()`` order) and
-    are built on the fitted skull (Eq. 5 thickness from its diagonal), deepest layer first.
-    Without muscles in fit.npz the system is the skull alone.
+    are built on the fitted skull (Eq. 5 thickness from its diagonal), deepest layer first;
+    on a symmetric rig (fit.npz has ``mirror_point`` / ``mirror_normal``) each right muscle is
+    built as the mirror image of its left twin. Without muscles in fit.npz the system is the
+    skull alone.
     """
     from faceforge.anatomy.layers import MusculoskeletalSystem
     from faceforge.anatomy.muscles.muscle_map import load_muscle_map
     from faceforge.anatomy.skull import load_skull
     from faceforge.exceptions import StageError, TemplateError
     from faceforge.anatomy.muscles.build import build_muscles_on
+    from faceforge.geometry.mirror import Mirror
     from faceforge.io.templates import resolve_template_path
 
     if "muscle_map_names" not in fit or not len(fit["muscle_map_names"]):
@@ -288,7 +291,7 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
     try:
         muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness,
                                    float(config.get("muscle.sphincter.carry_inner")),
-                                   float(config.get("muscle.sphincter.protrusion")))
+                                   float(config.get("muscle.sphincter.protrusion")), mirror=Mirror.from_arrays(fit))
     except TemplateError as exc:
         raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
                          "another muscle map)") from None

@@ -44,7 +44,8 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)
     skin = SkinSurface.build(checked.vertices, checked.faces)
-    mirror = _skin_mirror(lm, checked.vertices, float(fit_config.get("symmetric_tolerance", 0.0)), log)
+    mirror = _skin_mirror(lm, checked.vertices, checked.faces, float(fit_config.get("symmetric_tolerance", 0.0)),
+                          log)
     try:
         result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles,
                           mirror=mirror)
@@ -52,6 +53,10 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
         from faceforge.exceptions import LandmarkError
 
         raise LandmarkError(f"cannot fit the template: {exc}", lm_path) from None
+    if result.mirror is not None:   # bind sees the muscles the rig builds (fit.symmetry)
+        from faceforge.fit.symmetry import rebuild_muscles
+
+        result = rebuild_muscles(result, template.specs)
     t_fit = time.perf_counter() - t
     t = time.perf_counter()
     mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
@@ -65,17 +70,19 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
                             "orientation": orientation, "raw_landmarks": raw}
 
 
-def _skin_mirror(lm, vertices, tolerance: float, log):
-    """The skin's mirror (:class:`faceforge.fit.symmetry.Mirror`) when it is symmetric: its
-    vertices' mirror images lie within ``tolerance`` ES0 of it on average; else None (also
+def _skin_mirror(lm, vertices, faces, tolerance: float, log):
+    """The skin's mirror (:class:`faceforge.fit.symmetry.Mirror`) when it is symmetric: every
+    used vertex's mirror image lies within ``tolerance`` ES0 of a vertex; else None (also
     for ``tolerance`` 0: never)."""
+    import numpy as np
+
     from faceforge.fit.symmetry import mirror_plane, skin_asymmetry
 
     plane = mirror_plane(dict(zip(lm.ids, lm.positions))) if tolerance > 0 else None
     if plane is None:
         return None
     mirror, es0 = plane
-    off = skin_asymmetry(vertices, mirror) / es0
+    off = skin_asymmetry(np.asarray(vertices)[np.unique(faces)], mirror) / es0
     if off > tolerance:
         log(f"the skin is asymmetric ({off:.3f} ES0 from its mirror image): the rig is fitted as it is")
         return None

@@ -163,6 +163,7 @@ class FitResult:
     mandible_faces: np.ndarray = None
     tissue_targets: np.ndarray = None   # (n, 3) targets before the refit (skin - depth * normal)
     enhancement_targets: np.ndarray = None  # (e, 3) where the enhancement landmarks went
+    mirror: object = None               # faceforge.geometry.mirror.Mirror of a symmetric rig, else None
 
 
 def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,

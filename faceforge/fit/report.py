@@ -163,4 +163,6 @@ def npz_arrays(result, skin_vertices, skin_faces, user_to_internal, skin_landmar
     out["muscle_map_names"] = np.array([n for n, _ in mp], dtype=str)
     out["muscle_map_start"] = np.cumsum([0] + [len(p) for _, p in mp]).astype(np.int64)
     out["muscle_map_points"] = np.vstack([p for _, p in mp]) if mp else np.zeros((0, 3))
+    if getattr(result, "mirror", None) is not None:   # a symmetric rig: bind and animate keep it so
+        out.update(result.mirror.as_arrays())
     return out

@@ -24,30 +24,15 @@ from dataclasses import replace
 
 import numpy as np
 
+from faceforge.geometry.mirror import Mirror
+
+__all__ = ["Mirror", "mirror_plane", "skin_asymmetry", "symmetrize_bones", "symmetrize_fit"]
+
 #: left/right FDP pairs that span the midsagittal plane (ISO/IEC 14496-2 Annex C)
 FDP_PAIRS = (("3.5", "3.6"), ("3.7", "3.12"), ("3.11", "3.8"), ("4.1", "4.2"), ("4.3", "4.4"),
              ("4.5", "4.6"), ("8.3", "8.4"), ("2.4", "2.5"), ("9.1", "9.2"), ("9.5", "9.4"),
              ("5.1", "5.2"), ("5.3", "5.4"), ("2.13", "2.14"), ("10.9", "10.10"), ("8.5", "8.6"),
              ("8.7", "8.8"), ("2.6", "2.7"), ("2.8", "2.9"))
-
-
-class Mirror:
-    """Reflection about the plane through ``point (3,)`` with unit ``normal (3,)``."""
-
-    def __init__(self, point, normal):
-        n = np.asarray(normal, dtype=np.float64)
-        self.normal = n / np.linalg.norm(n)
-        self.point = np.asarray(point, dtype=np.float64)
-
-    def __call__(self, p: np.ndarray) -> np.ndarray:
-        """Points (k, 3) reflected."""
-        p = np.asarray(p, dtype=np.float64)
-        return p - 2.0 * ((p - self.point) @ self.normal)[..., None] * self.normal
-
-    def direction(self, d: np.ndarray) -> np.ndarray:
-        """Directions (..., 3) reflected (no translation)."""
-        d = np.asarray(d, dtype=np.float64)
-        return d - 2.0 * (d @ self.normal)[..., None] * self.normal
 
 
 def mirror_plane(landmarks: dict) -> tuple[Mirror, float] | None:
@@ -67,11 +52,12 @@ def mirror_plane(landmarks: dict) -> tuple[Mirror, float] | None:
 
 
 def skin_asymmetry(vertices: np.ndarray, mirror: Mirror) -> float:
-    """Mean distance (mesh units) from each mirrored vertex (n, 3) to the nearest vertex."""
+    """Largest distance (mesh units) from a mirrored vertex (n, 3) to the nearest vertex: 0 when
+    every vertex has a mirror partner."""
     from scipy.spatial import cKDTree
 
     v = np.asarray(vertices, dtype=np.float64)
-    return float(cKDTree(v).query(mirror(v))[0].mean())
+    return float(cKDTree(v).query(mirror(v))[0].max())
 
 
 def _points_halfway(p: np.ndarray, mirror: Mirror, rounds: int = 2) -> np.ndarray:
@@ -115,7 +101,7 @@ def _surface_halfway(v: np.ndarray, f: np.ndarray, mirror: Mirror, rounds: int =
 
 def _twins(named: dict, mirror: Mirror) -> dict:
     """{name: (k, 3)} with ``*_L`` / ``*_R`` twins of equal shape averaged through the mirror
-    (right = mirror of left), the rest moved halfway to their mirror images."""
+    (right = mirror of left, point by point), the rest moved halfway to their mirror images."""
     out = {}
     for name, p in named.items():
         p = np.asarray(p, dtype=np.float64)
@@ -147,7 +133,11 @@ def symmetrize_bones(skull: np.ndarray, n_cranium: int, cranium_faces, mandible_
     cranium = _surface_halfway(skull[:n_cranium], cranium_faces, mirror)
     mandible = _surface_halfway(skull[n_cranium:], mandible_faces, mirror)
     built = _twins({n: v for n, v, _ in muscles}, mirror)
-    return np.vstack([cranium, mandible]), [(n, built[n], f) for n, _, f in muscles]
+    faces = {n: f for n, _, f in muscles}
+    for n in faces:   # a right twin's faces: the left's, turned (a reflection turns the surface inside out)
+        if n.endswith("_R") and n[:-2] + "_L" in faces and np.shape(faces[n]) == np.shape(faces[n[:-2] + "_L"]):
+            faces[n] = np.ascontiguousarray(np.asarray(faces[n[:-2] + "_L"])[:, ::-1])
+    return np.vstack([cranium, mandible]), [(n, built[n], faces[n]) for n, _, _ in muscles]
 
 
 def symmetrize_fit(result, mirror: Mirror):
@@ -156,4 +146,28 @@ def symmetrize_fit(result, mirror: Mirror):
     FitResult, ``result`` is not changed."""
     jaw = {name: _axis(p, d, mirror, across=(name == "pitch")) for name, (p, d) in result.jaw_axes.items()}
     info = dict(result.info, symmetric=True)
-    return replace(result, jaw_axes=jaw, muscle_points=_twins(result.muscle_points, mirror), info=info)
+    return replace(result, jaw_axes=jaw, muscle_points=_twins(result.muscle_points, mirror), info=info,
+                   mirror=mirror)
+
+
+def rebuild_muscles(result, specs):
+    """The FitResult ``result`` of a symmetric rig with its muscles rebuilt as the animate stage
+    builds them (:func:`faceforge.anatomy.muscles.build.build_muscles_on` on the fitted bone
+    from the fitted muscle map, each right muscle the mirror image of its left twin, the
+    orbicularis oris' right half that of its left half): bind then binds the skin to the very
+    faces the rig moves, and a right skin vertex can be bound as the mirror image of its
+    partner (:func:`faceforge.skin.mirror.mirror_binding`). ``specs``: the template's
+    [MuscleSpec]. A map whose muscles cannot be built on this bone keeps the morphed ones."""
+    from faceforge.anatomy.muscles.build import build_muscles_on
+    from faceforge.exceptions import TemplateError
+
+    cranium = (result.cranium, result.cranium_faces)
+    mandible = (result.mandible, result.mandible_faces)
+    diagonal = float(np.linalg.norm(np.ptp(np.vstack([result.cranium, result.mandible]), axis=0)))
+    fitted = [s.with_points(result.muscle_points[s.name]) for s in specs if s.name in result.muscle_points]
+    try:
+        built = {m.name: m for m in build_muscles_on(fitted, cranium, mandible, diagonal, mirror=result.mirror)}
+    except TemplateError:
+        return result
+    muscles = [(n, built[n].rest_positions, built[n].faces) if n in built else (n, v, f) for n, v, f in result.muscles]
+    return replace(result, muscles=muscles, info=dict(result.info, muscles_rebuilt=True))

@@ -73,7 +73,7 @@ def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
-              modiolus_radius: float = MODIOLUS_RADIUS) -> BoundSkin:
+              modiolus_radius: float = MODIOLUS_RADIUS, mirror=None) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -101,6 +101,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     modiolus_radius : float
         ``bind.modiolus_radius``: the skin within this fraction of MW0 of a mouth corner
         binds to the orbicularis oris (:func:`modiolus_mask`; 0: by its rays, as the paper).
+    mirror : faceforge.geometry.mirror.Mirror or None
+        A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
+        image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
 
     Inner lips (:func:`lip_band`, :data:`LIP_BAND_MM`): like all the face's front skin,
     inner lip skin whose rays miss gets a closest-point anchor, across the oral vestibule
@@ -156,6 +159,11 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
                         modiolus=corner)
+    mirrored = 0
+    if mirror is not None:
+        from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
+
+        binding, mirrored = mirror_binding(binding, cut.vertices, bodies, mirror, MIRROR_TOLERANCE * diagonal)
 
     sources = np.flatnonzero(np.isin(binding.status, (MUSCLE, MANDIBLE)))
     back = int(_nearest_vertex(cut.vertices, pts["11.6"][None])[0]) if "11.6" in pts else None
@@ -164,6 +172,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     report = bind_report(binding, {"face_front": front, "face_front_outside_lips": front & ~lips,
                                    "lip_band": lips, "back_and_neck": ~front})
     report["region_rules"] = rule
+    report["mirrored_vertices"] = mirrored
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
     kind = binding.status[corner]   # the kind of each corner vertex's (first) anchor

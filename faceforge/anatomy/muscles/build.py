@@ -16,7 +16,7 @@ def eq5_thickness(fraction: float, skull_diagonal: float) -> float:
 
 
 def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
-                     carry_inner: float = 0.0, protrusion: float = 0.0) -> list:
+                     carry_inner: float = 0.0, protrusion: float = 0.0, mirror=None) -> list:
     """Build every muscle of ``specs`` on the given skull, deepest layer first.
 
     Each muscle's action lines are projected (outermost surface) onto the concatenation of
@@ -25,7 +25,10 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     {...}}`` of the config (empty: geometry only); ``carry_inner``: the sphincter's
     ``carry_inner`` of :func:`build_sphincter_muscle` (``muscle.sphincter.carry_inner``, on
     the skull's faces; it does not change the rest geometry); ``protrusion``: the sphincter's
-    ``protrusion`` (``muscle.sphincter.protrusion``). Returns ``[Muscle]`` in build order.
+    ``protrusion`` (``muscle.sphincter.protrusion``); ``mirror``
+    (:class:`faceforge.geometry.mirror.Mirror`, a symmetric head): a muscle that is
+    ``mirror_of`` a muscle built before it is built as that muscle's mirror image
+    (:func:`faceforge.anatomy.muscles.mirror.mirror_muscle`). Returns ``[Muscle]`` in build order.
     Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
     """
     from faceforge.anatomy.muscles.action_line import ActionLine
@@ -36,7 +39,7 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
 
     stiffness = stiffness or {}
     bodies = {"cranium": cranium, "mandible": mandible}
-    built = []
+    built, by_name, exact = [], {}, set()
     for spec in sorted(specs, key=lambda s: s.layer):
         parts = []
         for name in expand_lies_on(spec.lies_on):
@@ -54,7 +57,15 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
             return ActionLine.from_points(points, v, f, closed=closed, project="outermost")
 
         try:
-            if spec.type == "linear":
+            twin = by_name.get(spec.mirror_of) if mirror is not None and spec.mirror_of else None
+            if twin is not None:
+                from faceforge.anatomy.muscles.mirror import mirror_muscle
+
+                left_parts = [(n, bodies[n]) for n in expand_lies_on(twin.lies_on)]
+                right_parts = list(zip(expand_lies_on(spec.lies_on), parts))
+                m = mirror_muscle(twin, spec.name, tuple(spec.lies_on), left_parts, right_parts, mirror, exact)
+                exact.update((twin.name, spec.name))
+            elif spec.type == "linear":
                 m = build_linear_muscle(spec.name, line(lines["A3"]), line(lines["A1"]), line(lines["A0"]),
                                         line(lines["A2"]), v, f, spec.h, spec.w, t,
                                         stiffness.get("linear", {}), **kw)
@@ -62,11 +73,18 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                 inner, outer = align_loops(spec.inner, spec.outer)
                 bone = np.concatenate([np.full(len(p[1]), n in ("cranium", "mandible"))
                                        for n, p in zip(expand_lies_on(spec.lies_on), parts)])
-                m = build_sphincter_muscle(spec.name, line(inner, True), line(outer, True), v, f, spec.h,
+                loops = [line(inner, True), line(outer, True)]
+                if mirror is not None:   # its right half the mirror image of its left half
+                    from faceforge.anatomy.muscles.mirror import symmetric_loop
+
+                    named = list(zip(expand_lies_on(spec.lies_on), parts))
+                    loops = [symmetric_loop(x, named, mirror, exact) for x in loops]
+                m = build_sphincter_muscle(spec.name, loops[0], loops[1], v, f, spec.h,
                                            spec.w, t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
                                            carry_faces=bone, protrusion=protrusion, **kw)
         except ValueError as exc:   # e.g. an action line collapsing to one point on these surfaces
             raise TemplateError(f"muscle {spec.name!r} cannot be built on this skull: {exc}") from exc
         bodies[spec.name] = (m.rest_positions, m.faces)
+        by_name[spec.name] = m
         built.append(m)
     return built

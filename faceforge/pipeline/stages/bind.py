@@ -77,8 +77,11 @@ def head_from_fit_arrays(d: dict) -> dict:
             muscles.append((str(name), int(layers[i]),
                             d["muscle_vertices"][vs[i]:vs[i + 1]], d["muscle_faces"][fs[i]:fs[i + 1]]))
     landmarks = {str(k): p for k, p in zip(d["skin_landmark_ids"], d["skin_landmark_positions"])}
+    from faceforge.geometry.mirror import Mirror
+
     return {"vertices": d["skin_vertices"], "faces": d["skin_faces"], "landmarks": landmarks,
-            "cranium": part("cranium"), "mandible": part("mandible"), "muscles": muscles}
+            "cranium": part("cranium"), "mandible": part("mandible"), "muscles": muscles,
+            "mirror": Mirror.from_arrays(d)}
 
 
 def run(ctx):
@@ -100,7 +103,7 @@ def run(ctx):
                       head["mandible"], head["muscles"],
                       float(ctx.config.get("bind.max_ray_distance")), insertions=insertions,
                       lips_to_ring=bool(ctx.config.get("bind.lips_to_ring")),
-                      modiolus_radius=float(ctx.config.get("bind.modiolus_radius")))
+                      modiolus_radius=float(ctx.config.get("bind.modiolus_radius")), mirror=head["mirror"])
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
     save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())

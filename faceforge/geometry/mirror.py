@@ -1,0 +1,59 @@
+"""Reflection about a plane (a head's midsagittal plane) and a mesh's vertex mirror map."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class Mirror:
+    """Reflection about the plane through ``point (3,)`` with unit ``normal (3,)`` (mesh units)."""
+
+    def __init__(self, point, normal):
+        n = np.asarray(normal, dtype=np.float64)
+        self.normal = n / np.linalg.norm(n)
+        self.point = np.asarray(point, dtype=np.float64)
+
+    def __call__(self, p: np.ndarray) -> np.ndarray:
+        """Points (..., 3) reflected."""
+        p = np.asarray(p, dtype=np.float64)
+        return p - 2.0 * ((p - self.point) @ self.normal)[..., None] * self.normal
+
+    def direction(self, d: np.ndarray) -> np.ndarray:
+        """Directions (..., 3) reflected (no translation)."""
+        d = np.asarray(d, dtype=np.float64)
+        return d - 2.0 * (d @ self.normal)[..., None] * self.normal
+
+    def side(self, p: np.ndarray) -> np.ndarray:
+        """Signed distance (...,) of points (..., 3) from the plane (positive: the normal's side)."""
+        return (np.asarray(p, dtype=np.float64) - self.point) @ self.normal
+
+    def onto_plane(self, p: np.ndarray) -> np.ndarray:
+        """Points (..., 3) moved onto the plane (closest point)."""
+        p = np.asarray(p, dtype=np.float64)
+        return p - self.side(p)[..., None] * self.normal
+
+    def as_arrays(self) -> dict:
+        """``{"mirror_point": (3,), "mirror_normal": (3,)}`` for a stage file."""
+        return {"mirror_point": self.point.copy(), "mirror_normal": self.normal.copy()}
+
+    @classmethod
+    def from_arrays(cls, arrays) -> "Mirror | None":
+        """Inverse of :meth:`as_arrays`; None when ``arrays`` has no mirror (an asymmetric head)."""
+        if "mirror_normal" not in arrays or not np.all(np.isfinite(arrays["mirror_normal"])):
+            return None
+        return cls(arrays["mirror_point"], arrays["mirror_normal"])
+
+
+def vertex_mirror_map(vertices: np.ndarray, mirror: Mirror, tolerance: float) -> np.ndarray | None:
+    """``partner (n,)``: the vertex at each vertex's mirror image (itself on the plane), or None
+    when some vertex's mirror image is farther than ``tolerance`` (mesh units) from every vertex
+    or the pairing is not one-to-one (the mesh is not a mirror image of itself)."""
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=np.float64)
+    if not len(v):
+        return None
+    d, j = cKDTree(v).query(mirror(v))
+    if d.max() > tolerance or np.any(j[j] != np.arange(len(v))):
+        return None
+    return j.astype(np.int64)
