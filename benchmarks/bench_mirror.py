@@ -138,13 +138,13 @@ def fap_rows(workdir: Path, head, mapping, partner, plane, mm: float, fast: bool
     return out, {**{k: round(v, 3) for k, v in up.items()}, "differs": round((hi - lo) / max(hi, 1e-30), 4)}
 
 
-def head_figures(workdir: Path, fast: bool) -> dict:
-    """All figures of one head."""
+def head_figures(workdir: Path, fast: bool, sets=()) -> dict:
+    """All figures of one head (``sets``: config overrides, KEY=VALUE, in-process only)."""
     from faceforge.anatomy import tissue as fit_tissue
     from faceforge.fit.symmetry import mirror_plane
 
     t0 = time.perf_counter()
-    head, mapping, _ = em.load_head(workdir)
+    head, mapping, _ = em.load_head(workdir, sets=sets)
     mm = fit_tissue.units_per_mm(head.landmarks)
     plane, es0 = mirror_plane(head.landmarks)
     partner, worst = vertex_mirror(head.rest, plane, es0)
@@ -162,10 +162,11 @@ def main(argv=None) -> None:
     ap.add_argument("workdir", type=Path, nargs="+")
     ap.add_argument("--fast", action="store_true", help="settle the FAPs and joy in-process (no export)")
     ap.add_argument("--out", default="mirror", help="results name (benchmarks/results/NAME.json)")
+    ap.add_argument("--set", action="append", default=[], help="KEY=VALUE config override (with --fast)")
     args = ap.parse_args(argv)
     results = {}
     for d in args.workdir:
-        r = results[d.name] = head_figures(d, args.fast)
+        r = results[d.name] = head_figures(d, args.fast, args.set)
         print(f"{d.name} ({r['frames']}, {Path(r['mapping']).name}): skin mirror worst {r['skin_mirror_worst_es0']} ES0")
         print("  muscles", " ".join(f"{m['name']} {m['differs']:.3f}" for m in r["muscles"]))
         print("  faps   ", " ".join(f"{m['name'].split()[0]} {m['differs']:.3f}" for m in r["faps"]))

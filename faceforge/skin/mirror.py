@@ -10,7 +10,8 @@ the right of the plane by the mirror images of its partner's: on a muscle's mirr
 :func:`faceforge.fit.symmetry.symmetrize_bones`) the same face with the barycentric coordinates
 reversed (the twin's faces are the left's, turned); on a body that is its own mirror image (the
 skull, the orbicularis oris, the mentalis) the closest point of that body to the mirrored anchor.
-Vertices on the plane keep their own anchors.
+Vertices on the plane keep their own anchors; one bound to a muscle with a twin gets the mirror
+image of that anchor on the twin as well (it then follows both, as a midline vertex should).
 """
 
 from __future__ import annotations
@@ -78,6 +79,16 @@ def mirror_binding(binding, vertices: np.ndarray, bodies, mirror, tolerance: flo
             sp = project_to_surface(mirror(binding.points[src[o]]), bv, bf)
             face[o], bary[o] = sp.face_ids, sp.bary
             points[o] = sp.positions(bv, bf)
+    # a vertex on the plane bound to one of two twins follows that twin only: it gets the
+    # mirror image of that anchor on the other twin as well, and follows both
+    mid = np.flatnonzero(~right[binding.vertex_ids] & (np.abs(side[binding.vertex_ids]) <= tolerance)
+                         & exact[binding.body])
+    new_vid = np.concatenate([new_vid, binding.vertex_ids[mid]])
+    body = np.concatenate([body, twin[binding.body[mid]]])
+    face = np.concatenate([face, binding.face_ids[mid]])
+    bary = np.concatenate([bary, binding.bary[mid][:, ::-1]])
+    points = np.concatenate([points, mirror(binding.points[mid])])
+    src = np.concatenate([src, mid])
     cat = {k: np.concatenate([a[keep], b]) for k, (a, b) in {
         "vertex_ids": (binding.vertex_ids, new_vid), "body": (binding.body, body),
         "face_ids": (binding.face_ids, face), "bary": (binding.bary, bary),

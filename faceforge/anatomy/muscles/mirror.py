@@ -96,39 +96,58 @@ def mirror_muscle(left, name: str, lies_on: tuple, left_parts, right_parts, mirr
 
 def symmetric_loop(line, parts, mirror, exact: set):
     """A closed action line (a sphincter's loop) of a muscle that is its own mirror image, made
-    symmetric: its run of surface points on the left of the plane (``mirror.normal``'s side) is
-    kept, the right run is replaced by the left run's mirror images in reverse order
-    (:func:`_mirror_points`), a point on the plane is put at each crossing (the closest point of
-    the body beneath to the crossing), and the loop starts at the crossing it passes after its
-    old start. Sampled at regular arc length from there (Eq. 3), sample ``k`` and sample ``-k``
-    are then mirror images. A loop that does not cross the plane exactly twice is returned as it
-    is.
+    symmetric. The loop's two points nearest the plane, a quarter of the loop or more apart, split
+    it into two arcs; the arc on the left of the plane (``mirror.normal``'s side, on average) is
+    kept, the other is replaced by the kept arc's mirror images in reverse order
+    (:func:`_mirror_points`), and each split point by the closest point of the bodies that are
+    their own mirror images to its foot on the plane (:func:`_on_plane`). The loop keeps its sense and starts at the split point it reached first
+    from its old start (a sphincter's two loops start at corresponding points, and still do),
+    so that sampled at regular arc length from there (Eq. 3) sample ``k`` and sample ``-k`` are
+    mirror images.
 
     line : ActionLine (closed) on the concatenated ``parts`` [(body name, (v, f))], which hold
-    both twins of every body pair it lies on.
+    both twins of every body pair it lies on. A loop of fewer than 8 points is returned as is.
     """
     v = np.vstack([m[0] for _, m in parts])
     f = np.vstack([m[1] + o for (_, m), o in zip(parts, np.cumsum([0] + [len(m[0]) for _, m in parts]))])
     pos = line.positions(v, f)
-    left = mirror.side(pos) >= 0.0
-    ups = np.flatnonzero(left & ~np.roll(left, 1))     # first left point after a right one
-    if len(ups) != 1 or left.all():
+    n = len(pos)
+    if n < 8:
         return line
-    order = np.roll(np.arange(len(pos)), -int(ups[0]))
-    run = order[:int(left.sum())]
-    if not left[run].all():
+    side = mirror.side(pos)
+    i0 = int(np.argmin(np.abs(side)))
+    gap = np.minimum((np.arange(n) - i0) % n, (i0 - np.arange(n)) % n)
+    i1 = int(np.argmin(np.where(gap >= n // 4, np.abs(side), np.inf)))
+    arc_a = (i0 + 1 + np.arange((i1 - i0 - 1) % n)) % n     # i0 -> i1 in the loop's sense
+    arc_b = (i1 + 1 + np.arange((i0 - i1 - 1) % n)) % n     # i1 -> i0
+    if not len(arc_a) or not len(arc_b):
         return line
-    kept = line.points.take(run)
-    image = _mirror_points(kept.take(np.arange(len(run))[::-1]), parts, parts, mirror, exact)
-    cross = [_on_plane(kept.take([i]), v, f, mirror) for i in (len(run) - 1, 0)]
-    # the loop passes the old start (inside ``kept`` when it lies on the left) before ``cross[0]``
-    loop = [cross[0], image, cross[1], kept]
-    if not left[0]:   # the old start was on the right: start at the crossing after it
-        loop = [cross[1], kept, cross[0], image]
+    first, last, kept = (i0, i1, arc_a) if side[arc_a].mean() >= side[arc_b].mean() else (i1, i0, arc_b)
+    kept = kept[side[kept] > 0.0]   # a point next to a split point may lie just across the plane
+    if not len(kept):
+        return line
+    keep = line.points.take(kept)
+    image = _mirror_points(keep.take(np.arange(len(kept))[::-1]), parts, parts, mirror, exact)
+    loop = [_on_plane(line.points.take([first]), parts, v, f, mirror), keep,
+            _on_plane(line.points.take([last]), parts, v, f, mirror), image]
+    if last < first:   # start at the split point the loop reaches first from its old start
+        loop = loop[2:] + loop[:2]
     return replace(line, points=SurfacePoints.concatenate(loop))
 
 
-def _on_plane(point: SurfacePoints, v, f, mirror) -> SurfacePoints:
-    """The closest point of the surface (v, f) to the foot on the plane of one surface point."""
+def _on_plane(point: SurfacePoints, parts, v, f, mirror) -> SurfacePoints:
+    """The closest point, on the bodies of ``parts`` that are their own mirror images (the
+    bone, a midline muscle), to the foot on the plane of one surface point of the concatenated
+    mesh (v, f): a point on the midline that follows either twin would move one way for the
+    left muscle and another for the right one."""
+    starts = np.cumsum([0] + [len(m[1]) for _, m in parts])
     p = mirror.onto_plane(point.positions(v, f))
-    return project_to_surface(p, v, f)
+    best = None
+    for (name, (bv, bf)), s0 in zip(parts, starts):
+        if twin_name(name) != name:
+            continue
+        sp = project_to_surface(p, bv, bf)
+        d = float(np.linalg.norm(sp.positions(bv, bf) - p))
+        if best is None or d < best[0]:
+            best = (d, SurfacePoints(sp.face_ids + s0, sp.bary))
+    return best[1] if best is not None else project_to_surface(p, v, f)
