@@ -134,8 +134,9 @@ def fap_rows(workdir: Path, head, mapping, partner, plane, mm: float, fast: bool
                 plane, mm) for k, (name, left, right, value) in enumerate(FAP_PAIRS)]
     up = {side: float((joy_frames[:, head.fdp_vertex[f], 1] - rest[head.fdp_vertex[f], 1]).max() / mm)
           for side, f in (("left_8.3_mm", "8.3"), ("right_8.4_mm", "8.4"))}
-    lo, hi = sorted(up.values())
-    return out, {**{k: round(v, 3) for k, v in up.items()}, "differs": round((hi - lo) / max(hi, 1e-30), 4)}
+    a, b = up.values()
+    return out, {**{k: round(v, 3) for k, v in up.items()},
+                 "differs": round(abs(a - b) / max(abs(a), abs(b), 1e-30), 4)}
 
 
 def head_figures(workdir: Path, fast: bool, sets=()) -> dict:
