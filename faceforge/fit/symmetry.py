@@ -1,18 +1,23 @@
-"""A symmetric rig for a symmetric head: the fitted skull, muscles and jaw made mirror-symmetric.
+"""A symmetric rig for a symmetric head (issue 25): the fitted skull, muscles and jaw made
+mirror-symmetric, and the rig built symmetric by construction.
 
-The template skull is a real, asymmetric skull, and the fit's enhancement landmarks are chosen
-vertex by vertex, so even an exactly symmetric skin (MakeHuman) gets a lopsided rig: the
-orbicularis oris lowered MakeHuman's upper lip 81 MNS on the right at c = 0.57 and 13 MNS on
-the left at full contraction. When the skin is symmetric about the plane its left/right
-landmark pairs span (:func:`skin_asymmetry` below ``fit.symmetric_tolerance``),
-:func:`symmetrize_fit` replaces the fit by its mirror average:
+The template skull is a real skull, symmetric only to its mesh (its triangulation is not a
+mirror image of itself), and the fit's enhancement landmarks are chosen vertex by vertex, so
+even an exactly symmetric skin (MakeHuman) got a lopsided rig: left and right units differed by
+18-78 % of their motion. When every vertex of the skin has a mirror partner about the plane its
+left/right landmark pairs span (:func:`skin_asymmetry`, the worst vertex, below
+``fit.symmetric_tolerance`` x ES0):
 
-* each right muscle (and muscle-map curve) is the mirror image of the mean of its left twin
-  and its own mirror image (the twins share their topology: ``mirror_of`` in the map);
-* every other point set (cranium, mandible, the orbicularis oris, midline muscles) moves each
-  point halfway to its mirror partner: the closest point of the mirrored surface (bones) or
-  the nearest mirrored point (point sets), twice;
-* the jaw's pivot goes onto the plane, the pitch axis across it, the other axes into it.
+* :func:`symmetrize_bones` (before the eye sockets and the clearance) moves the fitted bone
+  halfway to its mirror image (closest points, smoothed) and averages each right muscle with
+  its mirrored left twin; the midline point sets move halfway to their mirror images;
+* :func:`symmetrize_fit` does the same to the muscle map and puts the jaw's axes on the plane,
+  and stores the plane (``FitResult.mirror``, fit.npz ``mirror_point`` / ``mirror_normal``);
+* :func:`rebuild_muscles` rebuilds the muscles as the animate stage builds them with the plane
+  (:func:`faceforge.anatomy.muscles.build.build_muscles_on`): each right muscle the mirror image
+  of its left twin, the orbicularis oris' right half that of its left half
+  (:mod:`faceforge.anatomy.muscles.mirror`); bind then binds each right skin vertex as the
+  mirror image of its partner (:mod:`faceforge.skin.mirror`).
 
 Everything is in head space (mesh units). No template file changes: an asymmetric head (a
 scan) keeps the fit as it is.

@@ -209,8 +209,9 @@ def test_same_inputs_same_fit(fitted, template):
 
 
 def test_symmetric_skin_gets_a_symmetric_rig(template):
-    """With ``fit.symmetric_tolerance`` (off by default) a mirror-symmetric skin (MediaPipe's)
-    gets its bones, muscle map and jaw axes made mirror-symmetric."""
+    """With ``fit.symmetric_tolerance`` (0.002 in the config; the library's default is 0) a
+    mirror-symmetric skin (MediaPipe's) gets its bones, muscle map and jaw axes made
+    mirror-symmetric, keeps the plane, and its right muscles are the mirror images of the left."""
     from faceforge.fit.files import fit_files
     from faceforge.fit.symmetry import mirror_plane
     from faceforge.geometry.closest import TriangleGrid
@@ -227,6 +228,11 @@ def test_symmetric_skin_gets_a_symmetric_rig(template):
         assert np.allclose(mirror(result.muscle_points[left]), result.muscle_points[left[:-2] + "_R"])
     assert abs(result.jaw_axes["pitch"][0] - mirror(result.jaw_axes["pitch"][0][None])[0]).max() < 1e-9 * es0
     assert report["skin_inside_bone"]["count"] == 0
+    assert result.mirror is not None
+    muscles = {n: v for n, v, _ in result.muscles}
+    for left in [n for n in muscles if n.endswith("_L")]:
+        gap = np.linalg.norm(mirror(muscles[left]) - muscles[left[:-2] + "_R"], axis=1).max()
+        assert gap < 0.02 * es0, (left, gap / es0)
 
 
 def test_fapu_come_from_the_landmarks_as_given(fitted, tmp_path):
