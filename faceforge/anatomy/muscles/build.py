@@ -82,6 +82,12 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                 m = build_sphincter_muscle(spec.name, loops[0], loops[1], v, f, spec.h,
                                            spec.w, t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
                                            carry_faces=bone, protrusion=protrusion, **kw)
+                if mirror is not None:   # its cells split as mirror images too
+                    from dataclasses import replace
+
+                    from faceforge.anatomy.muscles.mirror import symmetric_ring_faces
+
+                    m = replace(m, faces=symmetric_ring_faces(m))
         except ValueError as exc:   # e.g. an action line collapsing to one point on these surfaces
             raise TemplateError(f"muscle {spec.name!r} cannot be built on this skull: {exc}") from exc
         bodies[spec.name] = (m.rest_positions, m.faces)

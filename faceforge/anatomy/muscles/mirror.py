@@ -151,3 +151,26 @@ def _on_plane(point: SurfacePoints, parts, v, f, mirror) -> SurfacePoints:
         if best is None or d < best[0]:
             best = (d, SurfacePoints(sp.face_ids + s0, sp.bary))
     return best[1] if best is not None else project_to_surface(p, v, f)
+
+
+def symmetric_ring_faces(muscle) -> np.ndarray:
+    """Faces ``(m, 3)`` of a sphincter whose loops are symmetric (:func:`symmetric_loop`: sample
+    ``k`` mirrors sample ``-k``) with its cells split as mirror images: each cell of the first
+    half keeps its diagonal (:func:`faceforge.anatomy.muscles.hexmesh.cell_diagonals`), its
+    mirror cell takes the mirrored one. Split all alike (the default), the ring's triangles
+    run one way on the left and the other way on the right, and so do its bending and area
+    constraints. The rest positions do not change (the constraints' rest values come from them)."""
+    from faceforge.anatomy.muscles.hexmesh import _faces, cell_diagonals, signed_volume
+
+    h, w = muscle.topology.h, muscle.topology.w
+    flip = cell_diagonals(h, w, True, muscle.rest_positions[: h * w])
+    i, j = np.meshgrid(np.arange(h), np.arange(w - 1), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    image = ((-i - 1) % h) * (w - 1) + j
+    first = i < h // 2
+    flip = flip.copy()
+    flip[image[first]] = ~flip[first]
+    faces = _faces(h, w, True, flip)
+    if signed_volume(muscle.rest_positions, faces) < 0:
+        faces = faces[:, ::-1].copy()
+    return faces
