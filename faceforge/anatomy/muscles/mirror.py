@@ -97,13 +97,18 @@ def mirror_muscle(left, name: str, lies_on: tuple, left_parts, right_parts, mirr
 def symmetric_loop(line, parts, mirror, exact: set):
     """A closed action line (a sphincter's loop) of a muscle that is its own mirror image, made
     symmetric. The loop's two points nearest the plane, a quarter of the loop or more apart, split
-    it into two arcs; the arc on the left of the plane (``mirror.normal``'s side, on average) is
-    kept, the other is replaced by the kept arc's mirror images in reverse order
+    it into two arcs; the arc on the subject's right of the plane (against ``mirror.normal``, on
+    average) is kept, the other is replaced by the kept arc's mirror images in reverse order
     (:func:`_mirror_points`), and each split point by the closest point of the bodies that are
     their own mirror images to its foot on the plane (:func:`_on_plane`). The loop keeps its sense and starts at the split point it reached first
     from its old start (a sphincter's two loops start at corresponding points, and still do),
     so that sampled at regular arc length from there (Eq. 3) sample ``k`` and sample ``-k`` are
     mirror images.
+
+    Which half is kept matters, as it decides which muscle each mouth corner's loop lies on
+    (outermost projection): on MakeHuman the left half puts the corner on the risorius, and the
+    zygomaticus then lifts its corner 30 MW at c = 1 (208 on the unsymmetrised rig); the right
+    half keeps it on the zygomaticus (120 MW).
 
     line : ActionLine (closed) on the concatenated ``parts`` [(body name, (v, f))], which hold
     both twins of every body pair it lies on. A loop of fewer than 8 points is returned as is.
@@ -122,8 +127,8 @@ def symmetric_loop(line, parts, mirror, exact: set):
     arc_b = (i1 + 1 + np.arange((i0 - i1 - 1) % n)) % n     # i1 -> i0
     if not len(arc_a) or not len(arc_b):
         return line
-    first, last, kept = (i0, i1, arc_a) if side[arc_a].mean() >= side[arc_b].mean() else (i1, i0, arc_b)
-    kept = kept[side[kept] > 0.0]   # a point next to a split point may lie just across the plane
+    first, last, kept = (i0, i1, arc_a) if side[arc_a].mean() < side[arc_b].mean() else (i1, i0, arc_b)
+    kept = kept[side[kept] < 0.0]   # a point next to a split point may lie just across the plane
     if not len(kept):
         return line
     keep = line.points.take(kept)
