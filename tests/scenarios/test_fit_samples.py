@@ -209,7 +209,7 @@ def test_same_inputs_same_fit(fitted, template):
 
 
 def test_symmetric_skin_gets_a_symmetric_rig(template):
-    """With ``fit.symmetric_tolerance`` (0.002 in the config; the library's default is 0) a
+    """With ``fit.symmetric_tolerance`` (opt-in, 0.002 suits the samples) a
     mirror-symmetric skin (MediaPipe's) gets its bones, muscle map and jaw axes made
     mirror-symmetric, keeps the plane, and its right muscles are the mirror images of the left."""
     from faceforge.fit.files import fit_files
