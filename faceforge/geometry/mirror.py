@@ -1,4 +1,4 @@
-"""Reflection about a plane (a head's midsagittal plane) and a mesh's vertex mirror map."""
+"""Reflection about a plane (a head's midsagittal plane)."""
 
 from __future__ import annotations
 
@@ -43,17 +43,3 @@ class Mirror:
             return None
         return cls(arrays["mirror_point"], arrays["mirror_normal"])
 
-
-def vertex_mirror_map(vertices: np.ndarray, mirror: Mirror, tolerance: float) -> np.ndarray | None:
-    """``partner (n,)``: the vertex at each vertex's mirror image (itself on the plane), or None
-    when some vertex's mirror image is farther than ``tolerance`` (mesh units) from every vertex
-    or the pairing is not one-to-one (the mesh is not a mirror image of itself)."""
-    from scipy.spatial import cKDTree
-
-    v = np.asarray(vertices, dtype=np.float64)
-    if not len(v):
-        return None
-    d, j = cKDTree(v).query(mirror(v))
-    if d.max() > tolerance or np.any(j[j] != np.arange(len(v))):
-        return None
-    return j.astype(np.int64)
