@@ -10,6 +10,9 @@ Two protocols (issue 25):
 * ``signed`` (the magnitudes users play): each sign the files use, at the largest value of that
   sign (raise_b_midlip: -870 and +76 MNS; open_jaw +713), for every sign the mapping drives;
   a sign the files never use is not played;
+* ``context``: each of those requests inside the Xface frame where it occurs (every FAP of that
+  frame played together, head rotation and eyeballs zeroed): a lower lip lowered 870 MNS rides on
+  the open jaw that the files open with it;
 * ``abs`` (the first protocol, kept for comparison): the largest |value| of either sign, played
   with both signs (raise_b_midlip +870 MNS too, which no file asks for: it would push the lower
   lip through the upper one without the jaw).
@@ -84,7 +87,30 @@ def requests(mapping, probes, top, fraction: float = 1.0, signed: bool = False) 
     return out
 
 
-def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False) -> dict:
+def in_context(mapping, probes) -> list[tuple[int, float, np.ndarray]]:
+    """(FAP, value, the whole frame (68,)) for each mapped FAP and sign: the frame of the Xface
+    files where that FAP reaches its largest value of that sign, every other FAP of the frame
+    kept (the jaw opening that carries a lowered lip, the lids), head rotation and eyeballs
+    (23-26, 48-50) zeroed so the face is measured in the head's frame."""
+    from faceforge.mpeg4 import read_fap
+
+    best = {}
+    for path in sorted((ROOT / "samples/fap").glob("*.fap")):
+        t = read_fap(path)
+        v = np.where(t.mask, t.values, 0.0)
+        for fap in probes:
+            for sgn in (1.0, -1.0):
+                i = int(np.argmax(sgn * v[:, fap - 1]))
+                val = float(v[i, fap - 1])
+                if sgn * val > 0 and sgn * val > abs(best.get((fap, sgn), (0.0,))[0]):
+                    frame = v[i].copy()
+                    frame[[22, 23, 24, 25, 47, 48, 49]] = 0.0
+                    best[(fap, sgn)] = (val, frame)
+    played = {(fap, float(np.sign(v))) for fap, v in requests(mapping, probes, xface_magnitudes(True), 1.0, True)}
+    return [(fap, val, frame) for (fap, sgn), (val, frame) in sorted(best.items()) if (fap, sgn) in played]
+
+
+def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False, context: bool = False) -> dict:
     from faceforge.animation.calibrate import measure
     from faceforge.animation.calibrate_head import calibration_probes
     from faceforge.io.export_cache import read_pc2
@@ -95,15 +121,19 @@ def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False) -> dic
 
     head, mapping, _ = em.load_head(workdir)
     probes = calibration_probes(mapping, head)
-    asked = requests(mapping, probes, xface_magnitudes(signed), fraction, signed)
+    if context:
+        asked = [(fap, fraction * v, fraction * frame) for fap, v, frame in in_context(mapping, probes)]
+    else:
+        asked = [(fap, v, np.eye(68)[fap - 1] * v)
+                 for fap, v in requests(mapping, probes, xface_magnitudes(signed), fraction, signed)]
     per = RAMP + HOLD + 5
     n = 2 + per * len(asked)
     values, mask = np.zeros((n, 68)), np.zeros((n, 68), dtype=bool)
     ends = []
-    for k, (fap, v) in enumerate(asked):
+    for k, (fap, v, frame) in enumerate(asked):
         s = 2 + k * per
-        ramp = np.concatenate([np.linspace(0, v, RAMP + 1)[1:], np.full(HOLD, v), np.zeros(5)])
-        values[s:s + per, fap - 1] = ramp
+        ramp = np.concatenate([np.linspace(0, 1.0, RAMP + 1)[1:], np.ones(HOLD), np.zeros(5)])
+        values[s:s + per] = ramp[:, None] * frame[None]
         ends.append(s + RAMP + HOLD - 1)
     mask[:, 2:] = True
     track = FapTrack.from_given(25.0, mask, values, name="bench_fap_played")
@@ -120,7 +150,7 @@ def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False) -> dic
     skins = frames[:, internal].astype(float) @ np.asarray(head.user_rotation).T
     rest = skins[0]
     rows = []
-    for (fap, v), end in zip(asked, ends):
+    for (fap, v, _), end in zip(asked, ends):
         got = float(measure(rest, skins[end], probes[fap]))
         rows.append({"fap": fap, "requested": v, "achieved": round(got, 2),
                      "relative_error": round(abs(got - v) / abs(v), 4)})
@@ -146,10 +176,11 @@ def main(argv=None) -> None:
     fractions = (1.0, 0.5) if "--half" in args else (1.0,)
     dirs = [Path(a) for a in args if a != "--half"]
     results = {}
-    for protocol in ("signed", "abs"):
+    for protocol in ("signed", "context", "abs"):
         for fraction in fractions:
             for d in dirs:
-                r = results[f"{d.name} {protocol} x{fraction:g}"] = head_rows(d, fraction, protocol == "signed")
+                r = results[f"{d.name} {protocol} x{fraction:g}"] = head_rows(d, fraction, protocol == "signed",
+                                                                            protocol == "context")
                 print(f"{d.name} {protocol} x{fraction:g} Xface magnitude: median {r['median_error']:.1%}, "
                       f"{r['within_10_percent']}/{r['count']} within 10 %, {r['over_30_percent']} over 30 %, "
                       f"worst {r['worst']}; L/R within 10 %: "

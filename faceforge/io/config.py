@@ -197,6 +197,7 @@ RULES: list[tuple[str, Rule]] = [
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
     ("animate.calibrate.magnitudes", PathValue()),
+    ("animate.quality", Choice(("realtime", "offline"))),
     ("animate.calibrate.fractions.*", Number(0.01, 1.0)),
     ("animate.calibrate.tolerance", Number(0.0, 0.5)),
     ("animate.statics.tolerance", Number(0.0, 0.01)),

@@ -55,3 +55,17 @@ def test_an_unconverged_pose_is_reported():
            SettleSettings(tolerance=1e-9, max_frames=30), stats=stats)
     assert stats.converged == [False] and stats.frames == [30]
     assert stats.as_dict()["unconverged"] == 1
+
+
+def test_offline_playback_converges_every_frame_where_real_time_lags():
+    from faceforge.animation.playback import play
+    from faceforge.animation.statics import play_converged
+
+    c = np.linspace(0.0, 1.0, 6)[:, None]
+    got = {}
+    play_converged(relaxing_rig(), c, np.zeros((6, 3)), 25.0, lambda s, f: got.update({s: f.copy()}),
+                   SettleSettings(tolerance=1e-9), chunk=4)
+    frames = np.concatenate([got[0], got[4]])
+    assert np.allclose(frames[:, 0, 0], c[:, 0], atol=1e-8)           # each frame at its converged pose
+    lagging = play(relaxing_rig(), c, np.zeros((6, 3)), 25.0)
+    assert np.abs(lagging[:, 0, 0] - c[:, 0]).max() > 0.1              # one step a frame lags behind

@@ -123,7 +123,12 @@ def write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings,
     with FrameNpzWriter(ctx.out_dir / "animation.npz", track.n_frames, len(head.user_index)) as writer:
         try:
             warm_up(head.rig, c, jaw, track.fps, ctx.log, guards=(head.orientation,))   # leaves the rig at rest
-            play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings, sink=sink)
+            if ctx.config.get("animate.quality") == "offline":   # each frame solved to convergence
+                from faceforge.animation.statics import SettleSettings, play_converged
+
+                play_converged(head.rig, c, jaw, track.fps, sink, SettleSettings.from_config(ctx.config))
+            else:                                                # real time: solver.iterations a frame
+                play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings, sink=sink)
         except FloatingPointError as exc:
             from faceforge.exceptions import StageError
 
