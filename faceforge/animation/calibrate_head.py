@@ -116,7 +116,7 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
     (:func:`faceforge.animation.calibrate_sweep.calibrate_sweep`); ``progress`` wraps an
     iterable (optional). The result's ``statics`` says how the poses settled."""
     from faceforge.animation.calibrate import measure_coupling, summarize
-    from faceforge.animation.calibrate_sweep import calibrate_sweep
+    from faceforge.animation.calibrate_sweep import calibrate_sweep, face_lanes
     from faceforge.animation.controls import controls
     from faceforge.animation.statics import SettleSettings, SettleStats, settle
 
@@ -143,6 +143,7 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
     calibrated, rows = calibrate_sweep(
         template, pose_for, head.rest, probes, requested, tolerance=float(config.get("animate.calibrate.tolerance")),
         max_steps=int(config.get("animate.calibrate.refine")),
+        lanes=face_lanes(template) if bool(config.get("animate.calibrate.lanes")) else None,
         progress=None if progress is None else (lambda it: progress(it, total=len(template.entries), desc="FAPs")))
     jaw_magnitude = float(config.get("animate.calibrate.jaw_magnitude"))
     if 3 in probes:

@@ -57,6 +57,22 @@ def fit_side(entry, pose, probes, rest, req: np.ndarray, caps: np.ndarray, knee:
         puts every muscle of the side at full contraction (:func:`full_drive`)
     Returns (drives (r,) float, NaN where unreachable; the :class:`Chain` of samples).
     """
+    return _run(_side_steps(entry, probes, rest, req, caps, knee, tolerance, max_steps), pose)
+
+
+def _run(steps, pose):
+    """Drive a generator of poses (it yields ``(faps, warm)``, is sent the settled skin) with
+    ``pose``; its return value."""
+    try:
+        asked = next(steps)
+        while True:
+            asked = steps.send(pose(*asked))
+    except StopIteration as stop:
+        return stop.value
+
+
+def _side_steps(entry, probes, rest, req, caps, knee, tolerance, max_steps):
+    """:func:`fit_side` as a generator: yields ``(faps (68,), warm)``, is sent the skin."""
     observed = [f for f in entry.faps if f in probes]
     chain = Chain.start(observed)
     out = np.full(len(req), np.nan)
@@ -72,7 +88,7 @@ def fit_side(entry, pose, probes, rest, req: np.ndarray, caps: np.ndarray, knee:
             continue                                 # this side never moved the FDP the asked way
         d = float(np.clip(d, -lim, lim))
         for _ in range(max_steps):
-            skin = pose(_frames(entry.faps, np.array([d]))[0], warm)
+            skin = yield _frames(entry.faps, np.array([d]))[0], warm
             warm = True
             got = {f: float(measure(rest, skin, probes[f])) for f in observed}
             chain.drives.append(d)
@@ -103,7 +119,7 @@ def _invert(chain: Chain, r: float) -> float:
 
 
 def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tolerance: float = 0.02,
-                    max_steps: int = 4, max_drive: float = 20.0, progress=None):
+                    max_steps: int = 4, max_drive: float = 20.0, lanes=None, progress=None):
     """Fit every entry's response curve on warm chains of converged poses.
 
     mapping : FapMapping (its response curves are ignored)
@@ -111,40 +127,84 @@ def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tole
     rest : (n, 3) float; probes : FAP -> Probe; requested : lead FAP -> requested values (FAPU)
     tolerance : relative error at which a request counts as met (default 2 %)
     max_steps : poses per request at most
+    lanes : lists of entry indices whose entries do not interact (far apart on the face, no
+        muscle in common: :func:`face_lanes`); one entry of each lane is probed in the same
+        simulation, the lanes' FAPs played together (default: one lane, one entry at a time)
     Returns (calibrated FapMapping, list of CalibrationRow), as
     :func:`faceforge.animation.calibrate.calibrate_mapping`. ``achieved_before`` (uncalibrated)
     is read off the sampled curve at drive = request (linear interpolation of the chain).
     """
+    todo = [i for i, e in enumerate(mapping.entries)
+            if e.faps[0] in probes and np.any(np.asarray(requested.get(e.faps[0], []), dtype=float) != 0.0)]
+    lanes = [todo] if lanes is None else [[i for i in lane if i in todo] for lane in lanes]
+    done = {}
+    tick = progress(range(len(todo))) if progress else None
+    ticks = iter(tick) if tick is not None else None
+    gens = [_lane(lane, mapping, probes, rest, requested, tolerance, max_steps, max_drive, done, ticks)
+            for lane in lanes if lane]
+    asked = {}
+    for k, g in enumerate(gens):
+        try:
+            asked[k] = next(g)
+        except StopIteration:
+            pass
+    while asked:   # one simulation per step: every lane's current entry, their FAPs together
+        identity, faps, warm = mapping, np.zeros(68), True
+        for idx, f, w in asked.values():
+            identity = with_entry(identity, idx, response=None)
+            faps, warm = faps + f, warm and w
+        skin = pose_for(identity, faps, warm)
+        for k in list(asked):
+            try:
+                asked[k] = gens[k].send(skin)
+            except StopIteration:
+                del asked[k]
     rows, calibrated = [], mapping
-    indices = range(len(mapping.entries))
-    for idx in (progress(indices) if progress else indices):
-        entry = mapping.entries[idx]
-        lead = entry.faps[0]
-        if lead not in probes or lead not in requested:
-            continue
-        req = np.asarray(requested[lead], dtype=float)
-        req = req[req != 0.0]
-        if len(req) == 0:
-            continue
-        identity = with_entry(calibrated, idx, response=None)
+    for idx in sorted(done):
+        req, drive, chains = done[idx]
+        ok = np.isfinite(drive)
+        knots = _monotone_knots(np.column_stack([req, np.where(ok, drive, 0.0)]))
+        calibrated = with_entry(calibrated, idx, response=knots)
+        rows += _rows(mapping.entries[idx], calibrated, req, drive, ok, knots, chains, probes)
+    return calibrated, rows
 
-        def pose(faps, warm, identity=identity):
-            return pose_for(identity, faps, warm)
-        drive = np.full(len(req), np.nan)
-        chains = {}
-        cap = drive_cap(entry, req, max_drive, calibrated.max_contraction)
+
+def _lane(indices, mapping, probes, rest, requested, tolerance, max_steps, max_drive, done, ticks):
+    """The entries of one lane, one after the other, as a generator of poses: yields
+    ``(entry index, faps (68,), warm)``, is sent the skin; puts ``(requests, drives, chains)``
+    into ``done[index]``."""
+    for idx in indices:
+        entry = mapping.entries[idx]
+        req = np.asarray(requested[entry.faps[0]], dtype=float)
+        req = req[req != 0.0]
+        drive, chains = np.full(len(req), np.nan), {}
+        cap = drive_cap(entry, req, max_drive, mapping.max_contraction)
         for sense in (1.0, -1.0):
             sel = np.flatnonzero(np.sign(req) == sense)
             if len(sel) == 0:
                 continue
-            knee = full_drive(entry, sense, calibrated.max_contraction)
-            drive[sel], chains[sense] = fit_side(entry, pose, probes, rest, req[sel], cap[sel], knee,
-                                                 tolerance, max_steps)
-        ok = np.isfinite(drive)
-        knots = _monotone_knots(np.column_stack([req, np.where(ok, drive, 0.0)]))
-        calibrated = with_entry(calibrated, idx, response=knots)
-        rows += _rows(entry, calibrated, req, drive, ok, knots, chains, probes)
-    return calibrated, rows
+            knee = full_drive(entry, sense, mapping.max_contraction)
+            steps = _side_steps(entry, probes, rest, req[sel], cap[sel], knee, tolerance, max_steps)
+            try:
+                faps, warm = next(steps)
+                while True:
+                    skin = yield idx, faps, warm
+                    faps, warm = steps.send(skin)
+            except StopIteration as stop:
+                drive[sel], chains[sense] = stop.value
+        done[idx] = (req, drive, chains)
+        if ticks is not None:
+            next(ticks, None)
+
+
+def face_lanes(mapping) -> list:
+    """Two lanes of entries that do not interact: the brows (the upper face), and everything
+    else (the jaw, which carries the lower lip and enters the lip entries' couplings, the lips,
+    the cheeks). Entry indices per lane."""
+    from faceforge.animation.calibrate import EYEBROW_FAPS
+
+    upper = [i for i, e in enumerate(mapping.entries) if set(e.faps) <= set(EYEBROW_FAPS)]
+    return [upper, [i for i in range(len(mapping.entries)) if i not in upper]]
 
 
 def _rows(entry, calibrated, req, drive, ok, knots, chains, probes):

@@ -58,7 +58,7 @@ class SettleSettings:
 
     ramp: int = 10
     warm_ramp: int = 3
-    tolerance: float = 2e-5
+    tolerance: float = 5e-5
     min_hold: int = 2
     max_frames: int = 150
 

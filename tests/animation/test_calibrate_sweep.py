@@ -52,3 +52,34 @@ def test_reachable_requests_land_and_an_unreachable_one_is_held_and_reported(hea
     # what the calibrated mapping then plays for 30 is the drive that was measured there
     c, _ = fap_controls(mapping, (np.eye(68)[[58]] + np.eye(68)[[11]]) * 30.0, ["zyg", "dep"], {"MNS": 1.0}, JawLevers(1.0, 1.0))
     assert c[0, 0] == pytest.approx(0.002 * by[(59, 30.0)].drive, rel=1e-9)
+
+
+def test_independent_entries_probed_in_one_simulation_fit_as_alone():
+    """Two entries that move different FDPs (lanes): the same fit, in fewer simulations."""
+    two = dict(MAPPING, entries=MAPPING["entries"] + [
+        {"fap": 31, "name": "raise_l_i_eyebrow", "fapu": "ENS", "positive": {"fr": 0.002}}])
+    rest = np.zeros((3, 3))
+    calls = []
+
+    def pose_for(mapping, faps, warm):
+        calls.append(1)
+        skin = rest.copy()
+        skin[0, 1] = response(float(faps[58])) * 0.01     # the lip corner (both twins alike)
+        skin[1, 1] = response(float(faps[58])) * 0.01
+        skin[2, 1] = 0.8 * float(faps[30]) * 0.01         # the brow
+        return skin
+
+    probes = {59: Probe(59, 0, -1, np.array([0.0, 1.0, 0.0]), 0.01),
+              12: Probe(12, 1, -1, np.array([0.0, 1.0, 0.0]), 0.01),
+              31: Probe(31, 2, -1, np.array([0.0, 1.0, 0.0]), 0.01)}
+    requested = {59: [15.0, 30.0, -50.0], 31: [20.0, 40.0]}
+    mapping = mapping_from_dict(two)
+    alone, rows_alone = calibrate_sweep(mapping, pose_for, rest, probes, requested)
+    n_alone = len(calls)
+    calls.clear()
+    together, rows = calibrate_sweep(mapping, pose_for, rest, probes, requested, lanes=[[0], [1]])
+    assert len(calls) < n_alone
+    assert [(r.fap, r.requested, round(r.achieved, 9)) for r in rows] == \
+        [(r.fap, r.requested, round(r.achieved, 9)) for r in rows_alone]
+    for a, b in zip(alone.entries, together.entries):
+        assert np.allclose(a.response, b.response)
