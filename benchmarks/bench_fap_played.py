@@ -13,7 +13,12 @@ Two protocols (issue 25):
 * ``context``: each of those requests inside the Xface frame where it occurs (every FAP of that
   frame played together, head rotation and eyeballs zeroed): a lower lip lowered 870 MNS rides on
   the open jaw that the files open with it;
-* ``abs`` (the first protocol, kept for comparison): the largest |value| of either sign, played
+The FAP file written gives, as the Xface files do, only the FAPs of the request: a lip FAP's
+twin (outer 51-60 / inner 4-13) not given is copied from it by the reader, so the entry they
+share is driven fully.
+
+* ``abs`` (the first protocol, kept for comparison; every FAP given in every frame, so a lip
+  FAP played alone had its twin at 0 and its entry, driven by the twins' mean, at half): the largest |value| of either sign, played
   with both signs (raise_b_midlip +870 MNS too, which no file asks for: it would push the lower
   lip through the upper one without the jaw).
 
@@ -134,8 +139,12 @@ def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False, contex
         s = 2 + k * per
         ramp = np.concatenate([np.linspace(0, 1.0, RAMP + 1)[1:], np.ones(HOLD), np.zeros(5)])
         values[s:s + per] = ramp[:, None] * frame[None]
+        if signed or context:   # given as a file gives them: the FAPs of the request, the rest held at 0,
+            mask[s:s + per] = frame[None] != 0.0   # a lip twin not given copied from its partner
         ends.append(s + RAMP + HOLD - 1)
-    mask[:, 2:] = True
+    mask[:2, 2:] = True
+    if not (signed or context):
+        mask[:, 2:] = True      # the first protocol: every FAP given, a lip twin's partner at 0
     track = FapTrack.from_given(25.0, mask, values, name="bench_fap_played")
     fap_path = workdir / "bench_fap_played.fap"
     out = workdir / "bench_fap_played.pc2"
