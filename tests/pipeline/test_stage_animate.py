@@ -527,6 +527,9 @@ def test_expressions_sheet_settles_each_preset_and_checks_it(workdir, patched, t
     assert d["jaw"][joy, 0] > 0.0 and np.abs(d["poses"][joy] - v).max() > 0.01
     assert all(e["checks"]["inverted_triangles"] == 0 and e["checks"]["skin_inside_skull"] == 0
                for e in report["expressions"].values()) and len(report["expressions"]) == 7
+    # held until converged (issue 25 item 6): each pose says its frames and residual
+    assert report["statics"]["unconverged"] == 0 and report["statics"]["residual_max"] <= 5e-5
+    assert all(e["converged"] and e["frames"] > 10 for e in report["expressions"].values())
     img = mpimg.imread(out / "expressions.png")
     # two poses a row, each with its heat map beside it (four panels wide), four rows; a panel
     # of 3.2 in at 120 dpi: the face >= 300 px

@@ -87,7 +87,8 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     names = ["neutral", *presets]
     faps = np.stack([np.zeros(68), *presets.values()])
     c, jaw = controls(mapping, faps, head)
-    poses, statics = settled_poses(head, c, jaw, ctx.config)
+    poses, settled = settled_poses(head, c, jaw, ctx.config)
+    statics = settled.as_dict()
     ctx.log(f"{len(presets)} {stem}, each held until it converged: {statics['frames_per_pose_median']:g} frames "
             f"(median), residual at most {statics['residual_max']:.1e} of the diagonal, {statics['unconverged']} "
             "unconverged")
@@ -99,7 +100,8 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
         checks = check_animation(head.rest, poses[i:i + 1], head.faces,
                                  skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
         report[stem][name] = {"checks": checks.as_dict(), "max_contraction": float(c[i].max(initial=0.0)),
-                              "jaw": jaw[i].tolist()}
+                              "jaw": jaw[i].tolist(), "frames": settled.frames[i],
+                              "residual": settled.residual[i], "converged": settled.converged[i]}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
     from faceforge.anatomy.tissue import units_per_mm
@@ -116,14 +118,15 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
 def settled_poses(head, c, jaw, config):
     """The held poses (k, n, 3) of controls ``c`` (k, m) and ``jaw`` (k, 3), each from rest and
     solved until the skin stops moving (:func:`faceforge.animation.statics.settle`,
-    ``animate.statics``), and how they settled (:meth:`SettleStats.as_dict`)."""
+    ``animate.statics``), and how they settled (a :class:`~faceforge.animation.statics.SettleStats`,
+    a pose each)."""
     from faceforge.animation.statics import SettleSettings, SettleStats, settle
 
     stats = SettleStats()
     poses = settle(head.rig, c, jaw, float(config.get("animate.fps")), SettleSettings.from_config(config),
                    stats=stats)
     head.rig.reset()
-    return poses, stats.as_dict()
+    return poses, stats
 
 
 def _face_region(head):
