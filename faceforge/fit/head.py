@@ -98,6 +98,7 @@ class FitSettings:
     enhancement_min_ratio: float = 0.7  # add a pair where thickness < ratio * expected depth
     enhancement_cell: float = 0.015    # candidates: one skull vertex per cell of this size (x skin diagonal)
     enhancement_flow_steps: int = 8    # >0: each enhancement round is a flow of this many midpoint steps; 0: exact RBF
+    enhancement_max_step: float = 0.25  # a flow moves a new pair at most this x its distance to the nearest held target
     skin_clearance_mm: float = 1.0     # skin found inside the bone is cleared by this much (mm); 0: off
     skin_clearance_samples: int = 16   # bone pairs per round for skin inside the bone
     front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0

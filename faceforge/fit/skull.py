@@ -121,6 +121,29 @@ def skin_inside_bone_pairs(moved: np.ndarray, skull_faces: np.ndarray, aligned: 
     return aligned[j], moved[j] + np.minimum(push, 0.0)[:, None] * n
 
 
+def limit_steps(start: np.ndarray, target: np.ndarray, held: np.ndarray, ratio: float) -> np.ndarray:
+    """Targets (k, 3) of new enhancement pairs pulled back towards their ``start`` (k, 3) so
+    that no pair moves more than ``ratio`` times its distance to the nearest ``held`` (h, 3)
+    point, where the round's field is zero (``ratio`` <= 0: unchanged).
+
+    The field of a flow goes from zero at a held target to the full correction at the new
+    pair, so its gradient there is about correction / distance, and the bone between them
+    stretches by that much: skin that a modelled eye socket pushes deep into the bone asked
+    for 1-4 cm of push beside the eye-corner targets, and the flows stretched the bone's edges
+    up to 17-fold, out through the lids and brows (MakeHuman ``caucasian_female_young``,
+    skull 96 % inside, issue 28). A shortened pair is met over the next rounds, which test
+    again."""
+    start, target = np.asarray(start, dtype=np.float64), np.asarray(target, dtype=np.float64)
+    if ratio <= 0 or len(start) == 0 or len(held) == 0:
+        return target
+    from scipy.spatial import cKDTree
+
+    near, _ = cKDTree(np.asarray(held, dtype=np.float64)).query(start)
+    step = np.linalg.norm(target - start, axis=1)
+    keep = np.minimum(1.0, ratio * near / np.maximum(step, 1e-300))
+    return start + keep[:, None] * (target - start)
+
+
 def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.ndarray, skin: SkinSurface,
               skin_landmarks: dict, settings, scale_mm: float = 1.0) -> SkullFit:
     """Steps 2-4 of the module docstring on the skull ``(vertices (n,3), faces (m,3))`` (template
@@ -171,6 +194,7 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
         if flow:
             # the new sources are skull vertices: where the map so far takes them
             start = Warp(np.eye(4), warp.rbfs)(new_src)
+            new_dst = limit_steps(start, new_dst, dst, settings.enhancement_max_step)
             # zero at every earlier target: the FDP landmarks stay exactly where they are, and
             # bone that an earlier flow left short of its target is not pinned there
             g = Flow(enhancement_field(dst, start, new_dst - start, eps), settings.enhancement_flow_steps)
