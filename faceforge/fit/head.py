@@ -90,6 +90,7 @@ class FitSettings:
     """Parameters of the fit (config section ``fit``)."""
 
     tissue_depth: bool = True          # move skin targets inward by tissue depth
+    tissue_normal_radius: float = 0.1  # ... along the skin normal averaged over this radius (x ES0); 0: the point's own
     enhancement_rays: bool = True      # add ray-cast enhancement landmarks
     refit: bool = True                 # cylindrical projection onto muscles and second fit
     enhancement_rounds: int = 3
@@ -188,7 +189,7 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     skin_lm = {f: np.asarray(p, dtype=np.float64) for f, p in zip(skin_ids, skin_points)}
     scale_mm = fit_tissue.units_per_mm(skin_lm)
     pairs = skull_targets(template.landmarks, skin, skin_ids, skin_points,
-                          scale_mm, settings.tissue_depth)
+                          scale_mm, settings.tissue_depth, settings.tissue_normal_radius * fit_tissue.es0(skin_lm))
     (cv, cf), (mv, mf) = template.cranium, template.mandible
     skull_v = np.vstack([cv, mv])
     skull_f = np.vstack([cf, mf + len(cv)])

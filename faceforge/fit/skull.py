@@ -44,12 +44,44 @@ class SkullTargets:
         return self.skin - self.depth[:, None] * self.normal
 
 
+def smoothed_normals(skin: SkinSurface, points: np.ndarray, radius: float) -> np.ndarray:
+    """Unit skin normals (k, 3) at the closest skin points of ``points`` (k, 3), averaged over
+    the skin around them: area-weighted face normals (fans included) whose centroids lie
+    within ``radius`` (head units), Gaussian weights of sigma ``radius / 2``; ``radius`` <= 0
+    or no face that near: the smooth normal at the point (:meth:`SkinSurface.normal_near`).
+
+    The tissue depth is measured across the face, not across a lid fold: an eye corner
+    placed on the lid margin of a modelled eye socket has a normal pointing into the socket
+    (MakeHuman, detected outer corner: (-0.97, -0.16, 0.17)), and its bone target, that far
+    sideways, pushed the lateral orbital rim 16 mm out of the skin."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    own = skin.normal_near(p)
+    if radius <= 0 or len(p) == 0:
+        return own
+    from scipy.spatial import cKDTree
+
+    tri = skin.vertices[skin.faces]
+    area_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    centroid = tri.mean(axis=1)
+    closest, _, _ = skin.closest(p)
+    out = own.copy()
+    for i, near in enumerate(cKDTree(centroid).query_ball_point(closest, radius)):
+        if not near:
+            continue
+        d2 = np.sum((centroid[near] - closest[i]) ** 2, axis=1)
+        n = (np.exp(-2.0 * d2 / radius ** 2)[:, None] * area_normal[near]).sum(axis=0)
+        if np.linalg.norm(n) > 0:
+            out[i] = n / np.linalg.norm(n)
+    return out
+
+
 def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_points,
-                  scale_mm: float, use_depth: bool) -> SkullTargets:
+                  scale_mm: float, use_depth: bool, normal_radius: float = 0.0) -> SkullTargets:
     """Pair the template skull landmarks with the skin landmarks they fit to.
 
     Only FDPs on both sides with bone beneath (``fit_tissue.FDP_TISSUE_CODE``) are used,
-    with depth 0 when ``use_depth`` is false.
+    with depth 0 when ``use_depth`` is false; the depth is taken along the skin normal
+    averaged over ``normal_radius`` (head units, :func:`smoothed_normals`).
     """
     index = {f: i for i, f in enumerate(skin_ids)}
     fdps = tuple(f for f in skull_landmarks if f in index and f in fit_tissue.FDP_TISSUE_CODE)
@@ -66,7 +98,8 @@ def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_point
     far = np.min(np.linalg.norm(rest[:, None] - source[None], axis=2), axis=1) > ANCHOR_DISTANCE * skull_diag \
         if len(rest) else np.zeros(0, bool)
     return SkullTargets(fdps, source, np.asarray(skin_points, dtype=np.float64)[rows],
-                        skin.normal_near(np.asarray(skin_points, dtype=np.float64)[rows]), depth,
+                        smoothed_normals(skin, np.asarray(skin_points, dtype=np.float64)[rows], normal_radius),
+                        depth,
                         rest[far])
 
 
