@@ -90,7 +90,7 @@ class FitSettings:
     """Parameters of the fit (config section ``fit``)."""
 
     tissue_depth: bool = True          # move skin targets inward by tissue depth
-    tissue_normal_radius: float = 0.1  # ... along the skin normal averaged over this radius (x ES0); 0: the point's own
+    tissue_normal_radius: float = 0.1  # a landmark on a fold takes the normal of the skin within this (x ES0); 0: off
     enhancement_rays: bool = True      # add ray-cast enhancement landmarks
     refit: bool = True                 # cylindrical projection onto muscles and second fit
     enhancement_rounds: int = 3

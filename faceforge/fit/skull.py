@@ -44,15 +44,22 @@ class SkullTargets:
         return self.skin - self.depth[:, None] * self.normal
 
 
+#: a landmark whose own skin normal is more than this many degrees from the normal of the
+#: skin around it sits on a fold: its tissue depth is taken along the latter
+FOLD_DEG = 40.0
+
+
 def smoothed_normals(skin: SkinSurface, points: np.ndarray, radius: float) -> np.ndarray:
-    """Unit skin normals (k, 3) at the closest skin points of ``points`` (k, 3), averaged over
-    the skin around them: area-weighted face normals (fans included) whose centroids lie
-    within ``radius`` (head units), Gaussian weights of sigma ``radius / 2``; ``radius`` <= 0
-    or no face that near: the smooth normal at the point (:meth:`SkinSurface.normal_near`).
+    """Unit skin normals (k, 3) at the closest skin points of ``points`` (k, 3): the smooth
+    normal at the point (:meth:`SkinSurface.normal_near`), or, where that is more than
+    :data:`FOLD_DEG` from the normal of the skin around it (area-weighted face normals,
+    fans included, whose centroids lie within ``radius`` head units, Gaussian weights of
+    sigma ``radius / 2``), the latter. ``radius`` <= 0: the point's own everywhere.
 
     The tissue depth is measured across the face, not across a lid fold: an eye corner
     placed on the lid margin of a modelled eye socket has a normal pointing into the socket
-    (MakeHuman, detected outer corner: (-0.97, -0.16, 0.17)), and its bone target, that far
+    (MakeHuman, detected outer corner: (-0.97, -0.16, 0.17), 60 degrees from the skin around it; a
+    hand-placed corner: 22 degrees), and its bone target, that far
     sideways, pushed the lateral orbital rim 16 mm out of the skin."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     own = skin.normal_near(p)
@@ -70,7 +77,7 @@ def smoothed_normals(skin: SkinSurface, points: np.ndarray, radius: float) -> np
             continue
         d2 = np.sum((centroid[near] - closest[i]) ** 2, axis=1)
         n = (np.exp(-2.0 * d2 / radius ** 2)[:, None] * area_normal[near]).sum(axis=0)
-        if np.linalg.norm(n) > 0:
+        if np.linalg.norm(n) > 0 and float(own[i] @ n) < np.cos(np.radians(FOLD_DEG)) * np.linalg.norm(n):
             out[i] = n / np.linalg.norm(n)
     return out
 

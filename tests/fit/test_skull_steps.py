@@ -41,3 +41,8 @@ def test_the_tissue_normal_is_that_of_the_face_around_a_point_not_of_a_fold_it_s
     avg = smoothed_normals(skin, p, 0.5)[0]
     assert np.isclose(np.linalg.norm(avg), 1.0) and avg[2] > 0.97
     assert np.allclose(smoothed_normals(skin, np.array([[0.5, 0.5, 0.0]]), 0.2)[0], [0, 0, 1], atol=1e-9)
+    # a gentle slope is no fold: the point keeps its own normal
+    v, f = _height_field(lambda x, y: 0.3 * x)
+    skin = SkinSurface.build(v, f, close_holes=False)
+    p = np.array([[0.0, 0.0, 0.0]])
+    assert np.array_equal(smoothed_normals(skin, p, 0.5), smoothed_normals(skin, p, 0.0))
