@@ -194,7 +194,10 @@ def _arkit_or_curves(app, orig, arkit, curves, kw):
     inputs = {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"), "FAP track": kw.get("fap"),
               "ARKit take": arkit}
     if curves:                # checked before anything runs, like -o and --preview
+        from faceforge.io.writable import check_writable
+
         protect_inputs(curves, {**inputs, "-o output": output, "--preview": preview})
+        check_writable(curves, "--curves")   # (a missing folder failed after the simulation and the bake)
     if arkit is None:
         orig(**{**kw, "output": None if shapes_out else output})
         write_curves(app, "animate", curves, output if shapes_out else None)
