@@ -107,7 +107,7 @@ CASES = {
                                  ["lm.txt", "format"]),
     # ARKit takes (animate --arkit) and curves: read before anything runs
     "arkit csv NUL byte": ({"t.csv": "jawOpen\n0.1\x00\n"}, ["animate", "--arkit", "{tmp}/t.csv"],
-                           ["t.csv", "not a CSV"]),
+                           ["t.csv:2", "not a number"]),
     "arkit csv weight nan": ({"t.csv": "jawOpen\nnan\n"}, ["animate", "--arkit", "{tmp}/t.csv"],
                              ["t.csv:2", "outside [0, 1]"]),
     "arkit csv timecodes at 24000 fps": ({"t.csv": "Timecode,jawOpen\n" + "".join(
