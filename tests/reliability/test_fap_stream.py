@@ -111,3 +111,35 @@ def test_spooled_tables_are_the_bytes_np_savez_writes(tmp_path):
     buf = io.BytesIO()
     np.savez(buf, frames=frames, fps=np.float64(25), contractions=c, controls=np.array(["a", "b"]), jaw=jaw)
     assert (tmp_path / "a.npz").read_bytes() == buf.getvalue()
+
+
+def test_block_controls_and_summary_are_the_whole_tracks(tmp_path):
+    """ControlBlocks (any block size) give track_controls' contractions, jaw, FAPs and head
+    angles bit for bit, and its summary the stage's figures (unmapped FAPs, visemes, maxima)."""
+    from types import SimpleNamespace
+
+    from faceforge.animation.control_stream import ControlBlocks
+    from faceforge.animation.controls import track_controls, visemes_played
+    from faceforge.animation.fap_mapping import JawLevers, load_fap_mapping
+    from faceforge.animation.head_motion import head_angles
+    from pathlib import Path
+
+    import faceforge
+
+    mapping = load_fap_mapping(Path(faceforge.__file__).parent / "templates" / "fap_mapping.yaml")
+    fapu = SimpleNamespace(as_dict=lambda: {n: 0.01 for n in ("IRISD", "ES", "ENS", "MNS", "MW", "AU")})
+    head = SimpleNamespace(controls=list(mapping.muscles), fapu=fapu, levers=JawLevers(pitch=9.0, yaw=8.0))
+    track = tricky_track(90)
+    path = write_fap(tmp_path / "t.fap", track)
+    c, jaw, unmapped, faps = track_controls(track, mapping, head)
+    visemes, viseme_frames = visemes_played(track)
+    for block in (7, 64):
+        source = ControlBlocks(FapFile(path, block=block), mapping, head, turn=True)
+        blocks = list(source)
+        assert np.array_equal(np.concatenate([b.c for b in blocks]), c)
+        assert np.array_equal(np.concatenate([b.jaw for b in blocks]), jaw)
+        assert np.array_equal(np.concatenate([b.angles for b in blocks]), head_angles(faps))
+        s = source.summary()
+        assert (s.unmapped, s.visemes, s.viseme_frames) == (unmapped, visemes, viseme_frames)
+        assert s.max_contraction == float(c.max()) and np.array_equal(s.max_jaw, jaw.max(axis=0))
+        assert np.array_equal(s.max_angles, np.abs(head_angles(faps)).max(axis=0))
