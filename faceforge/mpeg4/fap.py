@@ -318,41 +318,8 @@ def _parse_mask(tokens: list[str], source: str, line: int) -> np.ndarray:
     return np.array([t == "1" for t in tokens], dtype=bool)
 
 
-def parse_fap(text: str, source: str | Path = "<string>", *, strict: bool = False) -> FapTrack:
-    """Parse the text of a FAP file (see the module docstring for format and repairs).
-
-    Parameters
-    ----------
-    text : str
-    source : str or Path
-        Named in errors and warnings.
-    strict : bool
-        Turn every repair into a :class:`FapError`.
-
-    Returns
-    -------
-    FapTrack
-
-    Raises
-    ------
-    FapError
-        Naming ``source`` and the line.
-
-    The reader is :class:`faceforge.mpeg4.fap_stream.FapFile`, which also reads a long file
-    a block of frames at a time.
-    """
-    from .fap_stream import parse_lines
-
-    return parse_lines(text, str(source), strict)
-
-
-def read_fap(path: str | Path, *, strict: bool = False) -> FapTrack:
-    """Read a FAP file. See :func:`parse_fap`; errors name ``path`` and the line. The text is
-    never held whole (:class:`faceforge.mpeg4.fap_stream.FapFile`; its ``blocks()`` reads a
-    long take a block at a time)."""
-    from .fap_stream import FapFile
-
-    return FapFile(path, strict=strict).read()
+# parse_fap and read_fap live in fap_stream (one reader, which also reads a long file a block
+# of frames at a time); faceforge.mpeg4 exports them.
 
 
 # ---------------------------------------------------------------- writing

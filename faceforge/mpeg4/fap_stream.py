@@ -2,15 +2,15 @@
 
 :func:`faceforge.mpeg4.read_fap` used to hold the whole text, its lines and the filled
 ``(F, 68)`` tables at once (~4 KB a frame at the peak, issue 28). :class:`FapFile` reads the file
-twice, never whole: :meth:`FapFile.__init__` checks every line (the same errors, warnings and
-repairs as :func:`~faceforge.mpeg4.fap.parse_fap`, in the same order) and counts the frames;
+twice, never whole: :meth:`FapFile.__init__` checks every line (the errors, warnings and
+repairs of :mod:`faceforge.mpeg4.fap`'s format, in the order the whole-text reader had) and counts the frames;
 :meth:`FapFile.blocks` then yields :class:`~faceforge.mpeg4.fap.FapTrack` blocks of
 :data:`BLOCK` frames whose values are those of the whole track (the hold rule carries across
 blocks). Both passes keep a constant amount of memory: the bytes are read 1 MiB at a time and
 decoded incrementally.
 
-``parse_fap`` and ``read_fap`` are built on the same pass (:func:`parse_lines`), so there is
-one reader.
+:func:`parse_fap` and :func:`read_fap` (exported by :mod:`faceforge.mpeg4`) are built on the
+same passes, so there is one reader.
 """
 
 from __future__ import annotations
@@ -164,7 +164,7 @@ class FapFile:
 
     ``FapFile(path, strict=False, block=BLOCK)`` reads the file once to check it (raising
     :class:`FapError` naming the file and line, warning :class:`FapWarning` for the repairs, as
-    :func:`~faceforge.mpeg4.fap.parse_fap` does); then ``fps``, ``name``, ``version`` and
+    :func:`parse_fap` does); then ``fps``, ``name``, ``version`` and
     ``n_frames`` (the frames present) describe it and :meth:`blocks` reads it again.
     ``source`` (``path`` when None) names it in messages; ``pieces``: a callable returning the
     text in pieces (for :func:`parse_fap`'s strings; default: the file's bytes, UTF-8 or else
@@ -258,7 +258,7 @@ class FapFile:
             yield track
 
     def read(self) -> FapTrack:
-        """The whole track (what :func:`~faceforge.mpeg4.fap.read_fap` returns)."""
+        """The whole track (what :func:`read_fap` returns)."""
         parts = list(self.blocks())
         return FapTrack(fps=self.fps, values=np.concatenate([p.values for p in parts]),
                         mask=np.concatenate([p.mask for p in parts]),
@@ -286,6 +286,31 @@ def _filled(raw: _Raw, state, meta: FapFile) -> FapTrack:
                     frame_numbers=raw.frame_numbers[:k].copy(), name=meta.name, version=meta.version)
 
 
-def parse_lines(text: str, source: str, strict: bool) -> FapTrack:
-    """:func:`~faceforge.mpeg4.fap.parse_fap` of ``text`` through :class:`FapFile`."""
-    return FapFile(source, strict=strict, pieces=lambda: (text,), source=source).read()
+def parse_fap(text: str, source: str | Path = "<string>", *, strict: bool = False) -> FapTrack:
+    """Parse the text of a FAP file (see :mod:`faceforge.mpeg4.fap` for the format and the
+    repairs).
+
+    Parameters
+    ----------
+    text : str
+    source : str or Path
+        Named in errors and warnings.
+    strict : bool
+        Turn every repair into a :class:`FapError`.
+
+    Returns
+    -------
+    FapTrack
+
+    Raises
+    ------
+    FapError
+        Naming ``source`` and the line.
+    """
+    return FapFile(str(source), strict=strict, pieces=lambda: (text,), source=str(source)).read()
+
+
+def read_fap(path: str | Path, *, strict: bool = False) -> FapTrack:
+    """Read a FAP file (:func:`parse_fap`; errors name ``path`` and the line). The text is
+    never held whole; :meth:`FapFile.blocks` reads a long take a block at a time."""
+    return FapFile(path, strict=strict).read()
