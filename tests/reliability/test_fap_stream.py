@@ -143,3 +143,24 @@ def test_block_controls_and_summary_are_the_whole_tracks(tmp_path):
         assert (s.unmapped, s.visemes, s.viseme_frames) == (unmapped, visemes, viseme_frames)
         assert s.max_contraction == float(c.max()) and np.array_equal(s.max_jaw, jaw.max(axis=0))
         assert np.array_equal(s.max_angles, np.abs(head_angles(faps)).max(axis=0))
+
+
+def test_offline_playback_in_blocks_is_the_whole_tracks():
+    """animate plays a long take a block at a time; offline (play_converged), a block starts from
+    the previous block's last controls and the rig as it left it: the same frames as at once."""
+    from faceforge.animation.statics import SettleSettings, play_converged
+    from tests.animation.test_statics import relaxing_rig
+
+    c = np.linspace(0.0, 1.0, 12)[:, None] ** 2
+    jaw = np.zeros((12, 3))
+    settings = SettleSettings(tolerance=1e-6, max_frames=5)     # unconverged: the carried state shows
+    whole, parts = {}, {}
+    play_converged(relaxing_rig(), c, jaw, 25.0, lambda s, f: whole.update({s: f.copy()}), settings, chunk=4)
+    rig, previous = relaxing_rig(), None
+    for start in (0, 8):
+        block = slice(start, start + 8)
+        play_converged(rig, c[block], jaw[block], 25.0, lambda s, f, o=start: parts.update({o + s: f.copy()}),
+                       settings, chunk=4, previous=previous)
+        previous = (c[block][-1], jaw[block][-1])
+    assert sorted(whole) == sorted(parts)
+    assert all(np.array_equal(whole[k], parts[k]) for k in whole)
