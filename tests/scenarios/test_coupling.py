@@ -170,3 +170,22 @@ def test_a_static_pose_with_the_jaw_at_its_limit_stays_bounded(head):
             moved[n] = max(moved.get(n, 0.0), np.abs(h.system.positions(n) - h.system.rest_positions(n)).max())
     h.rig.reset()
     assert max(moved.values()) < 0.2 * diag, max(moved.items(), key=lambda kv: kv[1])
+
+
+def test_the_pucker_pushes_both_lips_forward_and_turns_them_out(head):
+    """orbicularis_oris.protrude (FAPs 16/17) at 0.5: both lips' middles (FDP 8.1, 8.2) move
+    forward, the upper one not down and the lower one down (a real pucker turns the lips out:
+    the MakeHuman units' mouth-protusion moves 8.1 5 mm up and 5 forward, 8.2 11 down and 5
+    forward). Along the mouth plane's normal alone the upper lip went down (0.5 mm for 1.8
+    forward at 0.5); with the eversion (sphincter.EVERSION 1.0) measured: 8.1 forward 1.9,
+    up 0.5 mm; 8.2 forward 1.2, down 1.9 mm."""
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.playback import static_poses
+
+    h, _ = head
+    ctr = np.zeros((1, len(h.controls)))
+    ctr[0, list(h.controls).index("orbicularis_oris.protrude")] = 0.5
+    d = (static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest) / units_per_mm(h.landmarks)
+    top, bottom = d[h.fdp_vertex["8.1"]], d[h.fdp_vertex["8.2"]]
+    assert top[2] > 1.0 and bottom[2] > 0.8, (top, bottom)
+    assert top[1] > 0.2 and bottom[1] < -1.0, (top, bottom)
