@@ -41,6 +41,10 @@ HEADS = {
     "ict": ROOT / "samples/ict/ict_face_headneck_neutral.obj",
     "mediapipe": ROOT / "samples/mediapipe/face_model_with_iris.obj",
 }
+#: heads of other identities kept in the repository (tests/data), measured the same way
+IDENTITIES = {
+    "makehuman_female_young": ROOT / "tests/data/makehuman-identities/mh_head_caucasian_female_young.obj",
+}
 FRAMES = {"blender (+Z up, -Y forward)": ("+Z", "-Y"), "facing +X": ("+Y", "+X")}
 
 
@@ -56,7 +60,7 @@ def accuracy() -> tuple[list, dict]:
     from faceforge.landmarks.detect import detect_landmarks
 
     rows, per_fdp, dets = [], {}, {}
-    for name, mesh in HEADS.items():
+    for name, mesh in {**HEADS, **IDENTITIES}.items():
         v, f, _ = load_mesh(mesh)
         diag = float(np.linalg.norm(np.ptp(v, axis=0)))
         t = time.perf_counter()
@@ -80,6 +84,8 @@ def orientation(dets: dict) -> list:
 
     rows = []
     for name, (v, f, det, diag) in dets.items():
+        if name not in HEADS:
+            continue
         for label, (up, fwd) in FRAMES.items():
             r = frame_rotation(parse_axis(up), parse_axis(fwd))   # head = user @ R.T
             turned = detect_landmarks(v @ r, f, name)             # the head in the user's frame
@@ -142,15 +148,20 @@ def _faceforge(*args, cwd=None) -> subprocess.CompletedProcess:
 def end_to_end(tmp: Path) -> dict:
     heads = tmp / "heads"
     heads.mkdir()
-    for mesh in HEADS.values():
+    every = {**HEADS, **IDENTITIES}
+    for mesh in every.values():
         shutil.copy(mesh, heads / mesh.name)     # no landmark file next to it
     fap = ROOT / "samples/fap/joy.fap"
     rows = []
-    for name, mesh in HEADS.items():
-        work = tmp / f"w_{name}"
+    runs = [(name, mesh, "detected") for name, mesh in every.items()]
+    runs += [(name, mesh, "hand") for name, mesh in IDENTITIES.items()]   # the identities' own files too
+    for name, mesh, lm in runs:
+        work = tmp / f"w_{name}_{lm}"
         t = time.perf_counter()
-        steps = [("fit", (heads / mesh.name,)), ("bind", ()), ("animate", ("--fap", fap, "-o", work / "joy.pc2"))]
-        row = {"head": name}
+        given = ("--landmarks", mesh.with_name(mesh.stem + ".fdp.yaml")) if lm == "hand" else ()
+        steps = [("fit", (heads / mesh.name, *given)), ("bind", ()),
+                 ("animate", ("--fap", fap, "-o", work / "joy.pc2"))]
+        row = {"head": name, "landmarks": lm}
         for step, extra in steps:
             res = _faceforge("--no-progress", "-w", work, step, *extra)
             row[step] = "ok" if res.returncode == 0 else f"exit {res.returncode}: {res.stderr.strip()[-300:]}"
@@ -159,8 +170,13 @@ def end_to_end(tmp: Path) -> dict:
         if row.get("animate") == "ok":
             rep = json.loads((work / "animate/report.json").read_text())
             row["animate_checks"] = rep.get("checks", {}).get("ok", rep.get("checks"))
+        if (work / "fit/report.json").exists():
             fit = json.loads((work / "fit/report.json").read_text())
             row["fit_landmark_max_residual"] = fit["landmarks"]["max_residual"]
+            row["fit_checks"] = fit["checks"]
+            row["fit_skull_inside_%"] = 100 * fit["skull"]["inside_fraction"]
+            row["fit_muscles_inside_%"] = 100 * (fit["muscles"]["inside_fraction"] or 0.0)
+            row["fit_muscles_poke_%"] = 100 * fit["muscles"]["max_outside_rel"]
         row["seconds"] = time.perf_counter() - t
         rows.append(row)
     t = time.perf_counter()

@@ -90,6 +90,7 @@ class FitSettings:
     """Parameters of the fit (config section ``fit``)."""
 
     tissue_depth: bool = True          # move skin targets inward by tissue depth
+    tissue_normal_radius: float = 0.1  # a landmark on a fold takes the normal of the skin within this (x ES0); 0: off
     enhancement_rays: bool = True      # add ray-cast enhancement landmarks
     refit: bool = True                 # cylindrical projection onto muscles and second fit
     enhancement_rounds: int = 3
@@ -98,6 +99,7 @@ class FitSettings:
     enhancement_min_ratio: float = 0.7  # add a pair where thickness < ratio * expected depth
     enhancement_cell: float = 0.015    # candidates: one skull vertex per cell of this size (x skin diagonal)
     enhancement_flow_steps: int = 8    # >0: each enhancement round is a flow of this many midpoint steps; 0: exact RBF
+    enhancement_max_step: float = 0.25  # a flow moves a new pair at most this x its distance to the nearest held target
     skin_clearance_mm: float = 1.0     # skin found inside the bone is cleared by this much (mm); 0: off
     skin_clearance_samples: int = 16   # bone pairs per round for skin inside the bone
     front_offset_es0: float = 0.75     # front region: in front of eye corners minus this * ES0
@@ -187,7 +189,7 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     skin_lm = {f: np.asarray(p, dtype=np.float64) for f, p in zip(skin_ids, skin_points)}
     scale_mm = fit_tissue.units_per_mm(skin_lm)
     pairs = skull_targets(template.landmarks, skin, skin_ids, skin_points,
-                          scale_mm, settings.tissue_depth)
+                          scale_mm, settings.tissue_depth, settings.tissue_normal_radius * fit_tissue.es0(skin_lm))
     (cv, cf), (mv, mf) = template.cranium, template.mandible
     skull_v = np.vstack([cv, mv])
     skull_f = np.vstack([cf, mf + len(cv)])

@@ -102,6 +102,8 @@ class OrbitHollow:
     beta: float = 0.5
     lam: float = 1.0
     socket_radius: float = 0.0
+    face_normal: np.ndarray = None   # (m, 3) the skin's outward face normals (with fan_face: see radius)
+    fan_face: np.ndarray = None      # (m,) bool: faces of the fans closing the skin's holes
 
     def radius(self, points: np.ndarray):
         """``(r (k,), u (k, 3), T (k,))`` of points (k, 3): distance from the centre, unit
@@ -116,8 +118,19 @@ class OrbitHollow:
         r = np.linalg.norm(d, axis=1)
         u = d / np.maximum(r, 1e-300)[:, None]
         u[r == 0] = (0.0, 0.0, -1.0)
-        _, _, t = self.caster.first_hit(np.broadcast_to(self.centre, u.shape), u,
-                                         max_distance=REACH_SLACK * self.reach)
+        face, _, t = self.caster.first_hit(np.broadcast_to(self.centre, u.shape), u,
+                                            max_distance=REACH_SLACK * self.reach)
+        if self.face_normal is not None:
+            # a ray that meets the skin from inside (its outward normal along the ray, not a
+            # fan) leaves the head there: the centre sees flesh, not the socket, that way, and
+            # bone along it stays. Bounding it by ``t`` pushed that bone out through the lids
+            # (MakeHuman caucasian_female_young with detected eye corners: skull 95 % inside)
+            hit = face >= 0
+            f = face[hit]
+            leaves = np.einsum("ij,ij->i", self.face_normal[f], u[hit]) > 0.0
+            if self.fan_face is not None:
+                leaves &= ~self.fan_face[f]
+            t[np.flatnonzero(hit)[leaves]] = np.inf
         return r, u, t + self.clearance
 
     def near(self, points: np.ndarray) -> np.ndarray:
@@ -133,7 +146,7 @@ class OrbitHollow:
         m = self.near(p)
         if m.any():
             r, _, big_t = self.radius(p[m])
-            out[m] = r < big_t + tol
+            out[m] = (r < big_t + tol) & np.isfinite(big_t)    # inf: no constraint that way
         return out
 
     def fitted(self, bone_points: np.ndarray, margin: float = 0.9) -> "OrbitHollow":
@@ -218,7 +231,8 @@ def find_hollow(skin, centre_candidates: np.ndarray, clearance: float, max_radiu
             enclosed[hit] = fan_face[f] | (np.einsum("ij,ij->i", face_normal[f], dirs[hit]) < 0.0)
         if enclosed.mean() >= min_enclosed:
             return OrbitHollow(c, skin.caster, float(clearance), float(t[hit].max()), float(beta),
-                               socket_radius=float(np.median(t[hit])))
+                               socket_radius=float(np.median(t[hit])), face_normal=face_normal,
+                               fan_face=fan_face)
     return None
 
 

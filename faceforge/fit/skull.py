@@ -44,12 +44,51 @@ class SkullTargets:
         return self.skin - self.depth[:, None] * self.normal
 
 
+#: a landmark whose own skin normal is more than this many degrees from the normal of the
+#: skin around it sits on a fold: its tissue depth is taken along the latter
+FOLD_DEG = 40.0
+
+
+def smoothed_normals(skin: SkinSurface, points: np.ndarray, radius: float) -> np.ndarray:
+    """Unit skin normals (k, 3) at the closest skin points of ``points`` (k, 3): the smooth
+    normal at the point (:meth:`SkinSurface.normal_near`), or, where that is more than
+    :data:`FOLD_DEG` from the normal of the skin around it (area-weighted face normals,
+    fans included, whose centroids lie within ``radius`` head units, Gaussian weights of
+    sigma ``radius / 2``), the latter. ``radius`` <= 0: the point's own everywhere.
+
+    The tissue depth is measured across the face, not across a lid fold: an eye corner
+    placed on the lid margin of a modelled eye socket has a normal pointing into the socket
+    (MakeHuman, detected outer corner: (-0.97, -0.16, 0.17), 60 degrees from the skin around it; a
+    hand-placed corner: 22 degrees), and its bone target, that far
+    sideways, pushed the lateral orbital rim 16 mm out of the skin."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    own = skin.normal_near(p)
+    if radius <= 0 or len(p) == 0:
+        return own
+    from scipy.spatial import cKDTree
+
+    tri = skin.vertices[skin.faces]
+    area_normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    centroid = tri.mean(axis=1)
+    closest, _, _ = skin.closest(p)
+    out = own.copy()
+    for i, near in enumerate(cKDTree(centroid).query_ball_point(closest, radius)):
+        if not near:
+            continue
+        d2 = np.sum((centroid[near] - closest[i]) ** 2, axis=1)
+        n = (np.exp(-2.0 * d2 / radius ** 2)[:, None] * area_normal[near]).sum(axis=0)
+        if np.linalg.norm(n) > 0 and float(own[i] @ n) < np.cos(np.radians(FOLD_DEG)) * np.linalg.norm(n):
+            out[i] = n / np.linalg.norm(n)
+    return out
+
+
 def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_points,
-                  scale_mm: float, use_depth: bool) -> SkullTargets:
+                  scale_mm: float, use_depth: bool, normal_radius: float = 0.0) -> SkullTargets:
     """Pair the template skull landmarks with the skin landmarks they fit to.
 
     Only FDPs on both sides with bone beneath (``fit_tissue.FDP_TISSUE_CODE``) are used,
-    with depth 0 when ``use_depth`` is false.
+    with depth 0 when ``use_depth`` is false; the depth is taken along the skin normal
+    averaged over ``normal_radius`` (head units, :func:`smoothed_normals`).
     """
     index = {f: i for i, f in enumerate(skin_ids)}
     fdps = tuple(f for f in skull_landmarks if f in index and f in fit_tissue.FDP_TISSUE_CODE)
@@ -66,7 +105,8 @@ def skull_targets(skull_landmarks: dict, skin: SkinSurface, skin_ids, skin_point
     far = np.min(np.linalg.norm(rest[:, None] - source[None], axis=2), axis=1) > ANCHOR_DISTANCE * skull_diag \
         if len(rest) else np.zeros(0, bool)
     return SkullTargets(fdps, source, np.asarray(skin_points, dtype=np.float64)[rows],
-                        skin.normal_near(np.asarray(skin_points, dtype=np.float64)[rows]), depth,
+                        smoothed_normals(skin, np.asarray(skin_points, dtype=np.float64)[rows], normal_radius),
+                        depth,
                         rest[far])
 
 
@@ -121,6 +161,29 @@ def skin_inside_bone_pairs(moved: np.ndarray, skull_faces: np.ndarray, aligned: 
     return aligned[j], moved[j] + np.minimum(push, 0.0)[:, None] * n
 
 
+def limit_steps(start: np.ndarray, target: np.ndarray, held: np.ndarray, ratio: float) -> np.ndarray:
+    """Targets (k, 3) of new enhancement pairs pulled back towards their ``start`` (k, 3) so
+    that no pair moves more than ``ratio`` times its distance to the nearest ``held`` (h, 3)
+    point, where the round's field is zero (``ratio`` <= 0: unchanged).
+
+    The field of a flow goes from zero at a held target to the full correction at the new
+    pair, so its gradient there is about correction / distance, and the bone between them
+    stretches by that much: skin that a modelled eye socket pushes deep into the bone asked
+    for 1-4 cm of push beside the eye-corner targets, and the flows stretched the bone's edges
+    up to 17-fold, out through the lids and brows (MakeHuman ``caucasian_female_young``,
+    skull 96 % inside, issue 28). A shortened pair is met over the next rounds, which test
+    again."""
+    start, target = np.asarray(start, dtype=np.float64), np.asarray(target, dtype=np.float64)
+    if ratio <= 0 or len(start) == 0 or len(held) == 0:
+        return target
+    from scipy.spatial import cKDTree
+
+    near, _ = cKDTree(np.asarray(held, dtype=np.float64)).query(start)
+    step = np.linalg.norm(target - start, axis=1)
+    keep = np.minimum(1.0, ratio * near / np.maximum(step, 1e-300))
+    return start + keep[:, None] * (target - start)
+
+
 def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.ndarray, skin: SkinSurface,
               skin_landmarks: dict, settings, scale_mm: float = 1.0) -> SkullFit:
     """Steps 2-4 of the module docstring on the skull ``(vertices (n,3), faces (m,3))`` (template
@@ -171,6 +234,7 @@ def fit_skull(pairs: SkullTargets, skull_vertices: np.ndarray, skull_faces: np.n
         if flow:
             # the new sources are skull vertices: where the map so far takes them
             start = Warp(np.eye(4), warp.rbfs)(new_src)
+            new_dst = limit_steps(start, new_dst, dst, settings.enhancement_max_step)
             # zero at every earlier target: the FDP landmarks stay exactly where they are, and
             # bone that an earlier flow left short of its target is not pinned there
             g = Flow(enhancement_field(dst, start, new_dst - start, eps), settings.enhancement_flow_steps)

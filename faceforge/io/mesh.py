@@ -99,9 +99,36 @@ def _read_text(path: Path) -> str:
         raise MeshError(f"cannot read: {exc.strerror}", path) from None
 
 
+def _read_obj_fast(text: str):
+    """The common OBJ in bulk (numpy): every ``v`` line x y z, every ``f`` line three
+    positive corner indices (``i``, ``i/t``, ``i/t/n`` or ``i//n``). Returns ``(vertices
+    (n, 3), faces (m, 3) int64)``, or None for anything else (the line-by-line reader then
+    reads it and names a bad line): a 45k-vertex head in about a fifth of the time."""
+    import re
+
+    if re.search(r"^[ \t]+[vf][ \t]", text, re.M):
+        return None                                   # indented lines: the careful reader
+    v = re.findall(r"^v[ \t]+(.*)$", text, re.M)
+    f = re.findall(r"^f[ \t]+(.*)$", text, re.M)
+    try:
+        vertices = np.array(" ".join(v).split(), dtype=np.float64)
+        corners = np.array(re.sub(r"/\S*", "", " ".join(f)).split(), dtype=np.int64)
+    except (ValueError, OverflowError):
+        return None
+    if len(vertices) != 3 * len(v) or len(corners) != 3 * len(f):
+        return None                                   # w coordinates, colours, polygons, short lines
+    if len(corners) and (corners.min() < 1 or not np.isfinite(vertices).all()):
+        return None
+    return vertices.reshape(-1, 3), corners.reshape(-1, 3) - 1
+
+
 def _read_obj(path: Path):
+    text = _read_text(path)
+    fast = _read_obj_fast(text)
+    if fast is not None:
+        return fast
     vertices, polygons = [], []
-    for number, line in enumerate(_read_text(path).splitlines(), start=1):
+    for number, line in enumerate(text.splitlines(), start=1):
         parts = line.split()
         if not parts:
             continue

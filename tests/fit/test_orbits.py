@@ -132,3 +132,23 @@ def test_the_map_ignores_skin_beyond_the_reach_of_the_socket(socket):
     h = OrbitHollow(np.zeros(3), socket.caster, 0.02, 1.0 / REACH_SLACK + 0.01, lam=0.5)
     _, _, big_t = h.radius(np.array([[0.0, 0.0, 0.3]]))
     assert np.isfinite(big_t).all()
+
+
+def test_a_ray_that_meets_the_skin_from_inside_puts_no_bound_on_the_bone(socket):
+    """From the centre a ray that meets the skin from inside leaves the head (it sees flesh,
+    not the socket): bone that way stays. Bounding it by the skin pushed bone out through
+    the lids (issue 28, MakeHuman with detected eye corners)."""
+    h = find_hollow(socket, np.array([[0.0, 0.0, 0.0]]), clearance=0.02, max_radius=2.0)
+    assert h.face_normal is not None
+    _, _, big_t = h.radius(np.array([[0.0, 0.0, 0.3], [0.3, 0.0, 0.0]]))
+    assert np.isfinite(big_t).all()                      # the lining faces the centre: a bound
+    s = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    head = surface(s.vertices, s.faces)                  # skin facing out: rays leave the head
+    tri = head.vertices[head.faces]
+    out = OrbitHollow(np.zeros(3), head.caster, 0.02, 1.0, lam=0.5,
+                      face_normal=np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                      fan_face=np.zeros(len(head.faces), bool))
+    _, _, big_t = out.radius(np.array([[0.0, 0.0, 0.3], [0.3, 0.0, 0.0]]))
+    assert not np.isfinite(big_t).any()
+    bone = np.array([[0.0, 0.0, 0.5], [0.0, 0.6, 0.0]])
+    assert np.array_equal(out(bone), bone) and not out.inside(bone).any()

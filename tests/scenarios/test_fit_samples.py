@@ -95,7 +95,10 @@ def test_modelled_eye_sockets_stay_hollow(fitted, name):
     hollows = find_orbit_hollows(skin, extra["landmarks"].as_dict(), report["units_per_mm"])
     assert len(hollows) == (2 if name == "makehuman" else 0)
     assert result.info["orbit_hollows"] == len(hollows)
-    assert result.info["orbit_max_shift_rel"] < 0.025
+    # (0.023 of the diagonal before the enhancement flows' step limit; with it the flows push
+    # less bone out of the socket and this map more: 0.045, one-to-one either way, and the
+    # whole fit turns over 67 cranium triangles instead of 145)
+    assert result.info["orbit_max_shift_rel"] < 0.05
     bone = np.vstack([result.cranium, result.mandible])
     for h in hollows:
         # the skin of the pocket holds the centre: it lies behind the eye corners
