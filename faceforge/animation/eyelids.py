@@ -29,6 +29,13 @@ the lower margin at ``reach / 2 * gap`` below it. Skin behind the margins fades 
 ``depth * gap`` behind them to twice that: the inside of a closed socket stays, and the back
 of the head is never in reach.
 
+**A driven lid holds its skin.** MPEG-4's lid FAPs give the lid FDP's displacement from the
+neutral face, so in a frame where an eye's lid FAPs move, the skin the lids own first gives back
+its simulated vertical drift (:func:`held_share`: all of it between the margins and at the
+corners, fading out above and below with the lids' fades): the frontalis of a surprised face
+dragged the upper margin up hardest under the brow's middle, and the lid's own raise laid over
+that peaked and skewed the opening.
+
 **Over the eyeball.** A lid closing over the eye rides forward over the eyeball: a vertex in
 front of the eyeball's horizontal axis (along ``u``) keeps its distance from the axis as it
 moves vertically, when that brings it forward; it never moves back (a lid opening wider
@@ -67,6 +74,10 @@ TAPER = 3.0
 
 #: eyeball radius as a fraction of half the eye's corner distance
 EYEBALL_RADIUS = 0.8
+
+#: how far beyond each eye corner (fraction of half the corner distance) a driven lid's hold on
+#: the skin's drift fades out (:func:`held_share`)
+HOLD_BEYOND = 0.3
 
 
 @dataclass(frozen=True)
@@ -167,13 +178,18 @@ class LidField:
     lower-lid rise at the lid FDPs (skin units), see :func:`lid_field`. ``index (k,)``: the
     vertices in reach; the shares are (k,) >= 0 at those vertices (1 at the lid FDPs);
     ``reach``: the fade's height above the upper margin, in rest openings (half of it below the
-    lower margin)."""
+    lower margin). ``hold (k,)`` in [0, 1]: how much of the skin's simulated vertical drift the
+    driven lids take back (:func:`held_share`): 1 between the margins, the shares' fades above
+    and below them, without the taper along the lid, so the corners (the canthi, tied to the
+    bone) are held as well, fading out beyond them over :data:`HOLD_BEYOND` of ``half``; None:
+    the shares' sum."""
 
     eye: Eye
     index: np.ndarray
     up_share: np.ndarray
     low_share: np.ndarray
     reach: float
+    hold: np.ndarray | None = None
 
 
 def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5) -> LidField:
@@ -198,9 +214,11 @@ def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5
     up = np.where(x[:, 1] >= hu, above, np.where(x[:, 1] <= hl, 0.0, t))
     low = np.where(x[:, 1] <= hl, below, np.where(x[:, 1] >= hu, 0.0, 1.0 - t))
     s_up, s_low = eye.taper([eye.upper_u, eye.lower_u])
+    across = np.clip(((1.0 + HOLD_BEYOND) * eye.half - np.abs(x[:, 0])) / (HOLD_BEYOND * eye.half), 0.0, 1.0)
+    hold = np.clip(up + low, 0.0, 1.0) * across * behind
     up, low = up * s * behind / s_up, low * s * behind / s_low
-    index = np.flatnonzero((up > 0.0) | (low > 0.0))
-    return LidField(eye, index, up[index], low[index], float(reach))
+    index = np.flatnonzero((up > 0.0) | (low > 0.0) | (hold > 0.0))
+    return LidField(eye, index, up[index], low[index], float(reach), hold[index])
 
 
 def lid_moves(field: LidField, faps: np.ndarray, irisd: float) -> np.ndarray:
@@ -226,6 +244,20 @@ def lid_moves(field: LidField, faps: np.ndarray, irisd: float) -> np.ndarray:
     return move
 
 
+def held_share(field: LidField, moves: np.ndarray) -> np.ndarray:
+    """``(F, k)`` in [0, 1]: how much of the simulated skin's vertical drift (along the eye's v)
+    the lid field takes back at each vertex of ``field.index`` in frames whose lid moves are
+    ``moves (F, 2)`` (:func:`lid_moves`). MPEG-4's lid FAPs give the lid FDP's displacement from
+    the neutral face, so a driven lid's margin (share 1) goes where its FAP says whatever the
+    muscles did to the skin around it (a brow raised by the frontalis dragged the upper margin up
+    where the brow pulled hardest: a peaked, skewed eye opening in surprise). In a frame where
+    either lid of the eye moves, both are held (a lid FAP of 0 is the neutral lid), with
+    :attr:`LidField.hold`; in a frame where neither moves, nothing is."""
+    moves = np.atleast_2d(moves)
+    hold = np.clip(field.up_share + field.low_share, 0.0, 1.0) if field.hold is None else field.hold
+    return np.any(moves != 0.0, axis=1)[:, None] * hold
+
+
 def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, irisd: float,
               rest: np.ndarray) -> np.ndarray:
     """Frames ``(F, n, 3)`` with the lids moved by FAPs 19-22 of ``faps (F, 68)``.
@@ -233,6 +265,8 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
     fields : one :class:`LidField` per eye (of the same ``rest (n, 3)``); irisd : one IRISD
     unit (skin units). Each vertex in a field's reach is displaced by its vertical move, turned
     over the eyeball (module docstring), computed on its rest position and added to the frame.
+    A driven lid first takes back the vertical drift of the skin it holds (:func:`held_share`),
+    so its FDP ends exactly ``FAP x IRISD`` from its rest place.
     A new array; frames without lid FAPs are copied bit for bit. No guard (:class:`Eyelids`).
     """
     out = np.array(frames, copy=True)
@@ -243,6 +277,10 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
         live = np.flatnonzero(np.any(moves != 0.0, axis=1))
         if not len(idx) or not len(live):
             continue
+        hold = held_share(field, moves[live])                      # (L, k)
+        if hold.any():   # a driven lid's margin goes where its FAP says, not where the skin dragged it
+            drift = (out[np.ix_(live, idx)] - rest[idx]) @ eye.axes[1]
+            out[np.ix_(live, idx)] -= ((hold * drift)[..., None] * eye.axes[1]).astype(out.dtype)
         x = (rest[idx] - eye.eyeball_centre) @ eye.axes.T       # (k, 3) about the eyeball
         dv = -np.outer(moves[live, 0], field.up_share) + np.outer(moves[live, 1], field.low_share)
         y0, z0 = x[:, 1], x[:, 2]
@@ -283,7 +321,7 @@ class Eyelids:
                                                  axis=1))) for f in fdps]
             keep = np.isin(piece[field.index], piece[lids])
             self.fields.append(replace(field, index=field.index[keep], up_share=field.up_share[keep],
-                                       low_share=field.low_share[keep]))
+                                       low_share=field.low_share[keep], hold=field.hold[keep]))
         moving = np.zeros(len(self.rest), dtype=bool)
         for field in self.fields:
             moving[field.index] = True

@@ -147,19 +147,23 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
 
 def play_converged(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, sink,
                    settings: SettleSettings | None = None, stats: SettleStats | None = None,
-                   chunk: int = 64) -> None:
+                   chunk: int = 64, previous: tuple | None = None) -> None:
     """Offline playback (``animate.quality: offline``): every frame of a track is held at its
     controls until the skin stops moving (warm from the frame before, no ramp), so each
     exported frame is the converged pose instead of the real-time ``solver.iterations`` sweeps'
     approximation. Frames go to ``sink(start, frames (k, n, 3))`` ``chunk`` at a time, as
     :func:`faceforge.animation.playback.play` hands them over. Costs several times real time.
+    ``previous``: the controls ``(c (m,), jaw (3,))`` of the frame before ``contractions[0]`` when
+    a long track is played a block at a time (the rig, holding that frame, is then not reset;
+    blocks of a multiple of ``chunk`` frames give the whole track's frames).
     """
     s = settings or SettleSettings()
     s = SettleSettings(ramp=1, warm_ramp=1, tolerance=s.tolerance, min_hold=0, max_frames=s.max_frames)
     c_all = np.atleast_2d(np.asarray(contractions, dtype=float))
     j_all = np.atleast_2d(np.asarray(jaw, dtype=float))
-    rig.reset()
-    previous = (np.zeros(c_all.shape[1]), np.zeros(3))
+    if previous is None:
+        rig.reset()
+        previous = (np.zeros(c_all.shape[1]), np.zeros(3))
     for start in range(0, len(j_all), chunk):
         stop = min(start + chunk, len(j_all))
         frames = settle(rig, c_all[start:stop], j_all[start:stop], fps, s, warm=True, stats=stats,

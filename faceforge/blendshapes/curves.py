@@ -74,8 +74,17 @@ def read_weights(path, default_fps: float = 60.0) -> tuple[list, np.ndarray, flo
     except (OSError, UnicodeDecodeError) as exc:
         raise _error(path, 0, f"cannot read the weights: {exc.__class__.__name__}") from None
     if path.suffix.lower() == ".json":
-        return _read_json(path, text, default_fps)
-    return _read_csv(path, text, default_fps)
+        names, weights, fps = _read_json(path, text, default_fps)
+    else:
+        try:
+            names, weights, fps = _read_csv(path, text, default_fps)
+        except csv.Error as exc:     # a NUL byte, a quote left open
+            raise _error(path, 0, f"not a CSV file: {exc}") from None
+    from faceforge.mpeg4.fap import FPS_RANGE
+
+    if not (np.isfinite(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
+        raise _error(path, 0, f"frame rate must be in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}] fps, got {fps:g}")
+    return names, weights, fps
 
 
 def _name(path, line, raw: str) -> str | None:
@@ -137,8 +146,28 @@ def _read_json(path, text, default_fps):
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise _error(path, exc.lineno, f"not JSON: {exc.msg}") from None
+    except RecursionError:
+        raise _error(path, 0, "JSON nested too deeply") from None
+    except ValueError as exc:      # e.g. an integer of more than 4,300 digits
+        raise _error(path, 0, f"not JSON: {exc}") from None
+    try:
+        return _json_weights(path, data, default_fps)
+    except (TypeError, ValueError, AttributeError) as exc:   # a name or weight of the wrong kind
+        from faceforge.exceptions import FapError
+
+        if isinstance(exc, FapError):
+            raise
+        raise _error(path, 0, f"expected {{\"names\": [...], \"weights\": [[...], ...], \"fps\": N}} or "
+                              f"{{\"frames\": [{{name: weight, ...}}, ...]}} of numbers ({exc})") from None
+
+
+def _json_weights(path, data, default_fps):
+    """names, weights, fps of a parsed JSON take (:func:`_read_json`); TypeError/ValueError on a
+    value of the wrong kind."""
     fps = default_fps
     if isinstance(data, dict) and "names" in data:
+        if not isinstance(data["names"], list) or not all(isinstance(n, str) for n in data["names"]):
+            raise _error(path, 0, "names must be a list of ARKit blendshape names")
         names = [_name(path, 0, n) for n in data["names"]]
         w = np.asarray(data.get("weights", []), dtype=float)
         fps = float(data.get("fps", fps))

@@ -39,6 +39,7 @@ class FrameNpzWriter:
         self.shape = (int(n_frames), int(n_verts), 3)
         self.dtype = np.dtype(dtype)
         self.written = 0
+        self._spools: dict = {}   # name -> [temporary file, dtype, row shape, rows]
         self._zip = zipfile.ZipFile(self.path, "w", compression=zipfile.ZIP_STORED, allowZip64=True)
         self._member = self._zip.open("frames.npy", "w", force_zip64=True)
         np.lib.format.write_array_header_1_0(
@@ -55,15 +56,53 @@ class FrameNpzWriter:
         self._member.write(chunk.tobytes())
         self.written += len(chunk)
 
+    #: a value of :meth:`close` standing for the rows given to :meth:`spool` under that name
+    SPOOLED = object()
+
+    def spool(self, name: str, rows: np.ndarray) -> None:
+        """Append ``rows (k, ...)`` to the array ``name``, kept in a temporary file beside the
+        output (not in memory) until :meth:`close` writes it (``name=FrameNpzWriter.SPOOLED``):
+        per-frame tables (contractions, jaw DOFs) of a long take."""
+        import tempfile
+
+        rows = np.ascontiguousarray(rows)
+        if name not in self._spools:
+            self._spools[name] = [tempfile.TemporaryFile(dir=self.path.parent), rows.dtype, rows.shape[1:], 0]
+        spool = self._spools[name]
+        if rows.dtype != spool[1] or rows.shape[1:] != spool[2]:
+            raise ValueError(f"{name}: rows {rows.dtype} {rows.shape[1:]} after {spool[1]} {spool[2]}")
+        spool[0].write(rows.tobytes())
+        spool[3] += len(rows)
+
     def close(self, **arrays) -> None:
-        """Finish ``frames`` and add ``arrays`` (name -> array) as members ``name.npy``."""
+        """Finish ``frames`` and add ``arrays`` (name -> array, or :data:`SPOOLED`) as members
+        ``name.npy``, in the order given (bytes as ``np.savez`` writes them)."""
         self._member.close()
         if self.written != self.shape[0]:
-            self._zip.close()
+            self._close_all()
             raise ValueError(f"{self.written} frames written, {self.shape[0]} announced")
         for name, value in arrays.items():
             with self._zip.open(f"{name}.npy", "w", force_zip64=True) as fh:
-                np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
+                if value is self.SPOOLED:
+                    self._copy_spool(name, fh)
+                else:
+                    np.lib.format.write_array(fh, np.asanyarray(value), allow_pickle=False)
+        self._close_all()
+
+    def _copy_spool(self, name: str, fh) -> None:
+        """Write the spooled array ``name`` (its ``.npy`` header, then its rows) to ``fh``."""
+        import shutil
+
+        tmp, dtype, row_shape, n = self._spools[name]
+        header = {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False,
+                  "shape": (n, *row_shape)}
+        np.lib.format.write_array_header_1_0(fh, header)   # the version np.save picks for a small header
+        tmp.seek(0)
+        shutil.copyfileobj(tmp, fh, 1 << 20)
+
+    def _close_all(self) -> None:
+        for spool in self._spools.values():
+            spool[0].close()
         self._zip.close()
 
     def __enter__(self) -> "FrameNpzWriter":
@@ -72,7 +111,7 @@ class FrameNpzWriter:
     def __exit__(self, kind, *rest) -> None:
         if kind is not None:
             self._member.close()
-            self._zip.close()
+            self._close_all()
 
 
 def open_frames(path: str | Path, name: str = "frames") -> np.ndarray:

@@ -10,7 +10,8 @@ Imports nothing of faceforge but ``constants``/``exceptions``. Public API::
 """
 
 from .expressions import EXPRESSION_CODES, EXPRESSIONS, expression_track, expression_weights
-from .fap import FapTrack, FapWarning, format_fap, parse_fap, read_fap, write_fap
+from .fap import FapTrack, FapWarning, format_fap, write_fap
+from .fap_stream import parse_fap, read_fap
 from .fapu import Fapu, fap_displacement, fapu_from_landmarks
 from .visemes import VISEME_CODES, VISEMES, viseme_track
 from .tables import (

@@ -38,7 +38,6 @@ from __future__ import annotations
 import math
 import os
 import tempfile
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,7 +45,6 @@ import numpy as np
 
 from faceforge.exceptions import FapError
 
-from .fap_range import clamp_to_range
 from .tables import LIP_PAIRS, N_EXPRESSION_VALUES, N_FAPS, N_VISEME_VALUES
 
 #: versions of the text format this module reads and writes
@@ -295,18 +293,6 @@ def _integer(token: str, source: str, line: int, what: str) -> int:
     return value
 
 
-def _content_lines(text: str) -> list[tuple[int, str]]:
-    """(1-based line number, line) of every line that is neither blank nor a comment. The
-    lines are split into tokens one frame at a time by the reader: tokens of a whole
-    10,000-frame file held at once cost ~8 KB a frame, more than the simulation keeps."""
-    out = []
-    for number, line in enumerate(text.lstrip("\ufeff").splitlines(), start=1):
-        stripped = line.strip()
-        if stripped and not stripped.startswith("#"):
-            out.append((number, stripped))
-    return out
-
-
 def _parse_header(tokens: list[str], source: str, line: int) -> tuple[str, str, float, int]:
     if len(tokens) < 3:
         raise FapError(f"header must be 'version name fps nframes', got {' '.join(tokens)!r}", source, line)
@@ -332,121 +318,8 @@ def _parse_mask(tokens: list[str], source: str, line: int) -> np.ndarray:
     return np.array([t == "1" for t in tokens], dtype=bool)
 
 
-def parse_fap(text: str, source: str | Path = "<string>", *, strict: bool = False) -> FapTrack:
-    """Parse the text of a FAP file (see the module docstring for format and repairs).
-
-    Parameters
-    ----------
-    text : str
-    source : str or Path
-        Named in errors and warnings.
-    strict : bool
-        Turn every repair into a :class:`FapError`.
-
-    Returns
-    -------
-    FapTrack
-
-    Raises
-    ------
-    FapError
-        Naming ``source`` and the line.
-
-    Length (92 lines): the file format's sections in order, each error naming its line; left as
-    it is (issue 24).
-    """
-    source = str(source)
-    lines = _content_lines(text)
-    if not lines:
-        raise FapError("empty FAP file (no header line)", source)
-    header_line, header_tokens = lines[0][0], lines[0][1].split()
-    version, name, fps, n_header = _parse_header(header_tokens, source, header_line)
-    body = lines[1:]
-    if len(body) % 2:
-        number, _ = body[-1]
-        raise FapError("file ends after a mask line without its data line (truncated?)", source, number)
-    n = len(body) // 2
-    if n == 0:
-        raise FapError("no frames after the header", source, header_line)
-    mask = np.zeros((n, N_FAPS), dtype=bool)
-    given = np.zeros((n, N_FAPS))
-    viseme = np.zeros((n, N_VISEME_VALUES))
-    expression = np.zeros((n, N_EXPRESSION_VALUES))
-    frame_numbers = np.zeros(n, dtype=np.int64)
-    repaired: list[int] = []
-    for frame in range(n):
-        (mask_line, mask_text), (data_line, data_text) = body[2 * frame], body[2 * frame + 1]
-        mask_tokens, data_tokens = mask_text.split(), data_text.split()
-        bits = _parse_mask(mask_tokens, source, mask_line)
-        expected = int(_N_VALUES[bits].sum())
-        if len(data_tokens) != expected + 1:
-            raise FapError(
-                f"data line must have the frame number and {expected} values for the mask on line "
-                f"{mask_line}, got {len(data_tokens) - 1} values",
-                source,
-                data_line,
-            )
-        frame_numbers[frame] = _integer(data_tokens[0], source, data_line, "frame number")
-        if frame and frame_numbers[frame] <= frame_numbers[frame - 1]:
-            raise FapError(
-                f"frame number {frame_numbers[frame]} does not increase (previous {frame_numbers[frame - 1]})",
-                source,
-                data_line,
-            )
-        numbers = np.array([_number(t, source, data_line, "FAP value") for t in data_tokens[1:]])
-        ids = np.flatnonzero(bits)
-        chunks = np.split(numbers, np.cumsum(_N_VALUES[ids])[:-1]) if ids.size else []
-        finite_row = True
-        for index, chunk in zip(ids, chunks):
-            if not np.all(np.isfinite(chunk)):
-                finite_row = False
-                continue  # treated as absent in this frame
-            mask[frame, index] = True
-            if index == 0:
-                viseme[frame] = chunk
-            elif index == 1:
-                expression[frame] = chunk
-            else:
-                given[frame, index] = chunk[0]
-        if not finite_row:
-            if strict:
-                raise FapError("non-finite FAP value (inf or nan)", source, data_line)
-            repaired.append(data_line)
-    if repaired:
-        shown = ", ".join(str(x) for x in repaired[:20]) + (" ..." if len(repaired) > 20 else "")
-        warnings.warn(
-            f"{source}: non-finite FAP values on lines {shown}: treated as absent from those frames "
-            "(held from the previous frame or copied from the lip partner)",
-            FapWarning,
-            stacklevel=2,
-        )
-    given, clamped = clamp_to_range(given, mask)
-    if clamped:
-        if strict:
-            raise FapError(f"FAP values past the standard's range: {clamped}", source)
-        warnings.warn(f"{source}: FAP values past the standard's range, clamped: {clamped}", FapWarning, stacklevel=2)
-    if n != n_header:
-        message = f"header says {n_header} frames but the file has {n}"
-        if strict:
-            raise FapError(message, source, header_line)
-        warnings.warn(f"{source}:{header_line}: {message}; using the {n} frames present", FapWarning, stacklevel=2)
-    return FapTrack.from_given(
-        fps, mask, given, viseme, expression, frame_numbers=frame_numbers, name=name, version=version
-    )
-
-
-def read_fap(path: str | Path, *, strict: bool = False) -> FapTrack:
-    """Read a FAP file. See :func:`parse_fap`; errors name ``path`` and the line."""
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FapError(f"cannot read FAP file: {exc.strerror or exc}", path) from None
-    try:
-        text = data.decode("utf-8")
-    except UnicodeDecodeError:
-        text = data.decode("latin-1")
-    return parse_fap(text, path, strict=strict)
+# parse_fap and read_fap live in fap_stream (one reader, which also reads a long file a block
+# of frames at a time); faceforge.mpeg4 exports them.
 
 
 # ---------------------------------------------------------------- writing

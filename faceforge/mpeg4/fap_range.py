@@ -44,17 +44,33 @@ def clamp_to_range(values: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, st
     """Clamp the given entries of ``values`` (n, 68) float (FAPU; only where ``mask`` (n, 68)
     bool) to :data:`LIMITS`. Returns ``(clamped copy, summary)``; the summary names each FAP
     that was clamped with its largest |value| and frame count (empty string: nothing clamped)."""
+    out, worst, count = clamp_block(values, mask)
+    return out, range_summary(worst, count)
+
+
+def clamp_block(values: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`clamp_to_range` of one block of frames without the summary: ``(clamped (n, 68),
+    worst (68,) float64 largest clamped |value| per FAP (0 where none), count (68,) int64 frames
+    clamped per FAP)``; a file read block by block adds up ``count`` and takes the maximum of
+    ``worst`` (:func:`range_summary`)."""
     values = np.asarray(values, dtype=np.float64)
     given = np.asarray(mask, dtype=bool)
     over = given & (np.abs(np.nan_to_num(values)) > LIMITS)
+    worst = np.zeros(N_FAPS)
+    count = over.sum(axis=0).astype(np.int64)
     if not over.any():
-        return values, ""
-    out = np.where(over, np.clip(values, -LIMITS, LIMITS), values)
+        return values, worst, count
+    for k in np.flatnonzero(count):
+        worst[k] = float(np.abs(values[over[:, k], k]).max())
+    return np.where(over, np.clip(values, -LIMITS, LIMITS), values), worst, count
+
+
+def range_summary(worst: np.ndarray, count: np.ndarray) -> str:
+    """The clamping summary of :func:`clamp_to_range` from the per-FAP largest clamped |value|
+    ``worst (68,)`` and frame count ``count (68,)`` (empty string: nothing clamped)."""
     parts = []
-    for k in np.flatnonzero(over.any(axis=0)):
-        record = FAP_TABLE[k]
-        worst = float(np.abs(values[over[:, k], k]).max())
-        parts.append(f"FAP {record.id} {record.name} up to {worst:.3g} {record.unit} in {int(over[:, k].sum())} "
-                     f"frame{'s' if over[:, k].sum() > 1 else ''} (limit {LIMITS[k]:g})")
-    shown = "; ".join(parts[:6]) + (f"; and {len(parts) - 6} more FAPs" if len(parts) > 6 else "")
-    return out, shown
+    for k in np.flatnonzero(np.asarray(count) > 0):
+        record, n = FAP_TABLE[k], int(count[k])
+        parts.append(f"FAP {record.id} {record.name} up to {float(worst[k]):.3g} {record.unit} in {n} "
+                     f"frame{'s' if n > 1 else ''} (limit {LIMITS[k]:g})")
+    return "; ".join(parts[:6]) + (f"; and {len(parts) - 6} more FAPs" if len(parts) > 6 else "")

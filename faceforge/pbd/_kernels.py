@@ -206,7 +206,8 @@ def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
     ``threaded``); the rest are the solver's frozen arrays, passed as one prepared tuple.
 
     ``seg (k + 2,)``: the block rows of each part and of the seam (:func:`_project_parts`);
-    ``threaded``: project the parts on threads (else all rows in order, the same result);
+    ``threaded``: unused here (:func:`_step_parts` projects the parts on threads; the same
+    arguments, so the solver calls either);
     ``bufs (k, BATCH_ROWS * BATCH)``: the vectorised sweeps' scratch, one row per part.
 
     ``lams`` is one flat scratch array holding the multipliers of all kinds in the
@@ -241,24 +242,69 @@ def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
                     x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
         if xpbd:  # the PBD modes never read the multipliers
             lams[:] = 0.0
-        if threaded:   # several parts, on threads (else the same sweeps in one thread)
-            _project_parts(x_out, w, blocks, seg, iterations, xpbd,
-                           d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
-                           b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t,
-                           q_stretch, q_area, q_area_stop,
-                           a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs,
-                           v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k,
-                           v_c, lams[o3:o4], v_g,
-                           p_idx, p_target, p_k, p_c, lams[o4:o5],
-                           t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
-        else:
-            _project(x_out, w, blocks, iterations, xpbd,
-                     d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
-                     b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
-                     q_area, q_area_stop,
-                     a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs[0],
-                     v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
-                     lams[o3:o4], v_g,
-                     p_idx, p_target, p_k, p_c, lams[o4:o5],
-                     t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
+        _project(x_out, w, blocks, iterations, xpbd,
+                 d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
+                 b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
+                 q_area, q_area_stop,
+                 a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs[0],
+                 v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c,
+                 lams[o3:o4], v_g,
+                 p_idx, p_target, p_k, p_c, lams[o4:o5],
+                 t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
+        _velocities(x_out, v_out, prev, 1.0 / h)
+
+
+@numba.njit(**PBD_NUMBA)
+def _step_parts(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
+          w, kin, kin_start, prev, gravity, damp,
+          substeps, iterations, xpbd, blocks, seg, lams,
+          d_idx, d_rest, d_k, d_c, d_coef, d_runs, d_coef_t, d_wt,
+          b_idx, b_rest, b_k, b_c, b_runs, b_w, b_rest_t, q_stretch, q_area, q_area_stop,
+          a_idx, a_rest, a_k, a_c, a_runs, a_w, bufs,
+          v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k, v_c, v_g,
+          p_idx, p_k, p_c,
+          t_idx, t_tri, t_bary, t_k, t_c):
+    """:func:`_step` with the parts on numba's threads (:func:`_project_parts`; the same
+    result). Two kernels rather than one with a branch, so that a run that never threads (one
+    thread, or a model of one part) never compiles the parallel sweep: numba compiles every
+    branch of a kernel, and the parallel one was ~55 % of a first animate's compile (issue 28).
+    The body is :func:`_step`'s but for the projection call; keep the two alike."""
+    n = x_in.shape[0]
+    for q in range(kin.shape[0]):
+        for d in range(3):
+            kin_start[q, d] = x_in[kin[q], d]
+    if x_out.ctypes.data != x_in.ctypes.data:  # stepping in place (the usual case): no copy
+        for i in range(n):
+            for d in range(3):
+                x_out[i, d] = x_in[i, d]
+    if v_out.ctypes.data != v_in.ctypes.data:
+        for i in range(n):
+            for d in range(3):
+                v_out[i, d] = v_in[i, d]
+    o1 = d_idx.shape[0]
+    o2 = o1 + b_idx.shape[0]
+    o3 = o2 + a_idx.shape[0]
+    o4 = o3 + v_rest.shape[0]
+    o5 = o4 + p_idx.shape[0]
+    for s in range(substeps):
+        _predict(x_out, v_out, prev, w, damp, h, gravity)
+        alpha = (s + 1.0) / substeps
+        for q in range(kin.shape[0]):
+            i = kin[q]
+            for d in range(3):
+                if s == substeps - 1:  # exactly the control, no rounding
+                    x_out[i, d] = kin_target[q, d]
+                else:
+                    x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
+        if xpbd:  # the PBD modes never read the multipliers
+            lams[:] = 0.0
+        _project_parts(x_out, w, blocks, seg, iterations, xpbd,
+                       d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
+                       b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t,
+                       q_stretch, q_area, q_area_stop,
+                       a_idx, a_rest, a_k, a_c, lams[o2:o3], a_runs, a_w, bufs,
+                       v_pstart, v_part, v_pcuts, v_cuts, v_tris, v_rstart, v_ref, v_rest, v_k,
+                       v_c, lams[o3:o4], v_g,
+                       p_idx, p_target, p_k, p_c, lams[o4:o5],
+                       t_idx, t_tri, t_bary, t_k, t_c, lams[o5:])
         _velocities(x_out, v_out, prev, 1.0 / h)

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step, _take_rows
+from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step, _step_parts, _take_rows
 from faceforge.pbd.colouring import colour_order
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
@@ -393,8 +393,9 @@ class Solver:
         if self._particle_order is not None:  # stepped in the partitioned model's numbering
             x_in = x_out = _take_rows(x_in, self._particle_order, self._x)
             v_in = v_out = _take_rows(v_in, self._particle_order, self._v)
-        self._chooser.run(lambda threaded: _step(x_in, v_in, x_out, v_out, kin, targets, dt / s.substeps,
-                                                 threaded, *self._frozen))
+        # two kernels: a run that never threads never compiles the parallel one (issue 28)
+        self._chooser.run(lambda threaded: (_step_parts if threaded else _step)(
+            x_in, v_in, x_out, v_out, kin, targets, dt / s.substeps, threaded, *self._frozen))
         if self._particle_order is not None:
             _take_rows(self._x, self._old_order, state_out.positions)
             _take_rows(self._v, self._old_order, state_out.velocities)

@@ -267,14 +267,23 @@ def test_sphincter_displacement_formula():
 
 def test_sphincter_protrusion_moves_the_loops_along_the_normal():
     """The protrusion drive moves every pair along the ellipse plane's normal, on the side of
-    ``forward``, by ``lift b`` times the fall-off (1 on the ellipse), and adds to the in-plane
-    contraction unchanged; without a lift the contraction has no normal component."""
+    ``forward``, by ``lift b`` times the fall-off (1 on the ellipse), turns the lips out
+    (``EVERSION`` times the lift and the sample's height along the minor axis: the upper lip up,
+    the lower one down, the corners not at all), and adds to the in-plane contraction
+    unchanged; without a lift the contraction has no normal component."""
+    from faceforge.anatomy.muscles.sphincter import EVERSION
+
     ang = np.linspace(0, 2 * np.pi, 16, endpoint=False)
     ring = np.stack([2 * np.cos(ang), np.sin(ang), np.zeros(16)], 1)     # b = 1, in z = 0
     up = np.array([0.0, 0.0, 1.0])
     lift = sphincter_displacement(ring, ring, 0.0, 0.3, up)
-    np.testing.assert_allclose(lift, np.tile([0.0, 0.0, 0.3], (16, 1)), atol=1e-9)
-    np.testing.assert_allclose(sphincter_displacement(ring, ring, 0.0, 0.3, -up), -lift, atol=1e-12)
+    assert EVERSION > 0.0
+    out = np.stack([np.zeros(16), 0.3 * EVERSION * ring[:, 1], np.full(16, 0.3)], 1)
+    np.testing.assert_allclose(lift, out, atol=1e-9)
+    top, bottom, corner = 4, 12, 0                                       # sin = 1, -1, 0
+    assert lift[top, 1] > 0.1 and lift[bottom, 1] < -0.1 and abs(lift[corner, 1]) < 1e-9
+    back = sphincter_displacement(ring, ring, 0.0, 0.3, -up)            # the other side: still out
+    np.testing.assert_allclose(back, lift * [1.0, 1.0, -1.0], atol=1e-12)
     both = sphincter_displacement(ring, ring, 0.4, 0.3, up)
     np.testing.assert_allclose(both, sphincter_displacement(ring, ring, 0.4) + lift, atol=1e-12)
     assert np.array_equal(sphincter_displacement(ring, ring, 0.4, 0.0, None),

@@ -196,3 +196,40 @@ def test_an_eyeball_in_the_same_mesh_stays_put():
     np.testing.assert_array_equal(out[:len(v)], alone)            # the skin moves as without them
     reached = lid_field(eye, vb).index
     assert np.any(reached >= len(v))                                # the field alone would move them
+
+
+def test_a_driven_lid_takes_back_the_skins_drift_so_its_margin_stays_clean(head):
+    """Surprise: the frontalis drags the skin round the eye up, hardest under the brow's
+    middle; laid over that, the lid's own raise used to peak and skew the opening. A driven
+    lid takes the skin's vertical drift back: the lid FDPs land exactly ``FAP x IRISD`` from
+    rest, the corners (canthi) stay at their rest height, and along the upper margin the
+    opening follows the smooth modelled curve ``d s(u)``: no spike where the drag peaked."""
+    from faceforge.animation.eyelids import held_share
+
+    name, v, f, lm, vid, lids, irisd = head
+    eyes = find_eyes(lm)
+    drag = np.zeros_like(v)
+    for e in eyes:   # a bump of 0.4 openings, peaked above the eye's middle, fading over a brow
+        r = np.linalg.norm((v - e.centre - 0.8 * e.gap * e.axes[1]) / e.half, axis=1)
+        drag += 0.4 * e.gap * np.exp(-r * r)[:, None] * e.axes[1]
+    track = faps([{19: -200, 20: -200}, {}])
+    frames = np.stack([v + drag, v + drag])
+    out = lids.apply(frames, track)
+    assert np.array_equal(out[1], frames[1])                      # no lid FAP: left as it was
+    for e, field, (up, low), (outer, inner) in zip(eyes, lids.fields, LIDS, (("3.7", "3.11"), ("3.12", "3.8"))):
+        assert vertical(e, out[0, vid[up]] - v[vid[up]]) == pytest.approx(200 * irisd, rel=1e-9)
+        assert vertical(e, out[0, vid[low]] - v[vid[low]]) == pytest.approx(0.0, abs=1e-9 * e.gap)
+        for corner in (outer, inner):
+            i = int(np.argmin(np.linalg.norm(v - lm[corner], axis=1)))
+            assert abs(vertical(e, out[0, i] - v[i])) < 0.02 * e.gap, corner
+        # the upper margin: skin within 0.1 openings above the modelled margin, along its middle
+        x = (v[field.index] - e.centre) @ e.axes.T
+        top = e.margins[0] * e.taper(x[:, 0])
+        rim = field.index[(x[:, 1] >= top) & (x[:, 1] <= top + 0.1 * e.gap) & (np.abs(x[:, 0]) < 0.8 * e.half)
+                          & (np.abs(x[:, 2] - e.lid_depth) < 0.5 * e.gap)]
+        assert len(rim) >= 3
+        want = 200 * irisd * e.taper((v[rim] - e.centre) @ e.axes[0]) / e.taper(e.upper_u)
+        got = vertical(e, out[0, rim] - v[rim])
+        assert vertical(e, drag[rim]).max() > 0.25 * e.gap          # the drag was there
+        assert np.abs(got - want).max() < 0.1 * e.gap               # and is (mostly) gone
+        assert np.all(held_share(field, np.zeros((1, 2))) == 0.0)

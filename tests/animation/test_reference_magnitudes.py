@@ -24,6 +24,7 @@ ACTIONS = [
     ("mouth-corner-puller", "8.3", 0, +1, "MW", (53, 6)),          # stretch_l_cornerlip
     ("eyebrows-left-up", "4.3", 1, +1, "ENS", (33,)),              # raise_l_m_eyebrow
     ("eyebrows-left-inner-up", "4.1", 1, +1, "ENS", (31,)),        # raise_l_i_eyebrow
+    ("eyebrows-left-down", "4.1", 1, -1, "ENS", (31,)),            # raise_l_i_eyebrow (negative = down)
     ("mouth-elevation", "8.1", 1, -1, "MNS", (51, 4)),             # lower_t_midlip (negative = up)
     ("eye-left-opened-up", "3.1", 1, -1, "IRISD", (19, 20)),       # close_t_l_eyelid (negative = up)
     ("eye-left-slit", "3.3", 1, +1, "IRISD", (21, 22)),            # close_b_l_eyelid (up)

@@ -401,19 +401,21 @@ def test_expression_preset_through_fap2(workdir, patched, tmp_path):
     assert c.max() == pytest.approx(0.8 * 150 * 0.003)         # joy's corner FAPs x intensity x gain
     assert json.loads((out / "report.json").read_text())["unmapped_faps"] == []
     # joy's eyelid FAPs (upper lids 128 down, lower 64 up), scaled the same way, narrow the eyes:
-    # laid over the simulated skin, they move the lid FDPs by exactly that much more than the
-    # same preset played without lids
+    # MPEG-4 lid FAPs are displacements from neutral, so the lid FDPs end exactly that far from
+    # rest, whatever the simulated skin did (eyelids.held_share); without lids they move less
     bare = run_stage("animate", workdir, {"fap": str(tmp_path / "joy_preset.fap"),
                                           "animate_mapping": str(workdir / "mapping.yaml")},
                      sets=(*SETS, "animate.eyelids=false"))
-    lids = d["frames"].astype(np.float64) - load_npz(bare / "animation.npz")["frames"]
+    moved = d["frames"].astype(np.float64)
+    bare = load_npz(bare / "animation.npz")["frames"].astype(np.float64)
     v, _ = S.skin_mesh()
     lm = S.landmarks(v)
     irisd = fapu_from_landmarks(lm, "synthetic").unit("IRISD")
     hold = int(np.argmax(c))
     for fdp, move in {"3.1": -128, "3.2": -128, "3.3": 64, "3.4": 64}.items():
         i = int(np.argmin(np.linalg.norm(v - lm[fdp], axis=1)))
-        assert lids[hold, i, 1] == pytest.approx(0.8 * move * irisd, rel=1e-4)
+        assert moved[hold, i, 1] - v[i, 1] == pytest.approx(0.8 * move * irisd, rel=1e-4)
+        assert abs(bare[hold, i, 1] - v[i, 1]) < abs(0.8 * move * irisd)
 
 
 def test_playing_the_calibration_takes_the_presets_from_the_template(workdir, patched, calibrated, tmp_path):
@@ -441,7 +443,7 @@ def test_playing_the_calibration_takes_the_presets_from_the_template(workdir, pa
     lm = S.landmarks(v)
     i = int(np.argmin(np.linalg.norm(v - lm["3.1"], axis=1)))
     hold = int(np.argmax(played[True]["contractions"][:, 0]))
-    drop = played[True]["frames"][hold, i, 1].astype(float) - played[False]["frames"][hold, i, 1]
+    drop = played[True]["frames"][hold, i, 1].astype(float) - v[i, 1]        # lid FAPs: from neutral
     assert drop == pytest.approx(-0.8 * 300 * fapu_from_landmarks(lm, "synthetic").unit("IRISD"), rel=1e-4)
 
 

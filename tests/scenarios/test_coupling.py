@@ -134,8 +134,8 @@ def test_raising_the_upper_lip_moves_its_outer_and_inner_middle_alike(head):
 
 
 @pytest.mark.parametrize("muscle, fdp, axis, sign, unit, least", [
-    ("frontalis_inner_L", "4.1", 1, +1, "ENS", 80.0),
-    ("frontalis_outer_L", "4.5", 1, +1, "ENS", 80.0),
+    ("frontalis_inner_L", "4.1", 1, +1, "ENS", 40.0),          # the belly only: 56 (hairline: 89)
+    ("frontalis_outer_L", "4.5", 1, +1, "ENS", 40.0),          # 50
     ("levator_labii_outer_L", "8.5", 1, +1, "MNS", 50.0),
     ("levator_labii_inner_R", "8.1", 1, +1, "MNS", 30.0),
     ("risorius_L", "8.3", 0, +1, "MW", 8.0),
@@ -170,3 +170,43 @@ def test_a_static_pose_with_the_jaw_at_its_limit_stays_bounded(head):
             moved[n] = max(moved.get(n, 0.0), np.abs(h.system.positions(n) - h.system.rest_positions(n)).max())
     h.rig.reset()
     assert max(moved.values()) < 0.2 * diag, max(moved.items(), key=lambda kv: kv[1])
+
+
+def test_the_pucker_pushes_both_lips_forward_and_turns_them_out(head):
+    """orbicularis_oris.protrude (FAPs 16/17) at 0.5: both lips' middles (FDP 8.1, 8.2) move
+    forward, the upper one not down and the lower one down (a real pucker turns the lips out:
+    the MakeHuman units' mouth-protusion moves 8.1 5 mm up and 5 forward, 8.2 11 down and 5
+    forward). Along the mouth plane's normal alone the upper lip went down (0.5 mm for 1.8
+    forward at 0.5); with the eversion (sphincter.EVERSION 1.0) measured: 8.1 forward 1.9,
+    up 0.5 mm; 8.2 forward 1.2, down 1.9 mm."""
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.playback import static_poses
+
+    h, _ = head
+    ctr = np.zeros((1, len(h.controls)))
+    ctr[0, list(h.controls).index("orbicularis_oris.protrude")] = 0.5
+    d = (static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest) / units_per_mm(h.landmarks)
+    top, bottom = d[h.fdp_vertex["8.1"]], d[h.fdp_vertex["8.2"]]
+    assert top[2] > 1.0 and bottom[2] > 0.8, (top, bottom)
+    assert top[1] > 0.2 and bottom[1] < -1.0, (top, bottom)
+
+
+def test_the_inner_brow_raise_lifts_the_brow_not_the_forehead_above_it(head):
+    """frontalis_inner_L at 0.5 lifts the inner brow (FDP 4.1) more than the forehead 30 mm
+    above it, and mostly up, not back. A real inner-brow raise (the MakeHuman unit
+    eyebrows-left-inner-up) moves 4.1 3.4 mm and the skin 30 mm above 1.4. With the frontalis
+    from the hairline and the brow muscles on the bone (they held the brow skin back) the
+    forehead moved most: 4.1 4.0 mm up and 1.3 back, 30 mm above 5.5 up; now 4.1 2.7 up, 0.6
+    back, 30 mm above 2.3."""
+    from faceforge.anatomy.tissue import units_per_mm
+
+    h, _ = head
+    mm = units_per_mm(h.landmarks)
+    d = moved(h, "frontalis_inner_L") / mm
+    brow = h.fdp_vertex["4.1"]
+    p = h.rest[brow]
+    front = np.flatnonzero(h.rest[:, 2] > p[2] - 15 * mm)
+    above = front[np.argmin(np.linalg.norm(h.rest[front, :2] - (p[:2] + [0.0, 30 * mm]), axis=1))]
+    assert d[brow, 1] > 1.5, d[brow]
+    assert d[brow, 1] > 1.1 * d[above, 1], (d[brow], d[above])
+    assert -d[brow, 2] < 0.4 * d[brow, 1], d[brow]              # up, not back

@@ -173,8 +173,8 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         ua0, ua1, ub0, ub1 = 1.0, 0.0, 0.0, 1.0
     da = ua0 * e1 + ua1 * e2
     db = ub0 * e1 + ub1 * e2
-    # sphincter_displacement: delta = (c P (o - s1) + lift b n) cos(pi/2 (1 - r)), r of the
-    # outer sample, n the plane's normal on the side of fwd
+    # sphincter_displacement: delta = (c P (o - s1) + lift (b n + EVERSION y db)) cos(pi/2 (1 - r)),
+    # r and y of the outer sample, n the plane's normal on the side of fwd
     nrm = np.empty(3)
     nrm[0] = da[1] * db[2] - da[2] * db[1]
     nrm[1] = da[2] * db[0] - da[0] * db[2]
@@ -196,7 +196,7 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
         for j in range(3):
-            dj = (c * (ta * da[j] + tb * db[j]) + lift * nrm[j]) * fall
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
 
@@ -212,6 +212,15 @@ def protrusion_control(name: str) -> str:
     return name + PROTRUSION_SUFFIX
 
 
+#: how far a protruding sphincter turns its lips out (away from the centre along the ellipse's
+#: minor axis: the upper lip up, the lower lip down; 0 at the corners), per unit of its forward
+#: push, times the outer sample's height over the semi-minor axis (:func:`sphincter_displacement`).
+#: Along the plane's normal alone the push tilted with the plane (the loops wrap round a face whose
+#: chin lies back), and the upper lip went down as it went forward (MakeHuman, drive 0.5: FDP 8.1
+#: 0.5 mm down, 1.8 mm forward), where a real pucker turns it up and out (the MakeHuman units:
+#: mouth-protusion 8.1 5 mm up and 5 forward, 8.2 11 down and 5 forward; mouth-pursing 8.1 2 up,
+#: 7 forward, 8.2 4 down, 5 forward).
+EVERSION = 1.0
 #: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
 SPHINCTER_MAX_CONTRACTION = 0.5
 #: fraction of the fibre length that c = 1 removes from a linear muscle
@@ -219,8 +228,9 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
-    multiplied by the maximal closure. ``delta = (c P (o - s1) + lift b n) cos(pi/2 (1 -
-    r))``, ``P`` the projection onto the ellipse's plane, ``b`` its semi-minor axis and ``n``
+    multiplied by the maximal closure. ``delta = (c P (o - s1) + lift (b n + EVERSION y
+    dir_b)) cos(pi/2 (1 - r))``, ``P`` the projection onto the ellipse's plane, ``b`` its
+    semi-minor axis, ``y`` the outer sample's coordinate along it (:data:`EVERSION`) and ``n``
     its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
     ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
     maximal closure.
@@ -238,7 +248,7 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
         n = np.cross(da, db)
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
-        d = d + lift * b * n
+        d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
     return d * fall[:, None]
 
 

@@ -97,11 +97,12 @@ def _mapping(ctx):
     return mapping, str(path)
 
 
-def write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings, mapping_path):
-    """Play the track and stream its frames, a chunk at a time, through the lids, the checks,
-    the head turn and the user's vertex order into ``animation.npz`` (issue 28: a take's
-    memory does not grow with its length). Returns the
-    :class:`~faceforge.animation.check_stream.StreamChecker` that saw every frame."""
+def write_frames(ctx, head, source, weights, lids, timings, mapping_path):
+    """Play the track's controls (``source``, a :class:`~faceforge.animation.control_stream.ControlBlocks`)
+    a block at a time and stream its frames, a chunk at a time, through the lids, the checks,
+    the head turn and the user's vertex order into ``animation.npz``, the contractions and jaw
+    DOFs spooled beside it (issue 28: a take's memory does not grow with its length). Returns
+    the :class:`~faceforge.animation.check_stream.StreamChecker` that saw every frame."""
     import numpy as np
 
     from faceforge.animation.check_stream import StreamChecker
@@ -109,93 +110,113 @@ def write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings,
     from faceforge.animation.playback import play, warm_up
     from faceforge.io.frame_stream import FrameNpzWriter
 
-    checker = StreamChecker(head.rest, head.faces, track.n_frames)
+    checker = StreamChecker(head.rest, head.faces, source.n_frames)
+    bar = ctx.progress(None, total=source.n_frames, desc="frames")
 
-    def sink(start, frames):
-        stop = start + len(frames)
-        if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
-            frames = lids.apply(frames, faps[start:stop])
-        checker.add(frames)
-        if weights is not None:
-            frames = turn_head(frames, angles[start:stop], head.skull.jaw.yaw_point, weights)
-        writer.write(head.to_user(frames))
+    def per_frame(frames, **_):   # one progress bar over the blocks
+        for i in frames:
+            yield i
+            bar.update(1)
 
-    with FrameNpzWriter(ctx.out_dir / "animation.npz", track.n_frames, len(head.user_index)) as writer:
+    with FrameNpzWriter(ctx.out_dir / "animation.npz", source.n_frames, len(head.user_index)) as writer:
         try:
-            warm_up(head.rig, c, jaw, track.fps, ctx.log, guards=(head.orientation,))   # leaves the rig at rest
-            if ctx.config.get("animate.quality") == "offline":   # each frame solved to convergence
-                from faceforge.animation.statics import SettleSettings, play_converged
+            offline = ctx.config.get("animate.quality") == "offline"   # each frame solved to convergence
+            previous = None
+            for block in source:
+                def sink(start, frames, block=block):
+                    stop = start + len(frames)
+                    if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
+                        frames = lids.apply(frames, block.faps[start:stop])
+                    checker.add(frames)
+                    if weights is not None:
+                        frames = turn_head(frames, block.angles[start:stop], head.skull.jaw.yaw_point, weights)
+                    writer.write(head.to_user(frames))
 
-                play_converged(head.rig, c, jaw, track.fps, sink, SettleSettings.from_config(ctx.config))
-            else:                                                # real time: solver.iterations a frame
-                play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings, sink=sink)
+                if not block.start:   # leaves the rig at rest
+                    warm_up(head.rig, block.c, block.jaw, source.fps, ctx.log, guards=(head.orientation,))
+                if offline:
+                    from faceforge.animation.statics import SettleSettings, play_converged
+
+                    play_converged(head.rig, block.c, block.jaw, source.fps, sink,
+                                   SettleSettings.from_config(ctx.config), previous=previous)
+                    previous = (block.c[-1], block.jaw[-1])
+                else:                 # real time: solver.iterations a frame
+                    play(head.rig, block.c, block.jaw, source.fps, progress=per_frame, timings=timings, sink=sink)
+                writer.spool("contractions", block.c)
+                writer.spool("jaw", block.jaw)
         except FloatingPointError as exc:
             from faceforge.exceptions import StageError
 
             raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
                              "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
-        writer.close(fps=np.float64(track.fps), contractions=c, controls=np.asarray(head.controls, dtype=str),
-                     jaw=jaw)
+        finally:
+            bar.close()
+        writer.close(fps=np.float64(source.fps), contractions=writer.SPOOLED,
+                     controls=np.asarray(head.controls, dtype=str), jaw=writer.SPOOLED)
     return checker
 
 
 def run_animate(ctx):
-    """Simulate the FAP track in ``ctx.params['fap']``; write animation.npz and report.json."""
+    """Simulate the FAP track in ``ctx.params['fap']``; write animation.npz and report.json. The
+    track is read a block of frames at a time (:class:`~faceforge.mpeg4.fap_stream.FapFile`):
+    once to check it, once for its summary, once to play it."""
     import numpy as np
 
-    from faceforge.animation.controls import track_controls, visemes_played
-    from faceforge.animation.head_motion import HEAD_FAPS, head_angles, neck_weights
+    from faceforge.animation.control_stream import ControlBlocks
+    from faceforge.animation.head_motion import HEAD_FAPS, neck_weights
     from faceforge.animation.playback import Timings
     from faceforge.animation.rig import BoundHead
+    from faceforge.io.frame_stream import open_frames
     from faceforge.io.stagefiles import save_json
-    from faceforge.mpeg4 import read_fap
+    from faceforge.mpeg4.fap_stream import FapFile
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, mapping_path = _mapping(ctx)
-    track = read_fap(ctx.param("fap"))
-    c, jaw, unmapped, faps = track_controls(track, mapping, head)
+    fap = FapFile(ctx.param("fap"))
     turn = bool(ctx.config.get("animate.head_rotation"))
-    angles = head_angles(faps) if turn else np.zeros((track.n_frames, 3))
+    source = ControlBlocks(fap, mapping, head, turn)
+    summary = source.summary()
+    unmapped = summary.unmapped
     if turn:
         unmapped = [f for f in unmapped if f not in HEAD_FAPS]
-        if np.any(angles):
-            ctx.log(f"head rotation (FAPs 48-50): up to {np.degrees(np.abs(angles).max()):.1f} deg")
+        if np.any(summary.max_angles):
+            ctx.log(f"head rotation (FAPs 48-50): up to {np.degrees(summary.max_angles.max()):.1f} deg")
     lids = head.eyelids(ctx.config)
     if lids is not None:
         unmapped = [f for f in unmapped if f not in lids.faps]
-        if lids.faps and np.any(faps[:, [f - 1 for f in lids.faps]]):
+        if lids.faps and np.any(summary.moving[[f - 1 for f in lids.faps]]):
             ctx.log(f"eyelids (FAPs {', '.join(map(str, lids.faps))}) on {len(lids.fields)} eye"
                     f"{'s' if len(lids.fields) > 1 else ''}")
-    visemes, viseme_frames = visemes_played(track)
-    if visemes:
-        ctx.log(f"visemes (FAP 1) in {viseme_frames} frames: {', '.join(visemes)}")
+    if summary.visemes:
+        ctx.log(f"visemes (FAP 1) in {summary.viseme_frames} frames: {', '.join(summary.visemes)}")
     if unmapped:
         ctx.log(f"FAPs without a muscle mapping (ignored): {unmapped}")
-    ctx.log(f"{track.n_frames} frames at {track.fps:g} fps on {len(head.rest)} skin vertices")
+    ctx.log(f"{fap.n_frames} frames at {fap.fps:g} fps on {len(head.rest)} skin vertices")
     timings = Timings()
     # the head turns as a whole about the top of the spine (approximated by the midpoint of the
     # jaw's condyles), the skin below the skull fading out of the turn; after the checks, which
     # look at the skin in the skull's own frame
     weights = None
-    if np.any(angles):
+    if np.any(summary.max_angles):
         from faceforge.animation.head_parts import detached_vertices
 
         low, high = head.bone_heights()
         span = float(ctx.config.get("animate.neck_fade")) * (high - low)
         weights = neck_weights(head.rest, low, span)
         weights[detached_vertices(head.rest, head.faces, list(head.fdp_vertex.values()))] = 0.0  # another head
-    checker = write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings, mapping_path)
-    checks = checker.report(skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
+    checker = write_frames(ctx, head, source, weights, lids, timings, mapping_path)
+    jaw = open_frames(ctx.out_dir / "animation.npz", "jaw")   # a map: the few frames the skull test reads
+    checks = checker.report(skull=lambda i: head.skull_at(np.asarray(jaw[i]) if i >= 0 else np.zeros(3)))
     threads = max(head.skin.solver.threads, head.system.threads)   # the step's widest layer
     save_json(ctx.out_dir / "report.json", {
-        "fap": str(ctx.param("fap")), "frames": track.n_frames, "fps": track.fps,
+        "fap": str(ctx.param("fap")), "frames": fap.n_frames, "fps": fap.fps,
         "mapping": mapping_path, "unmapped_faps": unmapped,
         "user_vertices": int(len(head.user_index)), "working_vertices": int(len(head.rest)),
         "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
-        "max_contraction": float(c.max()) if c.size else 0.0,
-        "eyes_with_lids": len(lids.fields) if lids is not None else 0, "visemes": visemes,
-        "max_head_rotation_deg": np.degrees(np.abs(angles).max(axis=0)).tolist() if len(angles) else [0, 0, 0],
-        "max_jaw": jaw.max(axis=0).tolist() if len(jaw) else [0, 0, 0]})
+        "max_contraction": summary.max_contraction,
+        "eyes_with_lids": len(lids.fields) if lids is not None else 0, "visemes": summary.visemes,
+        "max_head_rotation_deg": np.degrees(summary.max_angles).tolist(),
+        "max_jaw": summary.max_jaw.tolist()})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame on {threads} thread"
             f"{'s' if threads > 1 else ''}; checks: {'ok' if checks.ok else checks.as_dict()}; "
             f"{checks.folded_edges} skin edges folded (new creases; at most "
@@ -432,11 +453,11 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, output, p
     if fap is not None:   # a malformed FAP file fails in milliseconds, before the head is loaded
         import warnings
 
-        from faceforge.mpeg4 import read_fap
+        from faceforge.mpeg4.fap_stream import FapFile
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # the stage reads it again and warns then
-            read_fap(fap)
+            FapFile(fap)                      # checked a block at a time (a long take is not held)
     if preview:
         from faceforge.io.writable import check_writable
 

@@ -30,11 +30,12 @@ def run_arkit(ctx):
     """Play the take in ``ctx.params['arkit_take']`` through the baked shapes' controls."""
     import numpy as np
 
-    from faceforge.animation.checks import check_animation
+    from faceforge.animation.check_stream import StreamChecker
     from faceforge.animation.playback import Timings, play, warm_up
     from faceforge.animation.rig import BoundHead
     from faceforge.blendshapes.curves import read_weights
-    from faceforge.io.stagefiles import load_npz, save_json, save_npz
+    from faceforge.io.frame_stream import FrameNpzWriter, open_frames
+    from faceforge.io.stagefiles import load_npz, save_json
     from faceforge.pipeline.stages.animate import _mapping
 
     take = ctx.param("arkit_take")
@@ -53,37 +54,72 @@ def run_arkit(ctx):
     if ignored:
         ctx.log(f"shapes not made on this head (their weights are ignored): {', '.join(ignored)}")
     rows = [index[names[j]] for j in cols]
-    w = weights[:, cols]
+    ctx.log(f"{len(weights)} frames at {fps:g} fps, {len(cols)} shapes")
+    timings = Timings()
+    lids = head.eyelids(ctx.config)
+    gaze = baked["gaze"][rows] if "gaze" in baked else None
+    eyes = None
+    if gaze is not None and np.any(gaze):
+        from faceforge.blendshapes.eyes import eye_pieces
+
+        eyes = eye_pieces(head.rest, head.faces, head.landmarks)
+    checker = StreamChecker(head.rest, head.faces, len(weights))
+    bar = ctx.progress(None, total=len(weights), desc="frames")
+
+    def per_frame(frames, **_):   # one progress bar over the blocks
+        for i in frames:
+            yield i
+            bar.update(1)
+
+    with FrameNpzWriter(ctx.out_dir / "animation.npz", len(weights), len(head.user_index)) as writer:
+        for start in range(0, len(weights), BLOCK):   # the frames a block at a time (issue 28)
+            w = weights[start:start + BLOCK, cols]
+            c, jaw = _arkit_controls(w, baked, rows, mapping, head)
+            lid_faps = w @ baked["lids"][rows]
+            gazes = None if eyes is None else w @ gaze
+
+            def sink(at, frames, lid_faps=lid_faps, gazes=gazes):
+                if lids is not None:
+                    frames = lids.apply(frames, lid_faps[at:at + len(frames)])
+                if gazes is not None:
+                    from faceforge.blendshapes.bake import apply_gaze
+
+                    frames = apply_gaze(frames, gazes[at:at + len(frames)], eyes)
+                checker.add(frames)
+                writer.write(head.to_user(frames))
+
+            if not start:
+                warm_up(head.rig, c, jaw, fps, ctx.log)
+            play(head.rig, c, jaw, fps, progress=per_frame, timings=timings, sink=sink)
+            writer.spool("contractions", c)
+            writer.spool("jaw", jaw)
+        writer.close(fps=np.float64(fps), contractions=writer.SPOOLED, controls=np.asarray(head.controls, dtype=str),
+                     jaw=writer.SPOOLED, weights=weights, names=np.asarray(names))
+    bar.close()
+    jaws = open_frames(ctx.out_dir / "animation.npz", "jaw")   # a map: the few frames the skull test reads
+    checks = checker.report(skull=lambda i: head.skull_at(np.asarray(jaws[i]) if i >= 0 else np.zeros(3)))
+    save_json(ctx.out_dir / "report.json", {
+        "take": str(take), "frames": len(weights), "fps": fps, "shapes": [names[j] for j in cols],
+        "ignored": ignored, "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict()})
+    ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame; checks: {'ok' if checks.ok else checks.as_dict()}")
+
+
+#: frames simulated per block of an ARKit take
+BLOCK = 1024
+
+
+def _arkit_controls(w, baked, rows, mapping, head):
+    """Contractions (k, m) and jaw DOFs (k, 3) of the baked shapes ``rows`` mixed by the weights
+    ``w (k, len(rows))``, clipped to their ranges."""
+    import numpy as np
+
     c = np.clip(w @ baked["contractions"][rows], 0.0, mapping.max_contraction)
     jaw = w @ baked["jaw"][rows]
     for k, dof in enumerate(("pitch", "yaw", "protrusion")):
         lo, hi = mapping.jaw_limits.get(dof, (0.0, 0.0))
         scale = head.levers.pitch if dof == "protrusion" else 1.0
         jaw[:, k] = np.clip(jaw[:, k], lo * scale, hi * scale)
-    lid_faps = w @ baked["lids"][rows]
-    ctx.log(f"{len(w)} frames at {fps:g} fps, {len(cols)} shapes")
-    timings = Timings()
-    warm_up(head.rig, c, jaw, fps, ctx.log)
-    frames = play(head.rig, c, jaw, fps, progress=ctx.progress, timings=timings)
-    lids = head.eyelids(ctx.config)
-    if lids is not None:
-        frames = lids.apply(frames, lid_faps)
-    if "gaze" in baked:
-        gaze = w @ baked["gaze"][rows]
-        if np.any(gaze):
-            from faceforge.blendshapes.bake import apply_gaze
-            from faceforge.blendshapes.eyes import eye_pieces
-
-            frames = apply_gaze(frames, gaze, eye_pieces(head.rest, head.faces, head.landmarks))
-    checks = check_animation(head.rest, frames, head.faces,
-                             skull=lambda i: head.skull_at(jaw[i] if i >= 0 else np.zeros(3)))
-    user = head.to_user(frames).astype(np.float32)
-    save_npz(ctx.out_dir / "animation.npz", frames=user, fps=np.float64(fps), contractions=c,
-             controls=np.asarray(head.controls, dtype=str), jaw=jaw, weights=weights, names=np.asarray(names))
-    save_json(ctx.out_dir / "report.json", {
-        "take": str(take), "frames": len(w), "fps": fps, "shapes": [names[j] for j in cols],
-        "ignored": ignored, "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict()})
-    ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame; checks: {'ok' if checks.ok else checks.as_dict()}")
+    return c, jaw
 
 
 ARKIT = register_stage(Stage(
@@ -158,7 +194,10 @@ def _arkit_or_curves(app, orig, arkit, curves, kw):
     inputs = {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"), "FAP track": kw.get("fap"),
               "ARKit take": arkit}
     if curves:                # checked before anything runs, like -o and --preview
+        from faceforge.io.writable import check_writable
+
         protect_inputs(curves, {**inputs, "-o output": output, "--preview": preview})
+        check_writable(curves, "--curves")   # (a missing folder failed after the simulation and the bake)
     if arkit is None:
         orig(**{**kw, "output": None if shapes_out else output})
         write_curves(app, "animate", curves, output if shapes_out else None)

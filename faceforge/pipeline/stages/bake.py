@@ -167,6 +167,9 @@ def bake_command(app, output, shapes, mapping, force):
         params = app.workspace.load_params()
         protect_inputs(output, {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"),
                                 "ARKit mapping": mapping})
+        from faceforge.io.writable import check_writable
+
+        check_writable(output, "-o")   # a missing folder failed after the bake (issue 28)
     if shapes in ("arkit", "all"):
         from faceforge.blendshapes.arkit import default_mapping_path, load_arkit_mapping
 
