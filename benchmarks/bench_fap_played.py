@@ -5,13 +5,30 @@ own mapping: its calibration when there is one) and measured on the exported PC2
 the FDP's displacement along the FAP's axis, in the head's FAPU, at the end of a 20-frame
 hold after a 10-frame ramp.
 
+Two protocols (issue 25):
+
+* ``signed`` (the magnitudes users play): each sign the files use, at the largest value of that
+  sign (raise_b_midlip: -870 and +76 MNS; open_jaw +713), for every sign the mapping drives;
+  a sign the files never use is not played;
+* ``context``: each of those requests inside the Xface frame where it occurs (every FAP of that
+  frame played together, head rotation and eyeballs zeroed): a lower lip lowered 870 MNS rides on
+  the open jaw that the files open with it;
+The FAP file written gives, as the Xface files do, only the FAPs of the request: a lip FAP's
+twin (outer 51-60 / inner 4-13) not given is copied from it by the reader, so the entry they
+share is driven fully.
+
+* ``abs`` (the first protocol, kept for comparison; every FAP given in every frame, so a lip
+  FAP played alone had its twin at 0 and its entry, driven by the twins' mean, at half): the largest |value| of either sign, played
+  with both signs (raise_b_midlip +870 MNS too, which no file asks for: it would push the lower
+  lip through the upper one without the jaw).
+
 Usage::
 
-    python benchmarks/bench_fap_played.py WORKDIR [WORKDIR ...]   # full and half the Xface magnitude
+    python benchmarks/bench_fap_played.py WORKDIR [WORKDIR ...] [--half]   # --half: also x0.5
 
-Writes ``benchmarks/results/fap_played.json``: per head the rows (FAP, requested, achieved,
-relative error), the median and worst error, and left/right pairs (how far the two sides'
-achieved values differ, relative to the larger).
+Writes ``benchmarks/results/fap_played.json``: per head and protocol the rows (FAP, requested,
+achieved, relative error), the median and worst error, and left/right pairs (how far the two
+sides' achieved values differ, relative to the larger).
 """
 
 from __future__ import annotations
@@ -34,36 +51,71 @@ PAIRS = ((31, 32), (33, 34), (35, 36), (37, 38), (41, 42), (53, 54), (59, 60), (
          (6, 7), (12, 13), (8, 9), (10, 11), (19, 20), (21, 22))
 
 
-def xface_magnitudes() -> dict:
-    """FAP -> largest |value| any samples/fap/*.fap file gives it (FAPU)."""
+def xface_magnitudes(signed: bool = False) -> dict:
+    """FAP -> largest |value| any samples/fap/*.fap file gives it (FAPU); ``signed``: FAP ->
+    (most negative, most positive) value (0 for a sign never used)."""
     from faceforge.mpeg4 import read_fap
 
     top = {}
     for path in sorted((ROOT / "samples/fap").glob("*.fap")):
         t = read_fap(path)
-        v = np.abs(np.where(t.mask, t.values, 0.0)).max(axis=0)
-        for k in np.flatnonzero(v):
-            top[k + 1] = max(top.get(k + 1, 0.0), float(v[k]))
-    return top
+        v = np.where(t.mask, t.values, 0.0)
+        for k in np.flatnonzero(np.abs(v).max(axis=0)):
+            lo, hi = top.get(k + 1, (0.0, 0.0))
+            top[k + 1] = (min(lo, float(v[:, k].min())), max(hi, float(v[:, k].max())))
+    return top if signed else {k: max(-lo, hi) for k, (lo, hi) in top.items()}
 
 
-def requests(mapping, probes, top, fraction: float = 1.0) -> list[tuple[int, float]]:
-    """(FAP, value) pairs to play: the Xface magnitude, and its negative where the FAP is
-    bidirectional and its entry drives that way."""
+def requests(mapping, probes, top, fraction: float = 1.0, signed: bool = False) -> list[tuple[int, float]]:
+    """(FAP, value) pairs to play. ``signed=False``: the Xface magnitude, and its negative where
+    the FAP is bidirectional and its entry drives that way; ``signed=True`` (``top`` from
+    ``xface_magnitudes(signed=True)``): each sign the files use and the entry drives, at its
+    largest value."""
     from faceforge.mpeg4 import fap_record
 
     out = []
     for e in mapping.entries:
+        both = bool(e.negative) or (e.jaw is not None and e.jaw[0] == "yaw")
         for fap in e.faps:
             if fap not in probes or fap not in top:
                 continue
+            if signed:
+                lo, hi = top[fap]
+                if hi > 0:
+                    out.append((fap, fraction * hi))
+                if lo < 0 and both and fap_record(fap).bidirectional:
+                    out.append((fap, fraction * lo))
+                continue
             out.append((fap, fraction * top[fap]))
-            if fap_record(fap).bidirectional and (e.negative or (e.jaw is not None and e.jaw[0] == "yaw")):
+            if fap_record(fap).bidirectional and both:
                 out.append((fap, -fraction * top[fap]))
     return out
 
 
-def head_rows(workdir: Path, fraction: float = 1.0) -> dict:
+def in_context(mapping, probes) -> list[tuple[int, float, np.ndarray]]:
+    """(FAP, value, the whole frame (68,)) for each mapped FAP and sign: the frame of the Xface
+    files where that FAP reaches its largest value of that sign, every other FAP of the frame
+    kept (the jaw opening that carries a lowered lip, the lids), head rotation and eyeballs
+    (23-26, 48-50) zeroed so the face is measured in the head's frame."""
+    from faceforge.mpeg4 import read_fap
+
+    best = {}
+    for path in sorted((ROOT / "samples/fap").glob("*.fap")):
+        t = read_fap(path)
+        v = np.where(t.mask, t.values, 0.0)
+        for fap in probes:
+            for sgn in (1.0, -1.0):
+                i = int(np.argmax(sgn * v[:, fap - 1]))
+                val = float(v[i, fap - 1])
+                if sgn * val > 0 and sgn * val > abs(best.get((fap, sgn), (0.0,))[0]):
+                    frame = v[i].copy()
+                    frame[[22, 23, 24, 25, 47, 48, 49]] = 0.0
+                    best[(fap, sgn)] = (val, frame)
+    played = {(fap, float(np.sign(v))) for fap, v in requests(mapping, probes, xface_magnitudes(True), 1.0, True)}
+    return [(fap, val, frame) for (fap, sgn), (val, frame) in sorted(best.items()) if (fap, sgn) in played]
+
+
+def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False, context: bool = False) -> dict:
     from faceforge.animation.calibrate import measure
     from faceforge.animation.calibrate_head import calibration_probes
     from faceforge.io.export_cache import read_pc2
@@ -74,17 +126,25 @@ def head_rows(workdir: Path, fraction: float = 1.0) -> dict:
 
     head, mapping, _ = em.load_head(workdir)
     probes = calibration_probes(mapping, head)
-    asked = requests(mapping, probes, xface_magnitudes(), fraction)
+    if context:
+        asked = [(fap, fraction * v, fraction * frame) for fap, v, frame in in_context(mapping, probes)]
+    else:
+        asked = [(fap, v, np.eye(68)[fap - 1] * v)
+                 for fap, v in requests(mapping, probes, xface_magnitudes(signed), fraction, signed)]
     per = RAMP + HOLD + 5
     n = 2 + per * len(asked)
     values, mask = np.zeros((n, 68)), np.zeros((n, 68), dtype=bool)
     ends = []
-    for k, (fap, v) in enumerate(asked):
+    for k, (fap, v, frame) in enumerate(asked):
         s = 2 + k * per
-        ramp = np.concatenate([np.linspace(0, v, RAMP + 1)[1:], np.full(HOLD, v), np.zeros(5)])
-        values[s:s + per, fap - 1] = ramp
+        ramp = np.concatenate([np.linspace(0, 1.0, RAMP + 1)[1:], np.ones(HOLD), np.zeros(5)])
+        values[s:s + per] = ramp[:, None] * frame[None]
+        if signed or context:   # given as a file gives them: the FAPs of the request, the rest held at 0,
+            mask[s:s + per] = frame[None] != 0.0   # a lip twin not given copied from its partner
         ends.append(s + RAMP + HOLD - 1)
-    mask[:, 2:] = True
+    mask[:2, 2:] = True
+    if not (signed or context):
+        mask[:, 2:] = True      # the first protocol: every FAP given, a lip twin's partner at 0
     track = FapTrack.from_given(25.0, mask, values, name="bench_fap_played")
     fap_path = workdir / "bench_fap_played.fap"
     out = workdir / "bench_fap_played.pc2"
@@ -99,7 +159,7 @@ def head_rows(workdir: Path, fraction: float = 1.0) -> dict:
     skins = frames[:, internal].astype(float) @ np.asarray(head.user_rotation).T
     rest = skins[0]
     rows = []
-    for (fap, v), end in zip(asked, ends):
+    for (fap, v, _), end in zip(asked, ends):
         got = float(measure(rest, skins[end], probes[fap]))
         rows.append({"fap": fap, "requested": v, "achieved": round(got, 2),
                      "relative_error": round(abs(got - v) / abs(v), 4)})
@@ -121,14 +181,19 @@ def head_rows(workdir: Path, fraction: float = 1.0) -> dict:
 
 
 def main(argv=None) -> None:
-    dirs = [Path(a) for a in (argv if argv is not None else sys.argv[1:])]
+    args = list(argv if argv is not None else sys.argv[1:])
+    fractions = (1.0, 0.5) if "--half" in args else (1.0,)
+    dirs = [Path(a) for a in args if a != "--half"]
     results = {}
-    for fraction in (1.0, 0.5):
-        for d in dirs:
-            r = results[f"{d.name} x{fraction:g}"] = head_rows(d, fraction)
-            print(f"{d.name} x{fraction:g} Xface magnitude: median {r['median_error']:.1%}, "
-                  f"{r['within_10_percent']}/{r['count']} within 10 %, {r['over_30_percent']} over 30 %, "
-                  f"worst {r['worst']}; L/R within 10 %: {r['left_right_within_10_percent']}/{len(r['left_right'])}")
+    for protocol in ("signed", "context", "abs"):
+        for fraction in fractions:
+            for d in dirs:
+                r = results[f"{d.name} {protocol} x{fraction:g}"] = head_rows(d, fraction, protocol == "signed",
+                                                                            protocol == "context")
+                print(f"{d.name} {protocol} x{fraction:g} Xface magnitude: median {r['median_error']:.1%}, "
+                      f"{r['within_10_percent']}/{r['count']} within 10 %, {r['over_30_percent']} over 30 %, "
+                      f"worst {r['worst']}; L/R within 10 %: "
+                      f"{r['left_right_within_10_percent']}/{len(r['left_right'])}")
     write_results("fap_played", {"heads": results})
 
 

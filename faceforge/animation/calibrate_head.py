@@ -35,21 +35,49 @@ def calibration_probes(mapping, head):
 
 
 def requested_values(mapping, config) -> dict:
-    """FAP number -> requested FAPU values (half and full typical magnitude, both signs where the
-    mapping can produce them)."""
+    """FAP number -> requested FAPU values: for each sign the entry can drive, the fractions
+    ``animate.calibrate.fractions`` of the magnitude users play (the largest value of that sign
+    in the Xface files, ``animate.calibrate.magnitudes``, over the entry's FAPs), at least the
+    typical magnitude of its unit (``animate.calibrate.magnitude``; open_jaw:
+    ``animate.calibrate.jaw_magnitude``), which also serves a sign the files never use."""
     mags = dict(config.get("animate.calibrate.magnitude"))
     jaw_mag = float(config.get("animate.calibrate.jaw_magnitude"))
+    fractions = sorted(float(f) for f in config.get("animate.calibrate.fractions"))
+    played = played_magnitudes(config.get("animate.calibrate.magnitudes"))
     out = {}
     for e in mapping.entries:
         if not (e.positive or e.negative or e.jaw is not None):
             continue                      # nothing to drive (e.g. a pure jaw-coupling entry)
-        top = jaw_mag if (e.jaw is not None and e.jaw[0] == "pitch") else float(mags[e.fapu])
-        values = [0.5 * top, top]
-        two_sided = bool(e.negative) or (e.jaw is not None and e.jaw[0] == "yaw")
-        if two_sided:
-            values = [-top, -0.5 * top] + values
+        typical = jaw_mag if (e.jaw is not None and e.jaw[0] == "pitch") else float(mags[e.fapu])
+        neg = max([typical] + [-played.get(f, (0.0, 0.0))[0] for f in e.faps])
+        pos = max([typical] + [played.get(f, (0.0, 0.0))[1] for f in e.faps])
+        values = [f * pos for f in fractions]
+        if bool(e.negative) or (e.jaw is not None and e.jaw[0] == "yaw"):
+            values = [-f * neg for f in reversed(fractions)] + values
         out[e.faps[0]] = values
     return out
+
+
+def played_magnitudes(path) -> dict:
+    """FAP -> (most negative, most positive) value users play (``templates/fap_magnitudes.yaml``,
+    written by ``tools/fap_magnitudes.py``); {} for no file. A malformed file is a one-line
+    :class:`~faceforge.exceptions.TemplateError`."""
+    from pathlib import Path
+
+    from faceforge.exceptions import TemplateError
+    from faceforge.io.safe_yaml import load_user_yaml
+
+    if not path:
+        return {}
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TemplateError(f"cannot read it ({exc.__class__.__name__})", path) from None
+    data = load_user_yaml(text, str(path), error=TemplateError)
+    try:
+        return {int(k): (float(v[0]), float(v[1])) for k, v in (data or {}).items()}
+    except (TypeError, ValueError, IndexError, AttributeError):
+        raise TemplateError("expected lines 'FAP: [most negative, most positive]'", path) from None
 
 
 def lip_opening(mapping, simulate, head, value):
@@ -79,31 +107,47 @@ class CalibrationResult:
     summary: dict
     lips: dict | None
     probes: dict
+    statics: dict | None = None
 
 
 def calibrate_head(head, template, config, log=lambda m: None, progress=None) -> CalibrationResult:
-    """Fit ``template``'s response curves on ``head`` (``animate.fps``,
-    ``animate.calibrate.*`` of ``config``); ``progress`` wraps an iterable (optional)."""
-    from faceforge.animation.calibrate import calibrate_mapping, measure_coupling, summarize
+    """Fit ``template``'s response curves on ``head`` (``animate.fps``, ``animate.calibrate.*``
+    and ``animate.statics.*`` of ``config``) on warm chains of converged poses
+    (:func:`faceforge.animation.calibrate_sweep.calibrate_sweep`); ``progress`` wraps an
+    iterable (optional). The result's ``statics`` says how the poses settled."""
+    from faceforge.animation.calibrate import measure_coupling, summarize
+    from faceforge.animation.calibrate_sweep import calibrate_sweep, face_lanes
     from faceforge.animation.controls import controls
-    from faceforge.animation.playback import static_poses
+    from faceforge.animation.statics import SettleSettings, SettleStats, settle
 
     fps = float(config.get("animate.fps"))
-    settle = int(config.get("animate.calibrate.settle_frames"))
+    settings = SettleSettings.from_config(config)
+    stats = SettleStats()
+    held = {}
+
+    def pose_for(mapping, faps, warm):
+        c, jaw = controls(mapping, faps[None], head)
+        skin = settle(head.rig, c, jaw, fps, settings, warm=warm, stats=stats, previous=held.get("now"))[0]
+        held["now"] = (c[0], jaw[0])
+        return skin
 
     def simulate(mapping, faps):
         c, jaw = controls(mapping, faps, head)
-        return static_poses(head.rig, c, jaw, fps, settle=settle)
+        held.pop("now", None)
+        return settle(head.rig, c, jaw, fps, settings, stats=stats)
 
     probes = calibration_probes(template, head)
     requested = requested_values(template, config)
-    log(f"calibrating {len(template.entries)} entries ({len(probes)} FAPs observable), "
-        f"{settle} settle frames per pose")
-    calibrated, rows = calibrate_mapping(
-        template, simulate, head.rest, probes, requested, refine=int(config.get("animate.calibrate.refine")),
+    log(f"calibrating {len(template.entries)} entries ({len(probes)} FAPs observable) up to the magnitudes "
+        f"users play, each pose held until it converges")
+    calibrated, rows = calibrate_sweep(
+        template, pose_for, head.rest, probes, requested, tolerance=float(config.get("animate.calibrate.tolerance")),
+        max_steps=int(config.get("animate.calibrate.refine")),
+        lanes=face_lanes(template) if bool(config.get("animate.calibrate.lanes")) else None,
         progress=None if progress is None else (lambda it: progress(it, total=len(template.entries), desc="FAPs")))
     jaw_magnitude = float(config.get("animate.calibrate.jaw_magnitude"))
     if 3 in probes:
         calibrated = measure_coupling(calibrated, simulate, head.rest, probes, value=jaw_magnitude)
     lips = lip_opening(calibrated, simulate, head, jaw_magnitude)
-    return CalibrationResult(calibrated, rows, summarize(rows), lips, probes)
+    head.rig.reset()
+    return CalibrationResult(calibrated, rows, summarize(rows), lips, probes, stats.as_dict())

@@ -35,11 +35,12 @@ class HeadBake:
     frames: np.ndarray
 
 
-def bake_head(head, mapping, specs: dict, kinds, fps: float, settle: int, lids=None,
+def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None,
               log=lambda m: None) -> HeadBake:
     """Bake ``kinds`` (``arkit``, ``visemes``, ``expressions``) on ``head``: ``specs`` the ARKit
     mapping (:func:`faceforge.blendshapes.arkit.load_arkit_mapping`), ``mapping`` the FAP mapping
-    (muscles, jaw limits, presets, FAP probes), each pose settled ``settle`` frames at ``fps``;
+    (muscles, jaw limits, presets, FAP probes), each pose settled ``settle`` frames at ``fps`` (an int)
+    or to convergence (a :class:`faceforge.animation.statics.SettleSettings`);
     ``lids`` the head's :class:`faceforge.animation.eyelids.Eyelids` with at least one eye, or None."""
     t_start = time.perf_counter()
     settled = settler(head.rig, fps, settle)
@@ -52,7 +53,8 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle: int, lids=N
     simulate(np.zeros((1, len(head.controls))), np.zeros((1, 3)))   # compile outside the timing
     t0, cpu0 = time.perf_counter(), time.process_time()
     names, frames, c, jaw, lid_faps, gaze, made, report = [], [], [], [], [], [], [], {}
-    out = {"settle_frames": settle, "shapes": report}
+    out = {"settle_frames": settle if isinstance(settle, int) else "to convergence (animate.statics)",
+           "shapes": report}
     if "arkit" in kinds:
         space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
                               mapping.max_contraction)
@@ -80,7 +82,10 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle: int, lids=N
     out["bake_seconds"] = round(time.perf_counter() - t0, 2)
     out["bake_cpu_seconds"] = round(time.process_time() - cpu0, 2)   # all threads: honest on a busy machine
     out["poses_settled"] = poses[0] - 1                                # the first compiles, outside the timing
-    out["frames_simulated"] = out["poses_settled"] * settle
+    out["frames_simulated"] = out["poses_settled"] * settle if isinstance(settle, int) else \
+        int(sum(settled.stats.frames[1:]))
+    if settled.stats is not None:
+        out["statics"] = settled.stats.as_dict()
     frames = np.stack(frames)
     _check_shapes(head, frames, np.stack(jaw), names, made, report)
     user = head.to_user(np.concatenate([head.rest[None], frames])).astype(np.float32)

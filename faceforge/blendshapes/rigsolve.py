@@ -17,13 +17,25 @@ from faceforge.animation.calibrate import measure
 from faceforge.animation.playback import static_poses
 
 
-def settler(rig, fps: float, settle: int):
-    """``simulate(contractions (k, m), jaw (k, 3)) -> (k, n, 3)``: each pose settled from rest
-    (:func:`faceforge.animation.playback.static_poses`, ``settle`` frames at ``fps``)."""
+def settler(rig, fps: float, settle):
+    """``simulate(contractions (k, m), jaw (k, 3)) -> (k, n, 3)``: each pose settled from rest,
+    ``settle`` frames at ``fps`` (an int: :func:`faceforge.animation.playback.static_poses`) or
+    until it stops moving (a :class:`faceforge.animation.statics.SettleSettings`; then
+    ``simulate.stats`` is the :class:`~faceforge.animation.statics.SettleStats` of every pose)."""
+    if isinstance(settle, int):
+        def simulate(c, jaw):
+            return static_poses(rig, c, jaw, fps, settle=settle)
+        simulate.stats = None
+        return simulate
+    from faceforge.animation.statics import SettleStats, settle as settle_poses
+
+    stats = SettleStats()
 
     def simulate(c, jaw):
-        return static_poses(rig, c, jaw, fps, settle=settle)
-
+        out = settle_poses(rig, c, jaw, fps, settle, stats=stats)
+        rig.reset()
+        return out
+    simulate.stats = stats
     return simulate
 
 

@@ -129,7 +129,8 @@ def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> di
 
         template, calibrated = str(mapping_template_path(config)), calibrated_mapping_path(root)
         calibrated = str(calibrated) if calibrated.exists() else ""
-        known = {"fap_mapping": template, "animate_mapping": calibrated or template, "calibration": calibrated}
+        # the playback stages play the calibrate stage's mapping (upstream of them): no animate_mapping
+        known = {"fap_mapping": template, "calibration": calibrated}
         params.update({k: v for k, v in known.items() if k in needed})
     return params
 

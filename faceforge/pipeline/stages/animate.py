@@ -17,9 +17,12 @@ then exports ``-o`` by suffix (:mod:`faceforge.io.export`: .pc2, .mdd, .glb, .us
 folder of OBJ files) and ``--preview sheet.png`` (a contact sheet). Exports are not cached: a new
 ``-o`` reuses the simulated frames.
 
-``faceforge calibrate`` writes ``<workdir>/calibrate/``: ``fap_mapping.yaml`` (the mapping with
-fitted response curves and measured jaw couplings; ``animate`` uses it when present),
-``report.json`` and ``report.txt`` (per FAP: requested, achieved, relative error).
+The calibrate stage writes ``<workdir>/calibrate/``: ``fap_mapping.yaml`` (the mapping with
+fitted response curves and measured jaw couplings), ``report.json`` and ``report.txt`` (per FAP:
+requested, achieved, relative error). It is cached and upstream of animate, expressions, visemes
+and bake, so they always play the head's own mapping: it reruns when the head (fit, bind), the
+template or a simulation setting changes, never for a new FAP track. With
+``animate.calibrate.enabled: false`` it writes the template mapping as it is.
 
 The mapping template is ``animate.fap_mapping`` (relative paths are resolved against the
 current folder, then the repository).
@@ -75,17 +78,20 @@ def mapping_digest_without_presets(path) -> str:
 
 
 def _mapping(ctx):
-    """The mapping to play (``animate_mapping``) and its path. Playing the workdir's calibration,
-    the presets (expressions and visemes) are the template's (``animate.fap_mapping``):
-    calibration measures the FAP entries only, and a preset edited there (or new in a faceforge
-    release) plays without a recalibration."""
+    """The mapping to play and its path: the calibrate stage's (an upstream stage of every
+    playback stage), with the presets (expressions and visemes) of the template
+    (``animate.fap_mapping``): calibration measures the FAP entries only, and a preset edited
+    there (or new in a faceforge release) plays without a recalibration. Another mapping file
+    given as the ``animate_mapping`` param (tools, tests; the commands never remember one) plays
+    as it is, presets included."""
     from dataclasses import replace
 
     from faceforge.animation.fap_mapping import load_fap_mapping
 
-    path = ctx.param("animate_mapping")
+    given = ctx.params.get("animate_mapping")
+    path = Path(given) if given else ctx.input("calibrate") / "fap_mapping.yaml"
     mapping = load_fap_mapping(path)
-    if Path(path).resolve() == calibrated_mapping_path(ctx.workdir).resolve():
+    if not given or path.resolve() == calibrated_mapping_path(ctx.workdir).resolve():
         template = load_fap_mapping(mapping_template_path(ctx.config))
         mapping = replace(mapping, expressions=template.expressions, visemes=template.visemes)
     return mapping, str(path)
@@ -117,7 +123,12 @@ def write_frames(ctx, head, track, c, jaw, faps, angles, weights, lids, timings,
     with FrameNpzWriter(ctx.out_dir / "animation.npz", track.n_frames, len(head.user_index)) as writer:
         try:
             warm_up(head.rig, c, jaw, track.fps, ctx.log, guards=(head.orientation,))   # leaves the rig at rest
-            play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings, sink=sink)
+            if ctx.config.get("animate.quality") == "offline":   # each frame solved to convergence
+                from faceforge.animation.statics import SettleSettings, play_converged
+
+                play_converged(head.rig, c, jaw, track.fps, sink, SettleSettings.from_config(ctx.config))
+            else:                                                # real time: solver.iterations a frame
+                play(head.rig, c, jaw, track.fps, progress=ctx.progress, timings=timings, sink=sink)
         except FloatingPointError as exc:
             from faceforge.exceptions import StageError
 
@@ -194,11 +205,11 @@ def run_animate(ctx):
 ANIMATE = register_stage(Stage(
     # the bound head rebuilds the muscles from the template's muscle map on its skull
     # (faceforge.animation.rig.muscle_system): both template files are inputs
-    name="animate", deps=("fit", "bind"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
+    name="animate", deps=("fit", "bind", "calibrate"), config_keys=("solver", "skin.stiffness", "skin.carry", "muscle",
                                                 "animate", "template"),
-    inputs=("fap", "animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"),
+    inputs=("fap", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="7", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="8", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- calibrate
@@ -211,9 +222,12 @@ def run_calibrate(ctx):
     from faceforge.animation.rig import BoundHead
     from faceforge.io.stagefiles import save_json
 
-    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     template_path = mapping_template_path(ctx.config)
     template = load_fap_mapping(template_path)
+    if not bool(ctx.config.get("animate.calibrate.enabled")):
+        _uncalibrated(ctx, template, template_path)
+        return
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     result = calibrate_head(head, template, ctx.config, log=ctx.log, progress=ctx.progress)
     calibrated, rows, summary, lips, probes = (result.mapping, result.rows, result.summary, result.lips,
                                                result.probes)
@@ -223,7 +237,7 @@ def run_calibrate(ctx):
     save_json(ctx.out_dir / "report.json", {
         "summary": summary, "open_jaw_lip_separation": lips,
         "fapu": head.fapu.as_dict(), "jaw_levers": {"pitch": head.levers.pitch, "yaw": head.levers.yaw},
-        "rows": [r.as_dict() for r in rows],
+        "rows": [r.as_dict() for r in rows], "statics": result.statics,
         "unobservable_faps": sorted(int(f) for f in template.mapped_faps() if int(f) not in probes)})
     table = format_table(rows)
     med = _percent(summary["all"]["median_relative_error"])
@@ -232,8 +246,24 @@ def run_calibrate(ctx):
         f"{med}; {summary['all']['within_10_percent']} of "
         f"{summary['all']['count']} rows within 10 %, {summary['all']['saturated']} at full contraction "
         f"(c=max)\n")
+    st = result.statics or {}
     ctx.log(f"median relative error {med} "
-            f"(uncalibrated {_percent(summary['all_uncalibrated']['median_relative_error'])})")
+            f"(uncalibrated {_percent(summary['all_uncalibrated']['median_relative_error'])}); "
+            f"{st.get('poses')} poses, {st.get('frames')} frames, largest residual {st.get('residual_max', 0):.1e} "
+            f"of the diagonal, {st.get('unconverged')} unconverged")
+
+
+def _uncalibrated(ctx, template, template_path) -> None:
+    """``animate.calibrate.enabled: false``: the template mapping as it is, and a report saying so."""
+    from faceforge.animation.fap_mapping import save_fap_mapping
+    from faceforge.io.stagefiles import save_json
+
+    save_fap_mapping(template, ctx.out_dir / "fap_mapping.yaml",
+                     header=f"not calibrated (animate.calibrate.enabled: false): {template_path} as it is")
+    save_json(ctx.out_dir / "report.json", {"calibrated": False, "summary": None, "rows": []})
+    (ctx.out_dir / "report.txt").write_text("not calibrated (animate.calibrate.enabled: false): the template "
+                                            "mapping plays as it is\n")
+    ctx.log("calibration off (animate.calibrate.enabled: false): playing the template mapping")
 
 
 def _percent(fraction) -> str:
@@ -248,10 +278,11 @@ CALIBRATE = register_stage(Stage(
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry", "muscle", "animate.fap_mapping", "animate.fps",
         "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",
-        "animate.jaw_glide_slope", "template"),
-    inputs=("animate.fap_mapping", "template.skull", "template.muscle_map"), digests={"animate.fap_mapping": mapping_digest_without_presets},
+        "animate.jaw_glide_slope", "animate.statics", "template"),
+    inputs=("animate.fap_mapping", "animate.calibrate.magnitudes", "template.skull", "template.muscle_map"),
+    digests={"animate.fap_mapping": mapping_digest_without_presets},
     outputs=("fap_mapping.yaml", "report.json", "report.txt"),
-    version="4", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
+    version="5", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
 # --------------------------------------------------------------------------- commands
@@ -415,32 +446,19 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, output, p
         fap = _expression_file(app, expression, intensity, seconds)
     if visemes is not None:
         fap = _viseme_file(app, visemes)
-    mapping = playback_mapping(app, "animate")
-    app.run_stage("animate", params={"fap": str(fap), "animate_mapping": str(mapping)}, force=force)
+    playback_mapping(app, "animate")
+    app.run_stage("animate", params={"fap": str(fap), "animate_mapping": None}, force=force)   # forgets an old one
     export_outputs(app, output, preview, preview_frames)
 
 
 def playback_mapping(app, command: str) -> Path:
-    """The mapping a playback command plays: the workdir's calibration when there is one (said
-    so when it is out of date), else the template. Logged as ``<command>: mapping <path>``."""
+    """The mapping a playback command plays: the calibrate stage's, brought up to date first (a
+    cached stage upstream of every playback stage; ``animate.calibrate.enabled: false`` makes it
+    the template as it is). Logged as ``<command>: mapping <path>``."""
     calibrated = calibrated_mapping_path(app.workspace.root)
-    mapping = calibrated if calibrated.exists() else mapping_template_path(app.config)
-    app.log(f"{command}: mapping {mapping}")
-    if calibrated.exists():
-        _warn_if_stale_calibration(app, command)
-    return mapping
-
-
-def _warn_if_stale_calibration(app, command: str = "animate") -> None:
-    """Say so when the calibration animate plays is out of date (the head was refitted, the
-    template or the solver settings changed since): it is played anyway (a calibration takes
-    minutes; ``faceforge calibrate`` refreshes it)."""
-    from faceforge.pipeline.runner import plan
-
-    status = plan(app.workspace, app.config, app.workspace.load_params(), ["calibrate"])[-1]
-    if not status.up_to_date:
-        app.log(f"{command}: warning: the calibration is out of date ({'; '.join(status.reasons)}); "
-                "playing it anyway: `faceforge calibrate` brings it up to date")
+    on = bool(app.config.get("animate.calibrate.enabled"))
+    app.log(f"{command}: mapping {calibrated}" + ("" if on else " (uncalibrated template, animate.calibrate.enabled: false)"))
+    return calibrated
 
 
 @click.command("calibrate", help="Measure how precisely FAPs move the skin and fit the mapping (§9).")

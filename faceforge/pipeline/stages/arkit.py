@@ -87,9 +87,9 @@ def run_arkit(ctx):
 
 
 ARKIT = register_stage(Stage(
-    name="arkit", deps=("fit", "bind", "bake"),
+    name="arkit", deps=("fit", "bind", "calibrate", "bake"),
     config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
-    inputs=("arkit_take", "animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"),
+    inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
     version="1", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
 

@@ -76,16 +76,16 @@ def _sheet(path, head, frames, names, made) -> None:
 
 
 BAKE = register_stage(Stage(
-    name="bake", deps=("fit", "bind"),
+    name="bake", deps=("fit", "bind", "calibrate"),
     # the bound head rebuilds the muscles from the template (faceforge.animation.rig.muscle_system)
     # not the playback-only keys (head rotation, previews, presets' timing): they cost no rebake
     config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.calibrate.settle_frames",
                  "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.jaw_glide",
                  "animate.jaw_glide_slope"),
-    inputs=("bake_shapes", "arkit_mapping", "animate_mapping", "animate.fap_mapping", "template.skull",
+    inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="1", run=run_bake,
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="2", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 
@@ -100,8 +100,9 @@ def bake_params(app, shapes: str, mapping: str | None) -> dict:
     sel.parent.mkdir(parents=True, exist_ok=True)
     if not sel.exists() or sel.read_text() != " ".join(kinds):
         sel.write_text(" ".join(kinds))
+    playback_mapping(app, "bake")
     return {"bake_shapes": str(sel), "arkit_mapping": str(Path(mapping) if mapping else default_mapping_path()),
-            "animate_mapping": str(playback_mapping(app, "bake"))}
+            "animate_mapping": None}   # forgets one an older faceforge remembered
 
 
 def export_shapes(app, output: str, weights=None, fps: float = 25.0, names_only=None) -> Path:

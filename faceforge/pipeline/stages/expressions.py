@@ -19,8 +19,8 @@ report.json
 ... u, those it has) into ``<workdir>/visemes/`` (``visemes.png``, five columns;
 ``visemes.npz``; ``report.json``).
 
-Each pose is reached as ``calibrate`` reaches its probes (:func:`faceforge.animation.playback.
-static_poses`: eased in, then held for ``animate.calibrate.settle_frames`` frames), with the
+Each pose is eased in from rest and held until the skin stops moving (:func:`faceforge.animation.
+statics.settle`, ``animate.statics``; the report gives the frames and the residual), with the
 eyelids (``animate.eyelids``) laid over it.
 """
 
@@ -75,7 +75,6 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     import numpy as np
 
     from faceforge.animation.checks import check_animation
-    from faceforge.animation.playback import static_poses
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.animation.controls import controls
     from faceforge.animation.rig import BoundHead
@@ -88,18 +87,21 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     names = ["neutral", *presets]
     faps = np.stack([np.zeros(68), *presets.values()])
     c, jaw = controls(mapping, faps, head)
-    settle = int(ctx.config.get("animate.calibrate.settle_frames"))
-    ctx.log(f"{len(presets)} {stem}, {settle} settle frames each")
-    poses = static_poses(head.rig, c, jaw, float(ctx.config.get("animate.fps")), settle=settle)
+    poses, settled = settled_poses(head, c, jaw, ctx.config)
+    statics = settled.as_dict()
+    ctx.log(f"{len(presets)} {stem}, each held until it converged: {statics['frames_per_pose_median']:g} frames "
+            f"(median), residual at most {statics['residual_max']:.1e} of the diagonal, {statics['unconverged']} "
+            "unconverged")
     lids = head.eyelids(ctx.config)
     if lids is not None:
         poses = lids.apply(poses, faps)
-    report = {"mapping": mapping_path, stem: {}}
+    report = {"mapping": mapping_path, "statics": statics, stem: {}}
     for i, name in enumerate(names):
         checks = check_animation(head.rest, poses[i:i + 1], head.faces,
                                  skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
         report[stem][name] = {"checks": checks.as_dict(), "max_contraction": float(c[i].max(initial=0.0)),
-                              "jaw": jaw[i].tolist()}
+                              "jaw": jaw[i].tolist(), "frames": settled.frames[i],
+                              "residual": settled.residual[i], "converged": settled.converged[i]}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
     from faceforge.anatomy.tissue import units_per_mm
@@ -113,6 +115,20 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     save_json(ctx.out_dir / "report.json", report)
 
 
+def settled_poses(head, c, jaw, config):
+    """The held poses (k, n, 3) of controls ``c`` (k, m) and ``jaw`` (k, 3), each from rest and
+    solved until the skin stops moving (:func:`faceforge.animation.statics.settle`,
+    ``animate.statics``), and how they settled (a :class:`~faceforge.animation.statics.SettleStats`,
+    a pose each)."""
+    from faceforge.animation.statics import SettleSettings, SettleStats, settle
+
+    stats = SettleStats()
+    poses = settle(head.rig, c, jaw, float(config.get("animate.fps")), SettleSettings.from_config(config),
+                   stats=stats)
+    head.rig.reset()
+    return poses, stats
+
+
 def _face_region(head):
     """(n,) bool: the face to frame in a sheet (:func:`faceforge.viz.contact_sheet.face_region`),
     else the whole head above the bone's lowest point."""
@@ -122,17 +138,17 @@ def _face_region(head):
     return region if region is not None else head.rest[:, 1] >= head.bone_heights()[0]
 
 
-_SHEET_STAGE = dict(deps=("fit", "bind"),
+_SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),
                     config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
-                    inputs=("animate_mapping", "animate.fap_mapping", "template.skull", "template.muscle_map"))
+                    inputs=("animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"))
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),
-    version="2", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
+    version="3", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
 
 VISEMES_STAGE = register_stage(Stage(
     name="visemes", **_SHEET_STAGE, outputs=("visemes.png", "visemes.npz", "report.json"),
-    version="2", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
+    version="3", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
 
 
 def _sheet_command(stem: str, help_text: str):
@@ -149,8 +165,8 @@ def _sheet_command(stem: str, help_text: str):
 
         if output and not str(output).lower().endswith(".png"):
             raise StageError("the sheet is a PNG: give -o a .png path", output)
-        mapping = playback_mapping(app, stem)
-        app.run_stage(stem, params={"animate_mapping": str(mapping)}, force=force)
+        playback_mapping(app, stem)
+        app.run_stage(stem, params={"animate_mapping": None}, force=force)   # forgets an old one
         sheet = app.workspace.stage_dir(stem) / f"{stem}.png"
         if output:
             Path(output).parent.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,71 @@
+"""Held poses are solved until they stop changing (issue 25, item 6)."""
+
+import numpy as np
+import pytest
+
+from faceforge.animation.playback import Rig
+from faceforge.animation.statics import SettleSettings, SettleStats, settle
+
+
+def relaxing_rig(rate=0.3, n=5):
+    """A stand-in rig whose skin relaxes towards ``rest + c`` (x-offset) by ``rate`` of the gap
+    a frame: a fixed point at the target, reached geometrically like a held PBD pose."""
+    rest = np.zeros((n, 3))
+    rest[:, 1] = np.arange(n, dtype=float)
+    state = {"x": rest.copy()}
+
+    def skin(bones, muscles, dt):
+        target = rest + np.array([muscles, 0.0, 0.0])
+        state["x"] = state["x"] + rate * (target - state["x"])
+        return state["x"]
+
+    def reset():
+        state["x"] = rest.copy()
+
+    return Rig(skull=lambda j: None, muscles=lambda c, b, dt: float(c[0]), skin=skin, rest=rest, reset=reset)
+
+
+def test_a_held_pose_is_solved_to_its_tolerance_and_says_so():
+    rig = relaxing_rig()
+    diag = float(np.linalg.norm(np.ptp(rig.rest, axis=0)))
+    stats = SettleStats()
+    tight, loose = SettleSettings(tolerance=1e-8), SettleSettings(tolerance=1e-3)
+    a = settle(rig, [[1.0]], np.zeros((1, 3)), 25.0, tight, stats=stats)[0]
+    settle(rig, [[1.0]], np.zeros((1, 3)), 25.0, loose, stats=stats)
+    assert np.allclose(a[:, 0], 1.0, atol=1e-7)              # at the fixed point, not 10 frames short of it
+    assert stats.converged == [True, True]
+    assert stats.residual[0] <= 1e-8 and stats.residual[1] <= 1e-3
+    assert stats.frames[0] > stats.frames[1] > 10            # it holds until converged, more for less tolerance
+    assert stats.residual[0] * diag == pytest.approx(abs(1.0 - a[0, 0]) * 0.3 / 0.7, rel=0.2)
+
+
+def test_a_warm_pose_continues_from_the_last_and_settles_in_fewer_frames():
+    rig = relaxing_rig()
+    s = SettleSettings(tolerance=1e-6)
+    cold, warm = SettleStats(), SettleStats()
+    settle(rig, [[1.0], [1.05]], np.zeros((2, 3)), 25.0, s, stats=cold)
+    b = settle(rig, [[1.0], [1.05]], np.zeros((2, 3)), 25.0, s, warm=True, stats=warm)
+    assert np.allclose(b[1][:, 0], 1.05, atol=1e-5)
+    assert warm.frames[1] < cold.frames[1]
+
+
+def test_an_unconverged_pose_is_reported():
+    stats = SettleStats()
+    settle(relaxing_rig(rate=0.01), [[1.0]], np.zeros((1, 3)), 25.0,
+           SettleSettings(tolerance=1e-9, max_frames=30), stats=stats)
+    assert stats.converged == [False] and stats.frames == [30]
+    assert stats.as_dict()["unconverged"] == 1
+
+
+def test_offline_playback_converges_every_frame_where_real_time_lags():
+    from faceforge.animation.playback import play
+    from faceforge.animation.statics import play_converged
+
+    c = np.linspace(0.0, 1.0, 6)[:, None]
+    got = {}
+    play_converged(relaxing_rig(), c, np.zeros((6, 3)), 25.0, lambda s, f: got.update({s: f.copy()}),
+                   SettleSettings(tolerance=1e-9), chunk=4)
+    frames = np.concatenate([got[0], got[4]])
+    assert np.allclose(frames[:, 0, 0], c[:, 0], atol=1e-8)           # each frame at its converged pose
+    lagging = play(relaxing_rig(), c, np.zeros((6, 3)), 25.0)
+    assert np.abs(lagging[:, 0, 0] - c[:, 0]).max() > 0.1              # one step a frame lags behind
