@@ -23,7 +23,8 @@ def test_real_stages_one_good_head_one_broken(invoke, tmp_path, heads_dir):
     anna, broken = report["results"]
     assert broken["status"] == "failed" and broken["error"].startswith(str(heads_dir / "broken.obj"))
     assert anna["status"] == "ok", anna["error"]
-    assert [s["state"] for s in anna["stages"].values()] == ["ran"] * 4     # landmarks (given), fit, bind, animate
+    assert sorted(anna["stages"]) == ["animate", "bind", "calibrate", "fit", "landmarks"]
+    assert [s["state"] for s in anna["stages"].values()] == ["ran"] * 5
     assert anna["metrics"]["fit"]["mesh.n_vertices"] == 478
     assert 0 <= anna["metrics"]["fit"]["landmarks.max_residual"] < 0.05
     assert anna["metrics"]["bind"]["regions.face_front.fraction.bound"] > 0.5
@@ -40,4 +41,4 @@ def test_real_stages_one_good_head_one_broken(invoke, tmp_path, heads_dir):
     second = invoke(*args)
     assert second.exit_code == 1
     again = json.loads((out / batch.REPORT_NAME).read_text())["results"][0]
-    assert [s["state"] for s in again["stages"].values()] == ["cached"] * 4
+    assert [s["state"] for s in again["stages"].values()] == ["cached"] * 5

