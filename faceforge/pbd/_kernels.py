@@ -190,6 +190,39 @@ def _velocities(x, v, prev, inv_h):
 
 
 @numba.njit(**PBD_NUMBA)
+def _begin_step(x_in, v_in, x_out, v_out, kin, kin_start):
+    """Start a step: ``kin_start (q, 3)`` = the kinematic particles' positions in ``x_in``, and
+    ``x_out``/``v_out`` = ``x_in``/``v_in`` unless they are the same arrays (stepping in place)."""
+    n = x_in.shape[0]
+    for q in range(kin.shape[0]):
+        for d in range(3):
+            kin_start[q, d] = x_in[kin[q], d]
+    if x_out.ctypes.data != x_in.ctypes.data:  # stepping in place (the usual case): no copy
+        for i in range(n):
+            for d in range(3):
+                x_out[i, d] = x_in[i, d]
+    if v_out.ctypes.data != v_in.ctypes.data:
+        for i in range(n):
+            for d in range(3):
+                v_out[i, d] = v_in[i, d]
+
+
+@numba.njit(**PBD_NUMBA)
+def _drive_kinematic(x, kin, kin_start, kin_target, s, substeps):
+    """Substep ``s`` of ``substeps``: the kinematic particles ``kin`` go the fraction
+    ``(s + 1) / substeps`` of the way from ``kin_start`` to ``kin_target (q, 3)``, and the last
+    substep puts them exactly on the target."""
+    alpha = (s + 1.0) / substeps
+    for q in range(kin.shape[0]):
+        i = kin[q]
+        for d in range(3):
+            if s == substeps - 1:  # exactly the control, no rounding
+                x[i, d] = kin_target[q, d]
+            else:
+                x[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
+
+
+@numba.njit(**PBD_NUMBA)
 def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
           w, kin, kin_start, prev, gravity, damp,
           substeps, iterations, xpbd, blocks, seg, lams,
@@ -213,18 +246,7 @@ def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
     ``lams`` is one flat scratch array holding the multipliers of all kinds in the
     order distance, bending, area, volume, position, attachment.
     """
-    n = x_in.shape[0]
-    for q in range(kin.shape[0]):
-        for d in range(3):
-            kin_start[q, d] = x_in[kin[q], d]
-    if x_out.ctypes.data != x_in.ctypes.data:  # stepping in place (the usual case): no copy
-        for i in range(n):
-            for d in range(3):
-                x_out[i, d] = x_in[i, d]
-    if v_out.ctypes.data != v_in.ctypes.data:
-        for i in range(n):
-            for d in range(3):
-                v_out[i, d] = v_in[i, d]
+    _begin_step(x_in, v_in, x_out, v_out, kin, kin_start)
     o1 = d_idx.shape[0]
     o2 = o1 + b_idx.shape[0]
     o3 = o2 + a_idx.shape[0]
@@ -232,14 +254,7 @@ def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
     o5 = o4 + p_idx.shape[0]
     for s in range(substeps):
         _predict(x_out, v_out, prev, w, damp, h, gravity)
-        alpha = (s + 1.0) / substeps
-        for q in range(kin.shape[0]):
-            i = kin[q]
-            for d in range(3):
-                if s == substeps - 1:  # exactly the control, no rounding
-                    x_out[i, d] = kin_target[q, d]
-                else:
-                    x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
+        _drive_kinematic(x_out, kin, kin_start, kin_target, s, substeps)
         if xpbd:  # the PBD modes never read the multipliers
             lams[:] = 0.0
         _project(x_out, w, blocks, iterations, xpbd,
@@ -269,18 +284,7 @@ def _step_parts(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
     thread, or a model of one part) never compiles the parallel sweep: numba compiles every
     branch of a kernel, and the parallel one was ~55 % of a first animate's compile (issue 28).
     The body is :func:`_step`'s but for the projection call; keep the two alike."""
-    n = x_in.shape[0]
-    for q in range(kin.shape[0]):
-        for d in range(3):
-            kin_start[q, d] = x_in[kin[q], d]
-    if x_out.ctypes.data != x_in.ctypes.data:  # stepping in place (the usual case): no copy
-        for i in range(n):
-            for d in range(3):
-                x_out[i, d] = x_in[i, d]
-    if v_out.ctypes.data != v_in.ctypes.data:
-        for i in range(n):
-            for d in range(3):
-                v_out[i, d] = v_in[i, d]
+    _begin_step(x_in, v_in, x_out, v_out, kin, kin_start)
     o1 = d_idx.shape[0]
     o2 = o1 + b_idx.shape[0]
     o3 = o2 + a_idx.shape[0]
@@ -288,14 +292,7 @@ def _step_parts(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
     o5 = o4 + p_idx.shape[0]
     for s in range(substeps):
         _predict(x_out, v_out, prev, w, damp, h, gravity)
-        alpha = (s + 1.0) / substeps
-        for q in range(kin.shape[0]):
-            i = kin[q]
-            for d in range(3):
-                if s == substeps - 1:  # exactly the control, no rounding
-                    x_out[i, d] = kin_target[q, d]
-                else:
-                    x_out[i, d] = kin_start[q, d] + alpha * (kin_target[q, d] - kin_start[q, d])
+        _drive_kinematic(x_out, kin, kin_start, kin_target, s, substeps)
         if xpbd:  # the PBD modes never read the multipliers
             lams[:] = 0.0
         _project_parts(x_out, w, blocks, seg, iterations, xpbd,
