@@ -1,7 +1,7 @@
 """The exports opened in real Blender (tools/blender_check.py), vertex by vertex in the user's order.
 
 Needs a Blender: ``FACEFORGE_BLENDER_PYTHON`` naming a Python that has the ``bpy`` module
-(``python3.11 -m venv /tmp/bpy-venv && /tmp/bpy-venv/bin/pip install bpy==4.5.*``), or a
+(``python3.11 -m venv /tmp/bpy-venv && /tmp/bpy-venv/bin/pip install bpy==5.0.1``), or a
 ``blender`` binary on PATH. Without one every test here is skipped; ``.ci/run`` installs
 ``bpy==5.0.1`` into ``.venv-bpy`` and points this variable at it (9 tests, ~2.5 min on the
 loaded 2-core machine, after a ~2.5 min install);
@@ -51,7 +51,7 @@ def blender_command() -> list[str] | None:
 COMMAND = blender_command()
 pytestmark = pytest.mark.skipif(
     COMMAND is None,
-    reason="no Blender: set FACEFORGE_BLENDER_PYTHON to a Python with bpy (pip install bpy==4.5.*) "
+    reason="no Blender: set FACEFORGE_BLENDER_PYTHON to a Python with bpy (pip install bpy==5.0.1, as .ci/run does) "
     "or put `blender` on PATH",
 )
 

@@ -1,6 +1,6 @@
 """Open faceforge's animation outputs in real Blender and compare what Blender shows, vertex by vertex.
 
-Runs under a Python that has Blender's ``bpy`` module (``pip install bpy==4.5.*`` into a
+Runs under a Python that has Blender's ``bpy`` module (``pip install bpy==5.0.1`` into a
 separate Python 3.11 venv), or inside Blender itself::
 
     /tmp/bpy-venv/bin/python tools/blender_check.py MESH.obj OUT.pc2 OUT.mdd OUT.glb OUTDIR \\
