@@ -223,6 +223,27 @@ def _drive_kinematic(x, kin, kin_start, kin_target, s, substeps):
 
 
 @numba.njit(**PBD_NUMBA)
+def _lam_offsets(d_idx, b_idx, a_idx, v_rest, p_idx):
+    """Ends of the distance, bending, area, volume and position multipliers in the flat ``lams``
+    (the attachment ones follow the last)."""
+    o1 = d_idx.shape[0]
+    o2 = o1 + b_idx.shape[0]
+    o3 = o2 + a_idx.shape[0]
+    o4 = o3 + v_rest.shape[0]
+    return o1, o2, o3, o4, o4 + p_idx.shape[0]
+
+
+@numba.njit(**PBD_NUMBA)
+def _begin_substep(x, v, prev, w, damp, h, gravity, kin, kin_start, kin_target, s, substeps, xpbd, lams):
+    """Everything of substep ``s`` before the projection: predict (:func:`_predict`), drive the
+    kinematic particles (:func:`_drive_kinematic`) and, for XPBD, zero the multipliers."""
+    _predict(x, v, prev, w, damp, h, gravity)
+    _drive_kinematic(x, kin, kin_start, kin_target, s, substeps)
+    if xpbd:  # the PBD modes never read the multipliers
+        lams[:] = 0.0
+
+
+@numba.njit(**PBD_NUMBA)
 def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
           w, kin, kin_start, prev, gravity, damp,
           substeps, iterations, xpbd, blocks, seg, lams,
@@ -247,16 +268,10 @@ def _step(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
     order distance, bending, area, volume, position, attachment.
     """
     _begin_step(x_in, v_in, x_out, v_out, kin, kin_start)
-    o1 = d_idx.shape[0]
-    o2 = o1 + b_idx.shape[0]
-    o3 = o2 + a_idx.shape[0]
-    o4 = o3 + v_rest.shape[0]
-    o5 = o4 + p_idx.shape[0]
+    o1, o2, o3, o4, o5 = _lam_offsets(d_idx, b_idx, a_idx, v_rest, p_idx)
     for s in range(substeps):
-        _predict(x_out, v_out, prev, w, damp, h, gravity)
-        _drive_kinematic(x_out, kin, kin_start, kin_target, s, substeps)
-        if xpbd:  # the PBD modes never read the multipliers
-            lams[:] = 0.0
+        _begin_substep(x_out, v_out, prev, w, damp, h, gravity, kin, kin_start, kin_target, s, substeps,
+                       xpbd, lams)
         _project(x_out, w, blocks, iterations, xpbd,
                  d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
                  b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t, q_stretch,
@@ -285,16 +300,10 @@ def _step_parts(x_in, v_in, x_out, v_out, kin_target, p_target, h, threaded,
     branch of a kernel, and the parallel one was ~55 % of a first animate's compile (issue 28).
     The body is :func:`_step`'s but for the projection call; keep the two alike."""
     _begin_step(x_in, v_in, x_out, v_out, kin, kin_start)
-    o1 = d_idx.shape[0]
-    o2 = o1 + b_idx.shape[0]
-    o3 = o2 + a_idx.shape[0]
-    o4 = o3 + v_rest.shape[0]
-    o5 = o4 + p_idx.shape[0]
+    o1, o2, o3, o4, o5 = _lam_offsets(d_idx, b_idx, a_idx, v_rest, p_idx)
     for s in range(substeps):
-        _predict(x_out, v_out, prev, w, damp, h, gravity)
-        _drive_kinematic(x_out, kin, kin_start, kin_target, s, substeps)
-        if xpbd:  # the PBD modes never read the multipliers
-            lams[:] = 0.0
+        _begin_substep(x_out, v_out, prev, w, damp, h, gravity, kin, kin_start, kin_target, s, substeps,
+                       xpbd, lams)
         _project_parts(x_out, w, blocks, seg, iterations, xpbd,
                        d_idx, d_rest, d_k, d_c, lams[:o1], d_coef, d_runs, d_coef_t, d_wt,
                        b_idx, b_rest, b_k, b_c, lams[o1:o2], b_runs, b_w, b_rest_t,
