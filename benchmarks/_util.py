@@ -19,6 +19,12 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
+#: the sample heads shipped in samples/, by name
+SAMPLE_HEADS = {name: Path(__file__).resolve().parents[1] / "samples" / rel for name, rel in (
+    ("makehuman", "makehuman/mh_head_default.obj"),
+    ("ict", "ict/ict_face_headneck_neutral.obj"),
+    ("mediapipe", "mediapipe/face_model_with_iris.obj"),
+)}
 
 
 def timeit(fn, repeat: int = 5, number: int = 1, warmup: int = 1, clock=time.perf_counter) -> dict:

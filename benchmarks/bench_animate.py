@@ -38,7 +38,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT))
 
-from _util import print_table, write_results  # noqa: E402
+from _util import SAMPLE_HEADS, print_table, write_results  # noqa: E402
 
 TARGET_MS = 3.0
 PAPER_MESH_D_MS = 50.0
@@ -135,9 +135,6 @@ def measure(head, mapping, frames: int, repeats: int, rival=None) -> dict:
     }
 
 
-SAMPLE_HEADS = {"makehuman": "samples/makehuman/mh_head_default.obj",
-                "ict": "samples/ict/ict_face_headneck_neutral.obj",
-                "mediapipe": "samples/mediapipe/face_model_with_iris.obj"}
 
 
 def threads_info() -> dict:
@@ -167,7 +164,7 @@ def sweep(root: Path, heads, faps) -> dict:
     for head in heads:
         wd = root / head
         t0 = time.perf_counter()
-        for args in (["fit", str(ROOT / SAMPLE_HEADS[head])], ["bind"]):
+        for args in (["fit", str(SAMPLE_HEADS[head])], ["bind"]):
             r = runner.invoke(cli, ["-q", "-w", str(wd), *args])
             if r.exit_code != 0:
                 out[head] = {"error": r.output.strip()[-300:]}

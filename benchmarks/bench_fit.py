@@ -21,13 +21,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import print_table, timeit, write_results  # noqa: E402
+from _util import SAMPLE_HEADS, print_table, timeit, write_results  # noqa: E402
 
-HEADS = {
-    "makehuman": ROOT / "samples/makehuman/mh_head_default.obj",
-    "mediapipe": ROOT / "samples/mediapipe/face_model_with_iris.obj",
-    "ict": ROOT / "samples/ict/ict_face_headneck_neutral.obj",
-}
 
 
 def main() -> None:
@@ -43,7 +38,7 @@ def main() -> None:
     template = load_template(ROOT / "templates/skull", ROOT / "templates/muscle_map.yaml")
     template_s = time.perf_counter() - t0
     rows = []
-    for name, mesh in HEADS.items():
+    for name, mesh in SAMPLE_HEADS.items():
         lm_path = mesh.with_name(mesh.stem + ".fdp.yaml")
 
         def load():

@@ -34,13 +34,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import print_table, write_results  # noqa: E402
+from _util import SAMPLE_HEADS, print_table, write_results  # noqa: E402
 
-HEADS = {
-    "makehuman": ROOT / "samples/makehuman/mh_head_default.obj",
-    "ict": ROOT / "samples/ict/ict_face_headneck_neutral.obj",
-    "mediapipe": ROOT / "samples/mediapipe/face_model_with_iris.obj",
-}
 #: heads of other identities kept in the repository (tests/data), measured the same way
 IDENTITIES = {
     "makehuman_female_young": ROOT / "tests/data/makehuman-identities/mh_head_caucasian_female_young.obj",
@@ -60,7 +55,7 @@ def accuracy() -> tuple[list, dict]:
     from faceforge.landmarks.detect import detect_landmarks
 
     rows, per_fdp, dets = [], {}, {}
-    for name, mesh in {**HEADS, **IDENTITIES}.items():
+    for name, mesh in {**SAMPLE_HEADS, **IDENTITIES}.items():
         v, f, _ = load_mesh(mesh)
         diag = float(np.linalg.norm(np.ptp(v, axis=0)))
         t = time.perf_counter()
@@ -84,7 +79,7 @@ def orientation(dets: dict) -> list:
 
     rows = []
     for name, (v, f, det, diag) in dets.items():
-        if name not in HEADS:
+        if name not in SAMPLE_HEADS:
             continue
         for label, (up, fwd) in FRAMES.items():
             r = frame_rotation(parse_axis(up), parse_axis(fwd))   # head = user @ R.T
@@ -103,7 +98,7 @@ def big_head(tmp: Path) -> Path:
 
     from faceforge.io.mesh import load_mesh, save_mesh
 
-    v, f, _ = load_mesh(HEADS["ict"])
+    v, f, _ = load_mesh(SAMPLE_HEADS["ict"])
     v2, f2 = trimesh.remesh.subdivide(v, f)
     path = tmp / "ict_subdivided.obj"
     save_mesh(path, v2, f2)
@@ -148,7 +143,7 @@ def _faceforge(*args, cwd=None) -> subprocess.CompletedProcess:
 def end_to_end(tmp: Path) -> dict:
     heads = tmp / "heads"
     heads.mkdir()
-    every = {**HEADS, **IDENTITIES}
+    every = {**SAMPLE_HEADS, **IDENTITIES}
     for mesh in every.values():
         shutil.copy(mesh, heads / mesh.name)     # no landmark file next to it
     fap = ROOT / "samples/fap/joy.fap"
