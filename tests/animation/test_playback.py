@@ -5,18 +5,14 @@ import pytest
 
 from faceforge.animation.checks import check_animation, inverted_faces, inverted_triangles, points_inside
 from faceforge.animation.playback import Rig, Timings, play, static_poses
+from tests.pbd.meshes import grid_faces
 
 
 def grid(n=6):
     """A flat (n x n) sheet in the XY plane facing +Z, triangulated."""
     x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
     v = np.column_stack([x.ravel(), y.ravel(), np.zeros(n * n)])
-    f = []
-    for i in range(n - 1):
-        for j in range(n - 1):
-            a = i * n + j
-            f += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-    return v, np.array(f)
+    return v, grid_faces(n)
 
 
 def box():

@@ -8,6 +8,17 @@ import trimesh
 from faceforge.pbd import ModelBuilder
 
 
+def grid_faces(n: int) -> np.ndarray:
+    """Triangles ``(2 (n-1)^2, 3)`` of an ``n x n`` vertex grid numbered row by row (two per
+    cell, counter-clockwise seen from +Z when rows run along +y)."""
+    f = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a = i * n + j
+            f += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+    return np.array(f)
+
+
 def sphere(subdivisions: int = 2, radius: float = 1.0):
     m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
     return np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces, dtype=np.int64)

@@ -13,18 +13,14 @@ from faceforge.io.export_cache import read_mdd, read_pc2, write_mdd, write_pc2
 from faceforge.io.frame_stream import FrameNpzWriter, iter_chunks, open_frames
 from faceforge.pbd import thread_choice
 from faceforge.pbd.thread_choice import ThreadChooser
+from tests.pbd.meshes import grid_faces
 
 
 def grid(n=6):
     """A bumpy n x n grid (rest (n*n, 3), faces (2 (n-1)^2, 3))."""
     x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
     v = np.stack([x.ravel(), y.ravel(), 0.1 * np.sin(x.ravel() * 1.3) * np.cos(y.ravel())], axis=1)
-    f = []
-    for i in range(n - 1):
-        for j in range(n - 1):
-            a = i * n + j
-            f += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
-    return v, np.array(f)
+    return v, grid_faces(n)
 
 
 def wild_frames(rest, count=37, seed=0):
