@@ -20,6 +20,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from faceforge.anatomy.muscles.muscle_map import mirrored_name
 from faceforge.constants import FLOAT, INT
 
 #: skin vertices pair up when a mirror image lies within this fraction of the skin's diagonal
@@ -55,7 +56,7 @@ def mirror_binding(binding, vertices: np.ndarray, bodies, mirror, tolerance: flo
     right = (side < -tolerance) & (side[partner] > tolerance)
     names = list(binding.body_names)
     index = {n: i for i, n in enumerate(names)}
-    twin = np.array([index.get(_twin(n), i) for i, n in enumerate(names)], dtype=INT)
+    twin = np.array([index.get(mirrored_name(n), i) for i, n in enumerate(names)], dtype=INT)
     exact = np.array([twin[i] != i and len(bodies[i].faces) == len(bodies[twin[i]].faces)
                       for i in range(len(names))])
     keep = ~right[binding.vertex_ids]
@@ -102,6 +103,3 @@ def mirror_binding(binding, vertices: np.ndarray, bodies, mirror, tolerance: flo
     out = replace(binding, status=status, normals=normals, **{k: a[order] for k, a in cat.items()})
     return out, int(right.sum())
 
-
-def _twin(name: str) -> str:
-    return name[:-2] + "_R" if name.endswith("_L") else name[:-2] + "_L" if name.endswith("_R") else name

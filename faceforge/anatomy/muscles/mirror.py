@@ -23,17 +23,9 @@ from dataclasses import replace
 
 import numpy as np
 
+from faceforge.anatomy.muscles.muscle_map import mirrored_name
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.surface_points import SurfacePoints, project_to_surface
-
-
-def twin_name(name: str) -> str:
-    """``X_L`` <-> ``X_R``; other names are their own twins."""
-    if name.endswith("_L"):
-        return name[:-2] + "_R"
-    if name.endswith("_R"):
-        return name[:-2] + "_L"
-    return name
 
 
 def _mirror_points(points: SurfacePoints, left_parts, right_parts, mirror, exact: set) -> SurfacePoints:
@@ -49,7 +41,7 @@ def _mirror_points(points: SurfacePoints, left_parts, right_parts, mirror, exact
         sel = np.flatnonzero(part == k)
         if not len(sel):
             continue
-        rname = twin_name(lname)
+        rname = mirrored_name(lname)
         if rname not in rstart:
             raise ValueError(f"the mirror image of {lname!r} is not among the bodies the twin lies on")
         local = points.face_ids[sel] - lstart[k]
@@ -149,7 +141,7 @@ def _on_plane(point: SurfacePoints, parts, v, f, mirror) -> SurfacePoints:
     p = mirror.onto_plane(point.positions(v, f))
     best = None
     for (name, (bv, bf)), s0 in zip(parts, starts):
-        if twin_name(name) != name:
+        if mirrored_name(name) != name:
             continue
         sp = project_to_surface(p, bv, bf)
         d = float(np.linalg.norm(sp.positions(bv, bf) - p))
