@@ -59,10 +59,7 @@ def mirror_plane(landmarks: dict) -> tuple[Mirror, float] | None:
 def skin_asymmetry(vertices: np.ndarray, mirror: Mirror) -> float:
     """Largest distance (mesh units) from a mirrored vertex (n, 3) to the nearest vertex: 0 when
     every vertex has a mirror partner."""
-    from scipy.spatial import cKDTree
-
-    v = np.asarray(vertices, dtype=np.float64)
-    return float(cKDTree(v).query(mirror(v))[0].max())
+    return float(mirror.partners(vertices)[1].max())
 
 
 def _points_halfway(p: np.ndarray, mirror: Mirror, rounds: int = 2) -> np.ndarray:

@@ -23,6 +23,15 @@ class Mirror:
         d = np.asarray(d, dtype=np.float64)
         return d - 2.0 * (d @ self.normal)[..., None] * self.normal
 
+    def partners(self, vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For each of ``vertices (n, 3)``: the index (n,) of the vertex nearest its mirror image,
+        and that distance (n,) in mesh units (all 0 for a mesh that is its own mirror image)."""
+        from scipy.spatial import cKDTree
+
+        v = np.asarray(vertices, dtype=np.float64)
+        d, j = cKDTree(v).query(self(v))
+        return j, d
+
     def side(self, p: np.ndarray) -> np.ndarray:
         """Signed distance (...,) of points (..., 3) from the plane (positive: the normal's side)."""
         return (np.asarray(p, dtype=np.float64) - self.point) @ self.normal

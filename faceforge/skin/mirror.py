@@ -31,10 +31,7 @@ MIRROR_TOLERANCE = 5e-4
 def skin_partners(vertices: np.ndarray, mirror, tolerance: float) -> np.ndarray | None:
     """(n,) the vertex nearest each vertex's mirror image, or None when one lies farther than
     ``tolerance`` (mesh units): the skin is not its own mirror image."""
-    from scipy.spatial import cKDTree
-
-    v = np.asarray(vertices, dtype=FLOAT)
-    d, j = cKDTree(v).query(mirror(v))
+    j, d = mirror.partners(vertices)
     return None if d.max() > tolerance else j.astype(INT)
 
 
