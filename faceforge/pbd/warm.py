@@ -9,7 +9,7 @@ while ``fit`` and ``bind`` run: :func:`start` spawns ``python -m faceforge.pbd.w
 cache holds no compiled step for this source, and the first :class:`~faceforge.pbd.Solver` of
 a process waits for it (:func:`wait`) instead of compiling the same code again.
 
-The background process holds an exclusive ``flock`` on :func:`lock_path` while it compiles; a
+``FACEFORGE_COMPILE_AHEAD=0`` turns it off. The background process holds an exclusive ``flock`` on :func:`lock_path` while it compiles; a
 second :func:`start` (another workdir, a batch job) sees the lock and spawns nothing. Numba
 writes its cache files through a temporary file and a rename, so a process killed mid-way
 leaves no half-written cache. The results do not depend on any of this: only when the
@@ -74,7 +74,7 @@ def start(log=lambda msg: None) -> subprocess.Popen | None:
     the process (None when nothing was spawned). Detached from the terminal's signals, its
     output discarded. It keeps the caller's CPU priority: a stage may wait for it (a lower
     priority starved it on a busy machine while the stage waited)."""
-    if os.name != "posix" or not cold():
+    if os.name != "posix" or os.environ.get("FACEFORGE_COMPILE_AHEAD", "1") == "0" or not cold():
         return None
     try:
         path = lock_path()
