@@ -132,6 +132,32 @@ def symmetric_loop(line, parts, mirror, exact: set):
     return replace(line, points=SurfacePoints.concatenate(loop))
 
 
+def symmetric_sheet_lines(lines: dict, parts, mirror, exact: set) -> dict:
+    """The action lines {A0..A3: ActionLine} of a linear muscle that is its own mirror image
+    (the mentalis, across the chin), made symmetric: A2 the mirror image of A0, and the origin
+    and insertion (A3, A1, running from A0's side to A2's) each its half on A0's side, a point
+    on the plane and that half's mirror image in reverse order. Built from its own lines, the
+    mentalis was not: its origin row lay all on one side of the plane (MakeHuman, 0.02 ES0
+    apart from its mirror image at the chin), and the depressors that lie on it followed.
+    ``parts`` [(body name, (v, f))] as for :func:`symmetric_loop`."""
+    v = np.vstack([m[0] for _, m in parts])
+    f = np.vstack([m[1] + o for (_, m), o in zip(parts, np.cumsum([0] + [len(m[0]) for _, m in parts]))])
+    start = mirror.side(lines["A0"].points.take([0]).positions(v, f))[0]
+    out = dict(lines, A2=replace(lines["A2"], points=_mirror_points(lines["A0"].points, parts, parts, mirror, exact)))
+    for key in ("A1", "A3"):
+        pts = lines[key].points
+        side = mirror.side(pts.positions(v, f)) * np.sign(start)
+        across = np.flatnonzero(side <= 0.0)
+        kept = np.arange(across[0] if len(across) else len(side))   # the leading run on A0's side
+        if not len(kept) or start == 0.0:
+            continue
+        mid = _on_plane(pts.take([int(np.argmin(np.abs(side)))]), parts, v, f, mirror)
+        keep = pts.take(kept)
+        image = _mirror_points(keep.take(np.arange(len(kept))[::-1]), parts, parts, mirror, exact)
+        out[key] = replace(lines[key], points=SurfacePoints.concatenate([keep, mid, image]))
+    return out
+
+
 def _on_plane(point: SurfacePoints, parts, v, f, mirror) -> SurfacePoints:
     """The closest point, on the bodies of ``parts`` that are their own mirror images (the
     bone, a midline muscle), to the foot on the plane of one surface point of the concatenated
