@@ -248,6 +248,27 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
                      anchor_particles=q, anchor_slots=slots, kinematic_anchors=bool(len(av)) and held)
 
 
+def _particle_mirror(layer: SkinLayer, partner) -> np.ndarray | None:
+    """The skin model's particle mirror map from the skin vertices' ``partner (n,)`` (None:
+    none): each anchor particle maps to the anchor of its vertex's partner (itself when that
+    vertex has none, or several)."""
+    if partner is None:
+        return None
+    partner = np.asarray(partner, dtype=INT)
+    n = layer.first + layer.n_vertices
+    count = len(layer.anchor_particles)
+    out = np.arange(max(n, int(layer.anchor_particles.max()) + 1 if count else n), dtype=INT)
+    out[layer.first:n] = layer.first + partner
+    if count:
+        by_vertex = -np.ones(layer.n_vertices, dtype=INT)
+        unique = np.bincount(layer.anchor_vertices, minlength=layer.n_vertices) == 1
+        by_vertex[layer.anchor_vertices] = np.arange(count)
+        twin = by_vertex[partner[layer.anchor_vertices]]
+        ok = (twin >= 0) & unique[layer.anchor_vertices] & unique[partner[layer.anchor_vertices]]
+        out[layer.anchor_particles[ok]] = layer.anchor_particles[twin[ok]]
+    return out
+
+
 class SkinSimulation:
     """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
 
@@ -278,10 +299,13 @@ class SkinSimulation:
         moved (:meth:`carry_targets`): the skin goes where the tissue under it goes, as where
         mimetic muscles insert into the skin. Bone anchors are best left uncarried (skin
         slides over bone).
+    mirror : (n,) int, optional
+        Each skin vertex's mirror partner on a symmetric rig: the solver then colours mirror
+        twins alike (:func:`faceforge.pbd.colouring.mirror_colouring`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None):
+                 carried=None, mirror=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -297,7 +321,7 @@ class SkinSimulation:
         builder = ModelBuilder()
         self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest)
         self.model = builder.finalize()
-        self.solver = Solver(self.model, settings or SolverSettings())
+        self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror))
         self.state = self.model.state()
         self.control = self.model.control()
         self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)
