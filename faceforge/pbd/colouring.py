@@ -161,9 +161,11 @@ def colour_order(indices: np.ndarray, n_particles: int, blocks: np.ndarray, part
     idx = np.asarray(indices)
     order = np.arange(len(idx), dtype=np.int64)
     runs = [0, len(idx)]
+    # with a mirror map the kind is coloured as a whole: a twin may lie in another block (the
+    # skin cut into a left and a right part), and both blocks must then run in mirrored order
+    whole = None if partner is None or not len(idx) else mirror_colouring(idx, n_particles, partner)
     for start, stop in blocks:
-        colours = greedy_colouring(idx[start:stop], n_particles) if partner is None else \
-            mirror_colouring(idx[start:stop], n_particles, partner)
+        colours = greedy_colouring(idx[start:stop], n_particles) if whole is None else whole[start:stop]
         perm = np.argsort(colours, kind="stable")
         order[start:stop] = start + perm
         sorted_colours = colours[perm]
