@@ -36,13 +36,13 @@ def run_arkit(ctx):
     from faceforge.blendshapes.curves import read_weights
     from faceforge.io.frame_stream import FrameNpzWriter, open_frames
     from faceforge.io.stagefiles import load_npz, save_json
-    from faceforge.pipeline.stages.animate import _mapping
+    from faceforge.pipeline.mapping import stage_mapping
 
     take = ctx.param("arkit_take")
     names, weights, fps = read_weights(take)
     baked = load_npz(ctx.input("bake") / "shapes.npz")
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
-    mapping, _ = _mapping(ctx)
+    mapping, _ = stage_mapping(ctx)
     if [str(c) for c in baked["controls"]] != list(head.controls):
         from faceforge.exceptions import StageError
 
@@ -178,7 +178,7 @@ def _arkit_or_curves(app, orig, arkit, curves, kw):
     """The ``animate`` command with ``--arkit`` / ``--curves`` (module docstring); ``orig`` its own
     callback, ``kw`` its other arguments."""
     from faceforge.exceptions import StageError
-    from faceforge.pipeline.stages.animate import export_outputs
+    from faceforge.pipeline.outputs import export_outputs
     from faceforge.pipeline.stages.bake import bake_params
 
     output, preview = kw.get("output"), kw.get("preview")

@@ -44,12 +44,12 @@ def run_bake(ctx):
     from faceforge.blendshapes.arkit import load_arkit_mapping
     from faceforge.blendshapes.head import bake_head
     from faceforge.io.stagefiles import save_json, save_npz
-    from faceforge.pipeline.stages.animate import _mapping
+    from faceforge.pipeline.mapping import stage_mapping
 
     kinds = Path(ctx.param("bake_shapes")).read_text().split()
     specs = load_arkit_mapping(ctx.param("arkit_mapping")) if "arkit" in kinds else {}
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
-    mapping, mapping_path = _mapping(ctx)
+    mapping, mapping_path = stage_mapping(ctx)
     lids = head.eyelids(ctx.config)
     out = bake_head(head, mapping, specs, kinds, float(ctx.config.get("animate.fps")),
                     int(ctx.config.get("animate.calibrate.settle_frames")),
@@ -93,7 +93,7 @@ def bake_params(app, shapes: str, mapping: str | None) -> dict:
     """The bake stage's params: the selection written to ``<workdir>/inputs/bake_<shapes>.txt`` (its
     content keys the cache), the ARKit mapping and the FAP mapping played."""
     from faceforge.blendshapes.arkit import default_mapping_path
-    from faceforge.pipeline.stages.animate import playback_mapping
+    from faceforge.pipeline.mapping import playback_mapping
 
     kinds = KINDS if shapes == "all" else (shapes,)
     sel = app.workspace.root / "inputs" / f"bake_{shapes}.txt"
