@@ -181,6 +181,18 @@ def test_cli_output_never_overwrites_the_mesh_or_the_given_file(invoke, tmp_path
         assert out.read_bytes() == before and not (tmp_path / "w" / "landmarks").exists()
 
 
+def test_cli_output_into_a_missing_folder_is_one_line_exit_2_and_creates_nothing(invoke, tmp_path, monkeypatch):
+    # issue 28: `-o no/such/dir/x.yaml` created the folders and wrote there after the detection
+    monkeypatch.chdir(tmp_path)
+    mesh = tmp_path / "face.obj"
+    mesh.write_bytes(SAMPLES["mediapipe"].read_bytes())
+    result = invoke("-w", "w", "--no-progress", "landmarks", "face.obj", "-o", "no/such/dir/x.yaml")
+    assert result.exit_code == 2
+    lines = [ln for ln in result.stderr.strip().splitlines()]
+    assert lines == ["faceforge: error: no/such/dir/x.yaml: -o: folder no/such/dir does not exist"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["face.obj"]
+
+
 @pytest.mark.slow
 def test_fit_without_a_landmark_file_detects_them_says_so_and_is_cached(invoke, tmp_path):
     mesh = tmp_path / "face.obj"
