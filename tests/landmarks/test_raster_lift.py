@@ -108,8 +108,8 @@ def test_mirror_plane_of_a_symmetric_mesh_and_of_a_lopsided_one():
     left, right = v[:5], v[200:205]            # rough pairs: the start of the search
     plane = mirror_plane(v, left + 0.02, right, diag)
     assert symmetric(plane)
-    assert abs(abs(plane.normal @ (rot @ [1, 0, 0])) - 1) < 1e-9
-    assert np.allclose(plane.reflect(v[:200]), v[200:])
+    assert abs(abs(plane.mirror.normal @ (rot @ [1, 0, 0])) - 1) < 1e-9
+    assert np.allclose(plane.mirror(v[:200]), v[200:])
     assert np.array_equal(plane.partner[:200], np.arange(200, 400))
     lopsided = v.copy()
     lopsided[200:] += rng.normal(scale=0.05, size=(200, 3))
