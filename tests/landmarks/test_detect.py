@@ -20,7 +20,7 @@ SAMPLES = {
 #: (median, p90, max) error bounds, fraction of the diagonal: the measured values (benchmarks/
 #: results/landmarks.json) plus a margin; the MediaPipe mask is a face without a head, whose
 #: diagonal is a third of the others'
-BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.006, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
+BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.0045, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
 
 
 def _mesh(name):
@@ -47,6 +47,19 @@ def detected():
         v, f = _mesh(name)
         out[name] = (v, f, detect_landmarks(v, f, str(SAMPLES[name])))
     return out
+
+
+def test_lids_of_eyes_that_are_holes_are_the_visible_lid_margin(detected):
+    # ICT's eyes are holes whose boundary loop lies behind and beyond the lid margin: the loop
+    # put the upper lids 0.86 %, the lower ones 0.50 % and the pupils 0.51 % of the diagonal
+    # from the hand points; the opening seen in the frontal render puts them within 0.1 %
+    v, f, det = detected["ict"]
+    hand = _hand("ict", v)
+    diag = np.linalg.norm(np.ptp(v, axis=0))
+    at = {k: i for i, k in enumerate(det.ids)}
+    for k in ("3.1", "3.2", "3.3", "3.4", "3.5", "3.6"):
+        assert np.linalg.norm(det.positions[at[k]] - hand[k]) / diag < 0.002, k
+        assert "recess in the frontal render" in det.method[at[k]]
 
 
 @pytest.mark.parametrize("name", list(SAMPLES))
