@@ -194,7 +194,6 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
     (``front``: the frontal view's render, which serves as the cheeks' ray cast)."""
     from faceforge.geometry.rays import RayCaster
     from faceforge.landmarks import rules
-    from faceforge.landmarks.lips import lip_seam
 
     fr = det.info["frame"]
     frame = tuple(np.asarray(fr[k]) for k in ("left", "up", "forward"))
@@ -216,7 +215,6 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
     # diagonal from its hand point by the loop, 0.07 % by the recess); the loop where no recess is seen
     for name, found in (("eye opening (recess in the frontal render)", sockets),
                         ("eye opening (boundary loop)", {k: p for k, p in loops.items() if k not in sockets}),
-                        ("lip seam (groove in the frontal render)", {} if front is None else lip_seam(front, v, f, pos())),
                         ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal)),
                         ("cheek construction", rules.cheeks(RayCaster(v, f) if front is None else (front, v, f),
                                                             pos(), frame, diagonal))):

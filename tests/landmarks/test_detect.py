@@ -20,7 +20,7 @@ SAMPLES = {
 #: (median, p90, max) error bounds, fraction of the diagonal: the measured values (benchmarks/
 #: results/landmarks.json) plus a margin; the MediaPipe mask is a face without a head, whose
 #: diagonal is a third of the others'
-BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.0040, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
+BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.0045, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
 
 
 def _mesh(name):
@@ -60,19 +60,6 @@ def test_lids_of_eyes_that_are_holes_are_the_visible_lid_margin(detected):
     for k in ("3.1", "3.2", "3.3", "3.4", "3.5", "3.6"):
         assert np.linalg.norm(det.positions[at[k]] - hand[k]) / diag < 0.002, k
         assert "recess in the frontal render" in det.method[at[k]]
-
-
-def test_inner_lips_of_a_closed_mouth_are_on_the_seam(detected):
-    # MakeHuman's mouth is a closed seam: the detector's inner-lip points lifted onto the lips'
-    # front, 2.2 0.75 % and 2.6/2.7 0.78 % of the diagonal in front of the hand points; on the
-    # groove of the frontal render 0.13 % and 0.63 %. The mask's mouth is open: no seam rule.
-    for name, fdp, bound in (("makehuman", "2.2", 0.003), ("makehuman", "2.6", 0.007), ("ict", "2.8", 0.002)):
-        v, f, det = detected[name]
-        hand = _hand(name, v)
-        at = {k: i for i, k in enumerate(det.ids)}
-        assert "lip seam" in det.method[at[fdp]]
-        assert np.linalg.norm(det.positions[at[fdp]] - hand[fdp]) / np.linalg.norm(np.ptp(v, axis=0)) < bound, (name, fdp)
-    assert not any("lip seam" in m for m in detected["mediapipe"][2].method)
 
 
 @pytest.mark.parametrize("name", list(SAMPLES))
