@@ -1,15 +1,17 @@
 """Compile the step kernels ahead, in a background process, while a first run does other work.
 
 On a fresh install numba compiles every kernel at its first call and caches it on disk; the
-first ``calibrate`` spent ~110 s CPU compiling (measured, MediaPipe sample, cold cache: 131 s
-CPU against 32 s warm), about half of it the two step kernels (:func:`~faceforge.pbd._kernels._step`
-and its threaded twin :func:`~faceforge.pbd._kernels._step_parts`), which every layer of every
-solver runs. Nothing before ``calibrate`` needs them, so they can compile on the other core
+first ``calibrate`` spent ~100 s CPU compiling (measured, MediaPipe sample, cold cache, load
+8-9: 131 s CPU against 32 s warm), 80 s of it the two step kernels
+(:func:`~faceforge.pbd._kernels._step` and its threaded twin
+:func:`~faceforge.pbd._kernels._step_parts`), which every layer of every solver runs.
+Nothing before ``calibrate`` needs them, so they can compile on the other core
 while ``fit`` and ``bind`` run: :func:`start` spawns ``python -m faceforge.pbd.warm`` when the
 cache holds no compiled step for this source, and the first :class:`~faceforge.pbd.Solver` of
 a process waits for it (:func:`wait`) instead of compiling the same code again.
 
-``FACEFORGE_COMPILE_AHEAD=0`` turns it off. The background process holds an exclusive ``flock`` on :func:`lock_path` while it compiles; a
+``FACEFORGE_COMPILE_AHEAD=0`` turns it off. The background process holds an exclusive
+``flock`` on :func:`lock_path` while it compiles; a
 second :func:`start` (another workdir, a batch job) sees the lock and spawns nothing. Numba
 writes its cache files through a temporary file and a rename, so a process killed mid-way
 leaves no half-written cache. The results do not depend on any of this: only when the
