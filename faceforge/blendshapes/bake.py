@@ -221,7 +221,11 @@ def _reach(target: np.ndarray, got: np.ndarray) -> dict:
     but weak, as a muscle at full contraction that cannot move the skin as far as asked)."""
     t, g = np.asarray(target, dtype=float), np.asarray(got, dtype=float)
     s = float(g @ t) / max(float(t @ t), 1e-300)
-    return {"reach": round(s, 3), "form_error": round(float(np.linalg.norm(g - s * t)) / max(float(np.linalg.norm(g)), 1e-300), 3)}
+    form = float(np.linalg.norm(g - s * t)) / max(float(np.linalg.norm(g)), 1e-300)
+    err = float(np.linalg.norm(g - t)) / max(float(np.linalg.norm(t)), 1e-300)
+    verdict = ("on target" if err <= 0.1 else f"weak: {s:.0%} of its target, the right form" if form <= 0.15
+               else f"approximation: its FAP motion differs in form ({form:.0%} off after scaling)")
+    return {"reach": round(s, 3), "form_error": round(form, 3), "verdict": verdict}
 
 
 def apply_gaze(frames: np.ndarray, gaze: np.ndarray, eyes: dict) -> np.ndarray:

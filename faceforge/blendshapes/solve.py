@@ -190,7 +190,10 @@ def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, si
         err = float(np.linalg.norm(y - f)) / norm
         if err >= best.residuals[-1]:
             break
+        stalled = err > 0.9 * best.residuals[-1]
         best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
+        if stalled:   # less than a tenth off the residual: the next pass would not pay its pose
+            break
     return best
 
 

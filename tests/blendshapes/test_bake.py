@@ -117,3 +117,16 @@ def test_symmetric_rig_solves_one_side_and_mirrors_the_pose():
     assert out.report["both"]["targets"]["12"]["achieved"] == pytest.approx(8.0, abs=0.05)
     deltas = {n: f - rest for n, f in zip(out.names, out.frames)}
     assert mirror_agreement(rest, deltas, [("smileL", "smileR")]) == {"smileL": 0.0}
+
+
+def test_mirror_pose_swaps_twins_and_negates_the_yaw_only():
+    from faceforge.blendshapes.symmetric import mirror_columns, mirror_pose
+
+    cols = ("zygomaticus_major_L", "orbicularis_oris", "zygomaticus_major_R", "risorius_L",
+            "orbicularis_oris.protrude")
+    twins = mirror_columns(cols)
+    assert list(twins) == [2, 1, 0, 3, 4]                       # risorius_R absent: stays on itself
+    c, jaw = mirror_pose(np.array([0.7, 0.2, 0.0, 0.4, 0.3]), np.array([0.1, 0.05, 0.02]), twins)
+    assert c.tolist() == [0.0, 0.2, 0.7, 0.4, 0.3] and jaw.tolist() == [0.1, -0.05, 0.02]
+    c2, jaw2 = mirror_pose(c, jaw, twins)
+    assert c2.tolist() == [0.7, 0.2, 0.0, 0.4, 0.3] and jaw2.tolist() == [0.1, 0.05, 0.02]   # an involution
