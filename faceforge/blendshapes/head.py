@@ -51,22 +51,7 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
 
     t_start = time.perf_counter()
     settled = settler(head.rig, fps, settle)
-    poses, memo = [0], {}
-
-    def simulate(c, j):
-        keys = [np.concatenate([ci, ji]).tobytes() for ci, ji in zip(c, j)]
-        new = [i for i, k in enumerate(keys) if k not in memo]
-        if new:
-            poses[0] += len(new)
-            for i, f in zip(new, settled(np.asarray(c)[new], np.asarray(j)[new])):
-                memo[keys[i]] = f
-        return np.stack([memo[k] for k in keys]) if keys else settled(c, j)
-
-    def warm(c, j):
-        poses[0] += len(c)
-        return settled.warm(c, j)
-
-    simulate.warm = None if settled.warm is None else warm
+    simulate, poses = _remembering(settled)
 
     simulate(np.zeros((1, len(head.controls))), np.zeros((1, 3)))   # compile outside the timing
     t0, cpu0 = time.perf_counter(), time.process_time()
@@ -121,6 +106,30 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
                   contractions=np.stack(c), controls=np.asarray(head.controls, dtype=str), jaw=np.stack(jaw),
                   lids=np.stack(lid_faps), gaze=np.stack(gaze))
     return HeadBake(arrays, out, frames)
+
+
+def _remembering(settled):
+    """``settled`` (:func:`faceforge.blendshapes.rigsolve.settler`) wrapped so that a pose
+    (contractions and jaw, exactly) settled from rest once is not settled again, and counted.
+    Returns (simulate, [poses settled]); ``simulate.warm`` counts its poses too (never kept:
+    a warm pose depends on the one before)."""
+    poses, memo = [0], {}
+
+    def simulate(c, j):
+        keys = [np.concatenate([ci, ji]).tobytes() for ci, ji in zip(c, j)]
+        new = [i for i, k in enumerate(keys) if k not in memo]
+        if new:
+            poses[0] += len(new)
+            for i, f in zip(new, settled(np.asarray(c)[new], np.asarray(j)[new])):
+                memo[keys[i]] = f
+        return np.stack([memo[k] for k in keys]) if keys else settled(c, j)
+
+    def warm(c, j):
+        poses[0] += len(c)
+        return settled.warm(c, j)
+
+    simulate.warm = None if settled.warm is None else warm
+    return simulate, poses
 
 
 def _mirror(head, user, names, made) -> dict:
