@@ -28,6 +28,8 @@ from faceforge.pipeline import Stage, register_stage
 
 def run_arkit(ctx):
     """Play the take in ``ctx.params['arkit_take']`` through the baked shapes' controls."""
+    import time
+
     import numpy as np
 
     from faceforge.animation.check_stream import StreamChecker
@@ -94,7 +96,10 @@ def run_arkit(ctx):
             if not start:
                 warm_up(head.rig, c, jaw, fps, ctx.log)
             if offline is not None:   # animate.quality: offline, each frame converged as the bake's poses
+                t0 = time.perf_counter()
                 play_converged(head.rig, c, jaw, fps, sink, offline, previous=previous)
+                timings.skin += time.perf_counter() - t0   # all layers: the held frames are not split
+                timings.frames += len(c)
                 previous = (c[-1], jaw[-1])
             else:
                 play(head.rig, c, jaw, fps, progress=per_frame, timings=timings, sink=sink)
