@@ -43,7 +43,7 @@ class Stage:
     description : one line for ``faceforge status``.
     background : ``background(log)``, called before the stage runs: starts work that later
         stages need and this one does not (fit and bind start compiling the solver's kernels
-        on a fresh install, :mod:`faceforge.pbd.warm`); it must return at once.
+        on a fresh install, :mod:`faceforge.pbd.compile_ahead`); it must return at once.
     """
 
     name: str

@@ -1,4 +1,4 @@
-"""The step kernels compiled ahead in a background process (faceforge.pbd.warm)."""
+"""The step kernels compiled ahead in a background process (faceforge.pbd.compile_ahead, .warm)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from faceforge.pbd import Solver, SolverSettings
-from faceforge.pbd import warm
+from faceforge.pbd import compile_ahead, warm
 from faceforge.pbd._kernels import _step, _step_parts
 from tests.pbd.meshes import skin_builder, sphere
 
@@ -38,12 +38,12 @@ def test_a_face_like_model_steps_on_the_kernels_the_warm_up_compiled():
             solver.step(state, state, control, 1 / 25)
         assert np.isfinite(state.positions).all()
     assert (len(_step.signatures), len(_step_parts.signatures)) == before
-    assert not warm.cold()
-    assert warm.start() is None          # a warm cache: nothing is spawned
+    assert not compile_ahead.cold()
+    assert compile_ahead.start() is None          # a warm cache: nothing is spawned
 
 
 def test_wait_blocks_while_a_background_compile_holds_the_lock(monkeypatch):
-    path = warm.lock_path()
+    path = compile_ahead.lock_path()
     holder = subprocess.Popen([sys.executable, "-c", (
         "import fcntl, sys, time\n"
         f"f = open({str(path)!r}, 'a+b'); fcntl.flock(f, fcntl.LOCK_EX)\n"
@@ -51,13 +51,13 @@ def test_wait_blocks_while_a_background_compile_holds_the_lock(monkeypatch):
     try:
         assert holder.stdout.readline().strip() == "held"
         said = []
-        monkeypatch.setattr(warm, "_waited", False)
+        monkeypatch.setattr(compile_ahead, "_waited", False)
         t0 = time.perf_counter()
-        waited = warm.wait(said.append)
+        waited = compile_ahead.wait(said.append)
         assert time.perf_counter() - t0 >= 1.0 and waited >= 1.0
         assert said and "waiting" in said[0]
-        assert warm.wait() == 0.0            # once per process
+        assert compile_ahead.wait() == 0.0            # once per process
     finally:
         holder.wait(timeout=30)
-    monkeypatch.setattr(warm, "_waited", False)
-    assert warm.wait() < 0.5                 # nobody holds it: no wait
+    monkeypatch.setattr(compile_ahead, "_waited", False)
+    assert compile_ahead.wait() < 0.5                 # nobody holds it: no wait

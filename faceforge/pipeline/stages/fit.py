@@ -109,8 +109,8 @@ def write_outputs(out_dir, result, report, extra) -> None:
 
 def compile_solver_ahead(log) -> None:
     """``Stage.background`` of fit and bind: on a fresh install the solver's kernels compile in
-    a background process while they run (:mod:`faceforge.pbd.warm`)."""
-    from faceforge.pbd.warm import start
+    a background process while they run (:mod:`faceforge.pbd.compile_ahead`)."""
+    from faceforge.pbd.compile_ahead import start
 
     start(log)
 
