@@ -169,6 +169,8 @@ class BoundHead:
         if mirror is not None:
             partner, gap = mirror.partners(self.rest)
             partner = partner if gap.max() <= 1e-9 * float(np.ptp(self.rest, axis=0).max()) else None
+        #: True on a rig symmetric by construction whose skin has an exact mirror partner per vertex
+        self.symmetric = partner is not None
         return SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
                               settings, carried=carried_anchors(binding, config.get("skin.carry")),
                               mirror=partner)
