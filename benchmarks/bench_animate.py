@@ -71,7 +71,7 @@ def synthetic_head(tmp: Path, count, extra: int, sets=()):
 
 
 def real_head(workdir: Path, sets=()):
-    import faceforge.pipeline.stages.animate as stage
+    import faceforge.pipeline.mapping as stage
     from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.animation.rig import BoundHead
     from faceforge.io.config import load_config

@@ -98,7 +98,9 @@ def bake_head(name: str, work: Path, tmp: Path) -> dict:
         if not s.get("made"):
             shapes[n] = {"made": False, "reason": s["reason"]}
             continue
-        shapes[n] = {"error": s.get("error"), "peak": round(s["peak_displacement"], 5),
+        shapes[n] = {"error": s.get("error"), "reach": s.get("reach"), "form_error": s.get("form_error"),
+                     "verdict": s.get("verdict"), "saturated": s.get("saturated"),
+                     "mirrored_pose": bool(s.get("mirrored_pose")), "peak": round(s["peak_displacement"], 5),
                      "folded_edges": s["checks"]["folded_edges"],
                      "inverted_triangles": s["checks"]["inverted_triangles"],
                      "approximation": bool(s.get("approximation")),
@@ -111,6 +113,11 @@ def bake_head(name: str, work: Path, tmp: Path) -> dict:
            "load_average_before": [round(x, 2) for x in load], "made": rep["made"], "not_made": rep["not_made"],
            "fap_error_median": round(float(np.median(errs)), 3) if errs else None,
            "fap_error_max": round(float(np.max(errs)), 3) if errs else None,
+           "verdicts": {v: sum(1 for s in made if (s.get("verdict") or "").startswith(v))
+                        for v in ("on target", "weak", "approximation")},
+           "settle": rep.get("settle_frames"), "poses_settled": rep.get("poses_settled"),
+           "frames_simulated": rep.get("frames_simulated"), "statics": rep.get("statics"),
+           "symmetric_rig": rep.get("symmetric_rig"),
            "shapes_with_folded_edges": {n: s["folded_edges"] for n, s in shapes.items()
                                         if s.get("folded_edges")},
            "mirror_rel_diff": rep["mirror_rel_diff"], "shapes": shapes,

@@ -66,7 +66,7 @@ def main(argv=None) -> dict:
     from faceforge.blendshapes.solve import control_space, field_agreement, jacobian, solve_activations
     from faceforge.io.config import load_config
     from faceforge.animation.rig import BoundHead
-    from faceforge.pipeline.stages.animate import mapping_template_path
+    from faceforge.pipeline.mapping import mapping_template_path
 
     with tempfile.TemporaryDirectory() as tmp:
         work = args.workdir or fitted_workdir(Path(tmp))

@@ -34,7 +34,7 @@ def load_head(workdir: Path, sets=(), mapping_path=None):
     from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.animation.rig import BoundHead
     from faceforge.io.config import load_config
-    from faceforge.pipeline.stages import animate as stage
+    from faceforge.pipeline import mapping as stage
 
     config = load_config(remembered=workdir / "config.yaml", sets=list(sets))
     head = BoundHead(workdir / "fit", workdir / "bind", config)

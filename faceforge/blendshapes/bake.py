@@ -41,40 +41,38 @@ class BakedShapes:
 
 
 def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest: np.ndarray,
-                lids=None, eyes: dict | None = None, passes: int = 1, ridge: float = 1e-3,
+                lids=None, eyes: dict | None = None, passes: int = 3, ridge: float = 1e-3,
+                twins: np.ndarray | None = None, good_enough: float = 0.02,
                 log=lambda m: None) -> BakedShapes:
     """Settle every made shape of ``specs`` (module docstring).
 
     specs : {name: ShapeSpec} in output order; space : ControlSpace of the head (all controls;
         each shape uses its ``controls`` of it); probes : {FAP: Probe} of the head;
-    simulate : (c (k, m), jaw (k, 3)) -> (k, n, 3) settled skin; observe_probes : list of Probe ->
+    simulate : (c (k, m), jaw (k, 3)) -> (k, n, 3) skin settled from rest (its optional ``warm``
+        attribute: the same continuing from the last pose, used for a shape's refinements); observe_probes : list of Probe ->
         (frames -> (k, len) FAPU) (:func:`faceforge.blendshapes.rigsolve.probe_observer` bound to rest);
     lids : faceforge.animation.eyelids.Eyelids or None (then lid-only shapes are not made);
-    eyes : {side: (vertex ids, centre)} (:func:`faceforge.blendshapes.eyes.eye_pieces`) or None.
+    eyes : {side: (vertex ids, centre)} (:func:`faceforge.blendshapes.eyes.eye_pieces`) or None;
+    twins : (m,) mirror-twin column of each contraction column
+        (:func:`faceforge.blendshapes.symmetric.mirror_columns`) on a symmetric rig, else None: then
+        a shape that mirrors another is settled at its partner's mirrored pose instead of solved,
+        and a midline shape moves twin controls together;
+    good_enough : no Gauss-Newton pass after a solve whose relative FAP error is at most this.
     """
-    from faceforge.blendshapes.eyes import rotate_eye
-
-    eyes = eyes or {}
     import time
 
     report, todo = {}, []
     for name, spec in specs.items():
-        if not spec.made:
-            report[name] = {"made": False, "reason": spec.not_made}
-            continue
-        unknown = [c for c in spec.controls if c not in space.names]
-        missing = [f for f in spec.faps if f not in probes]
-        no_eye = bool(spec.eye) and spec.eye["side"] not in eyes
-        if unknown or missing or (spec.lids and lids is None) or no_eye:
-            why = (f"the head has no control {unknown[0]}" if unknown else
-                   f"no FDP on this head for FAP {missing[0]}" if missing else
-                   f"eye rotation: the mesh has no eyeball piece at the {spec.eye['side']} pupil" if no_eye
-                   else "the head has no eyelids")
+        why = _not_made(spec, space, probes, lids, eyes or {})
+        if why:
             report[name] = {"made": False, "reason": why}
-            continue
-        todo.append(spec)
-    faps = sorted({f for s in todo for f in s.faps})
-    used = [n for n in space.names if any(n in s.controls for s in todo)]
+        else:
+            todo.append(spec)
+    solved_names = {s.name for s in todo}
+    mirrored = [s for s in todo if twins is not None and s.faps and s.mirror_of in solved_names]
+    solved = [s for s in todo if s not in mirrored]
+    faps = sorted({f for s in solved for f in s.faps})
+    used = [n for n in space.names if any(n in s.controls for s in solved)]
     sub = space.subset(used)
     observe = observe_probes([probes[f] for f in faps])
     t0 = time.perf_counter()
@@ -82,59 +80,152 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     t_jac = time.perf_counter() - t0
     log(f"Jacobian: {len(used)} controls x {len(faps)} FAPs in {t_jac:.1f} s")
     m = len(space.columns)
-    names, frames, cs, jaws, lid_faps, gazes = [], [], [], [], [], []
+    poses = {}
     t0 = time.perf_counter()
-    for spec in todo:
+    for spec in solved:
         c, jaw, frame, row = np.zeros(m), np.zeros(3), np.asarray(rest, dtype=float), {}
         if spec.faps:
-            c, jaw, frame, row = _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge)
-        f68 = np.zeros(68)
-        for f, v in spec.lids.items():
-            f68[f - 1] = v
-        if spec.lids:
-            frame = lids.apply(frame[None], f68[None])[0]
-            row["lids"] = {str(f): v for f, v in spec.lids.items()}
-        gaze = np.zeros(4)
-        if spec.eye:
-            gaze[[0, 1] if spec.eye["side"] == "L" else [2, 3]] = spec.eye["yaw"], spec.eye["pitch"]
-            ids, centre = eyes[spec.eye["side"]]
-            frame = rotate_eye(frame, ids, centre, spec.eye["yaw"], spec.eye["pitch"])
-            row["eye"] = {"side": spec.eye["side"], "yaw_deg": round(float(np.degrees(spec.eye["yaw"])), 2),
-                          "pitch_deg": round(float(np.degrees(spec.eye["pitch"])), 2), "vertices": int(len(ids))}
+            c, jaw, frame, row = _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge,
+                                              tie=twins is not None, good_enough=good_enough)
+        poses[spec.name] = (c, jaw, frame, row)
+    if mirrored:
+        poses.update(_mirrored(mirrored, poses, twins, simulate, observe_probes, probes))
+    out = {k: [] for k in ("names", "frames", "cs", "jaws", "faps", "gaze")}
+    for spec in todo:
+        c, jaw, frame, row = poses[spec.name]
+        frame, f68, gaze = _overlay(spec, frame, row, lids, eyes or {})
         row.update(made=True, approximation=spec.approximation or None, mirror_of=spec.mirror_of or None)
         report[spec.name] = row
-        names.append(spec.name)
-        frames.append(frame)
-        cs.append(c)
-        jaws.append(jaw)
-        lid_faps.append(f68)
-        gazes.append(gaze)
+        for k, v in zip(out, (spec.name, frame, c, jaw, f68, gaze)):
+            out[k].append(v)
         log(f"{spec.name}: " + (f"FAP error {row['error']:.0%}" if "error" in row else
-                                "eye rotation" if spec.eye else "lids only"))
+                                "eye rotation" if spec.eye else "lids only")
+            + (" (mirrored pose)" if row.get("mirrored_pose") else ""))
     t_solve = time.perf_counter() - t0
     n = len(rest)
-    return BakedShapes(names, np.stack(frames) if frames else np.zeros((0, n, 3)),
-                       np.stack(cs) if cs else np.zeros((0, m)), np.stack(jaws) if jaws else np.zeros((0, 3)),
-                       np.stack(lid_faps) if lid_faps else np.zeros((0, 68)),
-                       np.stack(gazes) if gazes else np.zeros((0, 4)),
+
+    def stack(k, shape):
+        return np.stack(out[k]) if out[k] else np.zeros(shape)
+
+    return BakedShapes(out["names"], stack("frames", (0, n, 3)), stack("cs", (0, m)), stack("jaws", (0, 3)),
+                       stack("faps", (0, 68)), stack("gaze", (0, 4)),
                        {name: report[name] for name in specs}, t_jac, t_solve)
 
 
-def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge):
+def _not_made(spec, space, probes, lids, eyes) -> str:
+    """Why ``spec`` cannot be made on this head ('' when it can)."""
+    if not spec.made:
+        return spec.not_made
+    unknown = [c for c in spec.controls if c not in space.names]
+    missing = [f for f in spec.faps if f not in probes]
+    if unknown:
+        return f"the head has no control {unknown[0]}"
+    if missing:
+        return f"no FDP on this head for FAP {missing[0]}"
+    if spec.lids and lids is None:
+        return "the head has no eyelids"
+    if spec.eye and spec.eye["side"] not in eyes:
+        return f"eye rotation: the mesh has no eyeball piece at the {spec.eye['side']} pupil"
+    return ""
+
+
+def _overlay(spec, frame, row, lids, eyes):
+    """The kinematic parts laid over a settled frame: the eyelid FAPs and the eye piece's turn.
+    Returns (frame (n, 3), lid FAPs (68,), gaze (4,)); notes them in ``row``."""
+    from faceforge.blendshapes.eyes import rotate_eye
+
+    f68 = np.zeros(68)
+    for f, v in spec.lids.items():
+        f68[f - 1] = v
+    if spec.lids:
+        frame = lids.apply(frame[None], f68[None])[0]
+        row["lids"] = {str(f): v for f, v in spec.lids.items()}
+    gaze = np.zeros(4)
+    if spec.eye:
+        gaze[[0, 1] if spec.eye["side"] == "L" else [2, 3]] = spec.eye["yaw"], spec.eye["pitch"]
+        ids, centre = eyes[spec.eye["side"]]
+        frame = rotate_eye(frame, ids, centre, spec.eye["yaw"], spec.eye["pitch"])
+        row["eye"] = {"side": spec.eye["side"], "yaw_deg": round(float(np.degrees(spec.eye["yaw"])), 2),
+                      "pitch_deg": round(float(np.degrees(spec.eye["pitch"])), 2), "vertices": int(len(ids))}
+    return frame, f68, gaze
+
+
+def _mirrored(specs, poses, twins, simulate, observe_probes, probes) -> dict:
+    """Each of ``specs`` settled at the mirror image of its partner's solved pose (one batch);
+    {name: (c, jaw, frame, report row)}, the row measuring its own FAPs as a solve's would."""
+    from faceforge.blendshapes.arkit import mirror_name
+    from faceforge.blendshapes.symmetric import mirror_pose
+
+    c, jaw = mirror_pose(np.stack([poses[s.mirror_of][0] for s in specs]),
+                         np.stack([poses[s.mirror_of][1] for s in specs]), twins)
+    frames = simulate(c, jaw)
+    out = {}
+    for i, spec in enumerate(specs):
+        target = np.array(list(spec.faps.values()), dtype=float)
+        got = np.asarray(observe_probes([probes[f] for f in spec.faps])(frames[i:i + 1]), dtype=float)[0]
+        src = poses[spec.mirror_of][3]
+        row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
+                           for f, t, a in zip(spec.faps, target, got)},
+               "error": round(float(np.linalg.norm(got - target) / np.linalg.norm(target)), 3),
+               **_reach(target, got), "mirrored_pose": True,
+               "controls": {mirror_name(k) if not k.startswith("jaw.") else k:
+                            (-v if k == "jaw.yaw" else v) for k, v in src.get("controls", {}).items()}}
+        out[spec.name] = (c[i], jaw[i], frames[i], row)
+    return out
+
+
+def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie=False, good_enough=0.0):
     """One shape's activations on the rows (its FAPs) and columns (its controls) of the shared
-    Jacobian -> contractions (m,), jaw (3,), settled frame (n, 3), its report row."""
+    Jacobian -> contractions (m,), jaw (3,), settled frame (n, 3), its report row. ``tie``: a
+    midline shape (its name has no side) moves each pair of twin controls as one."""
+    from faceforge.blendshapes.arkit import mirror_name
+    from faceforge.blendshapes.symmetric import tie_twins
+
     rows = [faps.index(f) for f in spec.faps]
     space = sub.subset(spec.controls)
+    calls, warm = [0], getattr(simulate, "warm", None)
+
+    def settle(c, jaw):   # the first pose from rest, each refinement continuing from the one before
+        calls[0] += 1
+        return (simulate if calls[0] == 1 or warm is None else warm)(c, jaw)
+
     Js = J[np.ix_(rows, [used.index(n) for n in space.names])]
+    tied = tie_twins(space) if tie and mirror_name(spec.name) == spec.name else None
     target = np.array([spec.faps[f] for f in spec.faps])
-    res = solve_activations(target, Js, space, simulate, lambda fr: observe(fr)[:, rows], passes=passes,
-                            ridge=ridge)
+    res = solve_activations(target, Js if tied is None else Js @ tied.tie, space if tied is None else tied,
+                            settle, lambda fr: observe(fr)[:, rows], passes=passes, ridge=ridge,
+                            good_enough=good_enough)
+    x = res.x if tied is None else tied.expand(res.x)
     row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
                        for f, t, a in zip(spec.faps, target, res.observed)},
            "error": round(float(np.linalg.norm(res.observed - target) / np.linalg.norm(target)), 3),
-           "residuals": [round(r, 3) for r in res.residuals],
-           "controls": {n: round(float(v), 4) for n, v in zip(space.names, res.x)}}
+           **_reach(target, res.observed), "residuals": [round(r, 3) for r in res.residuals],
+           "saturated": _at_limit(space.names, x, space.lower, space.upper),
+           "controls": {n: round(float(v), 4) for n, v in zip(space.names, x)}}
+    if tied is not None:
+        row["tied"] = [n for n in tied.names if "+" in n]
     return res.contractions, res.jaw, res.frame, row
+
+
+def _at_limit(names, x, lower, upper) -> list:
+    """The controls at a nonzero bound (a muscle fully contracted, the jaw at a limit)."""
+    return [n for n, v, lo, hi in zip(names, x, lower, upper)
+            if (hi != 0 and v >= hi - 1e-9) or (lo != 0 and v <= lo + 1e-9)]
+
+
+def _reach(target: np.ndarray, got: np.ndarray) -> dict:
+    """How a shape's FAP motion ``got`` (d,) compares with its ``target`` (d,) (FAPU): ``reach``,
+    the part of the target made (``got . target / |target|^2``: 1 the whole, 0.3 a third in its
+    direction), and ``form_error``, the error left after the best scaling of ``got``
+    (``|got - s target| / |got|`` at ``s = got . target / |target|^2``: 0 when the shape is right
+    but weak, as a muscle at full contraction that cannot move the skin as far as asked)."""
+    t, g = np.asarray(target, dtype=float), np.asarray(got, dtype=float)
+    s = float(g @ t) / max(float(t @ t), 1e-300)
+    form = float(np.linalg.norm(g - s * t)) / max(float(np.linalg.norm(g)), 1e-300)
+    err = float(np.linalg.norm(g - t)) / max(float(np.linalg.norm(t)), 1e-300)
+    verdict = ("on target" if err <= 0.1 else f"weak: {s:.0%} of its target, the right form" if form <= 0.15
+               else f"approximation: its FAP motion differs in form ({form:.0%} off after scaling)")
+    return {"reach": round(s, 3), "form_error": round(form, 3), "verdict": verdict}
 
 
 def apply_gaze(frames: np.ndarray, gaze: np.ndarray, eyes: dict) -> np.ndarray:

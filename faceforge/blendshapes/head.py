@@ -35,34 +35,39 @@ class HeadBake:
     frames: np.ndarray
 
 
-def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None,
-              log=lambda m: None) -> HeadBake:
+def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, symmetric: bool = False,
+              muscle_probe: float = 1.0, log=lambda m: None) -> HeadBake:
     """Bake ``kinds`` (``arkit``, ``visemes``, ``expressions``) on ``head``: ``specs`` the ARKit
     mapping (:func:`faceforge.blendshapes.arkit.load_arkit_mapping`), ``mapping`` the FAP mapping
     (muscles, jaw limits, presets, FAP probes), each pose settled ``settle`` frames at ``fps`` (an int)
-    or to convergence (a :class:`faceforge.animation.statics.SettleSettings`);
-    ``lids`` the head's :class:`faceforge.animation.eyelids.Eyelids` with at least one eye, or None."""
+    or to convergence (a :class:`faceforge.animation.statics.SettleSettings`, each pose continuing
+    from the one before); ``lids`` the head's :class:`faceforge.animation.eyelids.Eyelids` with at
+    least one eye, or None; ``symmetric``: the rig is symmetric by construction (fit.npz has a
+    mirror plane): each right shape is settled at its left partner's mirrored pose, not solved
+    (:mod:`faceforge.blendshapes.symmetric`); ``muscle_probe``: the contraction each muscle's
+    Jacobian column is settled at (1: full, the pose a shape that saturates the muscle reuses).
+    A pose settled once is not settled again (the frame is kept)."""
+    from faceforge.blendshapes.symmetric import mirror_columns
+
     t_start = time.perf_counter()
     settled = settler(head.rig, fps, settle)
-    poses = [0]
-
-    def simulate(c, j):
-        poses[0] += len(c)
-        return settled(c, j)
+    simulate, poses = _remembering(settled)
 
     simulate(np.zeros((1, len(head.controls))), np.zeros((1, 3)))   # compile outside the timing
     t0, cpu0 = time.perf_counter(), time.process_time()
     names, frames, c, jaw, lid_faps, gaze, made, report = [], [], [], [], [], [], [], {}
-    out = {"settle_frames": settle if isinstance(settle, int) else "to convergence (animate.statics)",
+    out = {"settle_frames": settle if isinstance(settle, int) else "to convergence (animate.statics; refinements warm)",
+           "symmetric_rig": bool(symmetric),
            "shapes": report}
     if "arkit" in kinds:
         space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
-                              mapping.max_contraction)
+                              mapping.max_contraction, muscle_probe=muscle_probe)
         eyes = eye_pieces(head.rest, head.faces, head.landmarks)
         if eyes:
             log(f"eyeball pieces: {', '.join(f'{s} ({len(v[0])} vertices)' for s, v in eyes.items())}")
         baked = bake_shapes(specs, space, calibration_probes(mapping, head), simulate,
-                            lambda probes: probe_observer(head.rest, probes), head.rest, lids, eyes, log=log)
+                            lambda probes: probe_observer(head.rest, probes), head.rest, lids, eyes,
+                            twins=mirror_columns(head.controls) if symmetric else None, log=log)
         index = {n: i for i, n in enumerate(baked.names)}
         for name in ARKIT_NAMES:
             i = index.get(name)
@@ -101,6 +106,30 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None,
                   contractions=np.stack(c), controls=np.asarray(head.controls, dtype=str), jaw=np.stack(jaw),
                   lids=np.stack(lid_faps), gaze=np.stack(gaze))
     return HeadBake(arrays, out, frames)
+
+
+def _remembering(settled):
+    """``settled`` (:func:`faceforge.blendshapes.rigsolve.settler`) wrapped so that a pose
+    (contractions and jaw, exactly) settled from rest once is not settled again, and counted.
+    Returns (simulate, [poses settled]); ``simulate.warm`` counts its poses too (never kept:
+    a warm pose depends on the one before)."""
+    poses, memo = [0], {}
+
+    def simulate(c, j):
+        keys = [np.concatenate([ci, ji]).tobytes() for ci, ji in zip(c, j)]
+        new = [i for i, k in enumerate(keys) if k not in memo]
+        if new:
+            poses[0] += len(new)
+            for i, f in zip(new, settled(np.asarray(c)[new], np.asarray(j)[new])):
+                memo[keys[i]] = f
+        return np.stack([memo[k] for k in keys]) if keys else settled(c, j)
+
+    def warm(c, j):
+        poses[0] += len(c)
+        return settled.warm(c, j)
+
+    simulate.warm = None if settled.warm is None else warm
+    return simulate, poses
 
 
 def _mirror(head, user, names, made) -> dict:

@@ -21,21 +21,30 @@ def settler(rig, fps: float, settle):
     """``simulate(contractions (k, m), jaw (k, 3)) -> (k, n, 3)``: each pose settled from rest,
     ``settle`` frames at ``fps`` (an int: :func:`faceforge.animation.playback.static_poses`) or
     until it stops moving (a :class:`faceforge.animation.statics.SettleSettings`; then
-    ``simulate.stats`` is the :class:`~faceforge.animation.statics.SettleStats` of every pose)."""
+    ``simulate.stats`` is the :class:`~faceforge.animation.statics.SettleStats` of every pose, and
+    ``simulate.warm`` settles poses continuing from the last one settled instead of from rest:
+    a refinement of that pose settles in fewer frames; None for ``settle`` an int)."""
     if isinstance(settle, int):
         def simulate(c, jaw):
             return static_poses(rig, c, jaw, fps, settle=settle)
-        simulate.stats = None
+        simulate.stats = simulate.warm = None
         return simulate
     from faceforge.animation.statics import SettleStats, settle as settle_poses
 
     stats = SettleStats()
+    held = {}
+
+    def run(c, jaw, warm):
+        out = settle_poses(rig, c, jaw, fps, settle, warm=warm, stats=stats, previous=held.get("now"))
+        if len(c):
+            held["now"] = (np.array(c[-1], dtype=float), np.array(jaw[-1], dtype=float))
+        return out
 
     def simulate(c, jaw):
-        out = settle_poses(rig, c, jaw, fps, settle, stats=stats)
-        rig.reset()
-        return out
+        return run(c, jaw, False)
+
     simulate.stats = stats
+    simulate.warm = lambda c, jaw: run(c, jaw, True)
     return simulate
 
 

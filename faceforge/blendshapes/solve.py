@@ -150,12 +150,13 @@ def bounded_lsq(J: np.ndarray, y: np.ndarray, lower, upper, ridge: float = 1e-3)
 
 
 def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, simulate, observe,
-                      passes: int = 2, ridge: float = 1e-3) -> SolveResult:
+                      passes: int = 2, ridge: float = 1e-3, good_enough: float = 0.0) -> SolveResult:
     """Controls whose settled skin best matches ``target`` (d,) (module docstring).
 
     J : (d, q) Jacobian of ``space`` (:func:`jacobian`); passes : Gauss-Newton (chord) passes
     after the linear solve, each one more settled pose; a pass that does not lower the residual
-    ends the refinement (its pose is discarded).
+    ends the refinement (its pose is discarded), and so does a residual at or below
+    ``good_enough`` (relative; 0: refine all ``passes``).
     """
     y = np.asarray(target, dtype=float)
     J = np.asarray(J, dtype=float)
@@ -176,6 +177,8 @@ def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, si
     # that it reproduces the simulated change from rest: ``J x = f(x)``
     J = _broyden(J, x, f)
     for _ in range(passes):
+        if best.residuals[-1] <= good_enough:
+            break
         r = y - best.observed
         # the step dx within [lo - x, hi - x], pulled towards no step
         dx = bounded_lsq(J, r, lo - best.x, hi - best.x, ridge)
@@ -187,7 +190,10 @@ def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, si
         err = float(np.linalg.norm(y - f)) / norm
         if err >= best.residuals[-1]:
             break
+        stalled = err > 0.9 * best.residuals[-1]
         best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
+        if stalled:   # less than a tenth off the residual: the next pass would not pay its pose
+            break
     return best
 
 

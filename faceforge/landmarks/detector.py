@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -61,6 +62,67 @@ def model_path() -> Path:
     return path
 
 
+#: the MediaPipe packages whose ``__init__`` :func:`bare_mediapipe` skips
+_PACKAGES = ("mediapipe", "mediapipe.tasks", "mediapipe.tasks.python", "mediapipe.tasks.python.vision")
+#: the modules the face landmarker needs
+_MODULES = ("mediapipe.tasks.python.vision.face_landmarker", "mediapipe.tasks.python.core.base_options",
+            "mediapipe.tasks.python.vision.core.image", "mediapipe.tasks.python.vision.core.vision_task_running_mode")
+
+
+@contextmanager
+def bare_mediapipe():
+    """MediaPipe's modules imported in the block skip its packages' ``__init__`` files.
+
+    ``import mediapipe`` runs them, and they import every task, the audio tasks (sounddevice)
+    and the drawing utilities (matplotlib.pyplot, cv2): 4.8 s of a fresh process at load 8,
+    against 0.85 s for the modules of :data:`_MODULES`. In the block the four packages of
+    :data:`_PACKAGES` are bare stand-ins (their folders, no ``__init__`` run); on leaving it
+    every MediaPipe module imported in it leaves ``sys.modules`` again (objects that hold
+    them keep working), so a later ``import mediapipe`` is the ordinary one. Does nothing
+    when MediaPipe is already imported.
+    """
+    import importlib.util
+    import sys
+    import types
+
+    if "mediapipe" in sys.modules:
+        yield
+        return
+    spec = importlib.util.find_spec("mediapipe")
+    if spec is None or not spec.submodule_search_locations:
+        yield
+        return
+    root = Path(list(spec.submodule_search_locations)[0])
+    before = set(sys.modules)
+    try:
+        for name in _PACKAGES:
+            module = types.ModuleType(name)
+            module.__path__ = [str(root.joinpath(*name.split(".")[1:]))]
+            module.__package__ = name
+            sys.modules[name] = module
+        yield
+    finally:
+        for name in set(sys.modules) - before:
+            if name == "mediapipe" or name.startswith("mediapipe."):
+                del sys.modules[name]
+
+
+
+@lru_cache(maxsize=1)
+def mediapipe_modules() -> tuple:
+    """The modules of :data:`_MODULES`, imported under :func:`bare_mediapipe` with MediaPipe's
+    shared library loaded (it finds its file through the package ``mediapipe.tasks.c``, so
+    that is done in the block too); the ordinary import when MediaPipe's layout differs."""
+    from importlib import import_module
+
+    try:
+        with bare_mediapipe():
+            import_module("mediapipe.tasks.python.core.mediapipe_c_bindings").load_raw_library()
+            return tuple(import_module(name) for name in _MODULES)
+    except (ImportError, AttributeError, NameError):
+        return tuple(import_module(name) for name in _MODULES)
+
+
 @dataclass(frozen=True)
 class Face:
     """One detected face: ``points (478, 2)`` float pixel column, row; ``depth (478,)`` the
@@ -78,23 +140,19 @@ class Detector:
     def __init__(self, min_confidence: float = 0.3):
         for key, value in (("GLOG_minloglevel", "2"), ("TF_CPP_MIN_LOG_LEVEL", "3")):
             os.environ.setdefault(key, value)   # MediaPipe's C++ start-up chatter off stderr
-        from mediapipe.tasks.python import BaseOptions
-        from mediapipe.tasks.python import vision
-
-        opts = vision.FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_path=str(model_path())),
-            running_mode=vision.RunningMode.IMAGE, num_faces=1,
+        landmarker, base, self._image, mode = mediapipe_modules()
+        opts = landmarker.FaceLandmarkerOptions(
+            base_options=base.BaseOptions(model_asset_path=str(model_path())),
+            running_mode=mode.VisionTaskRunningMode.IMAGE, num_faces=1,
             min_face_detection_confidence=min_confidence, min_face_presence_confidence=min_confidence,
             output_face_blendshapes=False, output_facial_transformation_matrixes=True)
         with quiet_stderr():
-            self._landmarker = vision.FaceLandmarker.create_from_options(opts)
+            self._landmarker = landmarker.FaceLandmarker.create_from_options(opts)
 
     def detect(self, rgb: np.ndarray) -> Face | None:
         """The face in ``rgb (h, w, 3) uint8``, or None."""
-        import mediapipe as mp
-
         h, w = rgb.shape[:2]
-        image = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
+        image = self._image.Image(image_format=self._image.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
         with quiet_stderr():
             result = self._landmarker.detect(image)
         if not result.face_landmarks:

@@ -34,19 +34,38 @@ MENTON_NORMAL_DEG = 50.0
 EYE_LOOP_REACH = 0.6
 
 
+def plane_cut(vertices, faces, origin, normal) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles of ``(vertices (n, 3), faces (m, 3))`` the plane (``origin (3,)``, unit
+    ``normal (3,)``) cuts: ``(midpoints (k, 3) of the cut segments, triangle ids (k,))``. A
+    vertex on the plane counts as on its positive side, so an edge lying in the plane belongs
+    to the triangle on the negative side, and a triangle touching the plane at one vertex
+    only (a segment of length 0) is left out."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    d = ((v - np.asarray(origin)) @ np.asarray(normal))[f]            # (m, 3) signed distances
+    neg = d < 0
+    cut = np.flatnonzero(neg.any(axis=1) & ~neg.all(axis=1))
+    ends = []
+    for a, b in ((0, 1), (1, 2), (2, 0)):       # a cut triangle has exactly two edges whose sides differ
+        da, db = d[cut, a], d[cut, b]
+        cross = neg[cut, a] != neg[cut, b]
+        t = np.where(cross, da / np.where(cross, da - db, 1.0), np.nan)
+        ends.append(v[f[cut, a]] + t[:, None] * (v[f[cut, b]] - v[f[cut, a]]))
+    ends = np.stack(ends, axis=1)                                      # (k, 3 edges, 3), NaN: not crossed
+    two = ends[np.isfinite(ends[:, :, 0])].reshape(len(cut), 2, 3)
+    keep = np.linalg.norm(two[:, 0] - two[:, 1], axis=1) > 0
+    return two[keep].mean(axis=1), cut[keep]
+
+
 def midline_profile(vertices, faces, origin, normal):
     """Points and in-plane unit normals of the mesh cut by the plane (``origin``, ``normal``):
     ``(points (k, 3), normals (k, 3))``, one per cut triangle (segment midpoints; the normals
     interpolated from the vertex normals)."""
-    import trimesh
-
     from faceforge.geometry.triangles import barycentric, vertex_normals
 
-    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
-    segs, fids = trimesh.intersections.mesh_plane(mesh, normal, origin, return_faces=True)
-    if len(segs) == 0:
+    pts, fids = plane_cut(vertices, faces, origin, normal)
+    if len(pts) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    pts = segs.mean(axis=1)
     bary = barycentric(pts, vertices, faces, fids)          # smooth normals: a low-poly chin still turns gradually
     n = np.einsum("kj,kjd->kd", bary, vertex_normals(vertices, faces)[faces[fids]])
     n = n - np.outer(n @ normal, normal)

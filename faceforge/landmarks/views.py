@@ -2,7 +2,8 @@
 
 :func:`find_face` renders the mesh from the six axis directions, turns each picture
 through four quarter turns (exactly the four ``up`` choices of that direction), runs the
-face detector on all 24 and keeps the face with the best score. Every camera is built
+face detector on them (up to 24: an upright face seen from the front ends the search) and
+keeps the face with the best score. Every camera is built
 from the mesh's bounding box and the axes, so a head turned by a signed permutation of the
 axes (Blender's Z-up frame, a head facing +X) sees the very same pictures.
 
@@ -66,16 +67,20 @@ def _axis_name(vec) -> str:
     return ("+" if vec[i] > 0 else "-") + "XYZ"[i]
 
 
+#: the search's camera directions, in order, each with its picture's up (all four quarter turns of
+#: each picture are tried, so the up only sets which turn is upright): first the two frames heads
+#: come in most (OBJ/glTF: +Y up facing +Z, seen looking along -Z; Blender: +Z up facing -Y, seen
+#: looking along +Y), where an upright face ends the search after one picture (24 detections
+#: for an OBJ head before, 4 now); the same pictures in any order, so turned heads still see
+#: the same ones
+SEARCH_DIRECTIONS = (((0, 0, -1), (0, 1, 0)), ((0, 1, 0), (0, 0, 1)), ((0, 0, 1), (0, 1, 0)),
+                     ((0, -1, 0), (0, 0, 1)), ((1, 0, 0), (0, 1, 0)), ((-1, 0, 0), (0, 1, 0)))
+
+
 def search_views(vertices: np.ndarray):
-    """The six axis-direction cameras over the whole mesh: [(direction, up)] (unit (3,))."""
-    eye = np.eye(3)
-    out = []
-    for axis in range(3):
-        for sign in (1.0, -1.0):
-            direction = sign * eye[axis]
-            up = eye[(axis + 1) % 3] if axis != 1 else eye[2]
-            out.append((direction, up))
-    return out
+    """The six axis-direction cameras over the whole mesh: [(direction, up)] (unit (3,)),
+    in :data:`SEARCH_DIRECTIONS` order."""
+    return [(np.array(d, dtype=np.float64), np.array(u, dtype=np.float64)) for d, u in SEARCH_DIRECTIONS]
 
 
 def face_likeness(points3d: np.ndarray) -> float:

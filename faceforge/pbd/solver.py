@@ -46,6 +46,7 @@ from faceforge.pbd.partition import partitioned, row_cuts
 from faceforge.pbd.settings import SolverSettings
 from faceforge.pbd.thread_choice import ThreadChooser
 from faceforge.pbd.threads import threaded, threads_used
+from faceforge.pbd.compile_ahead import wait as wait_for_compile
 
 
 def _own(a: np.ndarray) -> np.ndarray:
@@ -247,6 +248,7 @@ class Solver:
         self._threaded = busy > 1 and threaded()
         # threads or the calling thread, whichever the clock says is faster (same bits)
         self._chooser = ThreadChooser(self._threaded)
+        self._compiled = False   # a background compile of the step kernels waited for (pbd.compile_ahead)
 
     def _frozen_arguments(self) -> tuple:
         """The compiled step's arguments that never change, gathered once (a step's Python
@@ -393,6 +395,9 @@ class Solver:
         if self._particle_order is not None:  # stepped in the partitioned model's numbering
             x_in = x_out = _take_rows(x_in, self._particle_order, self._x)
             v_in = v_out = _take_rows(v_in, self._particle_order, self._v)
+        if not self._compiled:   # the kernels a background process may be compiling (pbd.compile_ahead)
+            wait_for_compile()
+            self._compiled = True
         # two kernels: a run that never threads never compiles the parallel one (issue 28)
         self._chooser.run(lambda threaded: (_step_parts if threaded else _step)(
             x_in, v_in, x_out, v_out, kin, targets, dt / s.substeps, threaded, *self._frozen))

@@ -125,7 +125,7 @@ def _head_params(job: HeadJob, config, root: Path, targets: Sequence[str]) -> di
     if "fap" in needed:
         params["fap"] = str(Path(job.fap).absolute()) if job.fap else str(_expression_fap(job, config, root))
     if needed & _MAPPING_INPUTS:   # as `faceforge animate` does: the calibrated mapping if there is one
-        from faceforge.pipeline.stages.animate import calibrated_mapping_path, mapping_template_path
+        from faceforge.pipeline.mapping import calibrated_mapping_path, mapping_template_path
 
         template, calibrated = str(mapping_template_path(config)), calibrated_mapping_path(root)
         calibrated = str(calibrated) if calibrated.exists() else ""

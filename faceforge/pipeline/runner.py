@@ -265,6 +265,8 @@ def run(workspace: Workspace, config, params: Mapping, targets: Iterable[str], f
                 log(f"{name}: up to date")
                 continue
             log(f"{name}: running ({'; '.join(status.reasons)})")
+            if status.stage.background is not None:
+                status.stage.background(log)
             run_stage(workspace, status, config, params, log=log, progress=progress)
             log(f"{name}: done in {status.seconds:.1f} s")
     return statuses

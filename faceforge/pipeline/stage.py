@@ -41,6 +41,9 @@ class Stage:
         part (default: the file's bytes, :func:`faceforge.pipeline.cache.file_digest`).
     version : bump when the code changes what the stage writes.
     description : one line for ``faceforge status``.
+    background : ``background(log)``, called before the stage runs: starts work that later
+        stages need and this one does not (fit and bind start compiling the solver's kernels
+        on a fresh install, :mod:`faceforge.pbd.compile_ahead`); it must return at once.
     """
 
     name: str
@@ -52,6 +55,7 @@ class Stage:
     digests: dict = field(default_factory=dict, hash=False)
     version: str = "1"
     description: str = ""
+    background: Callable[[Callable[[str], None]], Any] | None = field(default=None, hash=False)
 
     def __post_init__(self):
         if not self.name.isidentifier():

@@ -119,9 +119,11 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
             ax.set_xlim(lo[0] - pad, hi[0] + pad)
             ax.set_ylim(lo[1] - pad, hi[1] + pad)
             ax.set_aspect("equal")
+    top = 1.0
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+        top = 1.0 - 0.35 / fig.get_figheight()   # a band of 0.35 in above the panels' labels
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, top))
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out_png)

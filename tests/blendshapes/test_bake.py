@@ -43,7 +43,7 @@ def test_each_shape_reaches_its_target_with_its_own_controls():
              "open": ShapeSpec("open", {3: 30.0}, ("jaw.pitch",)),
              "look": ShapeSpec("look", not_made="no eyeballs"),
              "nose": ShapeSpec("nose", {61: 5.0}, ("zyg_L",))}          # FAP 61 has no probe here
-    out = bake_shapes(specs, space, probes, simulate, lambda ps: probe_observer(rest, ps), rest)
+    out = bake_shapes(specs, space, probes, simulate, lambda ps: probe_observer(rest, ps), rest, good_enough=0.0)
     assert out.names == ["smileL", "smileR", "brow", "open"]
     assert list(out.report) == list(specs)                                 # every shape reported
     assert out.report["look"] == {"made": False, "reason": "no eyeballs"}
@@ -53,6 +53,8 @@ def test_each_shape_reaches_its_target_with_its_own_controls():
     assert out.contractions[0] == pytest.approx([0.5, 0, 0], abs=1e-4)    # only its own muscle
     assert out.contractions[2, 2] == pytest.approx(1.0)                    # the bound holds
     assert out.report["brow"]["error"] == pytest.approx(0.5, abs=1e-3)    # and the miss is reported
+    assert out.report["brow"]["reach"] == pytest.approx(0.5, abs=1e-3) and out.report["brow"]["form_error"] < 1e-6
+    assert out.report["brow"]["saturated"] == ["frontalis"] and out.report["smileL"]["saturated"] == []
     assert out.jaw[3, 0] == pytest.approx(0.3, abs=1e-4)
     deltas = {n: f - rest for n, f in zip(out.names, out.frames)}
     assert mirror_agreement(rest, deltas, [("smileL", "smileR")]) == {"smileL": 0.0}
@@ -87,3 +89,44 @@ def test_a_bad_arkit_mapping_fails_before_anything_runs(invoke, tmp_path):
     assert result.exit_code == 2
     assert "map.yaml: shapes: no entry for eyeBlinkLeft, eyeLookDownLeft, eyeLookInLeft and 48 more" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_symmetric_rig_solves_one_side_and_mirrors_the_pose():
+    from faceforge.blendshapes.symmetric import mirror_columns
+
+    rest, simulate, probes, space = _head()
+    calls = []
+
+    def counted(c, jaw):
+        calls.append(len(c))
+        return simulate(c, jaw)
+
+    specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",)),
+             "smileR": ShapeSpec("smileR", {13: 10.0}, ("zyg_R",), mirror_of="smileL"),
+             "both": ShapeSpec("both", {12: 10.0, 13: 6.0}, ("zyg_L", "zyg_R"))}   # a midline shape
+    twins = mirror_columns(COLUMNS)
+    assert list(twins) == [1, 0, 2]
+    out = bake_shapes(specs, space, probes, counted, lambda ps: probe_observer(rest, ps), rest, twins=twins)
+    assert out.report["smileR"]["mirrored_pose"] and "residuals" not in out.report["smileR"]
+    assert out.contractions[1] == pytest.approx(out.contractions[0][[1, 0, 2]])    # the twin's column
+    assert out.report["smileR"]["error"] < 2e-3                                 # measured on its own FAP
+    # the Jacobian has only the controls the solved shapes name; smileR is one batch of one pose
+    assert calls[0] == 2 and calls[-1] == 1
+    # the midline shape moves both twins together: symmetric, the two targets split evenly (8 each)
+    assert out.contractions[2, 0] == pytest.approx(out.contractions[2, 1]) and out.report["both"]["tied"]
+    assert out.report["both"]["targets"]["12"]["achieved"] == pytest.approx(8.0, abs=0.05)
+    deltas = {n: f - rest for n, f in zip(out.names, out.frames)}
+    assert mirror_agreement(rest, deltas, [("smileL", "smileR")]) == {"smileL": 0.0}
+
+
+def test_mirror_pose_swaps_twins_and_negates_the_yaw_only():
+    from faceforge.blendshapes.symmetric import mirror_columns, mirror_pose
+
+    cols = ("zygomaticus_major_L", "orbicularis_oris", "zygomaticus_major_R", "risorius_L",
+            "orbicularis_oris.protrude")
+    twins = mirror_columns(cols)
+    assert list(twins) == [2, 1, 0, 3, 4]                       # risorius_R absent: stays on itself
+    c, jaw = mirror_pose(np.array([0.7, 0.2, 0.0, 0.4, 0.3]), np.array([0.1, 0.05, 0.02]), twins)
+    assert c.tolist() == [0.0, 0.2, 0.7, 0.4, 0.3] and jaw.tolist() == [0.1, -0.05, 0.02]
+    c2, jaw2 = mirror_pose(c, jaw, twins)
+    assert c2.tolist() == [0.7, 0.2, 0.0, 0.4, 0.3] and jaw2.tolist() == [0.1, 0.05, 0.02]   # an involution

@@ -20,7 +20,7 @@ SAMPLES = {
 #: (median, p90, max) error bounds, fraction of the diagonal: the measured values (benchmarks/
 #: results/landmarks.json) plus a margin; the MediaPipe mask is a face without a head, whose
 #: diagonal is a third of the others'
-BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.006, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
+BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.0045, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
 
 
 def _mesh(name):
@@ -47,6 +47,19 @@ def detected():
         v, f = _mesh(name)
         out[name] = (v, f, detect_landmarks(v, f, str(SAMPLES[name])))
     return out
+
+
+def test_lids_of_eyes_that_are_holes_are_the_visible_lid_margin(detected):
+    # ICT's eyes are holes whose boundary loop lies behind and beyond the lid margin: the loop
+    # put the upper lids 0.86 %, the lower ones 0.50 % and the pupils 0.51 % of the diagonal
+    # from the hand points; the opening seen in the frontal render puts them within 0.1 %
+    v, f, det = detected["ict"]
+    hand = _hand("ict", v)
+    diag = np.linalg.norm(np.ptp(v, axis=0))
+    at = {k: i for i, k in enumerate(det.ids)}
+    for k in ("3.1", "3.2", "3.3", "3.4", "3.5", "3.6"):
+        assert np.linalg.norm(det.positions[at[k]] - hand[k]) / diag < 0.002, k
+        assert "recess in the frontal render" in det.method[at[k]]
 
 
 @pytest.mark.parametrize("name", list(SAMPLES))
@@ -179,6 +192,18 @@ def test_cli_output_never_overwrites_the_mesh_or_the_given_file(invoke, tmp_path
         result = invoke("-w", tmp_path / "w", "--no-progress", "landmarks", mesh, "--landmarks", mine, "-o", out)
         assert result.exit_code == 2 and "never overwrites" in result.stderr
         assert out.read_bytes() == before and not (tmp_path / "w" / "landmarks").exists()
+
+
+def test_cli_output_into_a_missing_folder_is_one_line_exit_2_and_creates_nothing(invoke, tmp_path, monkeypatch):
+    # issue 28: `-o no/such/dir/x.yaml` created the folders and wrote there after the detection
+    monkeypatch.chdir(tmp_path)
+    mesh = tmp_path / "face.obj"
+    mesh.write_bytes(SAMPLES["mediapipe"].read_bytes())
+    result = invoke("-w", "w", "--no-progress", "landmarks", "face.obj", "-o", "no/such/dir/x.yaml")
+    assert result.exit_code == 2
+    lines = [ln for ln in result.stderr.strip().splitlines()]
+    assert lines == ["faceforge: error: no/such/dir/x.yaml: -o: folder no/such/dir does not exist"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["face.obj"]
 
 
 @pytest.mark.slow

@@ -108,8 +108,8 @@ def test_mirror_plane_of_a_symmetric_mesh_and_of_a_lopsided_one():
     left, right = v[:5], v[200:205]            # rough pairs: the start of the search
     plane = mirror_plane(v, left + 0.02, right, diag)
     assert symmetric(plane)
-    assert abs(abs(plane.normal @ (rot @ [1, 0, 0])) - 1) < 1e-9
-    assert np.allclose(plane.reflect(v[:200]), v[200:])
+    assert abs(abs(plane.mirror.normal @ (rot @ [1, 0, 0])) - 1) < 1e-9
+    assert np.allclose(plane.mirror(v[:200]), v[200:])
     assert np.array_equal(plane.partner[:200], np.arange(200, 400))
     lopsided = v.copy()
     lopsided[200:] += rng.normal(scale=0.05, size=(200, 3))
@@ -129,3 +129,21 @@ def test_a_required_fdp_that_lands_nowhere_is_named():
     agreed[table["9.3"]] = 0.0
     ids = _placeable(table, agreed, "head.obj")
     assert "5.1" not in ids and len(ids) == len(table) - 1
+
+
+def test_plane_cut_matches_trimesh_and_takes_an_in_plane_edge_once():
+    import trimesh
+
+    from faceforge.landmarks.rules import plane_cut
+
+    s = trimesh.creation.icosphere(subdivisions=2, radius=1.0)
+    normal = np.array([0.3, 0.9, 0.1]) / np.linalg.norm([0.3, 0.9, 0.1])
+    pts, fid = plane_cut(s.vertices, s.faces, np.array([0.05, 0.1, 0.0]), normal)
+    segs, fids = trimesh.intersections.mesh_plane(s, normal, [0.05, 0.1, 0.0], return_faces=True)
+    order = np.argsort(fid)
+    assert np.array_equal(fid[order], np.sort(fids))
+    assert np.allclose(pts[order], segs.mean(axis=1)[np.argsort(fids)])
+    # two triangles sharing an edge in the plane x = 0: the edge counted once (the negative side's)
+    v = np.array([[0.0, 0, 0], [0, 1, 0], [-1, 0.5, 0], [1, 0.5, 0]])
+    pts, fid = plane_cut(v, np.array([[0, 1, 2], [0, 3, 1]]), np.zeros(3), np.array([1.0, 0, 0]))
+    assert fid.tolist() == [0] and np.allclose(pts, [[0, 0.5, 0]])

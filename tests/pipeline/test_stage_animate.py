@@ -467,7 +467,7 @@ def test_calibrate_command_says_wrote_only_when_the_stage_ran(tmp_path, ran):
 
     from click.testing import CliRunner
 
-    from faceforge.pipeline.stages.animate import calibrate_command
+    from faceforge.pipeline.stages.calibrate import calibrate_command
 
     (tmp_path / "report.txt").write_text("median relative error 0.05\n")
     lines = []

@@ -28,21 +28,24 @@ from faceforge.pipeline import Stage, register_stage
 
 def run_arkit(ctx):
     """Play the take in ``ctx.params['arkit_take']`` through the baked shapes' controls."""
+    import time
+
     import numpy as np
 
     from faceforge.animation.check_stream import StreamChecker
     from faceforge.animation.playback import Timings, play, warm_up
     from faceforge.animation.rig import BoundHead
+    from faceforge.animation.statics import SettleSettings, play_converged
     from faceforge.blendshapes.curves import read_weights
     from faceforge.io.frame_stream import FrameNpzWriter, open_frames
     from faceforge.io.stagefiles import load_npz, save_json
-    from faceforge.pipeline.stages.animate import _mapping
+    from faceforge.pipeline.mapping import stage_mapping
 
     take = ctx.param("arkit_take")
     names, weights, fps = read_weights(take)
     baked = load_npz(ctx.input("bake") / "shapes.npz")
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
-    mapping, _ = _mapping(ctx)
+    mapping, _ = stage_mapping(ctx)
     if [str(c) for c in baked["controls"]] != list(head.controls):
         from faceforge.exceptions import StageError
 
@@ -64,6 +67,8 @@ def run_arkit(ctx):
 
         eyes = eye_pieces(head.rest, head.faces, head.landmarks)
     checker = StreamChecker(head.rest, head.faces, len(weights))
+    offline, previous = (SettleSettings.from_config(ctx.config) if ctx.config.get("animate.quality") == "offline"
+                         else None), None
     bar = ctx.progress(None, total=len(weights), desc="frames")
 
     def per_frame(frames, **_):   # one progress bar over the blocks
@@ -90,7 +95,14 @@ def run_arkit(ctx):
 
             if not start:
                 warm_up(head.rig, c, jaw, fps, ctx.log)
-            play(head.rig, c, jaw, fps, progress=per_frame, timings=timings, sink=sink)
+            if offline is not None:   # animate.quality: offline, each frame converged as the bake's poses
+                t0 = time.perf_counter()
+                play_converged(head.rig, c, jaw, fps, sink, offline, previous=previous)
+                timings.skin += time.perf_counter() - t0   # all layers: the held frames are not split
+                timings.frames += len(c)
+                previous = (c[-1], jaw[-1])
+            else:
+                play(head.rig, c, jaw, fps, progress=per_frame, timings=timings, sink=sink)
             writer.spool("contractions", c)
             writer.spool("jaw", jaw)
         writer.close(fps=np.float64(fps), contractions=writer.SPOOLED, controls=np.asarray(head.controls, dtype=str),
@@ -127,7 +139,7 @@ ARKIT = register_stage(Stage(
     config_keys=("solver", "skin.stiffness", "skin.carry", "muscle", "animate", "template"),
     inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="1", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
+    version="2", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
 
 
 def write_curves(app, stage: str, curves: str | None, output: str | None) -> bool:
@@ -178,7 +190,7 @@ def _arkit_or_curves(app, orig, arkit, curves, kw):
     """The ``animate`` command with ``--arkit`` / ``--curves`` (module docstring); ``orig`` its own
     callback, ``kw`` its other arguments."""
     from faceforge.exceptions import StageError
-    from faceforge.pipeline.stages.animate import export_outputs
+    from faceforge.pipeline.outputs import export_outputs
     from faceforge.pipeline.stages.bake import bake_params
 
     output, preview = kw.get("output"), kw.get("preview")

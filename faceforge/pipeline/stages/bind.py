@@ -25,6 +25,7 @@ from __future__ import annotations
 import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
+from faceforge.pipeline.stages.fit import compile_solver_ahead
 
 
 def load_fit(fit_dir):
@@ -115,7 +116,7 @@ def run(ctx):
 STAGE = register_stage(Stage(
     name="bind", deps=("fit",), config_keys=("bind",),
     outputs=("bind.npz", "report.json", "influence.png"), version="6", run=run,
-    description="bind the skin to muscles and bone, influence map (§8)"))
+    description="bind the skin to muscles and bone, influence map (§8)", background=compile_solver_ahead))
 
 
 @click.command("bind", help="Bind the skin to the fitted muscles and skull (paper §8).")

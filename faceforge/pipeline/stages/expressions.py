@@ -78,11 +78,11 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.animation.controls import controls
     from faceforge.animation.rig import BoundHead
-    from faceforge.pipeline.stages.animate import _mapping
+    from faceforge.pipeline.mapping import stage_mapping
     from faceforge.viz.contact_sheet import contact_sheet
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
-    mapping, mapping_path = _mapping(ctx)
+    mapping, mapping_path = stage_mapping(ctx)
     presets = rows(mapping, mapping_path)
     names = ["neutral", *presets]
     faps = np.stack([np.zeros(68), *presets.values()])
@@ -161,7 +161,7 @@ def _sheet_command(stem: str, help_text: str):
     @click.pass_obj
     def command(app, output, force):
         from faceforge.exceptions import StageError
-        from faceforge.pipeline.stages.animate import playback_mapping
+        from faceforge.pipeline.mapping import playback_mapping
 
         if output and not str(output).lower().endswith(".png"):
             raise StageError("the sheet is a PNG: give -o a .png path", output)

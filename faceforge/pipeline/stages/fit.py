@@ -107,11 +107,19 @@ def write_outputs(out_dir, result, report, extra) -> None:
                        f"{len(result.enhancement_targets)} enhancement targets)")
 
 
+def compile_solver_ahead(log) -> None:
+    """``Stage.background`` of fit and bind: on a fresh install the solver's kernels compile in
+    a background process while they run (:mod:`faceforge.pbd.compile_ahead`)."""
+    from faceforge.pbd.compile_ahead import start
+
+    start(log)
+
+
 STAGE = register_stage(Stage(
     name="fit", deps=("landmarks",), config_keys=("fit", "template"),
     inputs=("mesh", "landmarks?", "template.skull", "template.muscle_map"),
     outputs=("fit.npz", "report.json", "fit.png", "muscle_map.yaml"), version=VERSION, run=run,
-    description="fit the skull and muscle map into the skin (§7)"))
+    description="fit the skull and muscle map into the skin (§7)", background=compile_solver_ahead))
 
 
 @click.command("fit", help="Fit the template skull and muscle map into a skin mesh (§7).")

@@ -90,8 +90,11 @@ def command(app, mesh, landmarks, output, force):
 
     if landmarks is None:   # the file next to the mesh, if any; else the landmarks are detected
         landmarks = str(default_landmark_path(mesh)) if default_landmark_path(mesh).exists() else None
-    if output:              # before any work: never the user's own mesh or landmark file
+    if output:              # before any work: never the user's own mesh or landmark file, nor a missing folder
+        from faceforge.io.writable import check_writable
+
         protect_inputs(output, {"mesh": mesh, "landmark file": landmarks})
+        check_writable(output, "-o")
     app.run_stage("landmarks", params={"mesh": mesh, "landmarks": landmarks}, force=force)
     folder = app.workspace.stage_dir("landmarks")
     if output:
