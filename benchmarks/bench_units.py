@@ -5,7 +5,7 @@ bound; default: fitted and bound here in a temporary folder through the CLI).
 
 For each unit of :data:`CHOSEN` (MakeHuman's units that one or a few muscles or the jaw produce,
 from ``tests/data/mh_head_expression_units_caucasian.npz``; CC0, tests/data/README.md) the activation solve (:mod:`faceforge.blendshapes.solve`)
-finds the contractions + jaw pose whose settled skin best matches the unit's displacement field
+finds the contractions + jaw pose whose skin, settled until it stops moving (``animate.statics``) best matches the unit's displacement field
 over all the head's vertices, and reports the cosine of the two fields and the magnitude ratio
 ``|result| / |unit|`` (targets: cosine >= 0.8, ratio 0.8-1.25), the residual after the linear
 solve and each Gauss-Newton pass, the controls used, and the solve's time. Also: each left unit
@@ -66,6 +66,7 @@ def main(argv=None) -> dict:
     from faceforge.blendshapes.solve import control_space, field_agreement, jacobian, solve_activations
     from faceforge.io.config import load_config
     from faceforge.animation.rig import BoundHead
+    from faceforge.animation.statics import SettleSettings
     from faceforge.pipeline.mapping import mapping_template_path
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -73,7 +74,10 @@ def main(argv=None) -> dict:
         cfg = load_config()
         head = BoundHead(work / "fit", work / "bind", cfg)
         mapping = load_fap_mapping(mapping_template_path(cfg))
-        settle = int(cfg.get("animate.calibrate.settle_frames"))
+        # held poses settle until the skin stops moving (animate.statics), as the sheets and the
+        # bake settle them: 30 fixed frames left the skin short (mouth-corner-puller 0.773 / 0.759
+        # at 30 frames, 0.814 / 0.812 converged)
+        settle = SettleSettings.from_config(cfg)
         simulate = settler(head.rig, float(cfg.get("animate.fps")), settle)
         observe = field_observer(head.rest, head.user_index, head.user_rotation)
         space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
@@ -106,7 +110,9 @@ def main(argv=None) -> dict:
                 a, b = fields[left], fields[right][mi] * np.array([-1.0, 1.0, 1.0])
                 mirror[left] = round(float(np.linalg.norm(a - b) / max(np.linalg.norm(a), 1e-12)), 3)
         worst = min(rows, key=lambda n: (rows[n]["cosine"], -abs(np.log(max(rows[n]["ratio"], 1e-9)))))
-        out = {"head": str(MESH.relative_to(ROOT)), "controls": list(space.names), "settle_frames": settle,
+        out = {"head": str(MESH.relative_to(ROOT)), "controls": list(space.names),
+               "settle": {"tolerance": settle.tolerance, "max_frames": settle.max_frames,
+                          **(simulate.stats.as_dict() if simulate.stats else {})},
                "jacobian_seconds": round(t_jac, 2), "units": rows, "worst_unit": worst,
                "passing": sum(r["ok"] for r in rows.values()), "of": len(rows),
                "mirror_rel_diff": mirror}

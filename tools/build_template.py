@@ -12,7 +12,12 @@ Steps
    CC BY 3.0; 5,154 vertices, one closed surface, Y up, face +Z, mandible fused to the
    cranium with the teeth in occlusion) is welded, its midsagittal plane (found by
    mirror-ICP) moved to x = 0, and the shape symmetrised by averaging each vertex with
-   the mirror image of its mirrored closest surface point.
+   the mirror image of its mirrored closest surface point. Then its +x half is kept and
+   mirrored with the mirror-image triangulation, welded at x = 0
+   (:func:`faceforge.geometry.mirror_mesh.mirror_half`): both bones are their own mirror
+   images vertex for vertex, so a fit that moves vertex pairs alike keeps them symmetric
+   (issue 25). The placement (step 3) is fitted on the shape before this step, so the
+   template frame did not move.
 2. **Mandible.** The fused skull is split with a minimum cut on the dual graph of the
    mesh (faces = nodes, shared edges = arcs of capacity = edge length) between the chin
    (source) and the vault (sink). Arcs may only be cut inside two search regions around
@@ -55,6 +60,8 @@ import trimesh
 import yaml
 from scipy.optimize import least_squares
 from scipy.spatial import cKDTree
+
+from faceforge.geometry.mirror_mesh import mirror_half
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -598,13 +605,15 @@ def build(assets: Path, out: Path, dental: bool = False) -> dict:
     v, f = load_welded(assets / "anatomy/skull-yahoojapan/skull_low_resolution.obj")
     v[:, 0] -= mirror_plane_offset(v)
     v = symmetrise(v, f)
+    placed_on = v   # the placement below is fitted on this shape (the template frame as before the mirroring)
+    v, f = mirror_half(v, f)   # its own mirror image, vertex for vertex (issue 25)
     cranium, mandible, loops = split_skull(v, f)
 
     head = trimesh.load(assets / "heads/ict/ict_face_headneck_neutral.obj", force="mesh", process=False)
     head_v = np.asarray(head.vertices, dtype=float)
     doc = yaml.safe_load((assets / "heads/ict/ict_face_headneck_neutral.fdp.yaml").read_text())
     fdp = {k: np.asarray(d["position"], dtype=float) for k, d in doc["landmarks"].items()}
-    params = fit_into_head(v, head_v, np.asarray(head.vertex_normals, dtype=float), fdp)
+    params = fit_into_head(placed_on, head_v, np.asarray(head.vertex_normals, dtype=float), fdp)
 
     cranium = (apply_similarity(params, cranium[0]), cranium[1])
     mandible = (apply_similarity(params, mandible[0]), mandible[1])

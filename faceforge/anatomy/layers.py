@@ -189,7 +189,7 @@ class MusculoskeletalSystem:
 
     # -- construction -------------------------------------------------------------
     @classmethod
-    def from_parts(cls, cranium, mandible, muscles, settings=None) -> "MusculoskeletalSystem":
+    def from_parts(cls, cranium, mandible, muscles, settings=None, mirror=None) -> "MusculoskeletalSystem":
         """Assemble the system.
 
         Parameters
@@ -202,6 +202,9 @@ class MusculoskeletalSystem:
             must exceed the layer of every muscle in ``lies_on``.
         settings : pbd.SolverSettings, optional
             Shared by every layer (default: the paper's 10 iterations).
+        mirror : :class:`faceforge.geometry.mirror.Mirror`, optional
+            A symmetric rig's plane: each layer's solver colours mirror twins alike
+            (:func:`faceforge.anatomy.muscles.mirror.particle_mirror`).
 
         Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle
         when a name is duplicated, unknown, or a muscle lies on a layer that
@@ -235,7 +238,13 @@ class MusculoskeletalSystem:
             b = ModelBuilder()
             firsts, slots = add_muscles_to_builder(b, group)
             model = b.finalize()
-            layers.append(_Layer(index, group, firsts, slots, model, Solver(model, settings),
+            partner = None
+            if mirror is not None:
+                from faceforge.anatomy.muscles.mirror import particle_mirror
+
+                diag = float(np.linalg.norm(np.ptp(np.vstack([cranium[0], mandible[0]]), axis=0)))
+                partner = particle_mirror(group, firsts, model.particle_count, mirror, 5e-3 * diag)
+            layers.append(_Layer(index, group, firsts, slots, model, Solver(model, settings, partner),
                                  model.state(), model.control()))
             layers[-1].gather()
         system = cls(bodies, layers, settings)

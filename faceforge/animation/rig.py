@@ -96,7 +96,7 @@ class BoundHead:
         self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log)
         self.muscle_names = tuple(system.muscles)
         self.controls = system.controls
-        self.skin = self._skin(bind, Path(bind_dir), settings, config)
+        self.skin = self._skin(bind, Path(bind_dir), settings, config, fit)
         self._guards(config)
         jaw = JawDrive(self.skull, system)
         skin_step = self._skin_step(jaw, int(config.get("animate.orientation_guard.rounds")))
@@ -141,8 +141,11 @@ class BoundHead:
         self.levers = JawLevers(lever_arm(chin, axes.pitch_point, axes.pitch_dir),
                                 lever_arm(chin, axes.yaw_point, axes.yaw_dir))
 
-    def _skin(self, bind: dict, bind_dir: Path, settings, config):
-        """The §8 skin layer on the binding's anchors, checked against the rebuilt system."""
+    def _skin(self, bind: dict, bind_dir: Path, settings, config, fit: dict):
+        """The §8 skin layer on the binding's anchors, checked against the rebuilt system; on a
+        symmetric rig (fit.npz's mirror, every skin vertex with a partner) its solver colours
+        mirror twins alike (:func:`faceforge.pbd.colouring.mirror_colouring`)."""
+        from faceforge.geometry.mirror import Mirror
         from faceforge.exceptions import StageError
         from faceforge.skin.binding import Binding
         from faceforge.skin.layer import SkinSimulation, SkinStiffness
@@ -162,8 +165,13 @@ class BoundHead:
         # anchors on the system's own rest bodies (the rebuilt muscles may differ from the meshes
         # bind saw by a projection): then the rest pose is an exact fixed point
         binding = replace(binding, points=binding.targets([system.surface(n) for n in binding.body_names]))
+        mirror, partner = Mirror.from_arrays(fit), None
+        if mirror is not None:
+            partner, gap = mirror.partners(self.rest)
+            partner = partner if gap.max() <= 1e-9 * float(np.ptp(self.rest, axis=0).max()) else None
         return SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
-                              settings, carried=carried_anchors(binding, config.get("skin.carry")))
+                              settings, carried=carried_anchors(binding, config.get("skin.carry")),
+                              mirror=partner)
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""
@@ -296,4 +304,4 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
         raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
                          "another muscle map)") from None
     settings = replace(settings, damping=float(config.get("muscle.damping")))
-    return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings)
+    return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings, Mirror.from_arrays(fit))

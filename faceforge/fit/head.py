@@ -231,10 +231,12 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
                 targets = rf.skull_targets
                 info["refit"] = True
                 info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
-    if mirror is not None:   # a symmetric skin gets a symmetric rig (the template skull is lopsided)
-        from faceforge.fit.symmetry import symmetrize_bones
+    partners = None
+    if mirror is not None:   # a symmetric skin gets a symmetric rig
+        from faceforge.fit.symmetry import bone_partners, symmetrize_bones
 
-        skull_fit, muscles = symmetrize_bones(skull_fit, len(cv), cf, mf, muscles, mirror)
+        partners = bone_partners(cv, mv)
+        skull_fit, muscles = symmetrize_bones(skull_fit, len(cv), cf, mf, muscles, mirror, partners)
     # 6a. a modelled eye socket is hollow (fit_orbits): bone inside it moves out along rays from
     # the socket's centre, by a one-to-one map that cannot fold the orbital walls
     if settings.skin_clearance_mm > 0 and settings.orbit_hollow:
@@ -272,6 +274,10 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         warp = Warp(warp.similarity, warp.rbfs + fields)
         info["clearance_fields"] = len(fields)
         info["clearance_points"] = int(sum(len(g.centres) for g in fields))
+    if partners is not None:   # the eye sockets and clearance are fitted per side: pair the bone again
+        from faceforge.fit.symmetry import pairs_halfway
+
+        skull_fit = pairs_halfway(skull_fit, partners, mirror)
     # axes: points by the fit's similarity (the least-squares scale, turn and shift of all the
     # landmarks), not by the full map: the condyles lie far behind the face's landmarks, where the
     # RBFs extrapolate (MakeHuman: the map put the pitch axis 0.2 cm above the pupils, the
@@ -307,7 +313,7 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
                        {n: muscle_map(n, p) for n, p in template.muscle_points.items()}, muscles, warp, info,
                        np.asarray(cf), np.asarray(mf), pairs.target, enhancement)
     if mirror is not None:
-        from faceforge.fit.symmetry import symmetrize_fit
+        from faceforge.fit.symmetry import point_partners, symmetrize_fit
 
-        result = symmetrize_fit(result, mirror)
+        result = symmetrize_fit(result, mirror, point_partners(template.muscle_points))
     return result

@@ -1,16 +1,20 @@
 """A symmetric rig for a symmetric head (issue 25): the fitted skull, muscles and jaw made
 mirror-symmetric, and the rig built symmetric by construction.
 
-The template skull is a real skull, symmetric only to its mesh (its triangulation is not a
+The template skull was a real skull, symmetric only to its mesh (its triangulation was not a
 mirror image of itself), and the fit's enhancement landmarks are chosen vertex by vertex, so
 even an exactly symmetric skin (MakeHuman) got a lopsided rig: left and right units differed by
 18-78 % of their motion. When every vertex of the skin has a mirror partner about the plane its
 left/right landmark pairs span (:func:`skin_asymmetry`, the worst vertex, below
 ``fit.symmetric_tolerance`` x ES0):
 
-* :func:`symmetrize_bones` (before the eye sockets and the clearance) moves the fitted bone
-  halfway to its mirror image (closest points, smoothed) and averages each right muscle with
-  its mirrored left twin; the midline point sets move halfway to their mirror images;
+* :func:`symmetrize_bones` (before the eye sockets and the clearance) averages each fitted
+  bone vertex with its partner's mirror image (the template skull is its own mirror image
+  vertex for vertex, :func:`bone_partners`; once more after the eye sockets and the
+  clearance, which are fitted per side), so the fitted bone is exactly symmetric; a template
+  without partners moves halfway to its mirror image instead (closest points, smoothed). Each
+  right muscle is averaged with its mirrored left twin; the midline point sets move halfway
+  to their mirror images;
 * :func:`symmetrize_fit` does the same to the muscle map and puts the jaw's axes on the plane,
   and stores the plane (``FitResult.mirror``, fit.npz ``mirror_point`` / ``mirror_normal``);
 * :func:`rebuild_muscles` rebuilds the muscles as the animate stage builds them with the plane
@@ -31,7 +35,8 @@ import numpy as np
 
 from faceforge.geometry.mirror import Mirror
 
-__all__ = ["Mirror", "mirror_plane", "skin_asymmetry", "symmetrize_bones", "symmetrize_fit"]
+__all__ = ["Mirror", "bone_partners", "mirror_plane", "pairs_halfway", "skin_asymmetry", "symmetrize_bones",
+           "symmetrize_fit"]
 
 #: left/right FDP pairs that span the midsagittal plane (ISO/IEC 14496-2 Annex C)
 FDP_PAIRS = (("3.5", "3.6"), ("3.7", "3.12"), ("3.11", "3.8"), ("4.1", "4.2"), ("4.3", "4.4"),
@@ -101,10 +106,33 @@ def _surface_halfway(v: np.ndarray, f: np.ndarray, mirror: Mirror, rounds: int =
     return v
 
 
-def _twins(named: dict, mirror: Mirror) -> dict:
-    """{name: (k, 3)} with ``*_L`` / ``*_R`` twins of equal shape averaged through the mirror
-    (right = mirror of left, point by point), the rest moved halfway to their mirror images."""
+def point_partners(named: dict, tol: float = 0.05) -> dict:
+    """{name: (k,) partner index} for the point sets (k, 3) of ``named`` (template space, plane
+    x = 0) that are their own mirror images: each point's mirror partner, when the pairing is
+    one to one within ``tol`` (template units). A fitted midline muscle's points are paired
+    by it (:func:`_twins`); paired afresh in head space, two points near the plane can take
+    the same partner (MakeHuman's mentalis origin: 0 and 0.013 units from the plane, its
+    template points 1.6 cm apart)."""
+    from scipy.spatial import cKDTree
+
     out = {}
+    for name, p in named.items():
+        p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+        if len(p) < 2 or name.endswith(("_L", "_R")):
+            continue
+        d, j = cKDTree(p).query(p * [-1.0, 1.0, 1.0])
+        if float(d.max()) <= tol and len(np.unique(j)) == len(p):
+            out[name] = j
+    return out
+
+
+def _twins(named: dict, mirror: Mirror, partners: dict | None = None) -> dict:
+    """{name: (k, 3)} with ``*_L`` / ``*_R`` twins of equal shape averaged through the mirror
+    (right = mirror of left, point by point), a set in ``partners`` ({name: (k,)},
+    :func:`point_partners`) averaged with its partners' mirror images, the rest moved halfway
+    to their mirror images."""
+    out = {}
+    partners = partners or {}
     for name, p in named.items():
         p = np.asarray(p, dtype=np.float64)
         if name.endswith("_L") and name[:-2] + "_R" in named and np.shape(named[name[:-2] + "_R"]) == p.shape:
@@ -112,6 +140,8 @@ def _twins(named: dict, mirror: Mirror) -> dict:
             out[name], out[name[:-2] + "_R"] = left, mirror(left)
         elif name.endswith("_R") and name[:-2] + "_L" in named and np.shape(named[name[:-2] + "_L"]) == p.shape:
             continue
+        elif name in partners and len(partners[name]) == len(p):
+            out[name] = 0.5 * (p + mirror(p[partners[name]]))
         else:
             out[name] = _points_halfway(p, mirror) if len(p) > 1 else p
     return out
@@ -127,29 +157,53 @@ def _axis(point, direction, mirror: Mirror, across: bool):
     return p, d / np.linalg.norm(d)
 
 
+def bone_partners(cranium: np.ndarray, mandible: np.ndarray) -> np.ndarray | None:
+    """Each template bone vertex's mirror partner (n_cranium + n_mandible,), indices into the
+    stacked bones, when both bones are their own mirror images about x = 0 vertex for vertex
+    (the template since issue 25, :func:`faceforge.geometry.mirror_mesh.mirror_half`); else None."""
+    from faceforge.geometry.mirror_mesh import vertex_partners
+
+    pc, pm = vertex_partners(cranium), vertex_partners(mandible)
+    return None if pc is None or pm is None else np.concatenate([pc, pm + len(cranium)])
+
+
+def pairs_halfway(v: np.ndarray, partners: np.ndarray, mirror: Mirror) -> np.ndarray:
+    """Each vertex (n, 3) averaged with its partner's mirror image (``partners`` (n,)): the
+    result is exactly symmetric about ``mirror`` and moves a symmetric fit by nothing."""
+    v = np.asarray(v, dtype=np.float64)
+    return 0.5 * (v + mirror(v[partners]))
+
+
 def symmetrize_bones(skull: np.ndarray, n_cranium: int, cranium_faces, mandible_faces, muscles,
-                     mirror: Mirror) -> tuple[np.ndarray, list]:
+                     mirror: Mirror, partners: np.ndarray | None = None) -> tuple[np.ndarray, list]:
     """The fitted skull ``(n, 3)`` (cranium rows first, ``n_cranium`` of them) and muscles
     ``[(name, vertices, faces)]`` made mirror-symmetric (module docstring); new arrays.
-    :func:`faceforge.fit.head.fit_head` calls it before the bone is cleared off the skin."""
-    cranium = _surface_halfway(skull[:n_cranium], cranium_faces, mirror)
-    mandible = _surface_halfway(skull[n_cranium:], mandible_faces, mirror)
+    ``partners`` (n,) (:func:`bone_partners`): the bone's vertex pairs are averaged exactly;
+    without (a template whose triangulation is not its own mirror image) each vertex moves
+    halfway to the mirrored surface. :func:`faceforge.fit.head.fit_head` calls it before the
+    bone is cleared off the skin."""
+    if partners is not None:
+        bone = pairs_halfway(skull, partners, mirror)
+    else:
+        bone = np.vstack([_surface_halfway(skull[:n_cranium], cranium_faces, mirror),
+                          _surface_halfway(skull[n_cranium:], mandible_faces, mirror)])
     built = _twins({n: v for n, v, _ in muscles}, mirror)
     faces = {n: f for n, _, f in muscles}
     for n in faces:   # a right twin's faces: the left's, turned (a reflection turns the surface inside out)
         if n.endswith("_R") and n[:-2] + "_L" in faces and np.shape(faces[n]) == np.shape(faces[n[:-2] + "_L"]):
             faces[n] = np.ascontiguousarray(np.asarray(faces[n[:-2] + "_L"])[:, ::-1])
-    return np.vstack([cranium, mandible]), [(n, built[n], faces[n]) for n, _, _ in muscles]
+    return bone, [(n, built[n], faces[n]) for n, _, _ in muscles]
 
 
-def symmetrize_fit(result, mirror: Mirror):
+def symmetrize_fit(result, mirror: Mirror, partners: dict | None = None):
     """The :class:`faceforge.fit.head.FitResult` ``result``'s muscle map and jaw axes made
-    mirror-symmetric about ``mirror`` (its bones and muscles: :func:`symmetrize_bones`); a new
-    FitResult, ``result`` is not changed."""
+    mirror-symmetric about ``mirror`` (its bones and muscles: :func:`symmetrize_bones`); a
+    midline muscle's points paired by ``partners`` (:func:`point_partners` of the template's
+    muscle map). A new FitResult, ``result`` is not changed."""
     jaw = {name: _axis(p, d, mirror, across=(name == "pitch")) for name, (p, d) in result.jaw_axes.items()}
     info = dict(result.info, symmetric=True)
-    return replace(result, jaw_axes=jaw, muscle_points=_twins(result.muscle_points, mirror), info=info,
-                   mirror=mirror)
+    return replace(result, jaw_axes=jaw, muscle_points=_twins(result.muscle_points, mirror, partners),
+                   info=info, mirror=mirror)
 
 
 def rebuild_muscles(result, specs):

@@ -131,7 +131,7 @@ def _volume_arrays(m: Model, part, partitions: int) -> tuple:
 class Solver:
     """Steps a :class:`Model`; holds only derived per-mode arrays and scratch buffers."""
 
-    def __init__(self, model: Model, settings: SolverSettings | None = None):
+    def __init__(self, model: Model, settings: SolverSettings | None = None, mirror: np.ndarray | None = None):
         """Derive the compiled step's arrays from ``model`` (left untouched) for ``settings``.
 
         model : :class:`Model` (particle ids checked against ``particle_count``; ValueError
@@ -140,13 +140,23 @@ class Solver:
         (:meth:`_partition`); with ``colouring`` the distance, bending and area constraints are
         reordered colour by colour (:meth:`_constraint_arrays`). Every array handed to the
         compiled step is a private writable C-contiguous copy, so that all models share one
-        compiled signature (read-only arrays would type differently).
+        compiled signature (read-only arrays would type differently). ``mirror`` ((particles,)
+        int, optional): each particle's mirror partner in a mirror-symmetric model; with
+        ``colouring`` a constraint and its twin then share a colour
+        (:func:`faceforge.pbd.colouring.mirror_colouring`), so the sweep treats both sides alike.
         """
         self.model = model
         self.settings = settings or SolverSettings()
         s = self.settings
         _check_particle_ids(model)
         m, part = self._partition(model, s)
+        self._mirror = None
+        if mirror is not None:
+            mirror = np.asarray(mirror, dtype=np.int64)
+            if mirror.shape != (model.particle_count,):
+                raise ValueError(f"mirror must map each of the {model.particle_count} particles, got {mirror.shape}")
+            self._mirror = mirror if self._particle_order is None else \
+                self._old_order[mirror[self._particle_order]]
         self._w = _own(m.inv_mass)
         self._kin = _own(m.kinematic_indices)
         self._blocks = _own(m.blocks)
@@ -211,7 +221,7 @@ class Solver:
             kk, c = self._k[kind]
             if s.colouring:
                 order, runs = colour_order(idx, m.particle_count,
-                                           m.blocks[m.blocks[:, 0] == code, 1:])
+                                           m.blocks[m.blocks[:, 0] == code, 1:], self._mirror)
                 idx, rest, kk, c = (np.ascontiguousarray(a[order]) for a in (idx, rest, kk, c))
                 if kind == "distance":
                     d_weight = d_weight[order]

@@ -198,7 +198,8 @@ class Binding:
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
-              insertions=None, face_sides=None, lips_to_ring=False, modiolus=None) -> Binding:
+              insertions=None, face_sides=None, lips_to_ring=False, modiolus=None,
+              brow=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -255,6 +256,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         to the closest point of the muscles around the mouth within ``max_distance``, a lip
         vertex to its own arc (:func:`_modiolus_anchors`; module docstring), and gets no
         second anchor. Skin on the bone stays there.
+    brow : ((n,) bool, sequence of int), optional
+        The brow's skin (:func:`faceforge.skin.brow.brow_mask`) and the brow muscles (indices
+        into ``bodies``): a vertex of it on the bone after the rays and the fallback binds to
+        the closest point of those muscles (:func:`faceforge.skin.brow.brow_anchors`).
 
     Returns
     -------
@@ -284,6 +289,12 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     closest = fallbacks(v, rules, hits, np.broadcast_to(np.asarray(fallback, bool), (n,)),
                          lips_to_ring, corner)
     body, face, pts, dist, outward = hits
+    if brow is not None:   # the brow's insertion: brow skin on the bone moves to the brow muscles
+        from faceforge.skin.brow import brow_anchors
+
+        moved = brow_anchors(v, bodies, rules.kinds, list(brow[1]), np.asarray(brow[0], bool), max_distance,
+                             body, face, pts, dist, rules.allowed)
+        outward[moved] = closest[moved] = False
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
     status[ids] = rules.kinds[body[ids]]

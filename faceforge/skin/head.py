@@ -12,6 +12,7 @@ from faceforge.geometry.triangles import check_mesh
 from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, bind_skin
 from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
+from faceforge.skin.brow import BROW_BAND_MM, brow_mask
 from faceforge.skin.rules import (MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
                                   modiolus_mask)
 
@@ -73,7 +74,8 @@ def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
 
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
-              modiolus_radius: float = MODIOLUS_RADIUS, mirror=None) -> BoundSkin:
+              modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
+              brow_muscles=()) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -101,6 +103,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     modiolus_radius : float
         ``bind.modiolus_radius``: the skin within this fraction of MW0 of a mouth corner
         binds to the orbicularis oris (:func:`modiolus_mask`; 0: by its rays, as the paper).
+    brow_band_mm, brow_muscles : float, sequence of str
+        ``bind.brow_band_mm``, ``bind.brow_muscles`` (names or pair names as ``insertions``):
+        brow skin that its rays bound to the bone binds to the closest brow muscle
+        (:mod:`faceforge.skin.brow`; 0 or none: by its rays, as the paper).
     mirror : faceforge.geometry.mirror.Mirror or None
         A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
         image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
@@ -151,6 +157,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     lips = lip_band(cut, band_width)
     ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
     corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
+    brow_ids, _ = match_insertions(brow_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
+    brow = brow_mask(cut.vertices, pts, brow_band_mm, up=up) if brow_ids else np.zeros(len(cut.vertices), bool)
     body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
                   for b in bodies]
     face_sides = [ring_face_sides(b.vertices, b.faces, cut, up=up) if s == AROUND_MOUTH else None
@@ -158,7 +166,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
-                        modiolus=corner)
+                        modiolus=corner, brow=(brow, brow_ids))
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
@@ -183,6 +191,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                           "on_the_ring": on_ring,
                           "on_bone": int(np.isin(kind, (CRANIUM, MANDIBLE)).sum()),
                           "on_other_muscles": int((kind == MUSCLE).sum()) - on_ring}
+    first_of = binding.vertex_ids[first]
+    report["brow"] = {"band_mm": float(brow_band_mm), "vertices": int(brow.sum()),
+                      "on_brow_muscles": int((np.isin(first_of, np.flatnonzero(brow))
+                                              & np.isin(binding.body[first], brow_ids)).sum())}
     report["mouth"] = cut.report()
     report["influence"] = {
         "sources": int(len(sources)), "normalisation": float(scale),

@@ -248,6 +248,30 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
                      anchor_particles=q, anchor_slots=slots, kinematic_anchors=bool(len(av)) and held)
 
 
+def _particle_mirror(layer: SkinLayer, partner, binding) -> np.ndarray | None:
+    """The skin model's particle mirror map from the skin vertices' ``partner (n,)`` (None:
+    none): each anchor particle maps to the anchor of its vertex's partner on the mirrored
+    body (``X_L`` <-> ``X_R``; a midline vertex holds one anchor on each twin), itself when
+    there is none."""
+    if partner is None:
+        return None
+    from faceforge.anatomy.muscles.muscle_map import mirrored_name
+
+    partner = np.asarray(partner, dtype=INT)
+    n = layer.first + layer.n_vertices
+    count = len(layer.anchor_particles)
+    out = np.arange(max(n, int(layer.anchor_particles.max()) + 1 if count else n), dtype=INT)
+    out[layer.first:n] = layer.first + partner
+    if count:
+        names = [str(binding.body_names[b]) for b in binding.body]
+        key = {(int(v), nm): a for a, (v, nm) in enumerate(zip(layer.anchor_vertices, names))}
+        for a, (v, nm) in enumerate(zip(layer.anchor_vertices, names)):
+            t = key.get((int(partner[v]), mirrored_name(nm)))
+            if t is not None:
+                out[layer.anchor_particles[a]] = layer.anchor_particles[t]
+    return out
+
+
 class SkinSimulation:
     """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
 
@@ -278,10 +302,13 @@ class SkinSimulation:
         moved (:meth:`carry_targets`): the skin goes where the tissue under it goes, as where
         mimetic muscles insert into the skin. Bone anchors are best left uncarried (skin
         slides over bone).
+    mirror : (n,) int, optional
+        Each skin vertex's mirror partner on a symmetric rig: the solver then colours mirror
+        twins alike (:func:`faceforge.pbd.colouring.mirror_colouring`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None):
+                 carried=None, mirror=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -297,7 +324,7 @@ class SkinSimulation:
         builder = ModelBuilder()
         self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest)
         self.model = builder.finalize()
-        self.solver = Solver(self.model, settings or SolverSettings())
+        self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self.control = self.model.control()
         self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)

@@ -1,11 +1,10 @@
 """Muscles built as mirror images (issue 25, a symmetric rig for a symmetric head).
 
-The template skull is symmetric about x = 0 only to its mesh (its triangulation is not a
-mirror image of itself), so a right muscle built from its own action lines differs from its
-mirrored left twin where the outermost projection picks another layer. With ``mirror`` the
-right twins are mirror images of the left ones (up to the bone's own asymmetry where their
-lines lie on bone), contract as mirror images, and the orbicularis oris pairs its samples
-k and -k.
+The template skull is its own mirror image about x = 0, vertex for vertex (since issue 25:
+its left half mirrored, ``tools/build_template.py``). With ``mirror`` the right twins are
+mirror images of the left ones (up to the midline mentalis, where a twin's line lies on it),
+contract as mirror images, the orbicularis oris pairs its samples k and -k, and a midline
+sheet (the mentalis) is its own mirror image.
 """
 
 from __future__ import annotations
@@ -46,6 +45,18 @@ def _gap(rest, left, diagonal):
     return np.linalg.norm(MIRROR(pl) - pr, axis=1).max() / diagonal
 
 
+def test_template_bone_is_its_own_mirror_image(built):
+    from faceforge.geometry.mirror_mesh import vertex_partners
+
+    skull = built[0]
+    for v, f in (skull.cranium, skull.mandible):
+        partner = vertex_partners(v)
+        assert partner is not None
+        # the mirror-image triangulation: each face's partner vertices form a face
+        faces = {tuple(sorted(x)) for x in np.asarray(f).tolist()}
+        assert all(tuple(sorted(x)) in faces for x in partner[np.asarray(f)].tolist())
+
+
 def test_right_twins_are_the_mirror_images_of_the_left(built):
     skull, mirrored, plain = built
     lefts = [n for n in mirrored.muscles if n.endswith("_L")]
@@ -53,12 +64,15 @@ def test_right_twins_are_the_mirror_images_of_the_left(built):
     for left in lefts:
         right = left[:-2] + "_R"
         np.testing.assert_array_equal(mirrored.muscles[right].faces, mirrored.muscles[left].faces[:, ::-1])
-        # the bone under the lines is the template's (mirror-symmetric to ~1 mm, not exactly)
-        assert _gap(mirrored.rest_positions, left, skull.diagonal) < 5e-3, left
-    # built on their own lines the twins lie up to 1.7 % of the diagonal apart, mirrored 0.34 %
-    worst_plain = max(_gap(plain.get, n, skull.diagonal) for n in lefts)
-    worst = max(_gap(mirrored.rest_positions, n, skull.diagonal) for n in lefts)
-    assert worst < 0.25 * worst_plain
+        # exact on the bone and on mirrored twins; the depressor labii lies on the midline
+        # mentalis too (closest points on it: 0.1 mm), the muscles above it follow
+        on_midline = left.startswith(("depressor_labii", "depressor_anguli", "risorius"))
+        assert _gap(mirrored.rest_positions, left, skull.diagonal) < (1e-3 if on_midline else 1e-9), left
+    m = mirrored.muscles["mentalis"]
+    h, w = m.topology.h, m.topology.w
+    for layer in (0, 1):   # column j mirrors column w - 1 - j
+        grid = m.rest_positions[layer * h * w:(layer + 1) * h * w].reshape(h, w, 3)
+        assert np.linalg.norm(MIRROR(grid) - grid[:, ::-1], axis=2).max() / skull.diagonal < 1e-4
 
 
 def test_orbicularis_oris_samples_pair_up(built):
@@ -68,9 +82,9 @@ def test_orbicularis_oris_samples_pair_up(built):
     bottom = m.rest_positions[: h * w].reshape(h, w, 3)
     pair = (-np.arange(h)) % h
     gap = np.linalg.norm(MIRROR(bottom) - bottom[pair], axis=2).max() / skull.diagonal
-    plain = plain["orbicularis_oris"][: h * w].reshape(h, w, 3)
-    assert gap < 5e-3
-    assert np.linalg.norm(MIRROR(plain) - plain[pair], axis=2).max() / skull.diagonal > 4 * gap
+    assert gap < 1e-3
+    top = m.rest_positions[h * w:].reshape(h, w, 3)   # the top sheet too (diagonal-independent normals)
+    assert np.linalg.norm(MIRROR(top) - top[pair], axis=2).max() / skull.diagonal < 1e-3
 
 
 def test_mirrored_rig_rests_and_contracts_as_mirror_images(built):

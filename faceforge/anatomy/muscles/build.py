@@ -34,6 +34,7 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     from faceforge.anatomy.muscles.action_line import ActionLine
     from faceforge.anatomy.layers import expand_lies_on
     from faceforge.anatomy.muscles.muscle import build_linear_muscle, build_sphincter_muscle
+    from faceforge.anatomy.muscles.muscle_map import mirrored_name
     from faceforge.anatomy.muscles.sphincter import align_loops
     from faceforge.exceptions import TemplateError
 
@@ -66,8 +67,12 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                 m = mirror_muscle(twin, spec.name, tuple(spec.lies_on), left_parts, right_parts, mirror, exact)
                 exact.update((twin.name, spec.name))
             elif spec.type == "linear":
-                m = build_linear_muscle(spec.name, line(lines["A3"]), line(lines["A1"]), line(lines["A0"]),
-                                        line(lines["A2"]), v, f, spec.h, spec.w, t,
+                al = {k: line(p) for k, p in lines.items()}
+                if mirror is not None and mirrored_name(spec.name) == spec.name:   # a midline muscle
+                    from faceforge.anatomy.muscles.mirror import symmetric_sheet_lines
+
+                    al = symmetric_sheet_lines(al, list(zip(expand_lies_on(spec.lies_on), parts)), mirror, exact)
+                m = build_linear_muscle(spec.name, al["A3"], al["A1"], al["A0"], al["A2"], v, f, spec.h, spec.w, t,
                                         stiffness.get("linear", {}), **kw)
             else:
                 inner, outer = align_loops(spec.inner, spec.outer)

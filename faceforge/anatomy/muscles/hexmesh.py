@@ -227,8 +227,9 @@ def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float, surf
        it: the RBF interpolates between the contour samples and would cut
        under a curved layer (chord sag) or float above it.
     3. The top sheet is then placed at ``bottom + thickness * n`` with ``n`` the
-       bottom sheet's vertex normals (oriented like the sample normals), which
-       is the paper's "displace the upper surface along the normals".
+       bottom sheet's vertex normals (oriented like the sample normals; each cell
+       split both ways, so they do not depend on its diagonal), which is the
+       paper's "displace the upper surface along the normals".
     4. Cells that came out non-convex are split along their other diagonal
        (:func:`cell_diagonals`), so no sheet triangle starts turned over.
     5. If the morph mirrored the template, the faces are flipped so the
@@ -261,8 +262,12 @@ def morph_hex(topo: HexTopology, samples, sample_normals, thickness: float, surf
             bottom[inner] = closest_points(bottom[inner], *surface)[0]
     flip = cell_diagonals(topo.h, topo.w, topo.closed, bottom)
     all_faces = _faces(topo.h, topo.w, topo.closed, flip) if flip.any() else topo.faces
-    sheet = all_faces[: len(flip) * 2]
-    n = vertex_normals(bottom, sheet)
+    # normals of both splits of every cell summed: they do not depend on the diagonals, so a
+    # muscle built on the mirror image of another's lines gets the mirror image of its top
+    # (one diagonal for all cells made the top sheets of twins differ by up to 0.06 ES0, issue 25)
+    n = sum(vertex_normals(bottom, _faces(topo.h, topo.w, topo.closed, np.full(len(flip), d))[: len(flip) * 2])
+            for d in (False, True))
+    n = n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     # the bottom sheet faces point away from the top: its outward side is -n
     side = np.sign(np.sum(-n[topo.contour] * sn))
     side = 1.0 if side == 0 else side

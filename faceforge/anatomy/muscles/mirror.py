@@ -132,6 +132,32 @@ def symmetric_loop(line, parts, mirror, exact: set):
     return replace(line, points=SurfacePoints.concatenate(loop))
 
 
+def symmetric_sheet_lines(lines: dict, parts, mirror, exact: set) -> dict:
+    """The action lines {A0..A3: ActionLine} of a linear muscle that is its own mirror image
+    (the mentalis, across the chin), made symmetric: A2 the mirror image of A0, and the origin
+    and insertion (A3, A1, running from A0's side to A2's) each its half on A0's side, a point
+    on the plane and that half's mirror image in reverse order. Built from its own lines, the
+    mentalis was not: its origin row lay all on one side of the plane (MakeHuman, 0.02 ES0
+    apart from its mirror image at the chin), and the depressors that lie on it followed.
+    ``parts`` [(body name, (v, f))] as for :func:`symmetric_loop`."""
+    v = np.vstack([m[0] for _, m in parts])
+    f = np.vstack([m[1] + o for (_, m), o in zip(parts, np.cumsum([0] + [len(m[0]) for _, m in parts]))])
+    start = mirror.side(lines["A0"].points.take([0]).positions(v, f))[0]
+    out = dict(lines, A2=replace(lines["A2"], points=_mirror_points(lines["A0"].points, parts, parts, mirror, exact)))
+    for key in ("A1", "A3"):
+        pts = lines[key].points
+        side = mirror.side(pts.positions(v, f)) * np.sign(start)
+        across = np.flatnonzero(side <= 0.0)
+        kept = np.arange(across[0] if len(across) else len(side))   # the leading run on A0's side
+        if not len(kept) or start == 0.0:
+            continue
+        mid = _on_plane(pts.take([int(np.argmin(np.abs(side)))]), parts, v, f, mirror)
+        keep = pts.take(kept)
+        image = _mirror_points(keep.take(np.arange(len(kept))[::-1]), parts, parts, mirror, exact)
+        out[key] = replace(lines[key], points=SurfacePoints.concatenate([keep, mid, image]))
+    return out
+
+
 def _on_plane(point: SurfacePoints, parts, v, f, mirror) -> SurfacePoints:
     """The closest point, on the bodies of ``parts`` that are their own mirror images (the
     bone, a midline muscle), to the foot on the plane of one surface point of the concatenated
@@ -167,7 +193,68 @@ def symmetric_ring_faces(muscle) -> np.ndarray:
     first = i < h // 2
     flip = flip.copy()
     flip[image[first]] = ~flip[first]
-    faces = _faces(h, w, True, flip)
+    faces = _mirror_walls(_faces(h, w, True, flip), h, w)
     if signed_volume(muscle.rest_positions, faces) < 0:
         faces = faces[:, ::-1].copy()
     return faces
+
+
+def _mirror_walls(faces: np.ndarray, h: int, w: int) -> np.ndarray:
+    """A ring's faces (:func:`faceforge.anatomy.muscles.hexmesh._faces`) with the wall quads of
+    its second half split as the mirror images of the first half's (sample k <-> -k): the
+    walls split every quad along the same diagonal, so the two halves' wall triangles (and
+    their bending and area constraints) did not pair up."""
+    n = h * w
+    part = np.array([(i * w + np.arange(w)) for i in range(h)])
+    image = np.concatenate([part[(-np.arange(h)) % h].ravel(), part[(-np.arange(h)) % h].ravel() + n])
+    nwall = len(faces) - 2 * (2 * h * (w - 1))   # two sheets of 2 h (w - 1) triangles, then the walls
+    body, wall = faces[:len(faces) - nwall], faces[len(faces) - nwall:]
+    half = nwall // 2
+    first, second = wall[:half], wall[half:]   # triangles (b, a, a+n) and (b, a+n, b+n) per quad
+    b, a = first[:, 0], first[:, 1]
+    row = np.minimum(a % n // w, b % n // w)
+    wrap = np.abs(a % n // w - b % n // w) > 1
+    row = np.where(wrap, h - 1, row)
+    keep = row < h // 2
+    out_first, out_second = first.copy(), second.copy()
+    quads = {}
+    for k in np.flatnonzero(keep):   # each kept quad's diagonal, mirrored
+        quads[frozenset(image[[b[k], a[k], a[k] + n, b[k] + n]].tolist())] = (image[a[k] + n], image[b[k]])
+    for k in np.flatnonzero(~keep):
+        d = quads.get(frozenset([b[k], a[k], a[k] + n, b[k] + n]))
+        if d is None or set(d) == {a[k] + n, b[k]}:
+            continue
+        # the other diagonal (a, b + n): triangles (b, a, b + n) and (a, a + n, b + n)
+        out_first[k] = (b[k], a[k], b[k] + n)
+        out_second[k] = (a[k], a[k] + n, b[k] + n)
+    return np.concatenate([body, out_first, out_second]).astype(faces.dtype)
+
+
+def particle_mirror(muscles, firsts, n_particles: int, mirror, tol: float) -> np.ndarray:
+    """Each particle's mirror partner ((n_particles,) int) in one layer's PBD model holding
+    ``muscles`` (first particles ``firsts``): a twin's particle k <-> its twin's particle k;
+    in a muscle that is its own mirror image, the sphincter's sample k <-> sample -k and a
+    sheet's column j <-> column w - 1 - j, in each of its two sheets. A muscle whose rest
+    particles do not match their partners' mirror images within ``tol`` (mesh units), and
+    a twin outside the layer, keep their particles to themselves."""
+    out = np.arange(n_particles, dtype=np.int64)
+    first = {m.name: int(f) for m, f in zip(muscles, firsts)}
+    for m in muscles:
+        n = len(m.rest_positions)
+        twin = mirrored_name(m.name)
+        if twin != m.name:
+            if twin not in first:
+                continue
+            other = next(x for x in muscles if x.name == twin)
+            local, rest = np.arange(n), other.rest_positions
+        else:
+            h, w = m.topology.h, m.topology.w
+            i, j = np.divmod(np.arange(h * w), w)
+            sheet = ((-i) % h) * w + j if m.kind == "sphincter" else i * w + (w - 1 - j)
+            if 2 * h * w != n:
+                continue
+            local, rest = np.concatenate([sheet, sheet + h * w]), m.rest_positions
+        if len(rest) != n or np.linalg.norm(mirror(m.rest_positions) - rest[local], axis=1).max() > tol:
+            continue
+        out[first[m.name]:first[m.name] + n] = first[twin] + local
+    return out

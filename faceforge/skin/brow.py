@@ -1,0 +1,96 @@
+"""The brow's insertion (``bind.brow_band_mm``, beyond §8): the skin of the brow binds to the
+brow muscles, not to the bone through the orbit.
+
+The frontalis, the corrugator, the depressor supercilii and the orbital orbicularis oculi all
+insert into the dermis of the brow. By its ray (§8) the brow skin binds to whatever the ray
+meets first, and over the supraorbital ridge the inward ray passes below the frontalis' lower
+edge into the orbit and meets the cranium at the back of it: on the MakeHuman sample a band
+about 1 cm high along the brow (the brow itself, between the frontalis-bound forehead and the
+lids) was tied to the orbit's floor 2-3.6 cm away. The frontalis then raised the forehead
+above a brow held to the bone, and every brow unit of MakeHuman (a raise or a lowering peaked
+at the brow, fading out 2-3 cm above it) was reproduced at a cosine of 0.36-0.62 whatever the
+contractions (``benchmarks/bench_units.py``).
+
+Here the skin within :data:`BROW_BAND_MM` of the brow line (FDPs 4.1-4.3-4.5, 4.2-4.4-4.6) and
+above the upper lids (:data:`LID_CLEARANCE_MM` over FDP 3.1 / 3.2) that its rays bound to the
+bone binds instead to the closest point of the brow muscles (``bind.brow_muscles``) within the
+longest ray. The lids stay on the bone (the lid field moves them, :mod:`faceforge.animation.eyelids`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from faceforge.constants import FLOAT
+
+#: ``bind.brow_band_mm``: the skin within this many mm (an average adult's, scaled by ES0) of
+#: the brow line is the brow's (0: none, the paper's rays)
+BROW_BAND_MM = 10.0
+
+#: the brow band keeps this many mm above the upper lid's FDP (3.1, 3.2) height: the lids stay
+LID_CLEARANCE_MM = 3.0
+
+#: the brow lines, each from the inner end over the top to the outer end
+BROW_LINES = (("4.1", "4.3", "4.5"), ("4.2", "4.4", "4.6"))
+
+#: the upper lid FDP of each brow line's eye
+UPPER_LIDS = ("3.1", "3.2")
+
+
+def _segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(k,) distance of the points p (k, 3) to the segment a-b (3,)."""
+    ab = b - a
+    t = np.clip(((p - a) @ ab) / max(float(ab @ ab), 1e-300), 0.0, 1.0)
+    return np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+
+
+def brow_mask(vertices, landmarks: dict, band_mm: float = BROW_BAND_MM, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """(n,) bool: the vertices within ``band_mm`` (scaled by ES0, :func:`faceforge.anatomy.
+    tissue.units_per_mm`) of a brow line (:data:`BROW_LINES`, the FDPs given) and higher along
+    ``up`` than that eye's upper lid FDP plus :data:`LID_CLEARANCE_MM`. No vertex with
+    ``band_mm`` 0 or without the FDPs that give ES0."""
+    from faceforge.anatomy.tissue import units_per_mm
+
+    v = np.asarray(vertices, FLOAT)
+    mask = np.zeros(len(v), bool)
+    if band_mm <= 0.0:
+        return mask
+    try:
+        mm = units_per_mm(landmarks)
+    except KeyError:
+        return mask
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    for line, lid in zip(BROW_LINES, UPPER_LIDS):
+        pts = [np.asarray(landmarks[k], FLOAT) for k in line if k in landmarks]
+        if len(pts) < 2 or lid not in landmarks:
+            continue
+        d = np.min([_segment_distance(v, a, b) for a, b in zip(pts[:-1], pts[1:])], axis=0)
+        above = v @ u > float(np.asarray(landmarks[lid], FLOAT) @ u) + LID_CLEARANCE_MM * mm
+        mask |= (d <= band_mm * mm) & above
+    return mask
+
+
+def brow_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts, dist,
+                 allowed=None) -> np.ndarray:
+    """Rebind the vertices of ``mask`` (n,) bool that are on the bone (``kinds[body]`` not a
+    muscle) to the closest point of the bodies ``muscles`` (indices) within ``max_distance``
+    (module docstring). ``allowed`` (n, n_bodies) bool filters bodies per vertex. Updates
+    ``body, face, pts, dist`` in place (a vertex with no brow muscle in reach keeps its anchor);
+    returns the (n,) bool mask of the vertices rebound."""
+    from faceforge.geometry.surface_points import closest_points
+    from faceforge.skin.casting import MUSCLE
+
+    done = np.zeros(len(v), bool)
+    on_bone = (body >= 0) & (np.asarray(kinds)[np.maximum(body, 0)] != MUSCLE)
+    todo = np.flatnonzero(np.asarray(mask, bool) & on_bone)
+    best = np.full(len(todo), np.inf)
+    for i in muscles if len(todo) else ():
+        p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
+        take = (d < best) & (d <= max_distance)
+        if allowed is not None:
+            take &= allowed[todo, i]
+        best[take] = d[take]
+        t = todo[take]
+        body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
+        done[t] = True
+    return done
