@@ -163,6 +163,7 @@ def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False, contex
         got = float(measure(rest, skins[end], probes[fap]))
         rows.append({"fap": fap, "requested": v, "achieved": round(got, 2),
                      "relative_error": round(abs(got - v) / abs(v), 4)})
+    chin = chin_from_frames(head, skins, rest, asked, ends)
     err = np.array([r["relative_error"] for r in rows])
     by = {(r["fap"], np.sign(r["requested"])): r["achieved"] for r in rows}
     lr = []
@@ -177,7 +178,25 @@ def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False, contex
             "within_10_percent": int((err <= 0.1).sum()), "over_30_percent": int((err > 0.3).sum()),
             "count": len(rows), "worst": worst, "left_right": lr,
             "left_right_within_10_percent": int(sum(p["differs"] <= 0.1 for p in lr)),
-            "animate_seconds": round(seconds, 1), "mapping": mapping.source}
+            "animate_seconds": round(seconds, 1), "mapping": mapping.source, "chin_path": chin}
+
+
+def chin_from_frames(head, skins, rest, asked, ends) -> list[dict]:
+    """open_jaw's chin path on the exported frames (issue 25): for each request that opens
+    the jaw, how far the skin chin (FDP 2.1) moved down and back at the end of its hold, in
+    MNS units (head frame: +y up, +z forward)."""
+    v = head.fdp_vertex.get("2.1")
+    if v is None:
+        return []
+    mns = head.fapu.unit("MNS")
+    out = []
+    for (fap, value, frame), end in zip(asked, ends):
+        if frame[2] > 0.0:
+            d = (skins[end, v] - rest[v]) / mns
+            out.append({"fap": fap, "open_jaw": float(frame[2]), "down_mns": round(float(-d[1]), 1),
+                        "back_mns": round(float(-d[2]), 1),
+                        "back_per_down": round(float(-d[2] / max(-d[1], 1e-9)), 3)})
+    return out
 
 
 def main(argv=None) -> None:

@@ -54,6 +54,9 @@ class SettleSettings:
     tolerance : stop when the skin moved less than this fraction of the rest diagonal in one
         frame (the residual of the held pose's fixed point)
     min_hold, max_frames : frames held at the least after the ramp; frames in all at the most
+    stall : stop a held pose whose residual has not fallen below ``STALL_DROP`` x its lowest
+        so far for this many frames (it stopped changing: a vertex flipping between two states
+        settles no further; reported unconverged); 0 holds such a pose to ``max_frames``
     """
 
     ramp: int = 10
@@ -61,6 +64,7 @@ class SettleSettings:
     tolerance: float = 5e-5
     min_hold: int = 2
     max_frames: int = 150
+    stall: int = 0
 
     @classmethod
     def from_config(cls, config) -> "SettleSettings":
@@ -74,7 +78,7 @@ class SettleSettings:
 
         return cls(ramp=int(get("ramp", cls.ramp)), warm_ramp=int(get("warm_ramp", cls.warm_ramp)),
                    tolerance=float(get("tolerance", cls.tolerance)), min_hold=int(get("min_hold", cls.min_hold)),
-                   max_frames=int(get("max_frames", cls.max_frames)))
+                   max_frames=int(get("max_frames", cls.max_frames)), stall=int(get("stall", cls.stall)))
 
 
 def settle(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, settings: SettleSettings | None = None,
@@ -127,10 +131,16 @@ def settle(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, settings:
     return out
 
 
+#: a held pose's residual must fall below this fraction of its lowest so far to count as still settling
+STALL_DROP = 0.9
+
+
 def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
     """Ease (c0, j0) -> (c1, j1) over ``ramp`` frames, then hold until a frame moves the skin
-    less than ``tol`` (or ``s.max_frames``). Returns (raw skin (n, 3), frames, last motion)."""
+    less than ``tol``, its residual stalls (``s.stall``) or ``s.max_frames``. Returns (raw skin
+    (n, 3), frames, last motion)."""
     last, motion, n = None, np.inf, 0
+    best, since = np.inf, 0
     while n < s.max_frames:
         t = min(1.0, (n + 1) / ramp)
         c, j = c0 + t * (c1 - c0), j0 + t * (j1 - j0)
@@ -142,6 +152,11 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
         last = skin.copy()
         if n >= ramp + s.min_hold and motion <= tol:
             break
+        if n > ramp:
+            if motion < STALL_DROP * best:
+                best, since = motion, n
+            elif s.stall and n - since >= s.stall and n >= ramp + s.min_hold:
+                break                            # the residual stopped changing: unconverged, reported
     return last, n, motion
 
 

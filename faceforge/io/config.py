@@ -201,6 +201,8 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.calibrate.fractions.*", Number(0.01, 1.0)),
     ("animate.calibrate.tolerance", Number(0.0, 0.5)),
     ("animate.statics.tolerance", Number(0.0, 0.01)),
+    ("animate.statics.stall", Integer(0, 2000)),                  # 0: hold a stalled pose to max_frames
+    ("animate.calibrate.statics_tolerance", Number(0.0, 0.01)),
     ("animate.neck_fade", Number(0.0, 10.0)),
     ("animate.eyelid_reach", Number(0.1, 10.0)),
     ("animate.eyelid_depth", Number(0.1, 10.0)),

@@ -69,3 +69,32 @@ def test_offline_playback_converges_every_frame_where_real_time_lags():
     assert np.allclose(frames[:, 0, 0], c[:, 0], atol=1e-8)           # each frame at its converged pose
     lagging = play(relaxing_rig(), c, np.zeros((6, 3)), 25.0)
     assert np.abs(lagging[:, 0, 0] - c[:, 0]).max() > 0.1              # one step a frame lags behind
+
+
+def flipping_rig(n=5, amplitude=0.01):
+    """A stand-in rig that settles like :func:`relaxing_rig` but one vertex flips between two
+    states every frame (a held PBD pose whose residual stops falling)."""
+    rig = relaxing_rig(n=n)
+    inner, count = rig.skin, {"n": 0}
+
+    def skin(bones, muscles, dt):
+        count["n"] += 1
+        x = inner(bones, muscles, dt).copy()
+        x[0, 2] += amplitude * (count["n"] % 2)
+        return x
+
+    return Rig(skull=rig.skull, muscles=rig.muscles, skin=skin, rest=rig.rest, reset=rig.reset)
+
+
+def test_a_pose_whose_residual_stops_falling_is_stopped_and_reported_unconverged():
+    held, stalled = SettleStats(), SettleStats()
+    settle(flipping_rig(), [[1.0]], np.zeros((1, 3)), 25.0, SettleSettings(tolerance=1e-6, max_frames=150),
+           stats=held)
+    settle(flipping_rig(), [[1.0]], np.zeros((1, 3)), 25.0, SettleSettings(tolerance=1e-6, max_frames=150,
+                                                                           stall=20), stats=stalled)
+    assert held.frames == [150] and held.converged == [False]
+    assert stalled.converged == [False] and 20 < stalled.frames[0] < 60     # stopped once it stopped changing
+    slow = SettleStats()       # a residual still falling (1 % a frame) is not a stall: held to the end
+    settle(relaxing_rig(rate=0.01), [[1.0]], np.zeros((1, 3)), 25.0,
+           SettleSettings(tolerance=1e-9, max_frames=80, stall=20), stats=slow)
+    assert slow.frames == [80]
