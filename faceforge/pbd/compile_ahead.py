@@ -91,6 +91,13 @@ def start(log=lambda msg: None) -> subprocess.Popen | None:
                             start_new_session=True)
 
 
+def compiling_here() -> None:
+    """Say that this process is the one compiling (``python -m faceforge.pbd.warm``): its own
+    solver steps must not wait on the lock it holds."""
+    global _waited
+    _waited = True
+
+
 def wait(log=lambda msg: None, timeout: float = WAIT_SECONDS) -> float:
     """Block while a background compile holds the lock (once per process); returns the
     seconds waited. After ``timeout`` it gives up and the kernels compile here as usual."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from faceforge.pbd.compile_ahead import lock_path
+from faceforge.pbd.compile_ahead import compiling_here, lock_path
 
 
 def warm_model():
@@ -69,6 +69,7 @@ def main() -> int:
             fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             return 0
+        compiling_here()   # this process holds the lock: its steps must not wait for it
         warm_kernels()
     return 0
 

@@ -61,3 +61,14 @@ def test_wait_blocks_while_a_background_compile_holds_the_lock(monkeypatch):
         holder.wait(timeout=30)
     monkeypatch.setattr(compile_ahead, "_waited", False)
     assert compile_ahead.wait() < 0.5                 # nobody holds it: no wait
+
+
+def test_the_background_process_does_not_wait_for_itself():
+    """``python -m faceforge.pbd.warm`` holds the lock its own solver steps check: it must not
+    wait on it (it did, for compile_ahead.WAIT_SECONDS, on the first version). The kernels
+    are cached by the tests above, so it only loads them."""
+    warm.warm_kernels()
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "faceforge.pbd.warm"], timeout=300)
+    assert done.returncode == 0
+    assert time.perf_counter() - t0 < 0.5 * compile_ahead.WAIT_SECONDS
