@@ -108,16 +108,21 @@ class CalibrationResult:
     lips: dict | None
     probes: dict
     statics: dict | None = None
+    mirrored: dict | None = None     # right entry name -> the left twin whose response it plays
 
 
 def calibrate_head(head, template, config, log=lambda m: None, progress=None) -> CalibrationResult:
     """Fit ``template``'s response curves on ``head`` (``animate.fps``, ``animate.calibrate.*``
     and ``animate.statics.*`` of ``config``) on warm chains of converged poses
     (:func:`faceforge.animation.calibrate_sweep.calibrate_sweep`); ``progress`` wraps an
-    iterable (optional). The result's ``statics`` says how the poses settled."""
+    iterable (optional). The result's ``statics`` says how the poses settled. On a symmetric
+    rig (``head.symmetric``) only the left entry of each left/right pair is probed, at both
+    sides' requests, and the right one plays its response (:mod:`~faceforge.animation.calibrate_mirror`;
+    the result's ``mirrored``); its rows are then the left entry's only."""
     from dataclasses import replace
 
     from faceforge.animation.calibrate import measure_coupling, summarize
+    from faceforge.animation.calibrate_mirror import entry_twins, joint_requests, mirror_responses
     from faceforge.animation.calibrate_sweep import calibrate_sweep, face_lanes
     from faceforge.animation.controls import controls
     from faceforge.animation.statics import SettleSettings, SettleStats, settle
@@ -151,16 +156,24 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
 
     probes = calibration_probes(template, head)
     requested = requested_values(template, config)
-    log(f"calibrating {len(template.entries)} entries ({len(probes)} FAPs observable) up to the magnitudes "
-        f"users play, each pose held until it converges")
+    # a symmetric rig: each right entry plays its left twin's response (calibrate_mirror)
+    twins = entry_twins(template) if getattr(head, "symmetric", False) else {}
+    if twins:
+        requested = joint_requests(template, twins, requested)
+    count = len(template.entries) - len(twins)
+    log(f"calibrating {count} entries ({len(probes)} FAPs observable) up to the magnitudes users play, each "
+        f"pose held until it converges" + (f"; {len(twins)} right entries mirror their left twins (symmetric rig)"
+                                           if twins else ""))
     calibrated, rows = calibrate_sweep(
         template, pose_for, head.rest, probes, requested, tolerance=float(config.get("animate.calibrate.tolerance")),
         max_steps=int(config.get("animate.calibrate.refine")),
-        lanes=face_lanes(template) if bool(config.get("animate.calibrate.lanes")) else None,
-        progress=None if progress is None else (lambda it: progress(it, total=len(template.entries), desc="FAPs")))
+        lanes=face_lanes(template) if bool(config.get("animate.calibrate.lanes")) else None, skip=set(twins),
+        progress=None if progress is None else (lambda it: progress(it, total=count, desc="FAPs")))
+    calibrated = mirror_responses(calibrated, twins)
     jaw_magnitude = float(config.get("animate.calibrate.jaw_magnitude"))
     if 3 in probes:
         calibrated = measure_coupling(calibrated, simulate, head.rest, probes, value=jaw_magnitude)
     lips = lip_opening(calibrated, simulate, head, jaw_magnitude)
     head.rig.reset()
-    return CalibrationResult(calibrated, rows, summarize(rows), lips, probes, stats.as_dict())
+    mirrored = {template.entries[r].name: template.entries[l].name for r, l in sorted(twins.items())}
+    return CalibrationResult(calibrated, rows, summarize(rows), lips, probes, stats.as_dict(), mirrored)

@@ -119,7 +119,7 @@ def _invert(chain: Chain, r: float) -> float:
 
 
 def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tolerance: float = 0.02,
-                    max_steps: int = 4, max_drive: float = 20.0, lanes=None, progress=None):
+                    max_steps: int = 4, max_drive: float = 20.0, lanes=None, skip=(), progress=None):
     """Fit every entry's response curve on warm chains of converged poses.
 
     mapping : FapMapping (its response curves are ignored)
@@ -130,12 +130,13 @@ def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tole
     lanes : lists of entry indices whose entries do not interact (far apart on the face, no
         muscle in common: :func:`face_lanes`); one entry of each lane is probed in the same
         simulation, the lanes' FAPs played together (default: one lane, one entry at a time)
+    skip : entry indices not probed (their responses are left as they are)
     Returns (calibrated FapMapping, list of CalibrationRow), as
     :func:`faceforge.animation.calibrate.calibrate_mapping`. ``achieved_before`` (uncalibrated)
     is read off the sampled curve at drive = request (linear interpolation of the chain).
     """
     todo = [i for i, e in enumerate(mapping.entries)
-            if e.faps[0] in probes and np.any(np.asarray(requested.get(e.faps[0], []), dtype=float) != 0.0)]
+            if i not in skip and e.faps[0] in probes and np.any(np.asarray(requested.get(e.faps[0], []), dtype=float) != 0.0)]
     lanes = [todo] if lanes is None else [[i for i in lane if i in todo] for lane in lanes]
     done = {}
     tick = progress(range(len(todo))) if progress else None

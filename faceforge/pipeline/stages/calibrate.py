@@ -39,7 +39,7 @@ def run_calibrate(ctx):
     save_json(ctx.out_dir / "report.json", {
         "summary": summary, "open_jaw_lip_separation": lips,
         "fapu": head.fapu.as_dict(), "jaw_levers": {"pitch": head.levers.pitch, "yaw": head.levers.yaw},
-        "rows": [r.as_dict() for r in rows], "statics": result.statics,
+        "rows": [r.as_dict() for r in rows], "statics": result.statics, "mirrored_entries": result.mirrored,
         "unobservable_faps": sorted(int(f) for f in template.mapped_faps() if int(f) not in probes)})
     table = format_table(rows)
     med = _percent(summary["all"]["median_relative_error"])
@@ -84,7 +84,7 @@ CALIBRATE = register_stage(Stage(
     inputs=("animate.fap_mapping", "animate.calibrate.magnitudes", "template.skull", "template.muscle_map"),
     digests={"animate.fap_mapping": mapping_digest_without_presets},
     outputs=("fap_mapping.yaml", "report.json", "report.txt"),
-    version="5", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
+    version="6", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
 @click.command("calibrate", help="Measure how precisely FAPs move the skin and fit the mapping (§9).")
