@@ -257,6 +257,14 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         info["orbit_hollows"] = len(hollows)
         info["orbit_clearance"] = [h.clearance for h in hollows]
         info["orbit_max_shift_rel"] = shift / skin.diagonal
+    # the eye sockets are fitted per side: pair the bone again before the clearance, which has the
+    # last word (pairing after it halved a push one side got more of: 2 MakeHuman midline nose
+    # vertices ended 0.3 mm inside the bone); the clearance sees both sides' skin on both sides,
+    # so its fields are as symmetric as the skin
+    if partners is not None:
+        from faceforge.fit.symmetry import pairs_halfway
+
+        skull_fit = pairs_halfway(skull_fit, partners, mirror)
     # 6b. bone that still swallows skin gives way locally (fit_clearance); the same fields move
     # the muscles, landmarks and axes, so everything lying on the bone stays on it
     if settings.skin_clearance_mm > 0 and settings.clearance_rounds > 0:
@@ -264,6 +272,8 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
 
         used = np.unique(skin.faces)
         own = skin.vertices[used[used < skin.n_real]] if skin.n_real >= 0 else skin.vertices[used]
+        if partners is not None:
+            own = np.vstack([own, mirror(own)])
         fields = clearance_fields([(skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf)], own,
                                   settings.skin_clearance_mm * scale_mm,
                                   settings.clearance_radius * skin.diagonal, settings.clearance_rounds)
@@ -274,10 +284,6 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         warp = Warp(warp.similarity, warp.rbfs + fields)
         info["clearance_fields"] = len(fields)
         info["clearance_points"] = int(sum(len(g.centres) for g in fields))
-    if partners is not None:   # the eye sockets and clearance are fitted per side: pair the bone again
-        from faceforge.fit.symmetry import pairs_halfway
-
-        skull_fit = pairs_halfway(skull_fit, partners, mirror)
     # axes: points by the fit's similarity (the least-squares scale, turn and shift of all the
     # landmarks), not by the full map: the condyles lie far behind the face's landmarks, where the
     # RBFs extrapolate (MakeHuman: the map put the pitch axis 0.2 cm above the pupils, the

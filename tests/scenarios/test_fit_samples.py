@@ -46,7 +46,10 @@ def test_bone_does_not_swallow_the_skin(fitted, name):
 #: enhancement_flow_steps: 8): MakeHuman 140, 10; ICT 0, 0; MediaPipe 9, 10. With the paper's
 #: exact RBF through every enhancement pair (enhancement_flow_steps: 0): 250, 64; 7, 0; 37, 5.
 TURNED_OVER = {"makehuman": (180, 20), "ict": (3, 3), "mediapipe": (20, 16)}
-TURNED_OVER_EXACT = {"makehuman": (265, 70), "ict": (10, 2), "mediapipe": (42, 8)}
+#: The template bone became its own mirror image (its right half re-triangulated, issue 25);
+#: with it MakeHuman's exact-RBF fit turns over 279, 78 (was 250, 64 on the old template): the
+#: limits below were 265, 70 and are now 5 % above the new figures, a loosening for a new mesh.
+TURNED_OVER_EXACT = {"makehuman": (295, 82), "ict": (10, 2), "mediapipe": (42, 8)}
 
 
 def turned_over_counts(result, template) -> list:
@@ -97,8 +100,9 @@ def test_modelled_eye_sockets_stay_hollow(fitted, name):
     assert result.info["orbit_hollows"] == len(hollows)
     # (0.023 of the diagonal before the enhancement flows' step limit; with it the flows push
     # less bone out of the socket and this map more: 0.045, one-to-one either way, and the
-    # whole fit turns over 67 cranium triangles instead of 145)
-    assert result.info["orbit_max_shift_rel"] < 0.05
+    # whole fit turns over 67 cranium triangles instead of 145; 0.052 on the mirror-image
+    # template bone of issue 25, so the bound went from 0.05 to 0.055)
+    assert result.info["orbit_max_shift_rel"] < 0.055
     bone = np.vstack([result.cranium, result.mandible])
     for h in hollows:
         # the skin of the pocket holds the centre: it lies behind the eye corners
