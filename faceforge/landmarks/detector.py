@@ -177,7 +177,7 @@ def plausibility(points: np.ndarray, size: int) -> float:
     in the tasks API, so the score rewards an upright, sizeable face: the eye line level
     (left outer corner 263 to the right of right outer corner 33 in the picture, mirrored) and
     the chin 152 below the eyes."""
-    eye_r, eye_l, chin, nose = points[33], points[263], points[152], points[4]
+    eye_r, eye_l, chin = points[33], points[263], points[152]
     across = eye_l - eye_r
     width = float(np.linalg.norm(across))
     if width < 0.02 * size:
