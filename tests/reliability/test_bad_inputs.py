@@ -137,6 +137,8 @@ CASES = {
     "landmarks of a malformed mesh": ({"bad.obj": "v 1 2\nf 1 2 3\n"}, ["landmarks", "{tmp}/bad.obj"],
                                       ["bad.obj:1", "OBJ"]),
     "landmarks output is the mesh": ({}, ["landmarks", "{mesh}", "-o", "{mesh}"], ["is your mesh"]),
+    "landmarks output folder missing": ({}, ["landmarks", "{mesh}", "-o", "{tmp}/no/x.yaml"],
+                                        ["x.yaml", "does not exist"]),
     "batch manifest name escapes": ({"m.yaml": "heads:\n  - mesh: x.obj\n    name: ../../etc\n"},
                                     ["batch", "{tmp}/m.yaml", "--out", "{tmp}/out", "--expression", "joy"],
                                     ["m.yaml:3", "name"]),
