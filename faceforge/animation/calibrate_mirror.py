@@ -58,7 +58,7 @@ def _mirrored(entry: FapEntry, twins: dict[int, int]) -> FapEntry:
     def fap(f):
         return twins.get(int(f), int(f))
 
-    return replace(entry, faps=tuple(fap(f) for f in entry.faps), name=entry.name,
+    return replace(entry, faps=tuple(fap(f) for f in entry.faps),
                    positive=muscles(entry.positive), negative=muscles(entry.negative),
                    coupling={fap(f): r for f, r in entry.coupling.items()},
                    measure={fap(f): Measure(fdp.get(m.fdp, m.fdp),
