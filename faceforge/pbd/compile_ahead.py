@@ -85,10 +85,14 @@ def start(log=lambda msg: None) -> subprocess.Popen | None:
         return None
     if _held(path):
         return None
+    try:
+        process = subprocess.Popen([sys.executable, "-m", "faceforge.pbd.warm"], stdin=subprocess.DEVNULL,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                   start_new_session=True)
+    except OSError:   # no process to spare: the kernels compile at first use, as without it
+        return None
     log("compiling the solver's kernels in the background (first run after an install)")
-    return subprocess.Popen([sys.executable, "-m", "faceforge.pbd.warm"], stdin=subprocess.DEVNULL,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                            start_new_session=True)
+    return process
 
 
 def compiling_here() -> None:
