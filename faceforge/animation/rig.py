@@ -187,7 +187,8 @@ class BoundHead:
         self.guard = SkullGuard(self.rest, bones, reach=float(config.get("animate.skull_guard.reach")) * diag,
                                 keep=keep)
         reach = float(config.get("animate.skull_guard.collision_reach")) * diag
-        self.collision = BoneCollision(self.rest, bones, reach=reach, keep=keep) if reach > 0 else None
+        self.collision = BoneCollision(self.rest, bones, reach=reach, keep=float(
+            config.get("animate.skull_guard.collision_keep"))) if reach > 0 else None
         rounds = int(config.get("animate.orientation_guard.rounds"))
         self.orientation = OrientationGuard(
             self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \

@@ -80,7 +80,7 @@ from typing import Callable
 import numpy as np
 
 from faceforge.anatomy import tissue as fit_tissue
-from faceforge.fit.align import Warp, apply_affine, similarity_transform
+from faceforge.fit.align import Warp
 from faceforge.fit.skull import fit_skull, skull_targets
 from faceforge.fit.surface import SkinSurface
 
@@ -284,22 +284,10 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         warp = Warp(warp.similarity, warp.rbfs + fields)
         info["clearance_fields"] = len(fields)
         info["clearance_points"] = int(sum(len(g.centres) for g in fields))
-    # axes: points by the fit's similarity (the least-squares scale, turn and shift of all the
-    # landmarks), not by the full map: the condyles lie far behind the face's landmarks, where the
-    # RBFs extrapolate (MakeHuman: the map put the pitch axis 0.2 cm above the pupils, the
-    # similarity 1.3 cm below them, in front of the ear); directions turned by the rotation that
-    # best carries the template mandible onto the fitted one (least squares over all its
-    # vertices): the jaw is one rigid body, so its axes follow the mandible as a whole
-    jaw = {}
-    if len(mv) >= 3:
-        m = similarity_transform(np.asarray(mv, dtype=np.float64), skull_fit[len(cv):])
-        rot = m[:3, :3] / np.cbrt(abs(np.linalg.det(m[:3, :3])))
-    else:
-        rot = warp.similarity[:3, :3] / np.cbrt(abs(np.linalg.det(warp.similarity[:3, :3])))
-    for name, (point, direction) in template.jaw_axes.items():
-        d = rot @ np.asarray(direction, dtype=np.float64)
-        jaw[name] = (apply_affine(warp.similarity, np.asarray(point, dtype=np.float64)[None])[0],
-                     d / np.linalg.norm(d))
+    # axes: points by the fit's similarity, directions by the bones' best rotations (fit/jaw.py)
+    from faceforge.fit.jaw import fit_jaw_axes
+
+    jaw = fit_jaw_axes(template.jaw_axes, warp.similarity, (cv, skull_fit[:len(cv)]), (mv, skull_fit[len(cv):]))
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
     enhancement = sk.reached[sk.n_landmarks + len(pairs.anchors):]
     later = warp.rbfs[len(sk.warp.rbfs):]   # the refit, orbit and clearance maps carry them on

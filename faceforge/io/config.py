@@ -183,6 +183,7 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
     ("animate.orientation_guard.min_area", Number(0.0, 0.95)),
     ("animate.skull_guard.collision_reach", Number(0.0, 0.5)),     # 0 turns bone collision off
+    ("animate.skull_guard.collision_keep", Number(0.0, 0.95)),
     ("animate.jaw_glide", Number(0.0, 2.0)),                       # 0: the jaw only turns
     ("animate.jaw_glide_slope", Number(-30.0, 80.0)),
     ("*.stiffness.*", Number(0.0, 1.0)),
