@@ -215,7 +215,12 @@ def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5
     low = np.where(x[:, 1] <= hl, below, np.where(x[:, 1] >= hu, 0.0, 1.0 - t))
     s_up, s_low = eye.taper([eye.upper_u, eye.lower_u])
     across = np.clip(((1.0 + HOLD_BEYOND) * eye.half - np.abs(x[:, 0])) / (HOLD_BEYOND * eye.half), 0.0, 1.0)
-    hold = np.clip(up + low, 0.0, 1.0) * across * behind
+    # the hold fades over the upper lid's reach below the lower margin as well: a cheek raised under
+    # the eye (fear's zygomaticus) drifts the lower lid up as far as the half-reach fade is high,
+    # and taking that back within it sheared the skin there by its own height (folds at the canthi)
+    below_hold = np.clip(1.0 - (hl - x[:, 1]) / (reach * g), 0.0, 1.0)
+    low_hold = np.where(x[:, 1] <= hl, below_hold, np.where(x[:, 1] >= hu, 0.0, 1.0 - t))
+    hold = np.clip(up + low_hold, 0.0, 1.0) * across * behind
     up, low = up * s * behind / s_up, low * s * behind / s_low
     index = np.flatnonzero((up > 0.0) | (low > 0.0) | (hold > 0.0))
     return LidField(eye, index, up[index], low[index], float(reach), hold[index])
