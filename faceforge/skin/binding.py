@@ -259,7 +259,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     brow : ((n,) bool, sequence of int), optional
         The brow's skin (:func:`faceforge.skin.brow.brow_mask`) and the brow muscles (indices
         into ``bodies``): a vertex of it on the bone after the rays and the fallback binds to
-        the closest point of those muscles (:func:`faceforge.skin.brow.brow_anchors`).
+        the closest point of those muscles (:func:`faceforge.skin.brow.brow_anchors`). A third
+        and fourth item, the eyes' skin (:func:`faceforge.skin.brow.eye_mask`) and muscles
+        (indices), rebind the eye's vertices on those muscles to the closest bone
+        (:func:`faceforge.skin.brow.eye_anchors`).
 
     Returns
     -------
@@ -295,6 +298,12 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         moved = brow_anchors(v, bodies, rules.kinds, list(brow[1]), np.asarray(brow[0], bool), max_distance,
                              body, face, pts, dist, rules.allowed)
         outward[moved] = closest[moved] = False
+        if len(brow) > 2:   # the eye's skin (lids, socket) stays off the brow muscles
+            from faceforge.skin.brow import eye_anchors
+
+            moved = eye_anchors(v, bodies, rules.kinds, list(brow[3]), np.asarray(brow[2], bool), max_distance,
+                                body, face, pts, dist, rules.allowed)
+            outward[moved], closest[moved] = False, True
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
     status[ids] = rules.kinds[body[ids]]

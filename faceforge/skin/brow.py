@@ -94,3 +94,71 @@ def brow_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts,
         body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
         done[t] = True
     return done
+
+
+#: each eye: inner canthus, outer canthus, upper lid, lower lid FDPs (subject's left, right)
+EYES = (("3.11", "3.7", "3.1", "3.3"), ("3.12", "3.8", "3.2", "3.4"))
+
+#: the eye's skin reaches this many eye widths (inner to outer canthus) from the canthi's segment
+EYE_REACH = 1.0
+
+
+def eye_mask(vertices, landmarks: dict, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """(n,) bool: the skin of the eyes, which no brow muscle may hold: within
+    :data:`EYE_REACH` eye widths of an eye's canthi (:data:`EYES`), no higher than its upper
+    lid FDP plus :data:`LID_CLEARANCE_MM` (below the brow band), and either no lower than its
+    lower lid FDP less that (the lids and their margins) or that far behind the canthi (the
+    socket a mesh without eyeballs closes behind the lids).
+
+    By their rays (§8) the lid margins and the socket's lining bind to whatever the ray meets
+    across the opening: on the MakeHuman sample 42 such vertices per eye were tied to the
+    corrugator, the depressor supercilii, the frontalis or the orbital orbicularis oculi, so
+    the corrugator pulled the lids 2.6-3.6 mm toward the nose and the socket's floor held the
+    brow back. No vertex without the FDPs."""
+    from faceforge.anatomy.tissue import units_per_mm
+
+    v = np.asarray(vertices, FLOAT)
+    mask = np.zeros(len(v), bool)
+    try:
+        mm = units_per_mm(landmarks)
+    except KeyError:
+        return mask
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    if not all(k in landmarks for eye in EYES for k in eye):
+        return mask
+    p = {k: np.asarray(landmarks[k], FLOAT) for eye in EYES for k in eye}
+    forward = np.cross(p["3.7"] - p["3.8"], u)   # subject's left x up: out of the face
+    forward /= max(float(np.linalg.norm(forward)), 1e-300)
+    gap = LID_CLEARANCE_MM * mm
+    for inner, outer, upper, lower in EYES:
+        width = float(np.linalg.norm(p[outer] - p[inner]))
+        near = _segment_distance(v, p[inner], p[outer]) <= EYE_REACH * width
+        h = v @ u
+        lids = h >= float(p[lower] @ u) - gap
+        behind = (v - 0.5 * (p[inner] + p[outer])) @ forward < -gap
+        mask |= near & (h <= float(p[upper] @ u) + gap) & (lids | behind)
+    return mask
+
+
+def eye_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts, dist,
+                allowed=None) -> np.ndarray:
+    """Rebind the vertices of ``mask`` (n,) bool that are on one of the bodies ``muscles``
+    (indices) to the closest point of the bone (every body whose ``kinds`` is not a muscle)
+    within ``max_distance`` (:func:`eye_mask`). Updates ``body, face, pts, dist`` in place (a
+    vertex with no bone in reach keeps its anchor); returns the (n,) bool mask rebound."""
+    from faceforge.geometry.surface_points import closest_points
+    from faceforge.skin.casting import MUSCLE
+
+    done = np.zeros(len(v), bool)
+    todo = np.flatnonzero(np.asarray(mask, bool) & np.isin(body, list(muscles)))
+    best = np.full(len(todo), np.inf)
+    for i in (i for i in range(len(bodies)) if kinds[i] != MUSCLE) if len(todo) else ():
+        p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
+        take = (d < best) & (d <= max_distance)
+        if allowed is not None:
+            take &= allowed[todo, i]
+        best[take] = d[take]
+        t = todo[take]
+        body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
+        done[t] = True
+    return done
