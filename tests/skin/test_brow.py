@@ -52,3 +52,43 @@ def test_brow_skin_on_bone_moves_to_the_nearest_brow_muscle_within_reach():
     body2 = np.array([2, 2, 0, 2])
     assert not brow_anchors(v, bodies, kinds, [0], mask, 4.0, body2, face, pts.copy(), dist.copy()).any()
     assert body2.tolist() == [2, 2, 0, 2]
+
+
+# the eyes' corners and lids of the face above (inner / outer canthus, upper / lower lid FDPs)
+EYE_LANDMARKS = {**LANDMARKS, "3.11": (19.0, 0.0, 0.0), "3.7": (44.0, 0.0, 0.0), "3.3": (31.5, -4.0, 0.0),
+                 "3.12": (-19.0, 0.0, 0.0), "3.8": (-44.0, 0.0, 0.0), "3.4": (-31.5, -4.0, 0.0)}
+
+
+def test_eye_mask_is_the_lids_and_the_socket_behind_them_not_the_brow_or_cheek():
+    from faceforge.skin.brow import eye_mask
+
+    pts = np.array([[31.5, 4.0, 1.0],      # upper lid
+                    [31.5, -4.0, 1.0],     # lower lid margin
+                    [-31.5, 0.0, 0.0],     # the other eye
+                    [31.5, -12.0, -20.0],  # the socket's floor, deep behind the canthi
+                    [31.5, 4.0, -15.0],    # the socket's roof
+                    [31.5, -12.0, 0.0],    # the cheek below the lower lid, in front
+                    [30.0, 15.0, -10.0],   # between the lid and the brow, above the lid + 3 mm
+                    [30.0, 24.0, 0.0],     # the brow
+                    [80.0, 0.0, -20.0]])   # behind, but beyond the eye's reach (the temple)
+    assert eye_mask(pts, EYE_LANDMARKS).tolist() == [True, True, True, True, True, False, False, False, False]
+    assert not eye_mask(pts, LANDMARKS).any()   # no canthi: no eye
+
+
+def test_eye_skin_on_a_brow_muscle_moves_to_the_bone():
+    from faceforge.skin.brow import eye_anchors
+
+    bodies = [Body("corrugator_L", "muscle", *_plane(-5.0, 0.0, 60.0)),
+              Body("zygomaticus_L", "muscle", *_plane(-3.0, 0.0, 60.0)),
+              Body("cranium", "cranium", *_plane(-30.0, -100.0, 100.0))]
+    kinds = np.array([MUSCLE, MUSCLE, CRANIUM])
+    v = np.array([[30.0, 2.0, -10.0], [31.0, 2.0, -10.0], [30.0, 20.0, 0.0]])
+    mask = np.array([True, True, False])
+    body = np.array([0, 1, 0])
+    face, pts, dist = np.zeros(3, int), np.zeros((3, 3)), np.array([5.0, 7.0, 5.0])
+    moved = eye_anchors(v, bodies, kinds, [0], mask, 25.0, body, face, pts, dist)
+    # in the eye and on a brow muscle: to the bone; on another muscle or outside the eye: kept
+    assert moved.tolist() == [True, False, False]
+    assert body.tolist() == [2, 1, 0]
+    np.testing.assert_allclose(pts[0], [30.0, 2.0, -30.0])
+    np.testing.assert_allclose(dist[0], 20.0)
