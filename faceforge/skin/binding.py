@@ -262,7 +262,9 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         the closest point of those muscles (:func:`faceforge.skin.brow.brow_anchors`). A third
         and fourth item, the eyes' skin (:func:`faceforge.skin.brow.eye_mask`) and muscles
         (indices), rebind the eye's vertices on those muscles to the closest bone
-        (:func:`faceforge.skin.brow.eye_anchors`).
+        (:func:`faceforge.skin.brow.eye_anchors`); a fifth, a reach in skin units (0: off), gives
+        the brow's vertices a second anchor on the nearest other insertion muscle
+        (:func:`faceforge.skin.brow.shared_anchors`).
 
     Returns
     -------
@@ -309,6 +311,11 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     status[ids] = rules.kinds[body[ids]]
     anchors = (ids, body[ids], face[ids], pts[ids], dist[ids], outward[ids], closest[ids])
     anchors = second_anchors(v, nrm, rules, anchors, insertions, outward, corner)
+    if brow is not None and len(brow) > 4 and brow[4] > 0:   # the brow's dermis takes two insertions
+        from faceforge.skin.brow import shared_anchors
+
+        anchors = shared_anchors(v, bodies, anchors, np.asarray(brow[0], bool), list(brow[1]),
+                                 list(insertions or ()), brow[4])
     ids, a_body, a_face, a_pts, a_dist, a_out, a_closest = anchors
     bary = np.zeros((len(ids), 3), FLOAT)
     for b in np.unique(a_body):

@@ -162,3 +162,47 @@ def eye_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts, 
         body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
         done[t] = True
     return done
+
+
+#: ``bind.brow_shared_mm``: brow skin on one brow muscle takes a second anchor on another
+#: insertion muscle whose surface is within this many mm (scaled by ES0) of its first anchor
+BROW_SHARED_MM = 10.0
+
+
+def shared_anchors(v, bodies, anchors: tuple, mask, brow, muscles, reach: float) -> tuple:
+    """Second anchors of the brow (beyond §8): each vertex of ``mask`` (n,) bool bound to one of
+    the bodies ``brow`` (indices: the brow muscles) and to no other body yet takes a second
+    anchor at the closest point of the nearest other of the bodies ``muscles`` (the brow's
+    insertions, the corrugator and the depressor supercilii) when that point lies within
+    ``reach`` (skin units) of its first anchor.
+
+    The brow's dermis receives the corrugator, the depressor supercilii and the frontalis
+    together; bound by its ray to one of them, each vertex followed that muscle alone (MakeHuman,
+    depressor supercilii at c = 1: the muscle 7.1 mm down on average, 12.7 at its insertion, FDP
+    4.1, bound to the corrugator, 1.9 mm). ``anchors``: ``(vertex ids, body, face, point,
+    distance, outward, closest)`` rows (k,), sorted by vertex; new rows follow their vertex's
+    first. Returns the anchors."""
+    from faceforge.geometry.surface_points import closest_points
+
+    ids, a_body, _, a_pts = anchors[:4]
+    muscles = [int(i) for i in muscles]
+    count = np.bincount(ids, minlength=len(v))
+    cand = np.flatnonzero(np.asarray(mask, bool)[ids] & np.isin(a_body, list(brow)) & (count[ids] == 1))
+    if not len(cand) or not muscles:
+        return anchors
+    best = np.full(len(cand), np.inf)
+    hit = [np.zeros(len(cand), np.int64), np.zeros(len(cand), np.int64), np.zeros((len(cand), 3)),
+           np.zeros(len(cand))]
+    for i in muscles:
+        p, d, tri = closest_points(v[ids[cand]], bodies[i].vertices, bodies[i].faces)
+        gap = np.linalg.norm(p - a_pts[cand], axis=1)
+        take = (a_body[cand] != i) & (gap <= reach) & (gap < best)
+        best[take] = gap[take]
+        hit[0][take], hit[1][take], hit[2][take], hit[3][take] = i, tri[take], p[take], d[take]
+    ok = np.isfinite(best)
+    rows = cand[ok]
+    extra = (ids[rows], hit[0][ok], hit[1][ok], hit[2][ok], hit[3][ok], np.zeros(len(rows), bool),
+             np.zeros(len(rows), bool))
+    order = np.argsort(np.concatenate([ids, ids[rows]]), kind="stable")   # each right after its first
+    return tuple(np.concatenate([a, np.asarray(b, dtype=np.asarray(a).dtype)])[order]
+                 for a, b in zip(anchors, extra))

@@ -92,3 +92,28 @@ def test_eye_skin_on_a_brow_muscle_moves_to_the_bone():
     assert body.tolist() == [2, 1, 0]
     np.testing.assert_allclose(pts[0], [30.0, 2.0, -30.0])
     np.testing.assert_allclose(dist[0], 20.0)
+
+
+def test_brow_skin_on_one_insertion_also_anchors_to_the_nearest_other_within_reach():
+    from faceforge.skin.brow import shared_anchors
+
+    bodies = [Body("corrugator_L", "muscle", *_plane(-5.0, 0.0, 30.0)),
+              Body("depressor_supercilii_L", "muscle", *_plane(-6.0, 0.0, 20.0)),
+              Body("frontalis_L", "muscle", *_plane(-4.0, 0.0, 60.0)),
+              Body("cranium", "cranium", *_plane(-30.0, -100.0, 100.0))]
+    v = np.array([[10.0, 20.0, 0.0], [28.0, 20.0, 0.0], [15.0, 20.0, 0.0], [12.0, 20.0, 0.0], [40.0, 20.0, 0.0]])
+    ids = np.array([0, 1, 2, 3, 3, 4])
+    body = np.array([0, 0, 2, 0, 1, 3])
+    pts = v[ids] * [1.0, 1.0, 0.0] + np.array([[0, 0, -5.0], [0, 0, -5.0], [0, 0, -4.0], [0, 0, -5.0],
+                                                 [0, 0, -6.0], [0, 0, -30.0]])
+    anchors = (ids, body, np.zeros(6, int), pts, np.abs(pts[:, 2]), np.zeros(6, bool), np.zeros(6, bool))
+    mask = np.array([True, True, True, True, False])
+    out = shared_anchors(v, bodies, anchors, mask, [0, 1, 2], [0, 1], 4.0)
+    # vertex 0 (corrugator) gains the depressor below it; 1 lies beyond the depressor's reach
+    # (8 mm off its edge); 2 (frontalis) gains the nearer insertion, the corrugator; 3 has two
+    # anchors already; 4 is outside the brow
+    assert out[0].tolist() == [0, 0, 1, 2, 2, 3, 3, 4]
+    assert out[1].tolist() == [0, 1, 0, 2, 0, 0, 1, 3]
+    np.testing.assert_allclose(out[3][1], [10.0, 20.0, -6.0])
+    np.testing.assert_allclose(out[3][4], [15.0, 20.0, -5.0])
+    assert shared_anchors(v, bodies, anchors, mask, [0, 1, 2], [0, 1], 0.5)[0].tolist() == ids.tolist()
