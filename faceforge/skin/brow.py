@@ -103,7 +103,7 @@ EYES = (("3.11", "3.7", "3.1", "3.3"), ("3.12", "3.8", "3.2", "3.4"))
 EYE_REACH = 1.0
 
 
-def eye_mask(vertices, landmarks: dict, up=(0.0, 1.0, 0.0), socket_only: bool = False) -> np.ndarray:
+def eye_mask(vertices, landmarks: dict, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     """(n,) bool: the skin of the eyes, which no brow muscle may hold: within
     :data:`EYE_REACH` eye widths of an eye's canthi (:data:`EYES`), no higher than its upper
     lid FDP plus :data:`LID_CLEARANCE_MM` (below the brow band), and either no lower than its
@@ -114,9 +114,7 @@ def eye_mask(vertices, landmarks: dict, up=(0.0, 1.0, 0.0), socket_only: bool = 
     across the opening: on the MakeHuman sample 42 such vertices per eye were tied to the
     corrugator, the depressor supercilii, the frontalis or the orbital orbicularis oculi, so
     the corrugator pulled the lids 2.6-3.6 mm toward the nose and the socket's floor held the
-    brow back. ``socket_only``: the part behind the canthi alone (on MakeHuman 24 of its
-    vertices were tied through the head to the zygomaticus, risorius, masseter or the
-    orbicularis oris). No vertex without the FDPs."""
+    brow back. No vertex without the FDPs."""
     from faceforge.anatomy.tissue import units_per_mm
 
     v = np.asarray(vertices, FLOAT)
@@ -138,7 +136,7 @@ def eye_mask(vertices, landmarks: dict, up=(0.0, 1.0, 0.0), socket_only: bool = 
         h = v @ u
         lids = h >= float(p[lower] @ u) - gap
         behind = (v - 0.5 * (p[inner] + p[outer])) @ forward < -gap
-        mask |= near & (h <= float(p[upper] @ u) + gap) & (behind if socket_only else lids | behind)
+        mask |= near & (h <= float(p[upper] @ u) + gap) & (lids | behind)
     return mask
 
 

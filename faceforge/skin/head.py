@@ -166,8 +166,6 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     eye_ids, _ = match_insertions(tuple(brow_muscles) + ("orbicularis_oculi",) if brow_ids else (),
                                   [b.name if b.kind == "muscle" else None for b in bodies])
     eye = eye_mask(cut.vertices, pts, up=up) if eye_ids else np.zeros(len(cut.vertices), bool)
-    socket = eye_mask(cut.vertices, pts, up=up, socket_only=True)
-    all_muscles = [i for i, b in enumerate(bodies) if b.kind == "muscle"]
     from faceforge.anatomy.tissue import units_per_mm
 
     shared = brow_shared_mm * units_per_mm(pts) if brow.any() and brow_shared_mm > 0 else 0.0
@@ -179,7 +177,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
                         modiolus=corner,
-                        brow=(brow, brow_ids, ((eye, eye_ids), (socket, all_muscles)), shared))
+                        brow=(brow, brow_ids, ((eye, eye_ids),), shared))
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
@@ -208,9 +206,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     report["brow"] = {"band_mm": float(brow_band_mm), "vertices": int(brow.sum()),
                       "on_brow_muscles": int((np.isin(first_of, np.flatnonzero(brow))
                                               & np.isin(binding.body[first], brow_ids)).sum())}
-    report["eyes"] = {"vertices": int(eye.sum()), "socket_vertices": int(socket.sum()),
-                      "socket_on_muscles": int((np.isin(first_of, np.flatnonzero(socket))
-                                                & np.isin(binding.body[first], all_muscles)).sum()),
+    report["eyes"] = {"vertices": int(eye.sum()),
                       "on_brow_muscles": int((np.isin(first_of, np.flatnonzero(eye))
                                               & np.isin(binding.body[first], eye_ids)).sum())}
     report["mouth"] = cut.report()
