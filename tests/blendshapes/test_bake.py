@@ -119,6 +119,27 @@ def test_symmetric_rig_solves_one_side_and_mirrors_the_pose():
     assert mirror_agreement(rest, deltas, [("smileL", "smileR")]) == {"smileL": 0.0}
 
 
+def test_a_pose_the_simulation_blew_up_is_not_made():
+    # MakeHuman's mirrored mouthSmileRight once settled 1e7 skin units away: no shape, said so
+    from faceforge.blendshapes.symmetric import mirror_columns
+
+    rest, simulate, probes, space = _head()
+
+    def unstable(c, jaw):                # the right zygomaticus blows the skin up
+        out = simulate(c, jaw)
+        out[c[:, 1] > 0] *= 1e6
+        return out
+
+    specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",)),
+             "smileR": ShapeSpec("smileR", {13: 10.0}, ("zyg_R",), mirror_of="smileL")}
+    out = bake_shapes(specs, space, probes, unstable, lambda ps: probe_observer(rest, ps), rest,
+                      twins=mirror_columns(COLUMNS))
+    assert out.names == ["smileL"]
+    r = out.report["smileR"]
+    assert not r["made"] and "diverged" in r["reason"] and r["controls"]["zyg_R"] == pytest.approx(0.5, abs=1e-3)
+    assert out.report["smileL"]["made"]
+
+
 def test_mirror_pose_swaps_twins_and_negates_the_yaw_only():
     from faceforge.blendshapes.symmetric import mirror_columns, mirror_pose
 
