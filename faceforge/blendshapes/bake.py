@@ -61,6 +61,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     """
     import time
 
+    simulate = _finite_or_nan(simulate, len(rest))
     report, todo = {}, []
     for name, spec in specs.items():
         why = _not_made(spec, space, probes, lids, eyes or {})
@@ -116,6 +117,26 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     return BakedShapes(out["names"], stack("frames", (0, n, 3)), stack("cs", (0, m)), stack("jaws", (0, 3)),
                        stack("faps", (0, 68)), stack("gaze", (0, 4)),
                        {name: report[name] for name in specs}, t_jac, t_solve)
+
+
+def _finite_or_nan(simulate, n: int):
+    """``simulate`` (and its ``warm``) that, when a batch raises ``FloatingPointError`` (a pose
+    whose skin went non-finite), settles the batch pose by pose and returns NaN frames (1, n, 3)
+    for the poses that fail, so one diverging pose costs its shape, not the bake."""
+    def safe(run):
+        def call(c, jaw):
+            try:
+                return run(c, jaw)
+            except FloatingPointError:
+                if len(c) == 1:
+                    return np.full((1, n, 3), np.nan)
+                return np.concatenate([call(c[i:i + 1], jaw[i:i + 1]) for i in range(len(c))])
+        return call
+
+    out = safe(simulate)
+    warm = getattr(simulate, "warm", None)
+    out.warm = None if warm is None else safe(warm)
+    return out
 
 
 #: a settled pose whose skin moved more than this fraction of the head's size has diverged

@@ -137,6 +137,17 @@ def test_a_pose_the_simulation_blew_up_is_not_made():
     assert out.names == ["smileL"]
     r = out.report["smileR"]
     assert not r["made"] and "diverged" in r["reason"] and r["controls"]["zyg_R"] == pytest.approx(0.5, abs=1e-3)
+
+    def raising(c, jaw):                 # ... or the settle raises on its non-finite skin
+        if np.any(c[:, 1] > 0):
+            raise FloatingPointError("pose 0: the simulation produced non-finite skin positions")
+        return simulate(c, jaw)
+
+    out = bake_shapes(specs, space, probes, raising, lambda ps: probe_observer(rest, ps), rest,
+                      twins=mirror_columns(COLUMNS))
+    assert out.names == ["smileL"]
+    r = out.report["smileR"]
+    assert not r["made"] and "diverged" in r["reason"] and r["controls"]["zyg_R"] == pytest.approx(0.5, abs=1e-3)
     assert out.report["smileL"]["made"]
 
 
