@@ -120,17 +120,19 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
 
 
 def _finite_or_nan(simulate, n: int):
-    """``simulate`` (and its ``warm``) that, when a batch raises ``FloatingPointError`` (a pose
-    whose skin went non-finite), settles the batch pose by pose and returns NaN frames (1, n, 3)
-    for the poses that fail, so one diverging pose costs its shape, not the bake."""
+    """``simulate`` (and its ``warm``) settling pose by pose, a pose whose settle raises
+    ``FloatingPointError`` (its skin went non-finite) returned as NaN (1, n, 3): one diverging
+    pose costs its shape, not the bake."""
     def safe(run):
-        def call(c, jaw):
+        def one(c, jaw):
             try:
                 return run(c, jaw)
             except FloatingPointError:
-                if len(c) == 1:
-                    return np.full((1, n, 3), np.nan)
-                return np.concatenate([call(c[i:i + 1], jaw[i:i + 1]) for i in range(len(c))])
+                return np.full((1, n, 3), np.nan)
+
+        def call(c, jaw):   # pose by pose (settle goes pose by pose anyway): a failure loses no other
+            return np.concatenate([one(c[i:i + 1], jaw[i:i + 1]) for i in range(len(c))]) if len(c) \
+                else run(c, jaw)
         return call
 
     out = safe(simulate)
