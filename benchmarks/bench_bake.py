@@ -230,6 +230,8 @@ def main(argv=None) -> dict:
                                 if n in works and (not args.heads or n in args.heads)}}}
         if "makehuman" in works and not args.round_trip_only:
             out["reference_makehuman"] = reference_check(works["makehuman"])
+        elif last.get("reference_makehuman"):
+            out["reference_makehuman"] = last["reference_makehuman"]
         if args.heads:
             out["round_trip_makehuman"] = last.get("round_trip_makehuman")
         elif "makehuman" in works:
