@@ -235,12 +235,15 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
         det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
         moved[k] = name
     from faceforge.geometry.triangles import vertex_normals
-    from faceforge.landmarks.lips import inner_lips
-    name = "inner lip edge (walked from the outer lip point on its own lip)"
-    for k, i in inner_lips(v, f, vertex_normals(v, f), pos(), frame).items():
-        det.positions[at[k]] = v[i]
-        det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
-        moved[k] = name
+    from faceforge.landmarks.lips import inner_corners, inner_lips
+    normals = vertex_normals(v, f)
+    for name, found in (("inner lip edge (walked from the outer lip point on its own lip)",
+                         inner_lips(v, f, normals, pos(), frame)),
+                        ("inner lip corner (the slit's end wall)", inner_corners(v, normals, pos(), frame))):
+        for k, i in found.items():
+            det.positions[at[k]] = v[i]
+            det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
+            moved[k] = name
     det.info["rules"] = moved
 
 

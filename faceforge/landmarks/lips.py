@@ -1,4 +1,5 @@
-"""The inner-lip FDPs 2.2, 2.3, 2.6-2.9 of a closed mouth: on their own lip's rolled-in edge.
+"""The inner-lip FDPs 2.2, 2.3, 2.6-2.9 of a closed mouth on their own lip's rolled-in edge, and
+the inner corners 2.4/2.5 on the slit's end wall (:func:`inner_corners`).
 
 Why a rule. Where the lips meet, the detector's inner-lip points lie a pixel off the seam
 and lift onto the lips' front (MakeHuman 2.2 0.75 %, 2.6/2.7 0.78 % of the diagonal in front
@@ -89,4 +90,37 @@ def inner_lips(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, pos
             best = ids[np.argmin(sign * rolled[ids])]
             if sign * rolled[best] <= -ROLL:
                 out[inner] = int(best)
+    return out
+
+
+#: the inner-lip corners: FDP -> +1 on the face's left side, -1 on its right
+CORNERS = {"2.4": 1.0, "2.5": -1.0}
+#: corner search radius, fraction of the mouth's width
+CORNER_REACH = 0.15
+
+
+def inner_corners(vertices: np.ndarray, normals: np.ndarray, pos: dict, frame) -> dict:
+    """{2.4 / 2.5: vertex id}: the inner-lip corners on the lips' slit's end wall.
+
+    The detector's corner sits on the lips' front where they meet (MakeHuman 0.84 %, ICT 0.40 %
+    of the diagonal off); the lips' inner contours end deeper, where the slit's lateral wall
+    faces the midline. Among the vertices within :data:`CORNER_REACH` of the mouth's width
+    (8.3-8.4) of the detected corner, the one whose normal points most toward the midline
+    (``-left`` for 2.4), if it points there at least :data:`ROLL`; else the detector's is kept.
+    """
+    left = np.asarray(frame[0], dtype=np.float64)
+    if not all(k in pos for k in ("8.3", "8.4")):
+        return {}
+    v = np.asarray(vertices, dtype=np.float64)
+    width = abs((pos["8.3"] - pos["8.4"]) @ left)
+    out = {}
+    for k, sign in CORNERS.items():
+        if k not in pos:
+            continue
+        near = np.flatnonzero(np.linalg.norm(v - pos[k], axis=1) <= CORNER_REACH * width)
+        if len(near) == 0:
+            continue
+        inward = normals[near] @ (-sign * left)
+        if inward.max() >= ROLL:
+            out[k] = int(near[np.argmax(inward)])
     return out

@@ -35,7 +35,7 @@ def test_lowered_brows_go_back_to_the_canonical_brow_points():
     pos = {k: v[i] for k, i in {**EYE_CORNERS, **BROW_POINTS}.items()}
     span = abs(pos["3.7"][0] - pos["3.12"][0])
     low = {k: (p - [0.0, 0.15 * span, 0.0] if k in BROW_POINTS else p) for k, p in pos.items()}
-    out = brows(caster, low, FRAME, diag)
+    out = brows(caster, low, FRAME, diag, moved=tuple(BROW_POINTS))
     assert set(out) == set(BROW_POINTS)
     for k, i in BROW_POINTS.items():
         assert np.linalg.norm(out[k] - v[i]) < 1e-3 * diag, k
@@ -48,6 +48,7 @@ def test_scale_and_missing_corners():
     pos = {k: v[i] - np.array([0.0, 0.5, 0.0]) * (k in BROW_POINTS) for k, i in {**EYE_CORNERS, **BROW_POINTS}.items()}
     pos2 = {k: 100.0 * p for k, p in pos.items()}
     a, b = brows(caster, pos, FRAME, diag), brows(caster2, pos2, FRAME, diag2)
+    assert set(a) == {"4.1", "4.2", "4.3", "4.4"}     # the outer brows stay the detector's
     assert all(np.allclose(100.0 * a[k], b[k], atol=1e-6 * diag2) for k in a)
     assert brows(caster, {k: p for k, p in pos.items() if k != "3.8"}, FRAME, diag) == {}
     only = brows(caster, pos, FRAME, diag, moved=("4.1", "4.2"))
