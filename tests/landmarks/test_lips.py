@@ -47,3 +47,19 @@ def test_lips_joined_in_front_are_left_to_the_detector():
     v, f, n, hand = _head("samples/mediapipe/face_model_with_iris.obj")
     assert inner_lips(v, f, n, {k: v[hand[k]] for k in LIPS}, FRAME) == {}
     assert inner_lips(v, f, n, {k: v[hand[k]] for k in LIPS if k != "8.3"}, FRAME) == {}
+
+
+def test_inner_corners_go_to_the_slits_end_wall():
+    # the detector leaves MakeHuman's inner corners on the lips' front, 0.84 % of the diagonal
+    # from the hand points; the vertex facing the midline most is 0.34 % from them
+    from faceforge.landmarks.lips import inner_corners
+
+    v, f, n, hand = _head("samples/makehuman/mh_head_default.obj")
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    pos = {k: v[hand[k]].copy() for k in LIPS + ("2.4", "2.5")}
+    for k in ("2.4", "2.5"):
+        pos[k] += 0.008 * diag * np.array([0.0, 0.0, 1.0])
+    out = inner_corners(v, n, pos, FRAME)
+    for k, sign in (("2.4", 1.0), ("2.5", -1.0)):
+        assert np.linalg.norm(v[out[k]] - v[hand[k]]) < 0.004 * diag, k
+        assert n[out[k]] @ (-sign * FRAME[0]) > 0.9          # it faces the midline
