@@ -39,6 +39,8 @@ CHOSEN = ("mouth-open", "mouth-corner-puller", "eyebrows-left-inner-up", "eyebro
           "mouth-retraction", "mouth-protusion", "nose-left-elevation", "nose-right-elevation",
           "mouth-upward-retraction")
 MESH = ROOT / "samples" / "makehuman" / "mh_head_default.obj"
+#: ``--brows``: the muscles that move the brows
+BROW_MUSCLES = ("frontalis", "corrugator_supercilii", "depressor_supercilii", "orbicularis_oculi")
 
 
 def fitted_workdir(tmp: Path) -> Path:
@@ -60,6 +62,9 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--passes", type=int, default=2)
+    ap.add_argument("--brows", action="store_true",
+                    help="the brow units only, solved with the brow muscles only (frontalis, corrugator, "
+                         "depressor supercilii, orbicularis oculi; no jaw): results units_brows.json")
     args = ap.parse_args(argv)
     from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.blendshapes.rigsolve import field_observer, settler
@@ -80,7 +85,12 @@ def main(argv=None) -> dict:
         settle = SettleSettings.from_config(cfg)
         simulate = settler(head.rig, float(cfg.get("animate.fps")), settle)
         observe = field_observer(head.rest, head.user_index, head.user_rotation)
-        space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
+        muscles = set(mapping.muscles)
+        chosen = CHOSEN
+        if args.brows:
+            muscles = {m for m in muscles if m.startswith(BROW_MUSCLES)}
+            chosen = tuple(n for n in CHOSEN if n.startswith("eyebrows-"))
+        space = control_space(head.controls, muscles, {} if args.brows else mapping.jaw_limits, head.levers.pitch,
                               mapping.max_contraction)
         simulate(*space.pose(np.zeros(len(space.names))))   # compile outside the timing
         t0 = time.perf_counter()
@@ -89,7 +99,7 @@ def main(argv=None) -> dict:
         units = np.load(UNITS)
         names = [str(n) for n in units["names"]]
         rows, fields = {}, {}
-        for name, delta in ((n, units["deltas"][names.index(n)]) for n in CHOSEN):
+        for name, delta in ((n, units["deltas"][names.index(n)]) for n in chosen):
             t0 = time.perf_counter()
             res = solve_activations(delta.astype(float).ravel(), J, space, simulate, observe, passes=args.passes)
             cos, ratio = field_agreement(res.observed, delta)
@@ -117,7 +127,7 @@ def main(argv=None) -> dict:
                "passing": sum(r["ok"] for r in rows.values()), "of": len(rows),
                "mirror_rel_diff": mirror}
         print(f"worst {worst}; {out['passing']}/{len(rows)} pass; jacobian {t_jac:.1f} s; mirror {mirror}")
-        write_results("units", out)
+        write_results("units_brows" if args.brows else "units", out)
         return out
 
 

@@ -39,6 +39,7 @@ def load_head(workdir: Path, sets=(), mapping_path=None):
     config = load_config(remembered=workdir / "config.yaml", sets=list(sets))
     head = BoundHead(workdir / "fit", workdir / "bind", config)
     head._bench_lids = head.eyelids(config)
+    head._bench_config = config
     if mapping_path is None:
         cal = stage.calibrated_mapping_path(workdir)
         mapping_path = cal if cal.is_file() else stage.mapping_template_path(config)
@@ -50,14 +51,21 @@ def load_head(workdir: Path, sets=(), mapping_path=None):
     return head, mapping, config
 
 
-def settle(head, mapping, faps: np.ndarray, settle_frames: int = 30, lids=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def settle(head, mapping, faps: np.ndarray, settle_frames: int | None = None, lids=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Settled skins (k, n, 3), contractions (k, m) and jaw (k, 3) for FAP rows (k, 68),
-    eyelids laid over."""
+    eyelids laid over. Each pose is held until the skin stops moving (``animate.statics``, as
+    ``faceforge expressions`` holds it), or for ``settle_frames`` fixed frames when given."""
     from faceforge.animation.controls import controls
     from faceforge.animation.playback import static_poses
+    from faceforge.animation.statics import SettleSettings
+    from faceforge.animation.statics import settle as held
 
     c, jaw = controls(mapping, faps, head)
-    skins = static_poses(head.rig, c, jaw, 25.0, settle=settle_frames)
+    if settle_frames is None:
+        skins = held(head.rig, c, jaw, 25.0, SettleSettings.from_config(head._bench_config))
+        head.rig.reset()
+    else:
+        skins = static_poses(head.rig, c, jaw, 25.0, settle=settle_frames)
     lids = lids if lids is not None else getattr(head, "_bench_lids", None)
     if lids is not None:
         skins = lids.apply(skins, faps)

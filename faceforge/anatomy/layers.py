@@ -186,6 +186,7 @@ class MusculoskeletalSystem:
         self.settings = settings
         self._extra: list = []
         self._jaw = np.eye(4)
+        self._modiolus: dict = {}   # sphincter name -> anatomy.muscles.modiolus.Modiolus
 
     # -- construction -------------------------------------------------------------
     @classmethod
@@ -340,6 +341,27 @@ class MusculoskeletalSystem:
         except KeyError:
             raise KeyError(f"unknown body {name!r}; bodies: {', '.join(self._names)}") from None
 
+    def sphincter_lines(self, name: str, world=None) -> dict:
+        """The loop points of sphincter ``name`` on ``world (N, 3)`` (default: the current
+        vertices): ``{"A1": (k1, 3), "A3": (k3, 3)}``."""
+        world = self._world_v if world is None else np.asarray(world, FLOAT)
+        for layer in self._layers:
+            for m, own in zip(layer.muscles, layer.pieces):
+                if m.name == name:
+                    pts = bary_points(layer.bary, layer.vids, world, np.empty((len(layer.vids), 3)))
+                    return {key: pts[sl].copy() for key, sl in own.items()}
+        raise KeyError(f"unknown muscle {name!r}")
+
+    def set_modiolus(self, name: str, modiolus) -> None:
+        """Tie sphincter ``name``'s corners to a modiolus (:mod:`faceforge.anatomy.muscles.modiolus`;
+        None unties them); the rest targets are set again."""
+        if modiolus is None:
+            self._modiolus.pop(name, None)
+        else:
+            self._modiolus[name] = modiolus
+        for layer in self._layers:
+            self._set_targets(layer, self._rest_controls)
+
     # -- stepping -------------------------------------------------------------------
     def add_layer(self, layer) -> None:
         """Append a shallower layer (e.g. the skin): an object with ``step(system, dt)``."""
@@ -425,6 +447,8 @@ class MusculoskeletalSystem:
         for i, (m, s, own) in enumerate(zip(layer.muscles, layer.slots, layer.pieces)):
             if len(s) and m.kind != "linear":          # the sphincter, in numpy
                 lp = {key: pts[sl] for key, sl in own.items()}
+                if m.name in self._modiolus:   # the corners ride on the muscles inserting there
+                    lp = self._modiolus[m.name].apply(lp, self._world_v, contractions)
                 c = contractions[layer.columns[i]]
                 k = layer.protrusion_columns[i]
                 p = contractions[k] if k >= 0 else 0.0

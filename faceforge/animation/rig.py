@@ -310,4 +310,10 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
         raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
                          "another muscle map)") from None
     settings = replace(settings, damping=float(config.get("muscle.damping")))
-    return MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings, Mirror.from_arrays(fit))
+    system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings, Mirror.from_arrays(fit))
+    from faceforge.anatomy.muscles.modiolus import attach_modiolus
+
+    attach_modiolus(system, muscles=tuple(config.get("muscle.sphincter.modiolus.muscles")),
+                    radius=float(config.get("muscle.sphincter.modiolus.radius")),
+                    ramp=float(config.get("muscle.sphincter.modiolus.ramp")))
+    return system

@@ -223,6 +223,27 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
                 det.positions[at[k]] = p
                 det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
                 moved[k] = name
+    # after the eye rules, and only where they placed all four eye corners from the mesh: the
+    # brows' height is measured from those corners (featureless eyes, e.g. the MediaPipe mask's
+    # triangulated-shut ones, leave the corners the detector's guess, as biased as its brows)
+    from faceforge.landmarks.brows import EYE_CORNERS, brows
+    name = "eyebrow height (MediaPipe's canonical face over the eye corners)"
+    found = {} if not all(k in moved for k in EYE_CORNERS) else brows(
+        RayCaster(v, f) if front is None else (front, v, f), pos(), frame, diagonal)
+    for k, p in found.items():
+        det.positions[at[k]] = p
+        det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
+        moved[k] = name
+    from faceforge.geometry.triangles import vertex_normals
+    from faceforge.landmarks.lips import inner_corners, inner_lips
+    normals = vertex_normals(v, f)
+    for name, found in (("inner lip edge (walked from the outer lip point on its own lip)",
+                         inner_lips(v, f, normals, pos(), frame)),
+                        ("inner lip corner (the slit's end wall)", inner_corners(v, normals, pos(), frame))):
+        for k, i in found.items():
+            det.positions[at[k]] = v[i]
+            det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
+            moved[k] = name
     det.info["rules"] = moved
 
 

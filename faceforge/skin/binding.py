@@ -259,7 +259,12 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     brow : ((n,) bool, sequence of int), optional
         The brow's skin (:func:`faceforge.skin.brow.brow_mask`) and the brow muscles (indices
         into ``bodies``): a vertex of it on the bone after the rays and the fallback binds to
-        the closest point of those muscles (:func:`faceforge.skin.brow.brow_anchors`).
+        the closest point of those muscles (:func:`faceforge.skin.brow.brow_anchors`). A third
+        item, pairs ((n,) bool, indices): the eyes' skin (:func:`faceforge.skin.brow.eye_mask`)
+        and muscles it may not bind to, rebinds such vertices to the closest bone
+        (:func:`faceforge.skin.brow.eye_anchors`); a fourth, a reach in skin units (0: off), gives
+        the brow's vertices a second anchor on the nearest other insertion muscle
+        (:func:`faceforge.skin.brow.shared_anchors`).
 
     Returns
     -------
@@ -295,11 +300,22 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         moved = brow_anchors(v, bodies, rules.kinds, list(brow[1]), np.asarray(brow[0], bool), max_distance,
                              body, face, pts, dist, rules.allowed)
         outward[moved] = closest[moved] = False
+        from faceforge.skin.brow import eye_anchors
+
+        for eye, eye_ids in (brow[2] if len(brow) > 2 else ()):   # the eye's skin stays off these muscles
+            moved = eye_anchors(v, bodies, rules.kinds, list(eye_ids), np.asarray(eye, bool), max_distance,
+                                body, face, pts, dist, rules.allowed)
+            outward[moved], closest[moved] = False, True
     ids = np.flatnonzero(body >= 0).astype(INT)
     status = np.zeros(n, np.int8)
     status[ids] = rules.kinds[body[ids]]
     anchors = (ids, body[ids], face[ids], pts[ids], dist[ids], outward[ids], closest[ids])
     anchors = second_anchors(v, nrm, rules, anchors, insertions, outward, corner)
+    if brow is not None and len(brow) > 3 and brow[3] > 0:   # the brow's dermis takes two insertions
+        from faceforge.skin.brow import shared_anchors
+
+        anchors = shared_anchors(v, bodies, anchors, np.asarray(brow[0], bool), list(brow[1]),
+                                 list(insertions or ()), brow[3])
     ids, a_body, a_face, a_pts, a_dist, a_out, a_closest = anchors
     bary = np.zeros((len(ids), 3), FLOAT)
     for b in np.unique(a_body):

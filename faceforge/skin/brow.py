@@ -94,3 +94,115 @@ def brow_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts,
         body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
         done[t] = True
     return done
+
+
+#: each eye: inner canthus, outer canthus, upper lid, lower lid FDPs (subject's left, right)
+EYES = (("3.11", "3.7", "3.1", "3.3"), ("3.12", "3.8", "3.2", "3.4"))
+
+#: the eye's skin reaches this many eye widths (inner to outer canthus) from the canthi's segment
+EYE_REACH = 1.0
+
+
+def eye_mask(vertices, landmarks: dict, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """(n,) bool: the skin of the eyes, which no brow muscle may hold: within
+    :data:`EYE_REACH` eye widths of an eye's canthi (:data:`EYES`), no higher than its upper
+    lid FDP plus :data:`LID_CLEARANCE_MM` (below the brow band), and either no lower than its
+    lower lid FDP less that (the lids and their margins) or that far behind the canthi (the
+    socket a mesh without eyeballs closes behind the lids).
+
+    By their rays (§8) the lid margins and the socket's lining bind to whatever the ray meets
+    across the opening: on the MakeHuman sample 42 such vertices per eye were tied to the
+    corrugator, the depressor supercilii, the frontalis or the orbital orbicularis oculi, so
+    the corrugator pulled the lids 2.6-3.6 mm toward the nose and the socket's floor held the
+    brow back. No vertex without the FDPs."""
+    from faceforge.anatomy.tissue import units_per_mm
+
+    v = np.asarray(vertices, FLOAT)
+    mask = np.zeros(len(v), bool)
+    try:
+        mm = units_per_mm(landmarks)
+    except KeyError:
+        return mask
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    if not all(k in landmarks for eye in EYES for k in eye):
+        return mask
+    p = {k: np.asarray(landmarks[k], FLOAT) for eye in EYES for k in eye}
+    forward = np.cross(p["3.7"] - p["3.8"], u)   # subject's left x up: out of the face
+    forward /= max(float(np.linalg.norm(forward)), 1e-300)
+    gap = LID_CLEARANCE_MM * mm
+    for inner, outer, upper, lower in EYES:
+        width = float(np.linalg.norm(p[outer] - p[inner]))
+        near = _segment_distance(v, p[inner], p[outer]) <= EYE_REACH * width
+        h = v @ u
+        lids = h >= float(p[lower] @ u) - gap
+        behind = (v - 0.5 * (p[inner] + p[outer])) @ forward < -gap
+        mask |= near & (h <= float(p[upper] @ u) + gap) & (lids | behind)
+    return mask
+
+
+def eye_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts, dist,
+                allowed=None) -> np.ndarray:
+    """Rebind the vertices of ``mask`` (n,) bool that are on one of the bodies ``muscles``
+    (indices) to the closest point of the bone (every body whose ``kinds`` is not a muscle)
+    within ``max_distance`` (:func:`eye_mask`). Updates ``body, face, pts, dist`` in place (a
+    vertex with no bone in reach keeps its anchor); returns the (n,) bool mask rebound."""
+    from faceforge.geometry.surface_points import closest_points
+    from faceforge.skin.casting import MUSCLE
+
+    done = np.zeros(len(v), bool)
+    todo = np.flatnonzero(np.asarray(mask, bool) & np.isin(body, list(muscles)))
+    best = np.full(len(todo), np.inf)
+    for i in (i for i in range(len(bodies)) if kinds[i] != MUSCLE) if len(todo) else ():
+        p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
+        take = (d < best) & (d <= max_distance)
+        if allowed is not None:
+            take &= allowed[todo, i]
+        best[take] = d[take]
+        t = todo[take]
+        body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
+        done[t] = True
+    return done
+
+
+#: ``bind.brow_shared_mm``: brow skin on one brow muscle takes a second anchor on another
+#: insertion muscle whose surface is within this many mm (scaled by ES0) of its first anchor
+BROW_SHARED_MM = 10.0
+
+
+def shared_anchors(v, bodies, anchors: tuple, mask, brow, muscles, reach: float) -> tuple:
+    """Second anchors of the brow (beyond §8): each vertex of ``mask`` (n,) bool bound to one of
+    the bodies ``brow`` (indices: the brow muscles) and to no other body yet takes a second
+    anchor at the closest point of the nearest other of the bodies ``muscles`` (the brow's
+    insertions, the corrugator and the depressor supercilii) when that point lies within
+    ``reach`` (skin units) of its first anchor.
+
+    The brow's dermis receives the corrugator, the depressor supercilii and the frontalis
+    together; bound by its ray to one of them, each vertex followed that muscle alone (MakeHuman,
+    depressor supercilii at c = 1: the muscle 7.1 mm down on average, 12.7 at its insertion, FDP
+    4.1, bound to the corrugator, 1.9 mm). ``anchors``: ``(vertex ids, body, face, point,
+    distance, outward, closest)`` rows (k,), sorted by vertex; new rows follow their vertex's
+    first. Returns the anchors."""
+    from faceforge.geometry.surface_points import closest_points
+
+    ids, a_body, _, a_pts = anchors[:4]
+    muscles = [int(i) for i in muscles]
+    count = np.bincount(ids, minlength=len(v))
+    cand = np.flatnonzero(np.asarray(mask, bool)[ids] & np.isin(a_body, list(brow)) & (count[ids] == 1))
+    if not len(cand) or not muscles:
+        return anchors
+    best = np.full(len(cand), np.inf)
+    hit = [np.zeros(len(cand), np.int64), np.zeros(len(cand), np.int64), np.zeros((len(cand), 3)),
+           np.zeros(len(cand))]
+    for i in muscles:
+        p, d, tri = closest_points(v[ids[cand]], bodies[i].vertices, bodies[i].faces)
+        gap = np.linalg.norm(p - a_pts[cand], axis=1)
+        take = (a_body[cand] != i) & (gap <= reach) & (gap < best)
+        best[take] = gap[take]
+        hit[0][take], hit[1][take], hit[2][take], hit[3][take] = i, tri[take], p[take], d[take]
+    ok = np.isfinite(best)
+    rows = cand[ok]
+    extra = (ids[rows], hit[0][ok], hit[1][ok], hit[2][ok], hit[3][ok], np.zeros(len(rows), bool),
+             np.zeros(len(rows), bool))
+    order = np.argsort(np.concatenate([ids, ids[rows]]), kind="stable")   # each right after its first
+    return tuple(np.concatenate([a, np.asarray(b, dtype=np.asarray(a).dtype)])[order]
+                 for a, b in zip(anchors, extra))

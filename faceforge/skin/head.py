@@ -12,7 +12,7 @@ from faceforge.geometry.triangles import check_mesh
 from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, bind_skin
 from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
-from faceforge.skin.brow import BROW_BAND_MM, brow_mask
+from faceforge.skin.brow import BROW_BAND_MM, brow_mask, eye_mask
 from faceforge.skin.rules import (MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
                                   modiolus_mask)
 
@@ -75,7 +75,7 @@ def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
-              brow_muscles=()) -> BoundSkin:
+              brow_muscles=(), brow_shared_mm: float = 0.0) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -107,6 +107,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.brow_band_mm``, ``bind.brow_muscles`` (names or pair names as ``insertions``):
         brow skin that its rays bound to the bone binds to the closest brow muscle
         (:mod:`faceforge.skin.brow`; 0 or none: by its rays, as the paper).
+    brow_shared_mm : float
+        ``bind.brow_shared_mm``: brow skin on one brow muscle also anchors to the nearest other
+        insertion within this many mm (scaled by ES0) of its anchor
+        (:func:`faceforge.skin.brow.shared_anchors`; 0: off).
     mirror : faceforge.geometry.mirror.Mirror or None
         A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
         image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
@@ -159,6 +163,12 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
     brow_ids, _ = match_insertions(brow_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     brow = brow_mask(cut.vertices, pts, brow_band_mm, up=up) if brow_ids else np.zeros(len(cut.vertices), bool)
+    eye_ids, _ = match_insertions(tuple(brow_muscles) + ("orbicularis_oculi",) if brow_ids else (),
+                                  [b.name if b.kind == "muscle" else None for b in bodies])
+    eye = eye_mask(cut.vertices, pts, up=up) if eye_ids else np.zeros(len(cut.vertices), bool)
+    from faceforge.anatomy.tissue import units_per_mm
+
+    shared = brow_shared_mm * units_per_mm(pts) if brow.any() and brow_shared_mm > 0 else 0.0
     body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
                   for b in bodies]
     face_sides = [ring_face_sides(b.vertices, b.faces, cut, up=up) if s == AROUND_MOUTH else None
@@ -166,7 +176,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
-                        modiolus=corner, brow=(brow, brow_ids))
+                        modiolus=corner,
+                        brow=(brow, brow_ids, ((eye, eye_ids),), shared))
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
@@ -195,6 +206,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     report["brow"] = {"band_mm": float(brow_band_mm), "vertices": int(brow.sum()),
                       "on_brow_muscles": int((np.isin(first_of, np.flatnonzero(brow))
                                               & np.isin(binding.body[first], brow_ids)).sum())}
+    report["eyes"] = {"vertices": int(eye.sum()),
+                      "on_brow_muscles": int((np.isin(first_of, np.flatnonzero(eye))
+                                              & np.isin(binding.body[first], eye_ids)).sum())}
     report["mouth"] = cut.report()
     report["influence"] = {
         "sources": int(len(sources)), "normalisation": float(scale),

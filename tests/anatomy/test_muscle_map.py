@@ -198,6 +198,7 @@ def test_small_map_resolves_landmark_points(tmp_path, skull):
     ("units: template", "units: mm", r"units"),
     ("origin: [[3.5, 8.0, 8.5], [5.0, 7.5, 7.5]]", "origin: [[3.5, 8.0, 8.5]]", r"top_L.*origin.*at least 2"),
     ("    mirror_of: top_L\n", "    mirror_of: top_L\n    h: 5\n", r"top_R.*unknown key.*h"),
+    ("    w: 2\n", "    w: 2\n    max_contraction: 1.0\n", r"top_L.*max_contraction"),
 ])
 def test_errors_name_the_file_and_the_muscle(tmp_path, skull, old, new, pattern):
     assert old in GOOD
@@ -233,3 +234,10 @@ def test_with_points_is_the_inverse_of_points(muscles):
             assert np.array_equal(getattr(again, key), getattr(spec, key) * 2.0 + 1.0), (spec.name, key)
         with pytest.raises(ValueError, match=spec.name):
             spec.with_points(moved[:-1])
+
+
+def test_max_contraction_is_kept_and_mirrored(tmp_path, skull, by_name):
+    specs = load_muscle_map(write(tmp_path, GOOD.replace("    w: 2\n", "    w: 2\n    max_contraction: 0.7\n", 1)),
+                            skull)
+    assert [s.max_contraction for s in specs] == [None, 0.7, 0.7, None]
+    assert by_name["depressor_anguli_L"].max_contraction == by_name["depressor_anguli_R"].max_contraction == 0.7

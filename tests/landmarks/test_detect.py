@@ -20,7 +20,7 @@ SAMPLES = {
 #: (median, p90, max) error bounds, fraction of the diagonal: the measured values (benchmarks/
 #: results/landmarks.json) plus a margin; the MediaPipe mask is a face without a head, whose
 #: diagonal is a third of the others'
-BOUNDS = {"makehuman": (0.007, 0.016, 0.028), "ict": (0.0045, 0.014, 0.018), "mediapipe": (0.015, 0.030, 0.036)}
+BOUNDS = {"makehuman": (0.0055, 0.0145, 0.02), "ict": (0.004, 0.012, 0.015), "mediapipe": (0.014, 0.028, 0.033)}
 
 
 def _mesh(name):
@@ -223,6 +223,19 @@ def test_fit_without_a_landmark_file_detects_them_says_so_and_is_cached(invoke, 
     assert again.exit_code == 0 and "landmarks: up to date" in again.stderr and "fit: up to date" in again.stderr
 
 
+
+@pytest.mark.slow
+def test_makehuman_fit_from_detected_landmarks_passes_its_checks(invoke, tmp_path):
+    # With the detector's brows and inner lips (land2's points) this fit failed its checks on
+    # the 2026-11-27 tree (muscles 97.4 % inside the skin, poke 2.0 % of the diagonal); with the
+    # brow and inner-lip rules it passes (99.2 %, 0.73 %)
+    mesh = tmp_path / "head.obj"
+    mesh.write_bytes(SAMPLES["makehuman"].read_bytes())
+    res = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
+    assert res.exit_code == 0, res.stderr
+    report = yaml.safe_load((tmp_path / "w/fit/report.json").read_text())
+    assert all(report["checks"].values()), report["checks"]
+
 def test_a_head_turned_between_the_axes_is_found_as_well(detected):
     from faceforge.landmarks.detect import detect_landmarks
 
@@ -237,3 +250,26 @@ def test_a_head_turned_between_the_axes_is_found_as_well(detected):
     diag = np.linalg.norm(np.ptp(v, axis=0))
     err = np.array([np.linalg.norm(back[i] - hand[k]) / diag for i, k in enumerate(turned.ids) if k in hand])
     assert len(err) == 46 and np.median(err) < 0.007 and err.max() < 0.03
+
+
+def test_brows_and_inner_lips_are_placed_by_the_rules_where_the_mesh_allows(detected):
+    # brows: height from the canonical face over eye corners the mesh gave (MakeHuman: sockets,
+    # ICT: holes); the mask's featureless eyes leave its corners and brows the detector's.
+    # Inner lips: on each lip's own rolled-in edge (MakeHuman: the hand file's vertices); the
+    # mask's bridged lips keep the detector's
+    for name in ("makehuman", "ict"):
+        v, f, det = detected[name]
+        hand = _hand(name, v)
+        diag = np.linalg.norm(np.ptp(v, axis=0))
+        at = {k: i for i, k in enumerate(det.ids)}
+        for k in ("4.1", "4.2", "4.3", "4.4"):
+            assert "eyebrow height" in det.method[at[k]], (name, k)
+            assert np.linalg.norm(det.positions[at[k]] - hand[k]) / diag < 0.017, (name, k)
+        for k in ("2.2", "2.3", "2.4", "2.5"):
+            assert "rule: inner lip" in det.method[at[k]], (name, k)
+            assert np.linalg.norm(det.positions[at[k]] - hand[k]) / diag < 0.0035, (name, k)
+    v, f, det = detected["makehuman"]
+    at = {k: i for i, k in enumerate(det.ids)}
+    assert det.vertex[at["2.2"]] != det.vertex[at["2.3"]]
+    v, f, det = detected["mediapipe"]
+    assert not any(m.startswith(("rule: eyebrow", "rule: inner lip edge")) for m in det.method)

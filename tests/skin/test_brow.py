@@ -52,3 +52,68 @@ def test_brow_skin_on_bone_moves_to_the_nearest_brow_muscle_within_reach():
     body2 = np.array([2, 2, 0, 2])
     assert not brow_anchors(v, bodies, kinds, [0], mask, 4.0, body2, face, pts.copy(), dist.copy()).any()
     assert body2.tolist() == [2, 2, 0, 2]
+
+
+# the eyes' corners and lids of the face above (inner / outer canthus, upper / lower lid FDPs)
+EYE_LANDMARKS = {**LANDMARKS, "3.11": (19.0, 0.0, 0.0), "3.7": (44.0, 0.0, 0.0), "3.3": (31.5, -4.0, 0.0),
+                 "3.12": (-19.0, 0.0, 0.0), "3.8": (-44.0, 0.0, 0.0), "3.4": (-31.5, -4.0, 0.0)}
+
+
+def test_eye_mask_is_the_lids_and_the_socket_behind_them_not_the_brow_or_cheek():
+    from faceforge.skin.brow import eye_mask
+
+    pts = np.array([[31.5, 4.0, 1.0],      # upper lid
+                    [31.5, -4.0, 1.0],     # lower lid margin
+                    [-31.5, 0.0, 0.0],     # the other eye
+                    [31.5, -12.0, -20.0],  # the socket's floor, deep behind the canthi
+                    [31.5, 4.0, -15.0],    # the socket's roof
+                    [31.5, -12.0, 0.0],    # the cheek below the lower lid, in front
+                    [30.0, 15.0, -10.0],   # between the lid and the brow, above the lid + 3 mm
+                    [30.0, 24.0, 0.0],     # the brow
+                    [80.0, 0.0, -20.0]])   # behind, but beyond the eye's reach (the temple)
+    assert eye_mask(pts, EYE_LANDMARKS).tolist() == [True, True, True, True, True, False, False, False, False]
+    assert not eye_mask(pts, LANDMARKS).any()   # no canthi: no eye
+
+
+def test_eye_skin_on_a_brow_muscle_moves_to_the_bone():
+    from faceforge.skin.brow import eye_anchors
+
+    bodies = [Body("corrugator_L", "muscle", *_plane(-5.0, 0.0, 60.0)),
+              Body("zygomaticus_L", "muscle", *_plane(-3.0, 0.0, 60.0)),
+              Body("cranium", "cranium", *_plane(-30.0, -100.0, 100.0))]
+    kinds = np.array([MUSCLE, MUSCLE, CRANIUM])
+    v = np.array([[30.0, 2.0, -10.0], [31.0, 2.0, -10.0], [30.0, 20.0, 0.0]])
+    mask = np.array([True, True, False])
+    body = np.array([0, 1, 0])
+    face, pts, dist = np.zeros(3, int), np.zeros((3, 3)), np.array([5.0, 7.0, 5.0])
+    moved = eye_anchors(v, bodies, kinds, [0], mask, 25.0, body, face, pts, dist)
+    # in the eye and on a brow muscle: to the bone; on another muscle or outside the eye: kept
+    assert moved.tolist() == [True, False, False]
+    assert body.tolist() == [2, 1, 0]
+    np.testing.assert_allclose(pts[0], [30.0, 2.0, -30.0])
+    np.testing.assert_allclose(dist[0], 20.0)
+
+
+def test_brow_skin_on_one_insertion_also_anchors_to_the_nearest_other_within_reach():
+    from faceforge.skin.brow import shared_anchors
+
+    bodies = [Body("corrugator_L", "muscle", *_plane(-5.0, 0.0, 30.0)),
+              Body("depressor_supercilii_L", "muscle", *_plane(-6.0, 0.0, 20.0)),
+              Body("frontalis_L", "muscle", *_plane(-4.0, 0.0, 60.0)),
+              Body("cranium", "cranium", *_plane(-30.0, -100.0, 100.0))]
+    v = np.array([[10.0, 20.0, 0.0], [28.0, 20.0, 0.0], [15.0, 20.0, 0.0], [12.0, 20.0, 0.0], [40.0, 20.0, 0.0]])
+    ids = np.array([0, 1, 2, 3, 3, 4])
+    body = np.array([0, 0, 2, 0, 1, 3])
+    pts = v[ids] * [1.0, 1.0, 0.0] + np.array([[0, 0, -5.0], [0, 0, -5.0], [0, 0, -4.0], [0, 0, -5.0],
+                                                 [0, 0, -6.0], [0, 0, -30.0]])
+    anchors = (ids, body, np.zeros(6, int), pts, np.abs(pts[:, 2]), np.zeros(6, bool), np.zeros(6, bool))
+    mask = np.array([True, True, True, True, False])
+    out = shared_anchors(v, bodies, anchors, mask, [0, 1, 2], [0, 1], 4.0)
+    # vertex 0 (corrugator) gains the depressor below it; 1 lies beyond the depressor's reach
+    # (8 mm off its edge); 2 (frontalis) gains the nearer insertion, the corrugator; 3 has two
+    # anchors already; 4 is outside the brow
+    assert out[0].tolist() == [0, 0, 1, 2, 2, 3, 3, 4]
+    assert out[1].tolist() == [0, 1, 0, 2, 0, 0, 1, 3]
+    np.testing.assert_allclose(out[3][1], [10.0, 20.0, -6.0])
+    np.testing.assert_allclose(out[3][4], [15.0, 20.0, -5.0])
+    assert shared_anchors(v, bodies, anchors, mask, [0, 1, 2], [0, 1], 0.5)[0].tolist() == ids.tolist()

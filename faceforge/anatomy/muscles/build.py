@@ -72,6 +72,8 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                     from faceforge.anatomy.muscles.mirror import symmetric_sheet_lines
 
                     al = symmetric_sheet_lines(al, list(zip(expand_lies_on(spec.lies_on), parts)), mirror, exact)
+                if getattr(spec, "max_contraction", None) is not None:
+                    kw["max_contraction"] = spec.max_contraction
                 m = build_linear_muscle(spec.name, al["A3"], al["A1"], al["A0"], al["A2"], v, f, spec.h, spec.w, t,
                                         stiffness.get("linear", {}), **kw)
             else:

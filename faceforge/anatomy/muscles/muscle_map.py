@@ -32,7 +32,7 @@ from faceforge.io.stagefiles import yaml_safe_load
 
 TYPES = ("linear", "sphincter")
 COMMON_KEYS = {"name", "type", "layer", "lies_on", "active", "h", "w", "thickness"}
-LINEAR_KEYS = COMMON_KEYS | {"origin", "insertion", "fibre_a", "fibre_b"}
+LINEAR_KEYS = COMMON_KEYS | {"origin", "insertion", "fibre_a", "fibre_b", "max_contraction"}
 SPHINCTER_KEYS = COMMON_KEYS | {"inner", "outer"}
 MIRROR_KEYS = {"name", "mirror_of", "lies_on"}
 TOP_KEYS = {"units", "muscles"}
@@ -63,6 +63,8 @@ class MuscleSpec:
     fibre_a, fibre_b : (k, 3) float64, intermediate fibre points, k >= 0 (linear)
     inner, outer : (k, 3) float64, k >= 3, closed loops (sphincter; empty for linear)
     mirror_of : name of the muscle this one mirrors, or None
+    max_contraction : float or None, linear: the fibre shortening at c = 1 (``kappa`` of
+        :mod:`faceforge.anatomy.muscles.linear`, in (0, 0.9)); None: the default
     """
 
     name: str
@@ -80,6 +82,7 @@ class MuscleSpec:
     inner: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     outer: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     mirror_of: str | None = None
+    max_contraction: float | None = None
 
     def action_lines(self) -> dict[str, np.ndarray]:
         """The four action lines A0..A3 as polylines {name: (k, 3)} (see module docstring)."""
@@ -238,6 +241,11 @@ def _parse_muscle(entry, skull, ctx, line):
         fields["insertion"] = _points(entry, "insertion", skull, ctx, name, line, 2)
         fields["fibre_a"] = _points(entry, "fibre_a", skull, ctx, name, line, 0)
         fields["fibre_b"] = _points(entry, "fibre_b", skull, ctx, name, line, 0)
+        kappa = entry.get("max_contraction")
+        if kappa is not None:
+            if isinstance(kappa, bool) or not isinstance(kappa, (int, float)) or not 0.0 < kappa < 0.9:
+                ctx.fail(f"max_contraction: expected a fibre shortening in (0, 0.9), got {kappa!r}", line, name)
+            fields["max_contraction"] = float(kappa)
     else:
         fields["inner"] = _points(entry, "inner", skull, ctx, name, line, 3)
         fields["outer"] = _points(entry, "outer", skull, ctx, name, line, 3)

@@ -106,7 +106,8 @@ def run(ctx):
                       lips_to_ring=bool(ctx.config.get("bind.lips_to_ring")),
                       modiolus_radius=float(ctx.config.get("bind.modiolus_radius")), mirror=head["mirror"],
                       brow_band_mm=float(ctx.config.get("bind.brow_band_mm")),
-                      brow_muscles=tuple(str(n) for n in ctx.config.get("bind.brow_muscles")))
+                      brow_muscles=tuple(str(n) for n in ctx.config.get("bind.brow_muscles")),
+                      brow_shared_mm=float(ctx.config.get("bind.brow_shared_mm")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
     save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())

@@ -1,0 +1,65 @@
+"""The inner-lip rule (faceforge.landmarks.lips) on the sample meshes, without the detector."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from faceforge.landmarks.lips import inner_lips
+
+ROOT = Path(__file__).resolve().parents[2]
+FRAME = (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]))   # the samples face +Z
+LIPS = ("2.2", "2.3", "2.6", "2.7", "2.8", "2.9", "8.1", "8.2", "8.3", "8.4", "8.5", "8.6", "8.7", "8.8")
+
+
+def _head(rel):
+    from faceforge.geometry.triangles import vertex_normals
+    from faceforge.io.landmarks import read_landmarks
+    from faceforge.io.mesh import load_mesh
+
+    mesh = ROOT / rel
+    v, f, _ = load_mesh(mesh)
+    raw = read_landmarks(mesh.with_name(mesh.stem + ".fdp.yaml"))
+    hand = {k: int(raw.vertex[i]) for i, k in enumerate(raw.ids)}
+    return v, f, vertex_normals(v, f), hand
+
+
+def test_inner_lip_points_on_the_lips_front_go_to_each_lips_rolled_in_edge():
+    # MakeHuman: a slit into a closed mouth cavity; the inner points as the detector leaves them,
+    # on the lips' front (half a percent of the diagonal forward and toward their own lip's outer
+    # point), come back to the hand file's vertices, the upper ones on the upper lip, the lower
+    # ones on the lower lip (the two lips' edges lie 0.6 % of the diagonal apart)
+    v, f, n, hand = _head("samples/makehuman/mh_head_default.obj")
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    pos = {k: v[hand[k]].copy() for k in LIPS}
+    for k, outer in (("2.2", "8.1"), ("2.3", "8.2"), ("2.8", "8.7"), ("2.9", "8.8")):
+        pos[k] += 0.005 * diag * np.array([0.0, 0.0, 1.0]) + 0.2 * (v[hand[outer]] - v[hand[k]])
+    out = inner_lips(v, f, n, pos, FRAME)
+    for k in ("2.2", "2.3", "2.8", "2.9"):
+        assert out[k] == hand[k], (k, out.get(k), hand[k])
+    assert n[out["2.2"]] @ FRAME[1] < -0.5 < 0.5 < n[out["2.3"]] @ FRAME[1]      # upper faces down, lower up
+    assert np.linalg.norm(v[out["2.6"]] - v[hand["2.6"]]) < 0.006 * diag
+
+
+def test_lips_joined_in_front_are_left_to_the_detector():
+    # the MediaPipe mask's lips are bridged by forward-facing triangles: one surface, no rule
+    v, f, n, hand = _head("samples/mediapipe/face_model_with_iris.obj")
+    assert inner_lips(v, f, n, {k: v[hand[k]] for k in LIPS}, FRAME) == {}
+    assert inner_lips(v, f, n, {k: v[hand[k]] for k in LIPS if k != "8.3"}, FRAME) == {}
+
+
+def test_inner_corners_go_to_the_slits_end_wall():
+    # the detector leaves MakeHuman's inner corners on the lips' front, 0.84 % of the diagonal
+    # from the hand points; the vertex facing the midline most is 0.34 % from them
+    from faceforge.landmarks.lips import inner_corners
+
+    v, f, n, hand = _head("samples/makehuman/mh_head_default.obj")
+    diag = float(np.linalg.norm(np.ptp(v, axis=0)))
+    pos = {k: v[hand[k]].copy() for k in LIPS + ("2.4", "2.5")}
+    for k in ("2.4", "2.5"):
+        pos[k] += 0.008 * diag * np.array([0.0, 0.0, 1.0])
+    out = inner_corners(v, n, pos, FRAME)
+    for k, sign in (("2.4", 1.0), ("2.5", -1.0)):
+        assert np.linalg.norm(v[out[k]] - v[hand[k]]) < 0.004 * diag, k
+        assert n[out[k]] @ (-sign * FRAME[0]) > 0.9          # it faces the midline
