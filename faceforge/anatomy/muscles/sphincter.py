@@ -110,14 +110,15 @@ def _conic_lstsq(x, y):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd):  # pragma: no cover - numba
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd, low=0.0):  # pragma: no cover - numba
     """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
     :func:`sphincter_displacement` with ``c`` (already times the maximal closure) and ``lift``
     (``fwd (3,)``: :attr:`Muscle.forward`) when either is > 0; before that, with ``carry
     (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
-    r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples. Same values as the numpy code to
+    r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples; ``low``: the lower part's raise
+    (:func:`lower_raise`, already times the maximal closure). Same values as the numpy code to
     round-off (LAPACK's, summation order).
 
     Length: one compiled kernel (ellipse fit and the per-sample displacement in one pass); kept
@@ -131,7 +132,7 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         for i in range(h):
             for j in range(3):
                 grid[i, 0, j] += carry[i] * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
-    if not (c > 0.0 or lift > 0.0):
+    if not (c > 0.0 or lift > 0.0 or low > 0.0):
         return
     # fit_ellipse of the 2h samples (inner then outer)
     k = 2 * h
@@ -183,6 +184,7 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         for j in range(3):
             nrm[j] = -nrm[j]
     lift = lift * b
+    up = 1.0 if db[1] >= 0.0 else -1.0    # the lower part's raise: along db turned to +Y (up)
     for i in range(h):
         xo = 0.0
         yo = 0.0
@@ -195,8 +197,9 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
             tb += (o[j] - grid[i, 0, j]) * db[j]
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
+        wl = low * b * up * min(max(-up * yo / b, 0.0), 1.0)      # lower_weights
         for j in range(3):
-            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])) * fall
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j]) + wl * db[j]) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
 
@@ -212,6 +215,45 @@ def protrusion_control(name: str) -> str:
     return name + PROTRUSION_SUFFIX
 
 
+#: suffix of a sphincter's lower-part control (:func:`lower_control`)
+LOWER_SUFFIX = ".lower"
+
+
+def lower_control(name: str) -> str:
+    """The control name of sphincter ``name``'s lower part (``orbicularis_oris.lower``): a
+    contraction-like value in [0, 1] that raises the lower half of the loops toward the upper
+    one (:func:`lower_raise`)."""
+    return name + LOWER_SUFFIX
+
+
+def lower_weights(y, b: float) -> np.ndarray:
+    """``(h,)`` share of the lower part's raise per sample pair: ``clip(-y / b, 0, 1)``, ``y (h,)``
+    the outer sample's height over the ellipse's centre along its minor axis turned up (+Y, the
+    frame's convention), ``b`` the semi-minor axis: about 1 at the lower lip's middle, 0 along
+    the upper lip and little at the corners. (Not the samples' index: a symmetric rig restarts
+    the loops at the midline, muscles.mirror.symmetric_loop.)"""
+    return np.clip(-np.asarray(y, FLOAT) / b, 0.0, 1.0)
+
+
+#: how far a full lower-part drive raises the lower lip's middle, in the ellipse's semi-minor
+#: axes times the maximal closure (:func:`lower_raise`)
+LOWER_RAISE = 1.0
+
+
+def lower_raise(drive: float, active: bool, max_contraction: float) -> float:
+    """The lower part's raise for :func:`sphincter_displacement` / the compiled targets: ``drive``
+    clipped to [0, 1] (0 when passive) times :data:`LOWER_RAISE` and ``max_contraction``.
+
+    Anatomy: the lower lip is raised by the orbicularis oris' lower part (pars marginalis of
+    the lower lip: lips pressed together, AU24; the lower lip rolled in, AU28) and pushed up by
+    the mentalis below it (AU17). The paper's sphincter closes toward the loops' mean, which on
+    a face whose outer loop reaches the chin lies below the lower lip (the whole-ring
+    contraction lowered it on ICT), so the lower part has its own drive: every lower sample pair
+    moves ``low b w_i`` along the ellipse's minor axis toward the upper lip (``b`` the
+    semi-minor axis turned up, ``w_i`` :func:`lower_weights`), with the contraction's fall-off."""
+    return float(np.clip(drive, 0.0, 1.0)) * LOWER_RAISE * max_contraction if active else 0.0
+
+
 #: how far a protruding sphincter turns its lips out (away from the centre along the ellipse's
 #: minor axis: the upper lip up, the lower lip down; 0 at the corners), per unit of its forward
 #: push, times the outer sample's height over the semi-minor axis (:func:`sphincter_displacement`).
@@ -224,7 +266,8 @@ EVERSION = 1.0
 #: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
 SPHINCTER_MAX_CONTRACTION = 0.5
 #: fraction of the fibre length that c = 1 removes from a linear muscle
-def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None) -> np.ndarray:
+def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None,
+                           low: float = 0.0) -> np.ndarray:
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
@@ -233,7 +276,8 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     semi-minor axis, ``y`` the outer sample's coordinate along it (:data:`EVERSION`) and ``n``
     its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
     ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
-    maximal closure.
+    maximal closure. ``low``: the lower part's raise (:func:`lower_raise`): ``low b w_i`` along
+    the minor axis toward the upper lip (:func:`lower_weights`).
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -249,6 +293,9 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
         d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
+    if low:
+        up = 1.0 if db[1] >= 0.0 else -1.0        # the minor axis turned up (+Y)
+        d = d + (low * b * up) * np.outer(lower_weights(up * y, b), db)
     return d * fall[:, None]
 
 
