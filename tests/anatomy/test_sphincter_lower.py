@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.muscles.sphincter import (fit_ellipse, lower_control, lower_raise, lower_weights,
+from faceforge.anatomy.muscles.sphincter import (LOWER_INWARD, fit_ellipse, lower_control, lower_raise, lower_weights,
                                                  sphincter_displacement)
 
 from tests.anatomy.conftest import icosphere, sphincter_on
@@ -41,15 +41,17 @@ def test_lower_part_raises_the_lower_lip_only(order):
     inner = 0.5 * outer
     idx = np.arange(h) if order == "corner first" else np.roll(np.arange(h)[::-1], 4)
     d = np.empty((h, 3))
-    d[idx] = sphincter_displacement(inner[idx], outer[idx], 0.0, 0.0, None, 0.3)
+    fwd = np.array([0.0, 0.0, 1.0])
+    d[idx] = sphincter_displacement(inner[idx], outer[idx], 0.0, 0.0, fwd, 0.3)
     o, _, _, a, b = fit_ellipse(np.concatenate([inner, outer]))
     r = np.sqrt((outer[:, 0] / a) ** 2 + (outer[:, 1] / b) ** 2)
     fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
-    np.testing.assert_allclose(d[:, [0, 2]], 0.0, atol=1e-12)
+    np.testing.assert_allclose(d[:, 0], 0.0, atol=1e-12)
     np.testing.assert_allclose(d[:, 1], 0.3 * b * np.clip(-outer[:, 1] / b, 0, 1) * fall, atol=1e-9)
+    np.testing.assert_allclose(d[:, 2], -LOWER_INWARD * d[:, 1], atol=1e-12)    # and in, toward the teeth
     assert np.all(d[1:8, 1] == 0.0) and d[12, 1] > 0.25
     # with the contraction: the sum of both
-    both = sphincter_displacement(inner, outer, 0.4, 0.0, None, 0.3)
+    both = sphincter_displacement(inner, outer, 0.4, 0.0, fwd, 0.3)
     np.testing.assert_allclose(both, sphincter_displacement(inner, outer, 0.4) + d, atol=1e-12)
 
 

@@ -199,7 +199,8 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
         wl = low * b * up * min(max(-up * yo / b, 0.0), 1.0)      # lower_weights
         for j in range(3):
-            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j]) + wl * db[j]) * fall
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])
+                  + wl * (db[j] - up * LOWER_INWARD * nrm[j])) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
 
@@ -238,6 +239,12 @@ def lower_weights(y, b: float) -> np.ndarray:
 #: how far a full lower-part drive raises the lower lip's middle, in the ellipse's semi-minor
 #: axes times the maximal closure (:func:`lower_raise`)
 LOWER_RAISE = 1.0
+#: how far it moves the lower lip in (toward the teeth, against :attr:`Muscle.forward`) per unit
+#: of its raise: a lip press rolls the lips in (the MakeHuman unit mouth-compression: FDP 8.2
+#: up 97 MNS and back 134, 2.3 up 70 and back 11); raised in the loops' plane alone, whose
+#: normal tilts down with the chin, the lower lip went up and forward (MakeHuman, drive 0.5: FDP
+#: 2.3 up 125 MNS, forward 30) in front of the upper lip, its edge cutting through it
+LOWER_INWARD = 0.5
 
 
 def lower_raise(drive: float, active: bool, max_contraction: float) -> float:
@@ -250,7 +257,8 @@ def lower_raise(drive: float, active: bool, max_contraction: float) -> float:
     a face whose outer loop reaches the chin lies below the lower lip (the whole-ring
     contraction lowered it on ICT), so the lower part has its own drive: every lower sample pair
     moves ``low b w_i`` along the ellipse's minor axis toward the upper lip (``b`` the
-    semi-minor axis turned up, ``w_i`` :func:`lower_weights`), with the contraction's fall-off."""
+    semi-minor axis turned up, ``w_i`` :func:`lower_weights`) and :data:`LOWER_INWARD` times
+    that against the plane's forward normal, with the contraction's fall-off."""
     return float(np.clip(drive, 0.0, 1.0)) * LOWER_RAISE * max_contraction if active else 0.0
 
 
@@ -277,7 +285,8 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
     ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
     maximal closure. ``low``: the lower part's raise (:func:`lower_raise`): ``low b w_i`` along
-    the minor axis toward the upper lip (:func:`lower_weights`).
+    the minor axis toward the upper lip (:func:`lower_weights`) and :data:`LOWER_INWARD` times
+    that inward (``forward`` needed).
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -295,7 +304,10 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
         d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
     if low:
         up = 1.0 if db[1] >= 0.0 else -1.0        # the minor axis turned up (+Y)
-        d = d + (low * b * up) * np.outer(lower_weights(up * y, b), db)
+        n = np.cross(da, db)
+        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
+            n = -n
+        d = d + (low * b) * np.outer(lower_weights(up * y, b), up * db - LOWER_INWARD * n)
     return d * fall[:, None]
 
 
