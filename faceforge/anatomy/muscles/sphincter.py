@@ -184,7 +184,18 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         for j in range(3):
             nrm[j] = -nrm[j]
     lift = lift * b
-    up = 1.0 if db[1] >= 0.0 else -1.0    # the lower part's raise: along db turned to +Y (up)
+    # the lower part's raise: along u, the plane's direction nearest +Y (up), by the ellipse's
+    # radius ru along it (lower_raise)
+    ua = da[1]
+    ub = db[1]
+    un = np.sqrt(ua * ua + ub * ub)
+    if not un > 1e-12:
+        low = 0.0
+        un = 1.0
+    ua /= un
+    ub /= un
+    ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
+    low = low * ru
     for i in range(h):
         xo = 0.0
         yo = 0.0
@@ -197,10 +208,10 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
             tb += (o[j] - grid[i, 0, j]) * db[j]
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
-        wl = low * b * up * min(max(-up * yo / b, 0.0), 1.0)      # lower_weights
+        wl = low * min(max(-(xo * ua + yo * ub) / ru, 0.0), 1.0)      # lower_weights
         for j in range(3):
             dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])
-                  + wl * (db[j] - up * LOWER_INWARD * nrm[j])) * fall
+                  + wl * (ua * da[j] + ub * db[j] - LOWER_INWARD * nrm[j])) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
 
@@ -227,13 +238,15 @@ def lower_control(name: str) -> str:
     return name + LOWER_SUFFIX
 
 
-def lower_weights(y, b: float) -> np.ndarray:
-    """``(h,)`` share of the lower part's raise per sample pair: ``clip(-y / b, 0, 1)``, ``y (h,)``
-    the outer sample's height over the ellipse's centre along its minor axis turned up (+Y, the
-    frame's convention), ``b`` the semi-minor axis: about 1 at the lower lip's middle, 0 along
-    the upper lip and little at the corners. (Not the samples' index: a symmetric rig restarts
-    the loops at the midline, muscles.mirror.symmetric_loop.)"""
-    return np.clip(-np.asarray(y, FLOAT) / b, 0.0, 1.0)
+def lower_weights(y, r: float) -> np.ndarray:
+    """``(h,)`` share of the lower part's raise per sample pair: ``clip(-y / r, 0, 1)``, ``y (h,)``
+    the outer sample's height over the ellipse's centre along ``u``, the direction in the
+    ellipse's plane nearest +Y (up, the frame's convention), ``r`` the ellipse's radius along
+    ``u``: about 1 at the lower lip's middle, 0 along the upper lip and little at the corners.
+    Not the samples' index (a symmetric rig restarts the loops at the midline,
+    muscles.mirror.symmetric_loop), nor the minor axis (on the MediaPipe mask the loops' fitted
+    ellipse is taller than wide: its minor axis runs across the mouth)."""
+    return np.clip(-np.asarray(y, FLOAT) / r, 0.0, 1.0)
 
 
 #: how far a full lower-part drive raises the lower lip's middle, in the ellipse's semi-minor
@@ -256,8 +269,8 @@ def lower_raise(drive: float, active: bool, max_contraction: float) -> float:
     the mentalis below it (AU17). The paper's sphincter closes toward the loops' mean, which on
     a face whose outer loop reaches the chin lies below the lower lip (the whole-ring
     contraction lowered it on ICT), so the lower part has its own drive: every lower sample pair
-    moves ``low b w_i`` along the ellipse's minor axis toward the upper lip (``b`` the
-    semi-minor axis turned up, ``w_i`` :func:`lower_weights`) and :data:`LOWER_INWARD` times
+    moves ``low r w_i`` along ``u``, the ellipse plane's direction nearest +Y (``r`` the
+    ellipse's radius along ``u``, ``w_i`` :func:`lower_weights`), and :data:`LOWER_INWARD` times
     that against the plane's forward normal, with the contraction's fall-off."""
     return float(np.clip(drive, 0.0, 1.0)) * LOWER_RAISE * max_contraction if active else 0.0
 
@@ -284,9 +297,9 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     semi-minor axis, ``y`` the outer sample's coordinate along it (:data:`EVERSION`) and ``n``
     its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
     ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
-    maximal closure. ``low``: the lower part's raise (:func:`lower_raise`): ``low b w_i`` along
-    the minor axis toward the upper lip (:func:`lower_weights`) and :data:`LOWER_INWARD` times
-    that inward (``forward`` needed).
+    maximal closure. ``low``: the lower part's raise (:func:`lower_raise`): ``low r w_i`` up
+    along the plane (:func:`lower_weights`) and :data:`LOWER_INWARD` times that inward
+    (``forward`` needed).
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -302,12 +315,14 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
         d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
-    if low:
-        up = 1.0 if db[1] >= 0.0 else -1.0        # the minor axis turned up (+Y)
+    un = np.hypot(da[1], db[1])
+    if low and un > 1e-12:
+        ua, ub = da[1] / un, db[1] / un            # u: the plane's direction nearest +Y (up)
+        ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))     # the ellipse's radius along u
         n = np.cross(da, db)
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
-        d = d + (low * b) * np.outer(lower_weights(up * y, b), up * db - LOWER_INWARD * n)
+        d = d + (low * ru) * np.outer(lower_weights(x * ua + y * ub, ru), ua * da + ub * db - LOWER_INWARD * n)
     return d * fall[:, None]
 
 
