@@ -46,9 +46,6 @@ from _util import write_results  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RAMP, HOLD = 10, 20
-#: left/right FAP twins compared
-PAIRS = ((31, 32), (33, 34), (35, 36), (37, 38), (41, 42), (53, 54), (59, 60), (55, 56), (57, 58),
-         (6, 7), (12, 13), (8, 9), (10, 11), (19, 20), (21, 22))
 
 
 def xface_magnitudes(signed: bool = False) -> dict:
@@ -167,7 +164,9 @@ def head_rows(workdir: Path, fraction: float = 1.0, signed: bool = False, contex
     err = np.array([r["relative_error"] for r in rows])
     by = {(r["fap"], np.sign(r["requested"])): r["achieved"] for r in rows}
     lr = []
-    for a, b in PAIRS:
+    from faceforge.animation.calibrate_mirror import fap_twins
+
+    for a, b in sorted(fap_twins().items()):  # the standard's left/right twins; those played
         for sgn in (1.0, -1.0):
             if (a, sgn) in by and (b, sgn) in by:
                 x, y = abs(by[(a, sgn)]), abs(by[(b, sgn)])

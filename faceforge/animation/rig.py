@@ -73,6 +73,9 @@ class BoundHead:
     orientation : faceforge.animation.guards.orientation.OrientationGuard, or None when
         ``animate.orientation_guard.rounds`` is 0; after each skin step it alternates with
         the skull guard, and it is the rig's ``finish`` on each weighted frame
+    symmetric : bool, True on a rig symmetric by construction (fit.npz's mirror plane, every
+        skin vertex with an exact mirror partner; set where the skin is loaded): calibration
+        then probes one side of each left/right pair (``animation.calibrate_mirror``)
     """
 
     def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
