@@ -81,3 +81,20 @@ def test_compiled_lower_part_matches_the_numpy_twin(sphincter, sphere):
     d = sphincter.targets_from_line_points(0.0, points, 0.0, 1.0) - rest
     up = d[:, 1]
     assert up.max() > 0.02 and up.min() > -1e-9
+
+
+def test_collinear_loops_with_the_lower_part_stay_finite():
+    """A degenerate (collinear) loop has no up direction in its plane: the raise is skipped,
+    the targets stay finite (compiled and plain)."""
+    from faceforge.anatomy.muscles.sphincter import _sphincter_grid
+
+    p = np.stack([np.linspace(0.0, 1.0, 6), np.zeros(6), np.zeros(6)], 1)
+    seg, t = np.arange(5), np.full(5, 0.5)
+    for low in (0.0, 0.3):
+        grid = np.empty((5, 2, 3))
+        _sphincter_grid(p, seg, t, p.copy(), seg, t, 0.3, grid, p[:5], p[:5], np.zeros(0), 0.0,
+                        np.array([0.0, 0.0, 1.0]), low)
+        assert np.all(np.isfinite(grid))
+    with np.errstate(all="ignore"):
+        d = sphincter_displacement(p[:5], p[:5] * 1.5, 0.0, 0.0, np.array([0.0, 0.0, 1.0]), 0.3)
+    assert np.all(np.isfinite(d))

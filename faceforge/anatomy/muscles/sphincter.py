@@ -189,12 +189,14 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
     ua = da[1]
     ub = db[1]
     un = np.sqrt(ua * ua + ub * ub)
-    if not un > 1e-12:
+    ru = 0.0
+    if low > 0.0 and un > 1e-12:
+        ua /= un
+        ub /= un
+        ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
+    if not ru > 0.0:   # no raise asked, or no up direction in the plane (a degenerate ellipse)
         low = 0.0
-        un = 1.0
-    ua /= un
-    ub /= un
-    ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
+        ru = 1.0
     low = low * ru
     for i in range(h):
         xo = 0.0
@@ -208,7 +210,7 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
             tb += (o[j] - grid[i, 0, j]) * db[j]
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
-        wl = low * min(max(-(xo * ua + yo * ub) / ru, 0.0), 1.0)      # lower_weights
+        wl = low * min(max(-(xo * ua + yo * ub) / ru, 0.0), 1.0) if low > 0.0 else 0.0   # lower_weights
         for j in range(3):
             dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])
                   + wl * (ua * da[j] + ub * db[j] - LOWER_INWARD * nrm[j])) * fall
@@ -316,9 +318,9 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
             n = -n
         d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
     un = np.hypot(da[1], db[1])
-    if low and un > 1e-12:
-        ua, ub = da[1] / un, db[1] / un            # u: the plane's direction nearest +Y (up)
-        ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))     # the ellipse's radius along u
+    ua, ub = (da[1] / un, db[1] / un) if un > 1e-12 else (0.0, 0.0)   # u: the plane's direction nearest +Y
+    ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b)) if low and un > 1e-12 else 0.0
+    if ru > 0.0:                                   # the ellipse's radius along u
         n = np.cross(da, db)
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
