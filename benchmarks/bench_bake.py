@@ -127,6 +127,52 @@ def bake_head(name: str, work: Path, tmp: Path) -> dict:
     return out
 
 
+#: ARKit shape -> the MakeHuman expression unit(s) of the same action (tests/data, CC0): their
+#: offsets at full strength, measured at the shape's FAP rows, say how far a full action goes
+REFERENCE_UNITS = {
+    "jawOpen": ("mouth-open",), "mouthSmileLeft": ("mouth-corner-puller",),
+    "mouthFrownLeft": ("mouth-depression",), "mouthDimpleLeft": ("mouth-retraction",),
+    "mouthStretchLeft": ("neck-platysma",), "mouthUpperUpLeft": ("mouth-elevation",),
+    "mouthLowerDownLeft": ("mouth-depression-retraction",), "mouthPucker": ("mouth-pursing",),
+    "mouthFunnel": ("mouth-protusion",), "noseSneerLeft": ("nose-left-elevation",),
+    "browDownLeft": ("eyebrows-left-down",), "browOuterUpLeft": ("eyebrows-left-extern-up",),
+    "browInnerUp": ("eyebrows-left-inner-up", "eyebrows-right-inner-up"),
+    "eyeSquintLeft": ("eye-left-slit",),
+}
+
+
+def reference_check(work: Path) -> dict:
+    """Per shape of :data:`REFERENCE_UNITS`: its FAP targets (templates/arkit_mapping.yaml) beside
+    the MakeHuman unit's motion at the same FDPs (the bake's own probes and FAPU), and what the
+    bake achieved (report.json). MakeHuman only (the units are offsets of its vertices)."""
+    from faceforge.animation.calibrate_head import calibration_probes
+    from faceforge.animation.fap_mapping import load_fap_mapping
+    from faceforge.animation.rig import BoundHead
+    from faceforge.blendshapes.arkit import default_mapping_path, load_arkit_mapping
+    from faceforge.blendshapes.rigsolve import probe_observer
+    from faceforge.io.config import load_config
+
+    head = BoundHead(work / "fit", work / "bind", load_config(remembered=work / "config.yaml"))
+    probes = calibration_probes(load_fap_mapping(work / "calibrate" / "fap_mapping.yaml"), head)
+    specs = load_arkit_mapping(default_mapping_path())
+    units = np.load(ROOT / "tests" / "data" / "mh_head_expression_units_caucasian.npz")
+    names = [str(n) for n in units["names"]]
+    got = json.loads((work / "bake" / "report.json").read_text())["shapes"]
+    R = np.asarray(head.user_rotation, dtype=float)
+    out = {}
+    for shape, unit in REFERENCE_UNITS.items():
+        faps = [f for f in specs[shape].faps if f in probes]
+        frame = head.rest.copy()
+        frame[head.user_index] += sum(units["deltas"][names.index(u)].astype(float) for u in unit) @ R.T
+        ref = probe_observer(head.rest, [probes[f] for f in faps])(frame[None])[0]
+        ach = got.get(shape, {}).get("targets", {})
+        out[shape] = {"unit": "+".join(unit),
+                      "faps": {str(f): {"target": specs[shape].faps[f], "reference": round(float(r), 1),
+                                        "achieved": ach.get(str(f), {}).get("achieved")}
+                               for f, r in zip(faps, ref)}}
+    return out
+
+
 def round_trips(work: Path, tmp: Path) -> dict:
     from faceforge.blendshapes.curves import read_weights
 
@@ -182,6 +228,10 @@ def main(argv=None) -> dict:
             out = {"heads": {**last.get("heads", {}),
                              **{n: bake_head(n, works[n], tmp) for n in SAMPLES
                                 if n in works and (not args.heads or n in args.heads)}}}
+        if "makehuman" in works and not args.round_trip_only:
+            out["reference_makehuman"] = reference_check(works["makehuman"])
+        elif last.get("reference_makehuman"):
+            out["reference_makehuman"] = last["reference_makehuman"]
         if args.heads:
             out["round_trip_makehuman"] = last.get("round_trip_makehuman")
         elif "makehuman" in works:

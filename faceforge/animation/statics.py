@@ -133,6 +133,9 @@ def settle(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, settings:
 
 #: a held pose's residual must fall below this fraction of its lowest so far to count as still settling
 STALL_DROP = 0.9
+#: a frame that moves a vertex by more than this fraction of the diagonal has blown up: the pose
+#: stops there (a jaw opened 31 mm in one frame moves 8 %; MakeHuman's diverging right risorius took 50 s)
+BLOWN_UP = 0.2
 
 
 def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
@@ -152,6 +155,8 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
         last = skin.copy()
         if n >= ramp + s.min_hold and motion <= tol:
             break
+        if not motion <= BLOWN_UP * tol / s.tolerance and last is not None and n > 1:
+            break                                # blown up (or non-finite): nothing to settle
         if n > ramp:
             if motion < STALL_DROP * best:
                 best, since = motion, n

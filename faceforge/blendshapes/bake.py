@@ -61,6 +61,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     """
     import time
 
+    simulate = _finite_or_nan(simulate, len(rest))
     report, todo = {}, []
     for name, spec in specs.items():
         why = _not_made(spec, space, probes, lids, eyes or {})
@@ -93,6 +94,12 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     out = {k: [] for k in ("names", "frames", "cs", "jaws", "faps", "gaze")}
     for spec in todo:
         c, jaw, frame, row = poses[spec.name]
+        why = _diverged(frame, rest)
+        if why:
+            report[spec.name] = {"made": False, "reason": why, "controls": row.get("controls"),
+                                 "mirror_of": spec.mirror_of or None}
+            log(f"{spec.name}: not made: {why}")
+            continue
         frame, f68, gaze = _overlay(spec, frame, row, lids, eyes or {})
         row.update(made=True, approximation=spec.approximation or None, mirror_of=spec.mirror_of or None)
         report[spec.name] = row
@@ -110,6 +117,47 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     return BakedShapes(out["names"], stack("frames", (0, n, 3)), stack("cs", (0, m)), stack("jaws", (0, 3)),
                        stack("faps", (0, 68)), stack("gaze", (0, 4)),
                        {name: report[name] for name in specs}, t_jac, t_solve)
+
+
+def _finite_or_nan(simulate, n: int):
+    """``simulate`` (and its ``warm``) settling pose by pose, a pose whose settle raises
+    ``FloatingPointError`` (its skin went non-finite) returned as NaN (1, n, 3): one diverging
+    pose costs its shape, not the bake."""
+    def safe(run):
+        def one(c, jaw):
+            try:
+                return run(c, jaw)
+            except FloatingPointError:
+                return np.full((1, n, 3), np.nan)
+
+        def call(c, jaw):   # pose by pose (settle goes pose by pose anyway): a failure loses no other
+            return np.concatenate([one(c[i:i + 1], jaw[i:i + 1]) for i in range(len(c))]) if len(c) \
+                else run(c, jaw)
+        return call
+
+    out = safe(simulate)
+    warm = getattr(simulate, "warm", None)
+    out.warm = None if warm is None else safe(warm)
+    return out
+
+
+#: a settled pose whose skin moved more than this fraction of the head's size has diverged
+DIVERGED = 0.25
+
+
+def _diverged(frame: np.ndarray, rest: np.ndarray) -> str:
+    """Why a settled ``frame`` (n, 3) is no shape ('' when it is one): non-finite, or a vertex
+    moved more than :data:`DIVERGED` x the rest diagonal (a full ARKit shape moves 1-4 %; the
+    simulation blew up: MakeHuman's right risorius at 0.3-0.6 did, on a bone the fit's clearance
+    left asymmetric)."""
+    d = np.linalg.norm(np.asarray(frame, dtype=float) - rest, axis=1)
+    diag = float(np.linalg.norm(np.ptp(rest, axis=0)))
+    if not np.all(np.isfinite(d)):
+        return "the simulation diverged at this pose (non-finite skin)"
+    if d.max() > DIVERGED * diag:
+        return (f"the simulation diverged at this pose (a vertex moved {d.max() / diag:.3g} x the head's "
+                "size): the rig is unstable there")
+    return ""
 
 
 def _not_made(spec, space, probes, lids, eyes) -> str:

@@ -188,7 +188,7 @@ def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, si
         frame, f = evaluate(x_new)
         J = _broyden(J, x_new, f)
         err = float(np.linalg.norm(y - f)) / norm
-        if err >= best.residuals[-1]:
+        if not err < best.residuals[-1]:     # no better, or the pose diverged (NaN)
             break
         stalled = err > 0.9 * best.residuals[-1]
         best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])

@@ -98,3 +98,13 @@ def test_a_pose_whose_residual_stops_falling_is_stopped_and_reported_unconverged
     settle(relaxing_rig(rate=0.01), [[1.0]], np.zeros((1, 3)), 25.0,
            SettleSettings(tolerance=1e-9, max_frames=80, stall=20), stats=slow)
     assert slow.frames == [80]
+
+
+def test_a_pose_that_blows_up_stops_at_once():
+    # an unstable fixed point (the step overshoots 3x the gap): the motion grows each frame; the
+    # pose stops once a frame moves a vertex a fifth of the diagonal, not after max_frames
+    stats = SettleStats()
+    out = settle(relaxing_rig(rate=3.0), [[1.0]], np.zeros((1, 3)), 25.0,
+                 SettleSettings(tolerance=1e-6, max_frames=150), stats=stats)
+    assert stats.frames[0] < 15 and stats.converged == [False]
+    assert np.abs(out[0, :, 0]).max() > 0.2 * 4.0     # what it reached is reported as it is

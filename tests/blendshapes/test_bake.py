@@ -98,7 +98,7 @@ def test_symmetric_rig_solves_one_side_and_mirrors_the_pose():
     calls = []
 
     def counted(c, jaw):
-        calls.append(len(c))
+        calls.extend(np.asarray(c, dtype=float).copy())
         return simulate(c, jaw)
 
     specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",)),
@@ -110,13 +110,47 @@ def test_symmetric_rig_solves_one_side_and_mirrors_the_pose():
     assert out.report["smileR"]["mirrored_pose"] and "residuals" not in out.report["smileR"]
     assert out.contractions[1] == pytest.approx(out.contractions[0][[1, 0, 2]])    # the twin's column
     assert out.report["smileR"]["error"] < 2e-3                                 # measured on its own FAP
-    # the Jacobian has only the controls the solved shapes name; smileR is one batch of one pose
-    assert calls[0] == 2 and calls[-1] == 1
+    # the Jacobian has only the controls the solved shapes name (the frontalis is not probed);
+    # smileR is settled once, last, at smileL's mirrored pose
+    assert [list(np.flatnonzero(p)) for p in calls[:2]] == [[0], [1]]
+    assert calls[-1] == pytest.approx(out.contractions[1]) and sum(p[1] > 0 and p[0] == 0 for p in calls[2:]) == 1
     # the midline shape moves both twins together: symmetric, the two targets split evenly (8 each)
     assert out.contractions[2, 0] == pytest.approx(out.contractions[2, 1]) and out.report["both"]["tied"]
     assert out.report["both"]["targets"]["12"]["achieved"] == pytest.approx(8.0, abs=0.05)
     deltas = {n: f - rest for n, f in zip(out.names, out.frames)}
     assert mirror_agreement(rest, deltas, [("smileL", "smileR")]) == {"smileL": 0.0}
+
+
+def test_a_pose_the_simulation_blew_up_is_not_made():
+    # MakeHuman's mirrored mouthSmileRight once settled 1e7 skin units away: no shape, said so
+    from faceforge.blendshapes.symmetric import mirror_columns
+
+    rest, simulate, probes, space = _head()
+
+    def unstable(c, jaw):                # the right zygomaticus blows the skin up
+        out = simulate(c, jaw)
+        out[c[:, 1] > 0] *= 1e6
+        return out
+
+    specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",)),
+             "smileR": ShapeSpec("smileR", {13: 10.0}, ("zyg_R",), mirror_of="smileL")}
+    out = bake_shapes(specs, space, probes, unstable, lambda ps: probe_observer(rest, ps), rest,
+                      twins=mirror_columns(COLUMNS))
+    assert out.names == ["smileL"]
+    r = out.report["smileR"]
+    assert not r["made"] and "diverged" in r["reason"] and r["controls"]["zyg_R"] == pytest.approx(0.5, abs=1e-3)
+
+    def raising(c, jaw):                 # ... or the settle raises on its non-finite skin
+        if np.any(c[:, 1] > 0):
+            raise FloatingPointError("pose 0: the simulation produced non-finite skin positions")
+        return simulate(c, jaw)
+
+    out = bake_shapes(specs, space, probes, raising, lambda ps: probe_observer(rest, ps), rest,
+                      twins=mirror_columns(COLUMNS))
+    assert out.names == ["smileL"]
+    r = out.report["smileR"]
+    assert not r["made"] and "diverged" in r["reason"] and r["controls"]["zyg_R"] == pytest.approx(0.5, abs=1e-3)
+    assert out.report["smileL"]["made"]
 
 
 def test_mirror_pose_swaps_twins_and_negates_the_yaw_only():

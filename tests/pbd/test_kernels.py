@@ -237,3 +237,28 @@ def test_solver_step_matches_the_plain_python_step():
                         iterations=3, substeps=2, damping=0.2, gravity=1.5)
     np.testing.assert_allclose(out.positions, x, rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(out.velocities, vel, rtol=1e-8, atol=1e-9)
+
+
+def test_a_pbd_bending_projection_turns_a_folded_quad_at_most_max_step_angle():
+    """A hinge folded 2.6 rad away from its flat rest: one PBD projection (k = 1) turns it
+    by MAX_STEP_ANGLE (a linearised step from 2.6 rad overshoots; the orbicularis ring
+    diverged so); repeated projections still reach the rest angle. XPBD is not clamped."""
+    from faceforge.pbd.constraints.bending import MAX_STEP_ANGLE, _wrap
+
+    rest = np.array([[0.0, 0, 0], [1, 0, 0], [0.5, 1, 0], [0.5, -1, 0]])
+    q = np.array([[0, 1, 2, 3]])
+    r = init_bending(rest, q)
+    fold = 2.6
+    x = rest.copy()
+    x[3] = [0.5, -np.cos(fold), np.sin(fold)]      # the second wing turned about the hinge
+    w = np.ones(4)
+    before = float(_wrap(dihedral_angle(x, q) - r)[0])
+    assert abs(abs(before) - fold) < 1e-9
+    once = x.copy()
+    _project_bending(once, w, q, rest_cos_sin(r), np.ones(1), np.zeros(1), np.zeros(1), False, 0, 1)
+    turned = abs(before) - abs(float(_wrap(dihedral_angle(once, q) - r)[0]))
+    assert 0.5 * MAX_STEP_ANGLE < turned < 1.5 * MAX_STEP_ANGLE
+    np.testing.assert_allclose(once, twins.bending(x, w, q, r, np.ones(1))[0], rtol=1e-10, atol=1e-12)
+    for _ in range(40):
+        _project_bending(once, w, q, rest_cos_sin(r), np.ones(1), np.zeros(1), np.zeros(1), False, 0, 1)
+    assert abs(float(_wrap(dihedral_angle(once, q) - r)[0])) < 1e-6

@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from faceforge.pbd.constraints.bending import MAX_STEP_ANGLE
+
 
 def _apply(x, w, ids, grads, value, k, c, lam):
     denom = sum(w[i] * float(g @ g) for i, g in zip(ids, grads))
@@ -87,6 +89,8 @@ def bending(x, w, quads, rest, k, c=None, lam=None):
         if ee == 0 or na @ na <= 1e-24 * ee * ee or nb @ nb <= 1e-24 * ee * ee:
             continue
         value = deviation(*_sin_cos(*p), rest[j])
+        if not c[j]:   # PBD (no compliance): one projection turns by at most MAX_STEP_ANGLE
+            value = min(max(value, -MAX_STEP_ANGLE), MAX_STEP_ANGLE)
         lam[j] += _apply(x, w, q, bending_gradient(*p), value, k[j], c[j], lam[j])
     return x, lam
 

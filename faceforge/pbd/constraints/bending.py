@@ -61,6 +61,15 @@ def residual_bending(positions, quads, rest_angle) -> np.ndarray:
 #: below this |tan(theta - theta0)| the deviation uses a rational approximation of atan
 SMALL_TAN = 0.25
 
+#: PBD mode: one projection turns a quad by at most this deviation (radians); a larger one is
+#: taken over several iterations. The projection is a linearisation of the angle: from a
+#: deviation of a few radians it overshoots, and a stiff sheet whose quads fold that far
+#: (the orbicularis oris ring at MakeHuman's right corner, risorius_R at c = 0.45: deviations
+#: up to 3.1 rad) grew without bound, faster with more iterations. The solution (deviation 0)
+#: is unchanged, and so is every projection of a smaller deviation; XPBD is not clamped (its
+#: compliant equilibrium depends on the deviation itself).
+MAX_STEP_ANGLE = 0.5
+
 
 @numba.njit(inline="always", **PBD_NUMBA)
 def _deviation(y, x):
@@ -125,6 +134,8 @@ def _solve_bending(x, w, i0, i1, i2, i3, rest_cos, rest_sin, k, c, lam, xpbd):
     sin = -(ux * bx + uy * by + uz * bz) * elen
     cos = ax * bx + ay * by + az * bz
     value = _deviation(sin * rest_cos - cos * rest_sin, cos * rest_cos + sin * rest_sin)
+    if not xpbd:
+        value = min(max(value, -MAX_STEP_ANGLE), MAX_STEP_ANGLE)
     prod = na2 * nb2
     inv = 1.0 / (prod * elen)
     ia = nb2 * elen * inv  # 1 / |nA|^2
@@ -318,7 +329,8 @@ def _project_bending_batched(x, idx, inv_mass, rest_cs, k, seg, buf, start, stop
                 s = buf[_STEP + t]
                 gain = buf[_GAIN + t]
                 if gain != 0.0:  # large deviation: libm atan2
-                    s = gain * math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t])
+                    s = gain * min(max(math.atan2(buf[_DEV_Y + t], buf[_DEV_X + t]), -MAX_STEP_ANGLE),
+                                   MAX_STEP_ANGLE)
                 i0 = np.uint64(idx[j, 0])
                 i1 = np.uint64(idx[j, 1])
                 i2 = np.uint64(idx[j, 2])

@@ -42,7 +42,7 @@ import numpy as np
 
 from faceforge.pbd.constraints._common import BATCH, DEGENERATE, PBD_NUMBA
 from faceforge.pbd.constraints.area import _area_increments
-from faceforge.pbd.constraints.bending import SMALL_TAN
+from faceforge.pbd.constraints.bending import MAX_STEP_ANGLE, SMALL_TAN
 
 
 def match_quad_stretches(pairs: np.ndarray, quads: np.ndarray) -> np.ndarray:
@@ -474,7 +474,8 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
                 if buf[_FIX + t] != 0.0:  # recompute the lane (its S rows are unchanged)
                     j = np.uint64(c0 + t)
                     r = _quad_math(buf, t, j, inv_mass, rest_cs, k)
-                    step = -k[j] / r[25] * math.atan2(r[26], r[27])
+                    turn = min(max(math.atan2(r[26], r[27]), -MAX_STEP_ANGLE), MAX_STEP_ANGLE)
+                    step = -k[j] / r[25] * turn
                     for c in range(12):
                         buf[_Q0X + c * BATCH + t] = r[c] + step * r[13 + c]
                     if t < n_area:  # the fused area constraint, after the bending
