@@ -56,7 +56,7 @@ import numpy as np
 from faceforge.anatomy.muscles.action_line import ActionLine
 from faceforge.anatomy.muscles.targets import LinearTargets, bary_points
 from faceforge.anatomy.muscles.muscle import Muscle, add_muscles_to_builder
-from faceforge.anatomy.muscles.sphincter import protrusion_control
+from faceforge.anatomy.muscles.sphincter import lower_control, protrusion_control
 from faceforge.constants import FLOAT, INT
 from faceforge.exceptions import TemplateError
 from faceforge.geometry.surface_points import SurfacePoints
@@ -114,6 +114,7 @@ class _Layer:
     copies: list = None        # (world slice, layer state slice) pairs written back each step
     columns: np.ndarray = None  # (muscles,) each muscle's column in the system's contraction array
     protrusion_columns: np.ndarray = None  # (muscles,) its protrusion drive's column, or -1
+    lower_columns: np.ndarray = None  # (muscles,) its lower part's drive column, or -1
 
     def gather(self):
         """Precompute one gather for all surface points of all lines of the layer."""
@@ -174,12 +175,15 @@ class MusculoskeletalSystem:
         self._layers: list[_Layer] = layers
         self._muscles = {m.name: m for layer in layers for m in layer.muscles}
         self._controls = tuple(self._muscles) + tuple(protrusion_control(n) for n, m in self._muscles.items()
-                                                      if m.kind == "sphincter")
+                                                      if m.kind == "sphincter") \
+            + tuple(lower_control(n) for n, m in self._muscles.items() if m.kind == "sphincter")
         self._column = {name: i for i, name in enumerate(self._controls)}
         for layer in layers:   # each layer reads its muscles' columns of the contraction array
             layer.columns = np.array([self._column[m.name] for m in layer.muscles], dtype=INT)
             layer.protrusion_columns = np.array(
                 [self._column.get(protrusion_control(m.name), -1) for m in layer.muscles], dtype=INT)
+            layer.lower_columns = np.array(
+                [self._column.get(lower_control(m.name), -1) for m in layer.muscles], dtype=INT)
             if layer.linear is not None:
                 layer.linear.columns = np.array([self._column[n] for n in layer.linear.names], dtype=INT)
         self._rest_controls = np.zeros(len(self._controls))
@@ -271,7 +275,8 @@ class MusculoskeletalSystem:
     @property
     def controls(self) -> tuple[str, ...]:
         """What :meth:`step` drives: every muscle by name, then each sphincter's protrusion
-        (:func:`faceforge.anatomy.muscles.sphincter.protrusion_control`)."""
+        (:func:`faceforge.anatomy.muscles.sphincter.protrusion_control`), then each sphincter's
+        lower part (:func:`faceforge.anatomy.muscles.sphincter.lower_control`)."""
         return self._controls
 
     @property
@@ -452,7 +457,9 @@ class MusculoskeletalSystem:
                 c = contractions[layer.columns[i]]
                 k = layer.protrusion_columns[i]
                 p = contractions[k] if k >= 0 else 0.0
-                layer.control.position_targets[s] = m.targets_from_line_points(c, lp, p)
+                k = layer.lower_columns[i]
+                low = contractions[k] if k >= 0 else 0.0
+                layer.control.position_targets[s] = m.targets_from_line_points(c, lp, p, low)
 
     def reset(self) -> None:
         """Back to the rest state (jaw closed, muscles at rest, zero velocities)."""

@@ -198,7 +198,7 @@ def test_the_protrusion_control_moves_the_sphincter_forward(head):
     cranium, mandible, muscles = head
     muscles = [replace(m, protrusion=0.5) if m.kind == "sphincter" else m for m in muscles]
     system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles)
-    assert system.controls == tuple(system.muscles) + ("oris.protrude",)
+    assert system.controls == tuple(system.muscles) + ("oris.protrude", "oris.lower")
     rest = snapshot(system)
     twin = MusculoskeletalSystem.from_parts(cranium, mandible, muscles)
     system.step({"oris.protrude": 0.0})

@@ -215,6 +215,29 @@ def test_the_inner_brow_raise_lifts_the_brow_not_the_forehead_above_it(head):
     assert -d[brow, 2] < 0.4 * d[brow, 1], d[brow]              # up, not back
 
 
+def test_the_lower_part_of_the_ring_raises_the_lower_lip_and_tucks_it_in(head):
+    """orbicularis_oris.lower (FAPs 52/5, 57/10, 58/11 positive; a lip press) at 0.4: the lower
+    lip's middle and both its sides rise alike and move in, the upper lip stays, no skin edge
+    folds. Measured (60 frames): FDP 2.3 / 8.2 up 120 MNS (2.2 mm), back 29-32; 8.7 / 8.8 up 117
+    / 117; 2.2 up 2; 0 folded edges (1 at 0.5 alone, at the mouth corners). Before it nothing
+    raised the lower lip: the mentalis at 1.0 moved FDP 2.3 up 30 MNS."""
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.checks import folded_edges
+    from faceforge.animation.playback import static_poses
+
+    h, _ = head
+    ctr = np.zeros((1, len(h.controls)))
+    ctr[0, list(h.controls).index("orbicularis_oris.lower")] = 0.4
+    pose = static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0]
+    d = (pose - h.rest) / units_per_mm(h.landmarks)
+    mid, inner, upper = d[h.fdp_vertex["8.2"]], d[h.fdp_vertex["2.3"]], d[h.fdp_vertex["2.2"]]
+    left, right = d[h.fdp_vertex["8.7"]], d[h.fdp_vertex["8.8"]]
+    assert mid[1] > 1.5 and inner[1] > 1.5 and mid[2] < -0.2, (mid, inner)
+    assert abs(upper[1]) < 0.2 * inner[1], upper
+    assert left[1] > 0.8 * mid[1] and abs(left[1] - right[1]) < 0.1 * left[1], (left, right)
+    assert not folded_edges(h.rest, pose[None], h.faces).any()
+
+
 @pytest.mark.parametrize("c", [0.45, 0.65])
 def test_either_risorius_settles_and_mirrors_the_other(head, c):
     """risorius_R at 0.45-0.65 blew MakeHuman's orbicularis oris ring up (the skin 4e5 units

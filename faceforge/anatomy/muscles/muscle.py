@@ -37,7 +37,8 @@ from faceforge.anatomy.muscles.action_line import eval_polyline, sample_position
 from faceforge.anatomy.muscles.hexmesh import HexTopology, hex_topology, morph_hex
 from faceforge.anatomy.muscles.linear import (LINEAR_MAX_CONTRACTION, _row_blend, interior_grid, interior_targets,
                                               row_bases)
-from faceforge.anatomy.muscles.sphincter import SPHINCTER_MAX_CONTRACTION, _sphincter_grid, sphincter_displacement
+from faceforge.anatomy.muscles.sphincter import (SPHINCTER_MAX_CONTRACTION, _sphincter_grid, lower_raise,
+                                                 sphincter_displacement)
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
@@ -263,16 +264,19 @@ class Muscle:
         v, f = check_mesh(vertices, faces)
         return self.targets_from_line_points(c, {k: line.positions(v, f) for k, line in self.lines.items()})
 
-    def targets_from_line_points(self, c: float, points: dict, protrude: float = 0.0) -> np.ndarray:
+    def targets_from_line_points(self, c: float, points: dict, protrude: float = 0.0,
+                                 lower: float = 0.0) -> np.ndarray:
         """:meth:`sample_targets` from the current positions of the lines' surface points.
 
         ``points``: ``{line key: (p, 3)}`` as :meth:`ActionLine.positions` gives
         them (a caller that evaluates many lines at once gathers them itself). ``protrude``
         in [0, 1]: a sphincter's protrusion drive (its control :func:`protrusion_control`;
-        :attr:`protrusion`), clipped like ``c``.
+        :attr:`protrusion`), clipped like ``c``; ``lower`` in [0, 1]: its lower part's drive
+        (:func:`faceforge.anatomy.muscles.sphincter.lower_control`, :func:`lower_raise`).
         """
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         lift = self._lift(protrude)
+        low = lower_raise(lower, self.active, self.max_contraction) if self.kind != "linear" else 0.0
         g = self.bound_grid
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
@@ -280,9 +284,9 @@ class Muscle:
             r1, r3, carry = self._loop_rest
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
-                            c * self.max_contraction, grid, r1, r3, carry, lift, self.forward)
+                            c * self.max_contraction, grid, r1, r3, carry, lift, self.forward, low)
         else:
-            grid = self._grid_targets(c, points, lift)
+            grid = self._grid_targets(c, points, lift, low)
         return grid[g[:, 0], g[:, 1]]
 
     @property
@@ -341,7 +345,7 @@ class Muscle:
             g = self.__dict__["_cg"] = g
         return g
 
-    def _grid_targets(self, c, P, lift: float = 0.0) -> np.ndarray:
+    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
         grid = np.empty((h, w, 3))
         if self.kind == "linear":
@@ -369,8 +373,8 @@ class Muscle:
             r1, r3, carry = self._loop_rest
             if len(carry):
                 s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
-            if c > 0 or lift > 0:
-                d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward)
+            if c > 0 or lift > 0 or low > 0:
+                d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward, low)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3

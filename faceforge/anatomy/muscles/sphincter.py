@@ -110,14 +110,15 @@ def _conic_lstsq(x, y):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd):  # pragma: no cover - numba
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd, low=0.0):  # pragma: no cover - numba
     """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
     :func:`sphincter_displacement` with ``c`` (already times the maximal closure) and ``lift``
     (``fwd (3,)``: :attr:`Muscle.forward`) when either is > 0; before that, with ``carry
     (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
-    r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples. Same values as the numpy code to
+    r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples; ``low``: the lower part's raise
+    (:func:`lower_raise`, already times the maximal closure). Same values as the numpy code to
     round-off (LAPACK's, summation order).
 
     Length: one compiled kernel (ellipse fit and the per-sample displacement in one pass); kept
@@ -131,7 +132,7 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         for i in range(h):
             for j in range(3):
                 grid[i, 0, j] += carry[i] * ((grid[i, w1, j] - r3[i, j]) - (grid[i, 0, j] - r1[i, j]))
-    if not (c > 0.0 or lift > 0.0):
+    if not (c > 0.0 or lift > 0.0 or low > 0.0):
         return
     # fit_ellipse of the 2h samples (inner then outer)
     k = 2 * h
@@ -183,6 +184,20 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         for j in range(3):
             nrm[j] = -nrm[j]
     lift = lift * b
+    # the lower part's raise: along u, the plane's direction nearest +Y (up), by the ellipse's
+    # radius ru along it (lower_raise)
+    ua = da[1]
+    ub = db[1]
+    un = np.sqrt(ua * ua + ub * ub)
+    ru = 0.0
+    if low > 0.0 and un > 1e-12:
+        ua /= un
+        ub /= un
+        ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
+    if not ru > 0.0:   # no raise asked, or no up direction in the plane (a degenerate ellipse)
+        low = 0.0
+        ru = 1.0
+    low = low * ru
     for i in range(h):
         xo = 0.0
         yo = 0.0
@@ -195,8 +210,10 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
             tb += (o[j] - grid[i, 0, j]) * db[j]
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
+        wl = low * min(max(-(xo * ua + yo * ub) / ru, 0.0), 1.0) if low > 0.0 else 0.0   # lower_weights
         for j in range(3):
-            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])) * fall
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])
+                  + wl * (ua * da[j] + ub * db[j] - LOWER_INWARD * nrm[j])) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
 
@@ -212,6 +229,54 @@ def protrusion_control(name: str) -> str:
     return name + PROTRUSION_SUFFIX
 
 
+#: suffix of a sphincter's lower-part control (:func:`lower_control`)
+LOWER_SUFFIX = ".lower"
+
+
+def lower_control(name: str) -> str:
+    """The control name of sphincter ``name``'s lower part (``orbicularis_oris.lower``): a
+    contraction-like value in [0, 1] that raises the lower half of the loops toward the upper
+    one (:func:`lower_raise`)."""
+    return name + LOWER_SUFFIX
+
+
+def lower_weights(y, r: float) -> np.ndarray:
+    """``(h,)`` share of the lower part's raise per sample pair: ``clip(-y / r, 0, 1)``, ``y (h,)``
+    the outer sample's height over the ellipse's centre along ``u``, the direction in the
+    ellipse's plane nearest +Y (up, the frame's convention), ``r`` the ellipse's radius along
+    ``u``: about 1 at the lower lip's middle, 0 along the upper lip and little at the corners.
+    Not the samples' index (a symmetric rig restarts the loops at the midline,
+    muscles.mirror.symmetric_loop), nor the minor axis (on the MediaPipe mask the loops' fitted
+    ellipse is taller than wide: its minor axis runs across the mouth)."""
+    return np.clip(-np.asarray(y, FLOAT) / r, 0.0, 1.0)
+
+
+#: how far a full lower-part drive raises the lower lip's middle, in the ellipse's semi-minor
+#: axes times the maximal closure (:func:`lower_raise`)
+LOWER_RAISE = 1.0
+#: how far it moves the lower lip in (toward the teeth, against :attr:`Muscle.forward`) per unit
+#: of its raise: a lip press rolls the lips in (the MakeHuman unit mouth-compression: FDP 8.2
+#: up 97 MNS and back 134, 2.3 up 70 and back 11); raised in the loops' plane alone, whose
+#: normal tilts down with the chin, the lower lip went up and forward (MakeHuman, drive 0.5: FDP
+#: 2.3 up 125 MNS, forward 30) in front of the upper lip, its edge cutting through it
+LOWER_INWARD = 0.5
+
+
+def lower_raise(drive: float, active: bool, max_contraction: float) -> float:
+    """The lower part's raise for :func:`sphincter_displacement` / the compiled targets: ``drive``
+    clipped to [0, 1] (0 when passive) times :data:`LOWER_RAISE` and ``max_contraction``.
+
+    Anatomy: the lower lip is raised by the orbicularis oris' lower part (pars marginalis of
+    the lower lip: lips pressed together, AU24; the lower lip rolled in, AU28) and pushed up by
+    the mentalis below it (AU17). The paper's sphincter closes toward the loops' mean, which on
+    a face whose outer loop reaches the chin lies below the lower lip (the whole-ring
+    contraction lowered it on ICT), so the lower part has its own drive: every lower sample pair
+    moves ``low r w_i`` along ``u``, the ellipse plane's direction nearest +Y (``r`` the
+    ellipse's radius along ``u``, ``w_i`` :func:`lower_weights`), and :data:`LOWER_INWARD` times
+    that against the plane's forward normal, with the contraction's fall-off."""
+    return float(np.clip(drive, 0.0, 1.0)) * LOWER_RAISE * max_contraction if active else 0.0
+
+
 #: how far a protruding sphincter turns its lips out (away from the centre along the ellipse's
 #: minor axis: the upper lip up, the lower lip down; 0 at the corners), per unit of its forward
 #: push, times the outer sample's height over the semi-minor axis (:func:`sphincter_displacement`).
@@ -224,7 +289,8 @@ EVERSION = 1.0
 #: fraction of the way to the centre that c = 1 moves the sphincter's inner loop
 SPHINCTER_MAX_CONTRACTION = 0.5
 #: fraction of the fibre length that c = 1 removes from a linear muscle
-def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None) -> np.ndarray:
+def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None,
+                           low: float = 0.0) -> np.ndarray:
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
@@ -233,7 +299,9 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     semi-minor axis, ``y`` the outer sample's coordinate along it (:data:`EVERSION`) and ``n``
     its unit normal on the side of ``forward (3,)`` (:attr:`Muscle.forward`; needed when
     ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
-    maximal closure.
+    maximal closure. ``low``: the lower part's raise (:func:`lower_raise`): ``low r w_i`` up
+    along the plane (:func:`lower_weights`) and :data:`LOWER_INWARD` times that inward
+    (``forward`` needed).
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -249,6 +317,14 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
         d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
+    un = np.hypot(da[1], db[1])
+    ua, ub = (da[1] / un, db[1] / un) if un > 1e-12 else (0.0, 0.0)   # u: the plane's direction nearest +Y
+    ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b)) if low and un > 1e-12 else 0.0
+    if ru > 0.0:                                   # the ellipse's radius along u
+        n = np.cross(da, db)
+        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
+            n = -n
+        d = d + (low * ru) * np.outer(lower_weights(x * ua + y * ub, ru), ua * da + ub * db - LOWER_INWARD * n)
     return d * fall[:, None]
 
 
