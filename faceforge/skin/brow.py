@@ -77,14 +77,23 @@ def brow_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts,
     (module docstring). ``allowed`` (n, n_bodies) bool filters bodies per vertex. Updates
     ``body, face, pts, dist`` in place (a vertex with no brow muscle in reach keeps its anchor);
     returns the (n,) bool mask of the vertices rebound."""
-    from faceforge.geometry.surface_points import closest_points
     from faceforge.skin.casting import MUSCLE
 
-    done = np.zeros(len(v), bool)
     on_bone = (body >= 0) & (np.asarray(kinds)[np.maximum(body, 0)] != MUSCLE)
     todo = np.flatnonzero(np.asarray(mask, bool) & on_bone)
+    return _rebind(v, bodies, todo, muscles, max_distance, body, face, pts, dist, allowed)
+
+
+def _rebind(v, bodies, todo, candidates, max_distance, body, face, pts, dist, allowed) -> np.ndarray:
+    """Anchor each vertex ``todo`` (k,) int to the closest point of the bodies ``candidates``
+    (indices; ``allowed`` (n, n_bodies) bool filters them per vertex, None: all) within
+    ``max_distance``; updates ``body, face, pts, dist`` in place, returns the (n,) bool mask of
+    the vertices rebound (one with no candidate in reach keeps its anchor)."""
+    from faceforge.geometry.surface_points import closest_points
+
+    done = np.zeros(len(v), bool)
     best = np.full(len(todo), np.inf)
-    for i in muscles if len(todo) else ():
+    for i in candidates if len(todo) else ():
         p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
         take = (d < best) & (d <= max_distance)
         if allowed is not None:
@@ -146,22 +155,11 @@ def eye_anchors(v, bodies, kinds, muscles, mask, max_distance, body, face, pts, 
     (indices) to the closest point of the bone (every body whose ``kinds`` is not a muscle)
     within ``max_distance`` (:func:`eye_mask`). Updates ``body, face, pts, dist`` in place (a
     vertex with no bone in reach keeps its anchor); returns the (n,) bool mask rebound."""
-    from faceforge.geometry.surface_points import closest_points
     from faceforge.skin.casting import MUSCLE
 
-    done = np.zeros(len(v), bool)
     todo = np.flatnonzero(np.asarray(mask, bool) & np.isin(body, list(muscles)))
-    best = np.full(len(todo), np.inf)
-    for i in (i for i in range(len(bodies)) if kinds[i] != MUSCLE) if len(todo) else ():
-        p, d, tri = closest_points(v[todo], bodies[i].vertices, bodies[i].faces)
-        take = (d < best) & (d <= max_distance)
-        if allowed is not None:
-            take &= allowed[todo, i]
-        best[take] = d[take]
-        t = todo[take]
-        body[t], face[t], pts[t], dist[t] = i, tri[take], p[take], d[take]
-        done[t] = True
-    return done
+    bone = [i for i in range(len(bodies)) if kinds[i] != MUSCLE]
+    return _rebind(v, bodies, todo, bone, max_distance, body, face, pts, dist, allowed)
 
 
 #: ``bind.brow_shared_mm``: brow skin on one brow muscle takes a second anchor on another
