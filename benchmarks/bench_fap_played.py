@@ -24,7 +24,9 @@ share is driven fully.
 
 Usage::
 
-    python benchmarks/bench_fap_played.py WORKDIR [WORKDIR ...] [--half]   # --half: also x0.5
+    python benchmarks/bench_fap_played.py WORKDIR [WORKDIR ...] [--half] [--signed]
+
+``--half``: also x0.5; ``--signed``: the signed protocol only (the one issue 25 asks for).
 
 Writes ``benchmarks/results/fap_played.json``: per head and protocol the rows (FAP, requested,
 achieved, relative error), the median and worst error, and left/right pairs (how far the two
@@ -201,9 +203,10 @@ def chin_from_frames(head, skins, rest, asked, ends) -> list[dict]:
 def main(argv=None) -> None:
     args = list(argv if argv is not None else sys.argv[1:])
     fractions = (1.0, 0.5) if "--half" in args else (1.0,)
-    dirs = [Path(a) for a in args if a != "--half"]
+    protocols = ("signed",) if "--signed" in args else ("signed", "context", "abs")
+    dirs = [Path(a) for a in args if not a.startswith("--")]
     results = {}
-    for protocol in ("signed", "context", "abs"):
+    for protocol in protocols:
         for fraction in fractions:
             for d in dirs:
                 r = results[f"{d.name} {protocol} x{fraction:g}"] = head_rows(d, fraction, protocol == "signed",
