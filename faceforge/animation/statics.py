@@ -155,7 +155,7 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
         last = skin.copy()
         if n >= ramp + s.min_hold and motion <= tol:
             break
-        if not motion <= BLOWN_UP * tol / s.tolerance and last is not None and n > 1:
+        if n > 1 and not motion <= BLOWN_UP * tol / s.tolerance:
             break                                # blown up (or non-finite): nothing to settle
         if n > ramp:
             if motion < STALL_DROP * best:

@@ -65,7 +65,6 @@ class Modiolus:
         rest_world = np.asarray(rest_world, FLOAT)
         self.rest_ends = [np.array([rest_world[e].mean(axis=0) for e in ends]) for _, ends in self.sides]
         self.ramp = float(ramp)
-        self.corners = {}
         centres = [r.mean(axis=0) for r in self.rest_ends]
         outer = self.rest_lines.get("A3", next(iter(self.rest_lines.values())))
         corner_pts = [outer[int(np.argmin(np.linalg.norm(outer - c, axis=1)))] for c in centres]
@@ -79,7 +78,6 @@ class Modiolus:
                 r = np.linalg.norm(pts - corner, axis=1) / reach
                 w.append(np.clip(1.0 - r * r, 0.0, 1.0) ** 2)
             self.weights[key] = np.array(w)
-            self.corners[key] = [int(np.argmin(np.linalg.norm(pts - cp, axis=1))) for cp in corner_pts]
 
     def displacement(self, side: int, world, contractions) -> tuple[np.ndarray, float]:
         """``(d_mod (3,), g)`` of corner ``side`` for the current ``world (N, 3)`` vertices and

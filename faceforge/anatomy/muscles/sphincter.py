@@ -312,18 +312,16 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
     to = o - s1
     d = float(c) * (np.outer(to @ da, da) + np.outer(to @ db, db))      # in the ellipse's plane
+    if lift or low:                                # the plane's normal on the side of forward
+        n = np.cross(da, db)
+        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
+            n = -n
     if lift:
-        n = np.cross(da, db)
-        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
-            n = -n
         d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
-    un = np.hypot(da[1], db[1])
-    ua, ub = (da[1] / un, db[1] / un) if un > 1e-12 else (0.0, 0.0)   # u: the plane's direction nearest +Y
-    ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b)) if low and un > 1e-12 else 0.0
-    if ru > 0.0:                                   # the ellipse's radius along u
-        n = np.cross(da, db)
-        if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
-            n = -n
+    un = np.hypot(da[1], db[1]) if low else 0.0
+    if un > 1e-12:      # u: the plane's direction nearest +Y; ru: the ellipse's radius along it
+        ua, ub = da[1] / un, db[1] / un
+        ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
         d = d + (low * ru) * np.outer(lower_weights(x * ua + y * ub, ru), ua * da + ub * db - LOWER_INWARD * n)
     return d * fall[:, None]
 
