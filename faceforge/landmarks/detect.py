@@ -209,41 +209,39 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
         origin, normal = det.positions[mids].mean(axis=0), frame[0]
     loops = rules.eye_loops(v, f, pos(), frame)
     sockets = {} if front is None else rules.eye_openings(front, v, f, pos())
+    caster = RayCaster(v, f) if front is None else (front, v, f)   # the cheeks' and brows' ray cast
     moved = {}
+
+    def place(name, found):
+        """Move each FDP of ``found`` (FDP -> position) there, saying which rule did."""
+        for k, p in found.items():
+            if k in at:
+                det.positions[at[k]] = p
+                det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
+                moved[k] = name
+
     # the opening seen from the front first: a hole's boundary loop is where the lid's skin ends,
     # behind and beyond the visible lid margin the FDPs name (ICT: upper lid 3.1 0.86 % of the
     # diagonal from its hand point by the loop, 0.07 % by the recess); the loop where no recess is seen
     for name, found in (("eye opening (recess in the frontal render)", sockets),
                         ("eye opening (boundary loop)", {k: p for k, p in loops.items() if k not in sockets}),
                         ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal)),
-                        ("cheek construction", rules.cheeks(RayCaster(v, f) if front is None else (front, v, f),
-                                                            pos(), frame, diagonal))):
-        for k, p in found.items():
-            if k in at:
-                det.positions[at[k]] = p
-                det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
-                moved[k] = name
+                        ("cheek construction", rules.cheeks(caster, pos(), frame, diagonal))):
+        place(name, found)
     # after the eye rules, and only where they placed all four eye corners from the mesh: the
     # brows' height is measured from those corners (featureless eyes, e.g. the MediaPipe mask's
     # triangulated-shut ones, leave the corners the detector's guess, as biased as its brows)
     from faceforge.landmarks.brows import EYE_CORNERS, brows
-    name = "eyebrow height (MediaPipe's canonical face over the eye corners)"
-    found = {} if not all(k in moved for k in EYE_CORNERS) else brows(
-        RayCaster(v, f) if front is None else (front, v, f), pos(), frame, diagonal)
-    for k, p in found.items():
-        det.positions[at[k]] = p
-        det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
-        moved[k] = name
+    if all(k in moved for k in EYE_CORNERS):
+        place("eyebrow height (MediaPipe's canonical face over the eye corners)",
+              brows(caster, pos(), frame, diagonal))
     from faceforge.geometry.triangles import vertex_normals
     from faceforge.landmarks.lips import inner_corners, inner_lips
     normals = vertex_normals(v, f)
     for name, found in (("inner lip edge (walked from the outer lip point on its own lip)",
                          inner_lips(v, f, normals, pos(), frame)),
                         ("inner lip corner (the slit's end wall)", inner_corners(v, normals, pos(), frame))):
-        for k, i in found.items():
-            det.positions[at[k]] = v[i]
-            det.method[at[k]] = f"rule: {name} (MediaPipe point {fdp_table()[k]} was the start)"
-            moved[k] = name
+        place(name, {k: v[i] for k, i in found.items()})
     det.info["rules"] = moved
 
 
