@@ -70,12 +70,15 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
         ax.set_aspect("equal")
-        ax.set_title(name, fontsize=9)
+        # a label placed in axes coordinates: set_title and tight_layout measured every axis's
+        # tick boxes (two thirds of the sheet's CPU time on 43 panels, MakeHuman's bake)
+        ax.text(0.5, 1.01, name, transform=ax.transAxes, ha="center", va="bottom", fontsize=9)
+    top = 1.0 - (0.6 if title else 0.3) / (panel * 1.1 * rows)
     if title:
-        fig.suptitle(title, fontsize=11)
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.25 / (panel * 1.1 * rows)) if title else None)
+        fig.suptitle(title, fontsize=11, y=1.0 - 0.08 / (panel * 1.1 * rows), va="top")
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=top, wspace=0.05, hspace=0.12)
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out_png)
+    fig.savefig(out_png, pil_kwargs={"compress_level": 3})
     plt.close(fig)
     return out_png
