@@ -83,6 +83,15 @@ def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -
     return ParityGrid(vertices, faces).contains(points)
 
 
+def inside_bones(points: np.ndarray, bodies) -> np.ndarray:
+    """(k,) bool: which ``points`` (k, 3) lie inside any of the closed meshes ``bodies``
+    (a list of (vertices, faces))."""
+    out = np.zeros(len(points), dtype=bool)
+    for v, f in bodies:
+        out |= points_inside(points, v, f)
+    return out
+
+
 def _depth_below(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(k,) distance from each point (inside the mesh) to the mesh surface."""
     from faceforge.geometry.surface_points import closest_points
@@ -138,7 +147,7 @@ class FrameReport:
 
 def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
                     skull: Sequence | None = None, sample: int = 8,
-                    tolerance: float | None = None) -> FrameReport:
+                    tolerance: float | None = None, inside_at_rest: np.ndarray | None = None) -> FrameReport:
     """NaN, inverted skin triangles, skin inside the skull over an animation.
 
     ``inverted_triangles`` is the sum over frames of the triangles turned over
@@ -150,7 +159,9 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     ``frame_index -> list of (vertices, faces)``; ``sample`` frames (evenly spaced, always the
     one with the largest displacement) are checked against it. Vertices already inside at
     rest (e.g. teeth-adjacent folds) are not counted, nor vertices less than ``tolerance``
-    (skin units; default 1e-3 of the skin's bounding-box diagonal) below the bone surface.
+    (skin units; default 1e-3 of the skin's bounding-box diagonal) below the bone surface;
+    ``inside_at_rest`` (n,) bool: those vertices when the caller has them (:func:`inside_bones`
+    of ``rest`` in ``skull(-1)``; a bake checks 40 shapes against one rest).
     """
     if tolerance is None:
         tolerance = 1e-3 * float(np.linalg.norm(np.ptp(np.asarray(rest, dtype=float), axis=0)))
@@ -164,13 +175,11 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     inside_total = 0
     if skull is not None and len(frames):
         idx = sorted(set(np.linspace(0, len(frames) - 1, min(sample, len(frames))).astype(int)) | {worst})
-        base = None
+        base = inside_at_rest
         for i in idx:
             bodies = skull(i)
             if base is None:
-                base = np.zeros(len(rest), dtype=bool)
-                for v, f in skull(-1):
-                    base |= points_inside(rest, v, f)
+                base = inside_bones(rest, skull(-1))
             now = np.zeros(len(rest), dtype=bool)
             for v, f in bodies:
                 inside = points_inside(frames[i], v, f)

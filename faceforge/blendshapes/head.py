@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from faceforge.animation.calibrate_head import calibration_probes
-from faceforge.animation.checks import check_animation
+from faceforge.animation.checks import check_animation, inside_bones
 from faceforge.animation.controls import controls
 from faceforge.blendshapes.arkit import ARKIT_NAMES, mirror_name
 from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
@@ -167,10 +167,11 @@ def _presets(head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_fap
 
 def _check_shapes(head, frames, jaw, names, made, report) -> None:
     """Per made shape: peak displacement (skin units) and the physical checks at full weight."""
+    base = inside_bones(head.rest, head.skull_at(np.zeros(3)))   # once, not once per shape
     for i, name in enumerate(names):
         if not made[i]:
             continue
-        checks = check_animation(head.rest, frames[i:i + 1], head.faces,
+        checks = check_animation(head.rest, frames[i:i + 1], head.faces, inside_at_rest=base,
                                  skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
         report[name]["peak_displacement"] = float(np.linalg.norm(frames[i] - head.rest, axis=1).max())
         report[name]["checks"] = checks.as_dict()

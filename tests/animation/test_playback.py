@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from faceforge.animation.checks import check_animation, inverted_faces, inverted_triangles, points_inside
+from faceforge.animation.checks import (check_animation, inside_bones, inverted_faces, inverted_triangles,
+                                        points_inside)
 from faceforge.animation.playback import Rig, Timings, play, static_poses
 from tests.pbd.meshes import grid_faces
 
@@ -178,6 +179,13 @@ def test_points_inside_box_and_check_animation():
     assert rep.skin_inside_skull == len(rest) and rep.worst_frame == 1 and not rep.ok
     ok = check_animation(rest, np.stack([rest, rest + [0, 0, 0.2]]), faces, skull=lambda i: [(bv, bf)])
     assert ok.ok
+    # the rest's inside vertices given by the caller (a bake checks 40 shapes against one rest):
+    # the same count; vertices said to be inside at rest are not counted again
+    assert inside_bones(rest, [(bv, bf)]).sum() == 0
+    given = check_animation(rest, frames, faces, skull=lambda i: [(bv, bf)], inside_at_rest=inside_bones(rest, []))
+    assert given.skin_inside_skull == rep.skin_inside_skull
+    assert check_animation(rest, frames, faces, skull=lambda i: [(bv, bf)],
+                           inside_at_rest=np.ones(len(rest), bool)).skin_inside_skull == 0
 
 
 def test_contact_sheet_writes_a_png_with_the_chosen_frames(tmp_path):
