@@ -93,6 +93,8 @@ def bake_head(name: str, work: Path, tmp: Path) -> dict:
     glb = tmp / f"{name}.glb"
     wall, cpu, _ = cli(work, "bake", "--force", "-o", glb)
     rep = json.loads((work / "bake" / "report.json").read_text())
+    # head units per millimetre of an average adult (the fit's scale): peaks in mm
+    mm = json.loads((work / "fit" / "report.json").read_text()).get("units_per_mm")
     shapes = {}
     for n, s in rep["shapes"].items():
         if not s.get("made"):
@@ -101,6 +103,7 @@ def bake_head(name: str, work: Path, tmp: Path) -> dict:
         shapes[n] = {"error": s.get("error"), "reach": s.get("reach"), "form_error": s.get("form_error"),
                      "verdict": s.get("verdict"), "saturated": s.get("saturated"),
                      "mirrored_pose": bool(s.get("mirrored_pose")), "peak": round(s["peak_displacement"], 5),
+                     "peak_mm": round(s["peak_displacement"] / mm, 2) if mm else None,
                      "folded_edges": s["checks"]["folded_edges"],
                      "inverted_triangles": s["checks"]["inverted_triangles"],
                      "approximation": bool(s.get("approximation")),
@@ -120,7 +123,7 @@ def bake_head(name: str, work: Path, tmp: Path) -> dict:
            "symmetric_rig": rep.get("symmetric_rig"),
            "shapes_with_folded_edges": {n: s["folded_edges"] for n, s in shapes.items()
                                         if s.get("folded_edges")},
-           "mirror_rel_diff": rep["mirror_rel_diff"], "shapes": shapes,
+           "mirror_rel_diff": rep["mirror_rel_diff"], "units_per_mm": mm, "shapes": shapes,
            "validator": validator(glb), "blender": blender(glb, shapes=work / "bake" / "shapes.npz")}
     print(f"{name}: {rep['made']} made, bake {rep['bake_seconds']} s (command {wall:.0f} s wall, {cpu:.0f} s CPU), "
           f"median FAP error {out['fap_error_median']}, folded: {out['shapes_with_folded_edges']}")
