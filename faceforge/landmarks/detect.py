@@ -26,6 +26,9 @@ import numpy as np
 from faceforge.exceptions import LandmarkError
 
 #: FDPs on the midline of the face (put on the mirror plane of a symmetric mesh)
+#: FDPs whose detector point is only a rule's start (the jaw contour, 4-5 % of the diagonal in front
+#: of the jaw angle): left out where the rule does not place them (the MediaPipe mask has no jaw side)
+RULE_ONLY = ("2.13", "2.14")
 MIDLINE_FDPS = ("2.1", "2.2", "2.3", "2.10", "8.1", "8.2", "9.3", "9.15")
 #: FDPs lying in an eye opening rather than on the skin when the eye is a hole
 PUPILS = {"3.5": ("3.1", "3.3"), "3.6": ("3.2", "3.4")}
@@ -155,11 +158,20 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
                      "timings": {"search_s": t_search}})
     plane = _mirror(det, v, diagonal)
     _apply_rules(det, v, f, plane, diagonal, front)
+    det = _drop(det, [k for k in RULE_ONLY if det.info["rules"].get(k) is None])
     if symmetrise and det.info["symmetry"]["symmetric"]:
         _symmetrise(det, v, f, plane)
     _choose_vertices(det, v, diagonal, plane if det.info["symmetry"]["symmetric"] else None)
     det.info["timings"]["total_s"] = time.perf_counter() - t0
     return det
+
+
+def _drop(det: Detection, ids) -> Detection:
+    """``det`` without the FDPs ``ids``."""
+    keep = [i for i, k in enumerate(det.ids) if k not in ids]
+    return Detection(tuple(det.ids[i] for i in keep), det.positions[keep], det.vertex[keep],
+                     [det.method[i] for i in keep], det.confidence[keep], [det.views[i] for i in keep],
+                     det.spread[keep], det.info)
 
 
 def _placeable(table: dict, agreed: np.ndarray, path: str) -> tuple:
@@ -223,6 +235,10 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
     # the opening seen from the front first: a hole's boundary loop is where the lid's skin ends,
     # behind and beyond the visible lid margin the FDPs name (ICT: upper lid 3.1 0.86 % of the
     # diagonal from its hand point by the loop, 0.07 % by the recess); the loop where no recess is seen
+    # the subnasale first: the cheeks' construction measures from it
+    place("midline profile (subnasale)", rules.subnasale(v, f, pos(), frame, origin, normal, diagonal))
+    place("jaw angle (behind the detector's jaw contour, on the side of the head; approximate)",
+          rules.jaw_angles(caster if isinstance(caster, RayCaster) else RayCaster(v, f), pos(), frame, diagonal))
     for name, found in (("eye opening (recess in the frontal render)", sockets),
                         ("eye opening (boundary loop)", {k: p for k, p in loops.items() if k not in sockets}),
                         ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal)),

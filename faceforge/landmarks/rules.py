@@ -10,6 +10,12 @@ All work in the face's frame (left, up, forward unit (3,)) from the detection:
   2.1 menton = below the pogonion, the first profile point whose surface normal points
   :data:`MENTON_NORMAL_DEG` below the forward direction (the convention of the sample heads'
   hand files).
+* jaw angles 2.13/2.14: :func:`jaw_angles`.
+* subnasale 9.15, on the midline profile: going down from the nose tip 9.3, past the columella
+  (whose normal faces down, the steepest profile point), the first place where the normal has
+  turned back to :data:`SUBNASALE_NORMAL_DEG` below forward: where the columella meets the upper
+  lip. The detector puts it 0.3-1.1 % of the diagonal too high, on the columella, which makes
+  the FAP units MNS (9.15 - 2.2) 7-23 % too large and ENS 3-9 % too small.
 * cheeks (the MPEG-4 standard gives no construction; the rule of the sample heads' files):
   5.1/5.2 below the outer eye corner, at the height midway between the subnasale 9.15 and
   the outer lip corner; 5.3/5.4 below the outer eye corner, 45 % of the way down to the alare
@@ -30,6 +36,13 @@ from __future__ import annotations
 import numpy as np
 
 MENTON_NORMAL_DEG = 50.0
+#: the subnasale 9.15: where, below the columella, the profile normal has turned up to this angle
+#: below forward (the hand files' convention: MakeHuman ~20, ICT 23, the young female ~20 degrees)
+SUBNASALE_NORMAL_DEG = 22.0
+#: the jaw angles 2.13/2.14: how far behind the detector's jaw contour point (MediaPipe 397/172), in
+#: pupil distances (ES0); set from the MakeHuman and ICT hand files (0.33, 0.39), whose gonions are
+#: themselves a construction ("approx"); the young female MakeHuman's is 0.24
+GONION_BACK_ES = 0.36
 #: an eye boundary loop must lie this close to the detected pupil (fraction of the eye width)
 EYE_LOOP_REACH = 0.6
 
@@ -121,6 +134,56 @@ def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal)
         men = _crossing(pts, angle, np.concatenate([order[u[order] >= pog @ up][-1:], low]), MENTON_NORMAL_DEG)
         if men is not None:
             out["2.1"] = men
+    return out
+
+
+def subnasale(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal) -> dict:
+    """{"9.15": (3,)} from the midline profile (module docstring); {} if it fails."""
+    left, up, fwd = frame
+    if not all(k in pos for k in ("9.3", "8.1")):
+        return {}
+    pts, nrm = midline_profile(vertices, faces, plane_point, plane_normal)
+    if len(pts) == 0:
+        return {}
+    u, w = pts @ up, pts @ fwd
+    # the outer surface between the nose tip and the upper lip (not the nostrils' or mouth's inside)
+    band = (u < pos["9.3"] @ up) & (u > pos["8.1"] @ up) & (nrm @ fwd > 0) & (w > pos["8.1"] @ fwd - 0.03 * diagonal)
+    order = np.flatnonzero(band)
+    order = order[np.argsort(-u[order])]
+    if len(order) < 3:
+        return {}
+    angle = np.degrees(np.arctan2(-(nrm @ up), nrm @ fwd))[order]        # degrees below forward
+    top = int(np.argmax(angle))                                        # the columella
+    if angle[top] <= SUBNASALE_NORMAL_DEG:
+        return {}
+    below = np.flatnonzero(angle[top:] < SUBNASALE_NORMAL_DEG)
+    if len(below) == 0:
+        return {}
+    j = top + int(below[0])
+    t = (angle[j - 1] - SUBNASALE_NORMAL_DEG) / (angle[j - 1] - angle[j])
+    return {"9.15": pts[order[j - 1]] * (1 - t) + pts[order[j]] * t}
+
+
+def jaw_angles(caster, pos: dict, frame, diagonal) -> dict:
+    """{"2.13": (3,), "2.14": (3,)}: the soft-tissue gonions (module docstring); {} where it fails.
+
+    The detector's jaw points (397/172) lie on the face's contour as a photo shows it, on the
+    jaw's lower border 4-5 % of the diagonal in front of the angle; each is moved back
+    :data:`GONION_BACK_ES` pupil distances and put on the side of the head by a ray from outside
+    along the left axis. ``caster``: a :class:`faceforge.geometry.rays.RayCaster`.
+    Without these two the fit's jaw angle is free and the masseter pokes out of the cheek
+    (MakeHuman: 1.2 % of the diagonal, the fit's check fails).
+    """
+    left, up, fwd = frame
+    if not all(k in pos for k in ("2.13", "2.14", "3.5", "3.6")):
+        return {}
+    es = float(np.linalg.norm(pos["3.5"] - pos["3.6"]))
+    out = {}
+    for k, side in (("2.13", 1.0), ("2.14", -1.0)):
+        target = pos[k] - fwd * GONION_BACK_ES * es
+        fid, hit, _ = caster.first_hit((target + side * left * 0.5 * diagonal)[None], (-side * left)[None], diagonal)
+        if np.asarray(fid)[0] >= 0:
+            out[k] = np.asarray(hit, dtype=np.float64)[0]
     return out
 
 
