@@ -290,7 +290,9 @@ def test_subnasale_and_jaw_angles_come_from_the_mesh_and_set_the_fap_units(detec
         diag = np.linalg.norm(np.ptp(v, axis=0))
         at = {k: i for i, k in enumerate(det.ids)}
         assert "subnasale" in det.method[at["9.15"]] and "jaw angle" in det.method[at["2.13"]]
-        assert np.linalg.norm(det.positions[at["9.15"]] - hand["9.15"]) / diag < 0.002, name
+        for k in ("9.15", "8.1"):     # the detector's: MakeHuman 0.57 / 0.39 %, ICT 0.41 / 0.31 %
+            assert "rule: midline profile" in det.method[at[k]], (name, k)
+            assert np.linalg.norm(det.positions[at[k]] - hand[k]) / diag < 0.002, (name, k)
         for k in ("2.13", "2.14"):
             assert np.linalg.norm(det.positions[at[k]] - hand[k]) / diag < 0.012, (name, k)
         mine = measure_fapu({k: det.positions[i] for i, k in enumerate(det.ids)})
