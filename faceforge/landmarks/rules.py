@@ -41,6 +41,11 @@ MENTON_NORMAL_DEG = 50.0
 #: the subnasale 9.15: where, below the columella, the profile normal has turned up to this angle
 #: below forward (the hand files' convention: MakeHuman ~20, ICT 23, the young female ~20 degrees)
 SUBNASALE_NORMAL_DEG = 22.0
+#: ... only where the profile resolves that corner: the two profile points around the crossing lie
+#: within this fraction of the diagonal (MakeHuman 0.57 %, ICT 0.15 %). The 478-vertex MediaPipe mask's
+#: 0.88 %: there the rule's point (1.0 % from the hand point, the detector's 2.2 %) made the mask's
+#: fit fail its checks (brow muscles poking 1.5 % out at the glabella), so the detector's is kept
+PROFILE_RESOLUTION = 0.0075
 #: the upper lip's midpoint 8.1 (labrale superius): below the subnasale the philtrum's normal tilts
 #: up; where it turns back through this angle (15 degrees above forward) the lip turns forward at
 #: its vermilion border (MakeHuman's and ICT's hand points: -15 and -18 degrees)
@@ -166,6 +171,8 @@ def subnasale(vertices, faces, pos: dict, frame, plane_point, plane_normal, diag
     j = _falls_through(angle, top, SUBNASALE_NORMAL_DEG)
     if j is None:
         return {}
+    if np.linalg.norm(pts[order[j]] - pts[order[j - 1]]) > PROFILE_RESOLUTION * diagonal:
+        return {}                                               # too coarse to tell where the corner is
     out = {"9.15": _between(pts, order, angle, j, SUBNASALE_NORMAL_DEG)}
     tilted = _falls_through(angle, j, LABRALE_NORMAL_DEG)               # the philtrum tilting up
     if tilted is not None:
