@@ -26,6 +26,9 @@ import numpy as np
 from faceforge.exceptions import LandmarkError
 
 #: FDPs on the midline of the face (put on the mirror plane of a symmetric mesh)
+#: FDPs whose detector point is only a rule's start (the jaw contour, 4-5 % of the diagonal in front
+#: of the jaw angle): left out where the rule does not place them (the MediaPipe mask has no jaw side)
+RULE_ONLY = ("2.13", "2.14")
 MIDLINE_FDPS = ("2.1", "2.2", "2.3", "2.10", "8.1", "8.2", "9.3", "9.15")
 #: FDPs lying in an eye opening rather than on the skin when the eye is a hole
 PUPILS = {"3.5": ("3.1", "3.3"), "3.6": ("3.2", "3.4")}
@@ -154,12 +157,21 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
                      "frame": {"left": left.tolist(), "up": up.tolist(), "forward": forward.tolist()},
                      "timings": {"search_s": t_search}})
     plane = _mirror(det, v, diagonal)
-    _apply_rules(det, v, f, plane, diagonal, front)
+    _apply_rules(det, v, f, plane, diagonal, front, normals)
+    det = _drop(det, [k for k in RULE_ONLY if det.info["rules"].get(k) is None])
     if symmetrise and det.info["symmetry"]["symmetric"]:
         _symmetrise(det, v, f, plane)
     _choose_vertices(det, v, diagonal, plane if det.info["symmetry"]["symmetric"] else None)
     det.info["timings"]["total_s"] = time.perf_counter() - t0
     return det
+
+
+def _drop(det: Detection, ids) -> Detection:
+    """``det`` without the FDPs ``ids``."""
+    keep = [i for i, k in enumerate(det.ids) if k not in ids]
+    return Detection(tuple(det.ids[i] for i in keep), det.positions[keep], det.vertex[keep],
+                     [det.method[i] for i in keep], det.confidence[keep], [det.views[i] for i in keep],
+                     det.spread[keep], det.info)
 
 
 def _placeable(table: dict, agreed: np.ndarray, path: str) -> tuple:
@@ -189,9 +201,10 @@ def _mirror(det: Detection, v, diagonal):
     return plane
 
 
-def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
+def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None) -> None:
     """Move the points the geometric rules of :mod:`faceforge.landmarks.rules` place
-    (``front``: the frontal view's render, which serves as the cheeks' ray cast)."""
+    (``front``: the frontal view's render, which serves as the cheeks' ray cast; ``normals``:
+    the mesh's vertex normals (n, 3), computed if not given)."""
     from faceforge.geometry.rays import RayCaster
     from faceforge.landmarks import rules
 
@@ -223,9 +236,13 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
     # the opening seen from the front first: a hole's boundary loop is where the lid's skin ends,
     # behind and beyond the visible lid margin the FDPs name (ICT: upper lid 3.1 0.86 % of the
     # diagonal from its hand point by the loop, 0.07 % by the recess); the loop where no recess is seen
+    # the subnasale first: the cheeks' construction measures from it
+    place("midline profile (subnasale, upper lip)", rules.subnasale(v, f, pos(), frame, origin, normal, diagonal, normals))
+    place("jaw angle (behind the detector's jaw contour, on the side of the head; approximate)",
+          rules.jaw_angles(v, f, pos(), frame, diagonal))
     for name, found in (("eye opening (recess in the frontal render)", sockets),
                         ("eye opening (boundary loop)", {k: p for k, p in loops.items() if k not in sockets}),
-                        ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal)),
+                        ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal, normals)),
                         ("cheek construction", rules.cheeks(caster, pos(), frame, diagonal))):
         place(name, found)
     # after the eye rules, and only where they placed all four eye corners from the mesh: the
@@ -237,7 +254,7 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None) -> None:
               brows(caster, pos(), frame, diagonal))
     from faceforge.geometry.triangles import vertex_normals
     from faceforge.landmarks.lips import inner_corners, inner_lips
-    normals = vertex_normals(v, f)
+    normals = vertex_normals(v, f) if normals is None else normals
     for name, found in (("inner lip edge (walked from the outer lip point on its own lip)",
                          inner_lips(v, f, normals, pos(), frame)),
                         ("inner lip corner (the slit's end wall)", inner_corners(v, normals, pos(), frame))):

@@ -2,7 +2,8 @@
 
 :func:`find_landmarks` decides, for a mesh and its landmark file path:
 
-* the file exists and holds every FDP the detector gives (:func:`detect.fdp_table`):
+* the file exists and holds every FDP the detector gives (:func:`detect.fdp_table`; the jaw
+  angles 2.13/2.14 may be missing, as the detection leaves them out where the mesh has no jaw side):
   it is used as it is, nothing is detected (``source = "given"``);
 * the file exists but lacks some of them (a partial file): the rest are detected, the
   file's points are kept as written (``"completed"``);
@@ -37,7 +38,7 @@ def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True) -> Fo
     from faceforge.io.landmarks import default_landmark_path, read_landmarks
     from faceforge.io.mesh import load_mesh
     from faceforge.io.mesh_check import check_mesh
-    from faceforge.landmarks.detect import detect_landmarks, fdp_table
+    from faceforge.landmarks.detect import RULE_ONLY, detect_landmarks, fdp_table
     from faceforge.landmarks.output import merge
 
     mesh_path = Path(mesh_path)
@@ -47,7 +48,7 @@ def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True) -> Fo
     raw = None
     if path.exists() or path.absolute() != default.absolute():
         raw = read_landmarks(path)    # an explicit path that is absent: "not found"
-        if set(fdp_table()) <= set(raw.ids):
+        if set(fdp_table()) - set(RULE_ONLY) <= set(raw.ids):   # the jaw angles are optional
             return Found("given", None, str(path), v, f)
     check_mesh(v, f, str(mesh_path))     # a broken mesh says what is wrong with it, not "no face"
     det = detect_landmarks(v, f, str(mesh_path), symmetrise=symmetrise)

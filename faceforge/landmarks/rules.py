@@ -10,6 +10,14 @@ All work in the face's frame (left, up, forward unit (3,)) from the detection:
   2.1 menton = below the pogonion, the first profile point whose surface normal points
   :data:`MENTON_NORMAL_DEG` below the forward direction (the convention of the sample heads'
   hand files).
+* jaw angles 2.13/2.14: :func:`jaw_angles`.
+* subnasale 9.15, on the midline profile: going down from the nose tip 9.3, past the columella
+  (whose normal faces down, the steepest profile point), the first place where the normal has
+  turned back to :data:`SUBNASALE_NORMAL_DEG` below forward: where the columella meets the upper
+  lip. The detector puts it 0.3-1.1 % of the diagonal too high, on the columella, which makes
+  the FAP units MNS (9.15 - 2.2) 7-23 % too large and ENS 3-9 % too small.
+  Below it, 8.1: where the philtrum's normal, tilted up, turns back through
+  :data:`LABRALE_NORMAL_DEG` (the vermilion border; the detector's is 0.2-0.4 % low).
 * cheeks (the MPEG-4 standard gives no construction; the rule of the sample heads' files):
   5.1/5.2 below the outer eye corner, at the height midway between the subnasale 9.15 and
   the outer lip corner; 5.3/5.4 below the outer eye corner, 45 % of the way down to the alare
@@ -30,6 +38,22 @@ from __future__ import annotations
 import numpy as np
 
 MENTON_NORMAL_DEG = 50.0
+#: the subnasale 9.15: where, below the columella, the profile normal has turned up to this angle
+#: below forward (the hand files' convention: MakeHuman ~20, ICT 23, the young female ~20 degrees)
+SUBNASALE_NORMAL_DEG = 22.0
+#: ... only where the profile resolves that corner: the two profile points around the crossing lie
+#: within this fraction of the diagonal (MakeHuman 0.57 %, ICT 0.15 %). The 478-vertex MediaPipe mask's
+#: 0.88 %: there the rule's point (1.0 % from the hand point, the detector's 2.2 %) made the mask's
+#: fit fail its checks (brow muscles poking 1.5 % out at the glabella), so the detector's is kept
+PROFILE_RESOLUTION = 0.0075
+#: the upper lip's midpoint 8.1 (labrale superius): below the subnasale the philtrum's normal tilts
+#: up; where it turns back through this angle (15 degrees above forward) the lip turns forward at
+#: its vermilion border (MakeHuman's and ICT's hand points: -15 and -18 degrees)
+LABRALE_NORMAL_DEG = -15.0
+#: the jaw angles 2.13/2.14: how far behind the detector's jaw contour point (MediaPipe 397/172), in
+#: pupil distances (ES0); set from the MakeHuman and ICT hand files (0.33, 0.39), whose gonions are
+#: themselves a construction ("approx"); the young female MakeHuman's is 0.24
+GONION_BACK_ES = 0.36
 #: an eye boundary loop must lie this close to the detected pupil (fraction of the eye width)
 EYE_LOOP_REACH = 0.6
 
@@ -57,17 +81,18 @@ def plane_cut(vertices, faces, origin, normal) -> tuple[np.ndarray, np.ndarray]:
     return two[keep].mean(axis=1), cut[keep]
 
 
-def midline_profile(vertices, faces, origin, normal):
+def midline_profile(vertices, faces, origin, normal, vertex_normals_=None):
     """Points and in-plane unit normals of the mesh cut by the plane (``origin``, ``normal``):
     ``(points (k, 3), normals (k, 3))``, one per cut triangle (segment midpoints; the normals
-    interpolated from the vertex normals)."""
+    interpolated from the vertex normals, ``vertex_normals_ (n, 3)`` if given, else computed)."""
     from faceforge.geometry.triangles import barycentric, vertex_normals
 
     pts, fids = plane_cut(vertices, faces, origin, normal)
     if len(pts) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
     bary = barycentric(pts, vertices, faces, fids)          # smooth normals: a low-poly chin still turns gradually
-    n = np.einsum("kj,kjd->kd", bary, vertex_normals(vertices, faces)[faces[fids]])
+    vn = vertex_normals(vertices, faces) if vertex_normals_ is None else vertex_normals_
+    n = np.einsum("kj,kjd->kd", bary, vn[faces[fids]])
     n = n - np.outer(n @ normal, normal)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     return pts, n
@@ -85,7 +110,7 @@ def _crossing(pts, angle, order, level):
     return pts[order[j]] * (1 - t) + pts[order[j + 1]] * t
 
 
-def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal) -> dict:
+def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal, normals=None) -> dict:
     """{"2.10": (3,), "2.1": (3,)} from the midline profile (module docstring); {} if it fails.
 
     Along the profile from the lower lip down, the surface normal tilts up most in the
@@ -95,7 +120,7 @@ def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal)
     left, up, fwd = frame
     if not all(k in pos for k in ("2.1", "8.2")):
         return {}
-    pts, nrm = midline_profile(vertices, faces, plane_point, plane_normal)
+    pts, nrm = midline_profile(vertices, faces, plane_point, plane_normal, normals)
     if len(pts) == 0:
         return {}
     u, w = pts @ up, pts @ fwd
@@ -121,6 +146,84 @@ def chin(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal)
         men = _crossing(pts, angle, np.concatenate([order[u[order] >= pog @ up][-1:], low]), MENTON_NORMAL_DEG)
         if men is not None:
             out["2.1"] = men
+    return out
+
+
+def subnasale(vertices, faces, pos: dict, frame, plane_point, plane_normal, diagonal, normals=None) -> dict:
+    """{"9.15": (3,), "8.1": (3,)} from the midline profile (module docstring); {} or only 9.15
+    where the construction fails."""
+    left, up, fwd = frame
+    if not all(k in pos for k in ("9.3", "8.1", "2.2")):
+        return {}
+    pts, nrm = midline_profile(vertices, faces, plane_point, plane_normal, normals)
+    if len(pts) == 0:
+        return {}
+    u, w = pts @ up, pts @ fwd
+    # the outer surface between the nose tip and the mouth (not the nostrils' or mouth's inside)
+    low = min(pos["2.2"] @ up, pos["8.1"] @ up)
+    band = (u < pos["9.3"] @ up) & (u > low) & (nrm @ fwd > 0) & (w > pos["8.1"] @ fwd - 0.03 * diagonal)
+    order = np.flatnonzero(band)
+    order = order[np.argsort(-u[order])]
+    if len(order) < 3:
+        return {}
+    angle = np.degrees(np.arctan2(-(nrm @ up), nrm @ fwd))[order]        # degrees below forward
+    top = int(np.argmax(angle[u[order] > pos["8.1"] @ up]))             # the columella
+    j = _falls_through(angle, top, SUBNASALE_NORMAL_DEG)
+    if j is None:
+        return {}
+    if np.linalg.norm(pts[order[j]] - pts[order[j - 1]]) > PROFILE_RESOLUTION * diagonal:
+        return {}                                               # too coarse to tell where the corner is
+    out = {"9.15": _between(pts, order, angle, j, SUBNASALE_NORMAL_DEG)}
+    tilted = _falls_through(angle, j, LABRALE_NORMAL_DEG)               # the philtrum tilting up
+    if tilted is not None:
+        back = np.flatnonzero(angle[tilted:] >= LABRALE_NORMAL_DEG)     # ... and the lip turning forward
+        if len(back):
+            out["8.1"] = _between(pts, order, angle, tilted + int(back[0]), LABRALE_NORMAL_DEG)
+    return out
+
+
+def _falls_through(angle, start: int, level: float) -> int | None:
+    """The first index after ``start`` whose angle is below ``level`` (angle[start] above it)."""
+    if angle[start] <= level:
+        return None
+    below = np.flatnonzero(angle[start:] < level)
+    return None if len(below) == 0 else start + int(below[0])
+
+
+def _between(pts, order, angle, j: int, level: float) -> np.ndarray:
+    """The profile point between ``order[j - 1]`` and ``order[j]`` where the angle is ``level``."""
+    t = (angle[j - 1] - level) / (angle[j - 1] - angle[j])
+    return pts[order[j - 1]] * (1 - t) + pts[order[j]] * t
+
+
+def jaw_angles(vertices, faces, pos: dict, frame, diagonal) -> dict:
+    """{"2.13": (3,), "2.14": (3,)}: the soft-tissue gonions (module docstring); {} where it fails.
+
+    The detector's jaw points (397/172) lie on the face's contour as a photo shows it, on the
+    jaw's lower border 4-5 % of the diagonal in front of the angle; each is moved back
+    :data:`GONION_BACK_ES` pupil distances and put on the side of the head by a ray from outside
+    along the left axis.
+    Without these two the fit's jaw angle is free and the masseter pokes out of the cheek
+    (MakeHuman: 1.2 % of the diagonal, the fit's check fails).
+    """
+    left, up, fwd = frame
+    if not all(k in pos for k in ("2.13", "2.14", "3.5", "3.6")):
+        return {}
+    from faceforge.geometry.rays import RayCaster
+
+    es = float(np.linalg.norm(pos["3.5"] - pos["3.6"]))
+    out = {}
+    for k, side in (("2.13", 1.0), ("2.14", -1.0)):
+        target = pos[k] - fwd * GONION_BACK_ES * es
+        # only the triangles that come near the ray (a caster over the whole mesh costs 0.8 s on 45k vertices)
+        near = np.abs((vertices - target) @ np.array([up, fwd]).T).max(axis=1) < 0.02 * diagonal
+        tri = faces[near[faces].any(axis=1)]
+        if len(tri) == 0:
+            continue
+        caster = RayCaster(vertices, tri)
+        fid, hit, _ = caster.first_hit((target + side * left * 0.5 * diagonal)[None], (-side * left)[None], diagonal)
+        if np.asarray(fid)[0] >= 0:
+            out[k] = np.asarray(hit, dtype=np.float64)[0]
     return out
 
 
