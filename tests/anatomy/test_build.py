@@ -56,7 +56,7 @@ def test_the_map_keeps_its_muscles_and_layers(template):
     kinds = [s.type for s in specs]
     assert kinds.count("linear") == 29 and kinds.count("sphincter") == 1   # Fig. 6 + the brow depressors
     assert tuple(system.layer_indices) == (0, 1, 2, 3, 4)
-    assert len(muscles) == 30
+    assert len(muscles) == 32
 
 
 def test_rest_meshes_have_no_inverted_or_degenerate_face(template):
