@@ -173,6 +173,9 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
     jaw_magnitude = float(config.get("animate.calibrate.jaw_magnitude"))
     if 3 in probes:
         calibrated = measure_coupling(calibrated, simulate, head.rest, probes, value=jaw_magnitude)
+    from faceforge.animation.calibrate_jaw import fit_muscle_reach
+
+    calibrated, _ = fit_muscle_reach(calibrated, simulate, head.rest, probes, requested, log=log)
     lips = lip_opening(calibrated, simulate, head, jaw_magnitude)
     head.rig.reset()
     mirrored = {template.entries[r].name: template.entries[l].name for r, l in sorted(twins.items())}

@@ -105,5 +105,6 @@ def mirror_responses(calibrated: FapMapping, twins: dict[int, int]) -> FapMappin
     """Each right entry of ``twins`` with its left twin's response curve."""
     for right, left in twins.items():
         knots = calibrated.entries[left].response
-        calibrated = with_entry(calibrated, right, response=None if knots is None else np.array(knots))
+        calibrated = with_entry(calibrated, right, response=None if knots is None else np.array(knots),
+                                muscle_reach=calibrated.entries[left].muscle_reach)
     return calibrated

@@ -152,7 +152,7 @@ def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tole
     while asked:   # one simulation per step: every lane's current entry, their FAPs together
         identity, faps, warm = mapping, np.zeros(68), True
         for idx, f, w in asked.values():
-            identity = with_entry(identity, idx, response=None)
+            identity = with_entry(identity, idx, response=None, muscle_reach=None)   # the muscles alone
             faps, warm = faps + f, warm and w
         skin = pose_for(identity, faps, warm)
         for k in list(asked):
@@ -165,7 +165,8 @@ def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tole
         req, drive, chains = done[idx]
         ok = np.isfinite(drive)
         knots = _monotone_knots(np.column_stack([req, np.where(ok, drive, 0.0)]))
-        calibrated = with_entry(calibrated, idx, response=knots)
+        reach, knots = muscle_reach(mapping.entries[idx], chains, knots)
+        calibrated = with_entry(calibrated, idx, response=knots, muscle_reach=reach)
         rows += _rows(mapping.entries[idx], calibrated, req, drive, ok, knots, chains, probes)
     return calibrated, rows
 
@@ -196,6 +197,28 @@ def _lane(indices, mapping, probes, rest, requested, tolerance, max_steps, max_d
         done[idx] = (req, drive, chains)
         if ticks is not None:
             next(ticks, None)
+
+
+def muscle_reach(entry, chains: dict, knots: np.ndarray):
+    """(reach, knots) for an entry the jaw helps (``entry.muscle_reach`` set): the farthest its
+    muscles moved the FDP on the chain of the jaw's sense (the sign of its coupling ratio), in
+    FAPU, and the knots with ``(sense x reach, the drive that got there)`` added, so that the
+    remainder :func:`~faceforge.animation.fap_mapping.jaw_assisted` leaves to the muscles (at
+    most the reach) drives them as far as they went. Other entries: (their reach, knots)."""
+    if entry.muscle_reach is None or not entry.coupling:
+        return entry.muscle_reach, knots
+    sense = float(np.sign(next(iter(entry.coupling.values()))))
+    chain = chains.get(sense)
+    if chain is None or len(chain.mean) < 2:
+        return entry.muscle_reach, knots
+    got = sense * np.asarray(chain.mean[1:])
+    k = int(np.argmax(got))
+    if got[k] <= 0.0:
+        return 0.0, knots
+    reach = float(got[k])
+    if not np.any(np.isclose(knots[:, 0], sense * reach)):
+        knots = _monotone_knots(np.vstack([knots, [sense * reach, chain.drives[1 + k]]]))
+    return reach, knots
 
 
 def face_lanes(mapping) -> list:

@@ -10,6 +10,11 @@ entry, so a file that gives both does not count them twice). The entry's value `
    ``carried = sum_j coupling_j * v_j`` over the coupled FAPs ``j`` (open_jaw), a request
    of the same sign shrinks towards zero, ``v_eff = sign(v) max(|v| - |carried|, 0)``;
    a request of the other sign, or none, is kept (open_jaw alone still parts the lips);
+   before that, an entry with a ``muscle_reach`` (the lower lip) may **open the jaw** further
+   (:func:`jaw_assisted`): its muscles move the lip at most ``muscle_reach`` FAPU, so a
+   request past ``muscle_reach + carried`` raises the coupled FAP (open_jaw) to
+   ``(|v| - muscle_reach) / |coupling|``; the jaw then opens to the larger of what the file
+   asks and what the lip needs, never their sum;
 2. **response curve** (what calibration fits; identity when uncalibrated): a monotone
    piecewise-linear map ``drive = R(v_eff)`` through (0, 0), knots
    ``(requested FAPU, drive FAPU)``, extrapolated linearly with the end slopes;
@@ -73,6 +78,7 @@ class FapEntry:
     coupling: dict = field(default_factory=dict)      # FAP number -> ratio (FAPU per FAPU)
     response: np.ndarray | None = None                # (k, 2) knots (requested, drive), sorted
     measure: dict = field(default_factory=dict)       # FAP number -> Measure (calibration)
+    muscle_reach: float | None = None                 # FAPU the muscles move the FDP (coupled sense)
 
 
 @dataclass(frozen=True)
@@ -192,7 +198,7 @@ def _entry(raw, path, idx):
     if not isinstance(raw, dict):
         raise _err(path, f"{where}: expected a mapping")
     unknown = set(raw) - {"fap", "name", "fapu", "positive", "negative", "jaw", "coupling",
-                          "response", "measure"}
+                          "response", "measure", "muscle_reach"}
     if unknown:
         raise _err(path, f"{where}: unknown keys {sorted(unknown)}")
     faps = raw.get("fap")
@@ -214,12 +220,17 @@ def _entry(raw, path, idx):
             raise _err(path, f"{where}.measure.{k}: expected {{fdp: 'g.s', relative_to: 'g.s'}}")
         measure[_fap_number(k, path, f"{where}.measure")] = Measure(
             str(v["fdp"]), None if v.get("relative_to") is None else str(v["relative_to"]))
+    reach = raw.get("muscle_reach")
+    if reach is not None:
+        reach = _as_float(reach, path, f"{where}.muscle_reach")
+        if reach < 0.0 or not coupling:
+            raise _err(path, f"{where}.muscle_reach: expected a number >= 0 on an entry with a coupling")
     return FapEntry(faps=faps, name=str(raw.get("name", f"fap{faps[0]}")), fapu=fapu,
                     positive=_muscles(raw.get("positive"), path, f"{where}.positive"),
                     negative=_muscles(raw.get("negative"), path, f"{where}.negative"),
                     jaw=jaw, coupling=coupling,
                     response=_response(raw.get("response"), path, f"{where}.response"),
-                    measure=measure)
+                    measure=measure, muscle_reach=reach)
 
 
 def mapping_from_dict(data: dict, source: str = "<memory>") -> FapMapping:
@@ -306,6 +317,8 @@ def mapping_to_dict(mapping: FapMapping) -> dict:
             d["measure"] = {int(k): ({"fdp": m.fdp} if m.relative_to is None else
                                      {"fdp": m.fdp, "relative_to": m.relative_to})
                             for k, m in e.measure.items()}
+        if e.muscle_reach is not None:
+            d["muscle_reach"] = float(e.muscle_reach)
         if e.response is not None:
             d["response"] = [[float(a), float(b)] for a, b in e.response]
         entries.append(d)
@@ -428,11 +441,40 @@ def viseme_faps(mapping: FapMapping, fap1: np.ndarray) -> tuple[np.ndarray, list
     return out, missing
 
 
+def jaw_assisted(mapping: FapMapping, faps: np.ndarray) -> np.ndarray:
+    """``faps`` (n, 68) with each coupled FAP (open_jaw) raised to what the lip entries need.
+
+    MPEG-4's lower-lip FAPs are absolute displacements of the lip (the FAP table: open_jaw
+    "does not affect mouth opening"; the Xface files give the lower lip 1.1-1.3 x open_jaw).
+    An entry with ``muscle_reach`` R (FAPU its own muscles move the FDP at most, in the sense
+    the jaw moves it) asking ``v`` past that, with coupling ratio ``k`` to FAP ``j``, needs
+    ``(|v| - R) / |k|`` of FAP ``j``; the FAP becomes the largest of its own value and every
+    entry's need (a lip lowered alone opens the jaw as a real face does; in a file that opens
+    the jaw itself the jaw opens to the larger of the two, not their sum). Returns a copy
+    (n, 68); ``faps`` itself when no entry has a reach.
+    """
+    assisting = [e for e in mapping.entries if e.muscle_reach is not None and e.coupling]
+    if not assisting:
+        return faps
+    out = faps.copy()
+    for e in assisting:
+        v = faps[:, [f - 1 for f in e.faps]].mean(axis=1)
+        for f, ratio in e.coupling.items():
+            if ratio == 0.0:
+                continue
+            lip = np.where(np.sign(v) == np.sign(ratio), np.abs(v), 0.0)
+            need = np.maximum(lip - e.muscle_reach, 0.0) / abs(ratio)
+            out[:, f - 1] = np.maximum(out[:, f - 1], need)
+    return out
+
+
 def entry_drive(mapping: FapMapping, faps: np.ndarray) -> np.ndarray:
-    """Drive (n, n_entries) FAPU of every entry for low-level FAP frames ``faps`` (n, 68)."""
+    """Drive (n, n_entries) FAPU of every entry for low-level FAP frames ``faps`` (n, 68),
+    after the jaw's help to the lower lip (:func:`jaw_assisted`)."""
     faps = np.atleast_2d(np.asarray(faps, dtype=float))
     if faps.shape[1] != N_FAPS:
         raise ValueError(f"faps must be (n, {N_FAPS}), got {faps.shape}")
+    faps = jaw_assisted(mapping, faps)
     drive = np.zeros((len(faps), len(mapping.entries)))
     for j, e in enumerate(mapping.entries):
         v = faps[:, [f - 1 for f in e.faps]].mean(axis=1)

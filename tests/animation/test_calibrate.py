@@ -256,3 +256,23 @@ def test_an_unreachable_request_is_held_at_the_knee():
     faps[0, 30] = 200.0
     c, _ = fap_controls(cal, faps, MUSCLES, FAPU, LEVERS)
     assert c[0, MUSCLES.index("front")] == pytest.approx(0.5)
+
+
+def test_muscle_reach_is_fitted_so_the_lip_alone_lands_with_the_jaw():
+    from faceforge.animation.calibrate_jaw import fit_muscle_reach
+    from faceforge.animation.fap_mapping import with_entry
+
+    m = measure_coupling(mapping_from_dict(MAPPING), synthetic_head, np.zeros((5, 3)), PROBES, value=200.0)
+    k = [e.name for e in m.entries].index("raise_b_midlip")
+    # the depressor moves the lip 205 MNS at most (0.04 units); a response that meets it linearly
+    m = with_entry(m, k, response=np.array([[-205.0, -1000.0]]), muscle_reach=400.0)
+    rest = np.zeros((5, 3))
+    frame = np.zeros((1, 68))
+    frame[0, [51, 4]] = -870.0
+    before = measure(rest, synthetic_head(m, frame), PROBES[52])[0]
+    fitted, report = fit_muscle_reach(m, synthetic_head, rest, PROBES, {52: [-870.0, 100.0]}, steps=3)
+    after = measure(rest, synthetic_head(fitted, frame), PROBES[52])[0]
+    assert before > -0.85 * 870.0                          # a reach too large: the jaw opened too little
+    assert after == pytest.approx(-870.0, rel=0.02)       # alone: the jaw opens for the rest
+    assert fitted.entries[k].muscle_reach == pytest.approx(report["raise_b_midlip"][0])
+    assert 150.0 < fitted.entries[k].muscle_reach < 260.0   # about what the depressor gives

@@ -74,7 +74,13 @@ def test_contractions_clipped_and_jaw_limited(mapping):
     assert jaw[0, 0] == pytest.approx(mapping.jaw_limits["pitch"][1])
     assert jaw[0, 2] == pytest.approx(mapping.jaw_limits["protrusion"][1] * LEVERS.pitch)
     c, jaw = fap_controls(mapping, -f, mapping.muscles, FAPU, LEVERS)
-    assert c.min() >= 0.0 and jaw[0, 0] == pytest.approx(mapping.jaw_limits["pitch"][0])
+    # the lower lip lowered 1e6 MNS opens the jaw (jaw_assisted) as far as it goes
+    assert c.min() >= 0.0 and jaw[0, 0] == pytest.approx(mapping.jaw_limits["pitch"][1])
+    plain = mapping
+    for k, e in enumerate(mapping.entries):
+        plain = with_entry(plain, k, muscle_reach=None)
+    _, jaw = fap_controls(plain, -f, mapping.muscles, FAPU, LEVERS)
+    assert jaw[0, 0] == pytest.approx(mapping.jaw_limits["pitch"][0])
 
 
 def test_open_jaw_pitch_is_the_chin_arc(mapping):
@@ -121,6 +127,28 @@ def test_jaw_coupling_removes_only_what_the_jaw_carries(mapping):
     # a request smaller than what the jaw carries needs no depressor at all
     d = entry_drive(mapping, frames(f3=300, f52=-50, f5=-50))[0, mapping.entries.index(e)]
     assert d == 0.0
+
+
+def test_lower_lip_past_its_muscles_opens_the_jaw_to_the_larger_need(mapping):
+    # MPEG-4 lower-lip FAPs are absolute: alone past the muscles' reach the jaw opens for them
+    e = mapping.entry_of(52)
+    ratio, reach = e.coupling[3], e.muscle_reach
+    j = mapping.entries.index(mapping.entry_of(3))
+    k = mapping.entries.index(e)
+    d = entry_drive(mapping, frames(f52=-870, f5=-870))[0]
+    need = (870 - reach) / abs(ratio)
+    assert d[j] == pytest.approx(need)                    # the jaw opens for the lip
+    assert d[k] == pytest.approx(-reach)                  # the depressors give the rest
+    # a file that opens the jaw further itself: the jaw takes the larger, not the sum
+    d = entry_drive(mapping, frames(f3=need + 100, f52=-870, f5=-870))[0]
+    assert d[j] == pytest.approx(need + 100)
+    d = entry_drive(mapping, frames(f3=need - 100, f52=-870, f5=-870))[0]
+    assert d[j] == pytest.approx(need)
+    # within the muscles' reach, raised, or no reach: the jaw stays where the file puts it
+    assert entry_drive(mapping, frames(f52=-reach, f5=-reach))[0, j] == 0.0
+    assert entry_drive(mapping, frames(f52=300, f5=300))[0, j] == 0.0
+    plain = with_entry(mapping, k, muscle_reach=None)
+    assert entry_drive(plain, frames(f52=-870, f5=-870))[0, j] == 0.0
 
 
 def test_expression_faps_scale_with_intensity(mapping):
