@@ -4,8 +4,8 @@ chin path (issues 25 and 27), on the sample heads. Run::
     python benchmarks/bench_folds.py WORKDIR_MAKEHUMAN WORKDIR_ICT WORKDIR_MEDIAPIPE [--bake]
 
 Each WORKDIR is fitted and bound (calibrated or not: the stages calibrate when they need to).
-Through the CLI, as a user gets them: ``faceforge expressions`` (its report's per-preset checks)
-and, with ``--bake``, ``faceforge bake`` (its report's per-shape checks at full weight). In process,
+Through the CLI, as a user gets them: ``faceforge expressions`` and ``faceforge visemes`` (their reports' per-pose checks)
+and, with ``--bake``, ``faceforge bake --shapes all`` (its report's per-shape checks at full weight). In process,
 settled as the expressions stage settles them: where each preset's folded edges are (the nearest
 FDP group: lips 2.x/8.x, lids and canthi 3.x, brows 4.x, cheeks 5.x, nose 9.x) and how many come
 from the kinematic lids; the chin's (FDP 2.1) path down and back at open_jaw 713 MNS (the largest
@@ -89,13 +89,15 @@ def head_figures(workdir: Path, bake: bool) -> dict:
     """All figures of one workdir."""
     out = {"expressions_seconds": cli(workdir, "expressions", "--force")}
     out["presets"] = {n: f for n, f in stage_folds(workdir, "expressions", "expressions").items() if n in PRESETS}
+    out["visemes_seconds"] = cli(workdir, "visemes", "--force")
+    out["visemes"] = {n: f for n, f in stage_folds(workdir, "visemes", "visemes").items() if n != "neutral"}
     head, mapping, config = em.load_head(workdir)
     head._bench_mapping = mapping
     faps = np.array([mapping.expressions[n] for n in PRESETS], float).reshape(len(PRESETS), 68)
     out["presets_where"] = dict(zip(PRESETS, where(head, faps, config)))
     out["chin_path"] = chin(head, mapping)
     if bake:
-        out["bake_seconds"] = cli(workdir, "bake", "--force")
+        out["bake_seconds"] = cli(workdir, "bake", "--shapes", "all", "--force")
         folds = stage_folds(workdir, "bake", "shapes")
         out["bake_folds"] = {n: f for n, f in sorted(folds.items()) if f}
         out["bake_shapes_folding"] = len(out["bake_folds"])
@@ -110,6 +112,7 @@ def main(argv=None) -> None:
     for d in dirs:
         results[d.name] = r = head_figures(d, bake)
         print(d.name, "presets", r["presets"], "chin", r["chin_path"]["chin_down_713"], flush=True)
+        print("   visemes folding", {n: f for n, f in r["visemes"].items() if f}, flush=True)
         if bake:
             print("   bake shapes folding", r["bake_shapes_folding"], r["bake_folds"], flush=True)
     import os
