@@ -176,7 +176,7 @@ class BoundHead:
         self.symmetric = partner is not None
         return SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
                               settings, carried=carried_anchors(binding, config.get("skin.carry")),
-                              mirror=partner)
+                              mirror=partner, join=bool(config.get("skin.join_insertions")))
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""

@@ -316,6 +316,9 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
 
         anchors = shared_anchors(v, bodies, anchors, np.asarray(brow[0], bool), list(brow[1]),
                                  list(insertions or ()), brow[3])
+        from faceforge.skin.brow import outer_shared_anchors   # the outer brow: frontalis and orbicularis
+
+        anchors = outer_shared_anchors(v, bodies, anchors, np.asarray(brow[0], bool), brow[3])
     ids, a_body, a_face, a_pts, a_dist, a_out, a_closest = anchors
     bary = np.zeros((len(ids), 3), FLOAT)
     for b in np.unique(a_body):

@@ -204,3 +204,27 @@ def shared_anchors(v, bodies, anchors: tuple, mask, brow, muscles, reach: float)
     order = np.argsort(np.concatenate([ids, ids[rows]]), kind="stable")   # each right after its first
     return tuple(np.concatenate([a, np.asarray(b, dtype=np.asarray(a).dtype)])[order]
                  for a, b in zip(anchors, extra))
+
+
+#: the outer brow's dermis receives these two together (their pair names): the frontalis' outer
+#: part raises it, the lateral orbicularis oculi lowers it
+OUTER_BROW = ("frontalis_outer", "orbicularis_oculi")
+
+
+def outer_shared_anchors(v, bodies, anchors: tuple, mask, reach: float) -> tuple:
+    """:func:`shared_anchors` between the two muscles of :data:`OUTER_BROW`: brow skin (``mask``
+    (n,) bool) on one of them with no second anchor takes one on the other within ``reach``.
+
+    By its ray the outer brow binds to whichever sheet it meets first: on the MediaPipe sample
+    FDP 4.5 and its two neighbours were on the orbicularis oculi and the cranium, none on the
+    frontalis, so the frontalis outer at c = 1 (its sheet 356 ENS up) raised the outer brow 21.6
+    ENS of the 50 the Xface files ask, only through the skin's stretch from the forehead above,
+    and calibration, probing a curve that barely rose, settled anywhere between 1 and 22.
+    Returns the anchors (unchanged without both muscles)."""
+    from faceforge.skin.rules import match_insertions
+
+    ids, _ = match_insertions(OUTER_BROW, [getattr(b, "name", None) if getattr(b, "kind", "") == "muscle"
+                                           else None for b in bodies])
+    if len(ids) < 2:
+        return anchors
+    return shared_anchors(v, bodies, anchors, mask, ids, ids, reach)

@@ -308,7 +308,7 @@ class SkinSimulation:
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None, mirror=None):
+                 carried=None, mirror=None, join=False):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -319,6 +319,9 @@ class SkinSimulation:
         if self.carried.shape != (k,):
             raise ValueError(f"carried must have one flag per anchor ({k}), got {self.carried.shape}")
         self._any_carried = bool(self.carried.any())
+        from faceforge.skin.joined import join_args   # skin.join_insertions
+
+        self._joined = join_args(vertices, binding.vertex_ids, self.carried) if join else None
         q_rest = binding.points.copy()
         q_rest[self.carried] = self.rest[binding.vertex_ids[self.carried]]
         builder = ModelBuilder()
@@ -389,6 +392,10 @@ class SkinSimulation:
             if self._any_carried:   # t[carried] = carry_targets(system, t), compiled, in place
                 s0, p0 = self._carry_rest(system)
                 _carry(t, self._carried_rows, s0, p0)
+                if self._joined is not None:   # a vertex on several muscles follows the one that pulls
+                    from faceforge.skin.joined import join
+
+                    join(t, *self._joined)
             if not self._direct:
                 targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)

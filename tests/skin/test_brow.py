@@ -117,3 +117,25 @@ def test_brow_skin_on_one_insertion_also_anchors_to_the_nearest_other_within_rea
     np.testing.assert_allclose(out[3][1], [10.0, 20.0, -6.0])
     np.testing.assert_allclose(out[3][4], [15.0, 20.0, -5.0])
     assert shared_anchors(v, bodies, anchors, mask, [0, 1, 2], [0, 1], 0.5)[0].tolist() == ids.tolist()
+
+
+def test_outer_brow_on_the_orbicularis_also_anchors_to_the_frontalis_outer():
+    from faceforge.skin.brow import outer_shared_anchors
+
+    bodies = [Body("orbicularis_oculi_L", "muscle", *_plane(-5.0, 30.0, 60.0)),
+              Body("frontalis_outer_L", "muscle", *_plane(-7.0, 20.0, 60.0)),
+              Body("corrugator_supercilii_L", "muscle", *_plane(-6.0, 0.0, 20.0)),
+              Body("cranium", "cranium", *_plane(-30.0, -100.0, 100.0))]
+    v = np.array([[40.0, 20.0, 0.0], [10.0, 20.0, 0.0], [25.0, 20.0, 0.0]])
+    ids = np.array([0, 1, 2])
+    body = np.array([0, 2, 1])
+    pts = v[ids] * [1.0, 1.0, 0.0] + np.array([[0, 0, -5.0], [0, 0, -6.0], [0, 0, -7.0]])
+    anchors = (ids, body, np.zeros(3, int), pts, np.abs(pts[:, 2]), np.zeros(3, bool), np.zeros(3, bool))
+    out = outer_shared_anchors(v, bodies, anchors, np.ones(3, bool), 4.0)
+    # 0 (orbicularis) gains the frontalis 2 mm below; 1 (corrugator) is neither; 2 (frontalis)
+    # is 5 mm off the orbicularis' edge, beyond reach
+    assert out[0].tolist() == [0, 0, 1, 2]
+    assert out[1].tolist() == [0, 1, 2, 1]
+    np.testing.assert_allclose(out[3][1], [40.0, 20.0, -7.0])
+    # without the pair (a map of one's own): unchanged
+    assert outer_shared_anchors(v, bodies[2:], anchors, np.ones(3, bool), 4.0) is anchors
