@@ -305,7 +305,8 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
     try:
         muscles = build_muscles_on(fitted, cranium, mandible, diagonal, stiffness,
                                    float(config.get("muscle.sphincter.carry_inner")),
-                                   float(config.get("muscle.sphincter.protrusion")), mirror=Mirror.from_arrays(fit))
+                                   float(config.get("muscle.sphincter.protrusion")), mirror=Mirror.from_arrays(fit),
+                                   inner_on_bone=bool(config.get("muscle.sphincter.inner_on_bone")))
     except TemplateError as exc:
         raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
                          "another muscle map)") from None

@@ -274,13 +274,20 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
         own = skin.vertices[used[used < skin.n_real]] if skin.n_real >= 0 else skin.vertices[used]
         if partners is not None:
             own = np.vstack([own, mirror(own)])
-        fields = clearance_fields([(skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf)], own,
-                                  settings.skin_clearance_mm * scale_mm,
-                                  settings.clearance_radius * skin.diagonal, settings.clearance_rounds)
-        for g in fields:
-            skull_fit = g(skull_fit)
-            muscles = [(n, g(v), f) for n, v, f in muscles]
-            targets = g(targets)
+        # a symmetric rig's fields carry their mirror images (the bone stays symmetric); skin
+        # they cannot clear (a midline point inside a bony septum whose walls face sideways:
+        # mirrored pushes cancel there: 1 MakeHuman nose vertex by 0.05 mm) gets plain fields
+        fields = []
+        for sym in ((True, False) if partners is not None else (False,)):
+            more = clearance_fields([(skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf)], own,
+                                    settings.skin_clearance_mm * scale_mm,
+                                    settings.clearance_radius * skin.diagonal, settings.clearance_rounds,
+                                    mirror=mirror if sym else None)
+            for g in more:
+                skull_fit = g(skull_fit)
+                muscles = [(n, g(v), f) for n, v, f in muscles]
+                targets = g(targets)
+            fields += more
         warp = Warp(warp.similarity, warp.rbfs + fields)
         info["clearance_fields"] = len(fields)
         info["clearance_points"] = int(sum(len(g.centres) for g in fields))

@@ -301,3 +301,20 @@ def test_a_muscle_that_cannot_be_built_is_a_one_line_error_naming_it(template):
            "muscle_map_points": np.vstack(points)}
     with pytest.raises(StageError, match=r"^fit\.npz: muscle 'mentalis' cannot be built .*rerun `faceforge fit`"):
         muscle_system(fit, skull.cranium, skull.mandible, system.settings, load_config(), lambda m: None)
+
+
+def test_the_lips_contact_line_lies_on_the_teeth_only_with_inner_on_bone(template):
+    """``inner_on_bone`` (muscle.sphincter.inner_on_bone): the orbicularis oris' inner loop
+    (A1) is projected onto the skull's faces only, its outer loop (A3) onto every body it lies
+    on (the lip muscles' insertions among them). (The module's other tests build the template
+    without it: on the unfitted template skull it turns one ring face over at rest; the fitted
+    samples' rigs have the same folded faces with and without it.)"""
+    skull, specs, _, _ = template
+    ring = [s for s in specs if s.type == "sphincter"]
+    built = next(m for m in build_muscles_on(specs, skull.cranium, skull.mandible, skull.diagonal, inner_on_bone=True)
+                 if m.name == ring[0].name)
+    lies = expand_lies_on(ring[0].lies_on)
+    assert lies[:2] == ("cranium", "mandible")
+    n_bone = len(skull.cranium[1]) + len(skull.mandible[1])
+    assert np.all(built.lines["A1"].points.face_ids < n_bone)
+    assert np.all(built.lines["A1"].points.bary.sum(axis=1) > 0.999)

@@ -76,3 +76,27 @@ def test_skin_on_the_seam_of_two_touching_bones_ends_outside_both():
         bones = [(g(v), f) for v, f in bones]
     assert not swallowed(bones, skin).any()
     assert len(fields) <= 2
+
+
+def test_a_symmetric_field_keeps_a_symmetric_bone_symmetric_and_clears_midline_skin():
+    """With the head's mirror plane, each field carries its bumps' mirror images (pushes of
+    midline skin turned into the plane): skin off the plane, and its mirror image, and skin on
+    it all end outside, and the bone stays its own mirror image. Without the plane, the skin
+    point off the plane pushes one side only."""
+    from faceforge.geometry.mirror import Mirror
+
+    mirror = Mirror((0.0, 0.0, 0.0), (1.0, 0.0, 0.0))
+    bone = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
+    v0 = np.asarray(bone.vertices)
+    skin = np.array([[0.3, 0.2, 0.9], [-0.3, 0.2, 0.9], [0.0, -0.3, 0.93]])
+    partner, dist = mirror.partners(v0)
+    assert dist.max() < 1e-9                               # the icosphere is its own mirror image
+    for plane, symmetric in ((mirror, True), (None, False)):
+        v = v0
+        for g in clearance_fields([(v0, bone.faces)], skin[:1] if plane is None else skin, 0.01, 0.3,
+                                  mirror=plane):
+            v = g(v)
+        off = np.abs(mirror(v)[partner] - v).max()
+        assert (off < 1e-9) == symmetric, off
+        if symmetric:
+            assert not swallowed([(v, bone.faces)], skin).any()

@@ -94,3 +94,24 @@ def test_a_midline_vertex_on_one_twin_follows_both(scene):
     fixed, _ = mirror_binding(moved, skin_v, bodies, MIRROR, 1e-9)
     names = [fixed.body_names[i] for i in fixed.body[fixed.vertex_ids == mid]]
     assert names == ["plate_L", "plate_R"]
+
+
+def test_a_midline_vertex_bound_off_the_plane_on_a_self_mirror_body_follows_both_sides(scene):
+    """The bone is its own mirror image: a midline skin vertex bound to it off the plane (a
+    closest point can fall on either of two equally near sides) also gets the bone's closest
+    point to the mirrored anchor, so it follows both sides alike."""
+    skin_v, bodies, raw = scene
+    mid = int(np.flatnonzero(np.abs(skin_v[:, 0]) < 1e-12)[1])
+    anchor = np.searchsorted(raw.vertex_ids, mid)
+    bone = bodies[2]
+    from faceforge.geometry.surface_points import project_to_surface
+
+    sp = project_to_surface(np.array([[0.25, skin_v[mid, 1], -0.3]]), bone.vertices, bone.faces)
+    rows = np.arange(len(raw.body)) == anchor
+    moved = replace(raw, body=np.where(rows, 2, raw.body), face_ids=np.where(rows, sp.face_ids[0], raw.face_ids),
+                    bary=np.where(rows[:, None], sp.bary[0], raw.bary),
+                    points=np.where(rows[:, None], sp.positions(bone.vertices, bone.faces)[0], raw.points))
+    fixed, _ = mirror_binding(moved, skin_v, bodies, MIRROR, 1e-9)
+    pts = fixed.points[fixed.vertex_ids == mid]
+    assert len(pts) == 2
+    assert np.allclose(sorted(pts[:, 0]), [-0.25, 0.25], atol=0.05), pts

@@ -16,7 +16,8 @@ def eq5_thickness(fraction: float, skull_diagonal: float) -> float:
 
 
 def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
-                     carry_inner: float = 0.0, protrusion: float = 0.0, mirror=None) -> list:
+                     carry_inner: float = 0.0, protrusion: float = 0.0, mirror=None,
+                     inner_on_bone: bool = False) -> list:
     """Build every muscle of ``specs`` on the given skull, deepest layer first.
 
     Each muscle's action lines are projected (outermost surface) onto the concatenation of
@@ -27,7 +28,9 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     the skull's faces; it does not change the rest geometry); ``protrusion``: the sphincter's
     ``protrusion`` (``muscle.sphincter.protrusion``); ``mirror``
     (:class:`faceforge.geometry.mirror.Mirror`, a symmetric head): a muscle that is
-    ``mirror_of`` a muscle built before it is built as that muscle's mirror image
+    ``mirror_of`` a muscle built before it is built as that muscle's mirror image;
+    ``inner_on_bone`` (``muscle.sphincter.inner_on_bone``): a sphincter's inner loop (A1, the
+    lips' contact line) lies on the bones it lies on only (:func:`_inner_on_bone`)
     (:func:`faceforge.anatomy.muscles.mirror.mirror_muscle`). Returns ``[Muscle]`` in build order.
     Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
     """
@@ -80,7 +83,8 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                 inner, outer = align_loops(spec.inner, spec.outer)
                 bone = np.concatenate([np.full(len(p[1]), n in ("cranium", "mandible"))
                                        for n, p in zip(expand_lies_on(spec.lies_on), parts)])
-                loops = [line(inner, True), line(outer, True)]
+                loops = [_inner_on_bone(inner, v, f, bone) if inner_on_bone and bone.any() else line(inner, True),
+                         line(outer, True)]
                 if mirror is not None:   # its right half the mirror image of its left half
                     from faceforge.anatomy.muscles.mirror import symmetric_loop
 
@@ -101,3 +105,24 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
         by_name[spec.name] = m
         built.append(m)
     return built
+
+
+def _inner_on_bone(points, vertices, faces, bone):
+    """A sphincter's closed inner loop through ``points (p, 3)``, projected (outermost) onto the
+    faces ``faces[bone]`` (``bone`` (m,) bool: the skull's faces among the bodies it lies on) of
+    the concatenated ``(vertices, faces)``; face ids in the concatenation's numbering.
+
+    The lips' contact line rests on the teeth and gums (the mucosa slides over them,
+    ``carry_inner``); the lip muscles insert into the ring from outside, through its outer loop.
+    Projected onto every body, the contact line's middle samples lay on the levator labii
+    insertions wherever the fitted front teeth sit behind them, and a levator then dragged the
+    contact line back into the head and sideways (its fibres run up, back and out to the frontal
+    process of the maxilla): on MakeHuman's symmetric fit, whose front teeth the clearance moves
+    6 mm back, levator_labii_inner_R at c = 0.5 moved FDP 8.1 52 MNS sideways, 57 back and 2
+    down instead of up (teeth in front: 25 up)."""
+    from faceforge.anatomy.muscles.action_line import ActionLine
+    from faceforge.geometry.surface_points import SurfacePoints
+
+    ids = np.flatnonzero(bone)
+    line = ActionLine.from_points(points, vertices, faces[ids], closed=True, project="outermost")
+    return ActionLine(SurfacePoints(ids[line.points.face_ids], line.points.bary), True)
