@@ -4,7 +4,8 @@
 
 Each WORKDIR is fitted and bound (calibrated or not: the visemes stage calibrates when it needs to).
 Through the CLI, as a user gets it: ``faceforge visemes --force`` (its report's per-viseme checks:
-folded edges, inverted triangles, skin inside the skull; ``--no-cli`` skips it). In process, settled
+folded edges, inverted triangles, skin inside the skull; ``--no-cli`` reads the report the last
+run left instead). In process, settled
 as that stage settles them (each viseme held until the skin stops moving, the workdir's calibrated
 mapping with the template's ``visemes`` table), per viseme in mm (the fit's own scale,
 :func:`faceforge.anatomy.tissue.units_per_mm`):
@@ -87,15 +88,17 @@ SOURCES = {
 }
 
 
-def cli_report(workdir: Path) -> tuple[float, dict]:
-    """``faceforge visemes --force`` in ``workdir``: wall seconds, {viseme: checks}."""
+def cli_report(workdir: Path, run: bool = True) -> tuple[float | None, dict]:
+    """``faceforge visemes --force`` in ``workdir`` (``run``; else the report it left): wall
+    seconds, {viseme: checks}."""
     import json
 
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "from faceforge.cli import main; main()", "--workdir", str(workdir),
-                    "visemes", "--force"], check=True, capture_output=True, text=True)
+    if run:
+        subprocess.run([sys.executable, "-c", "from faceforge.cli import main; main()", "--workdir", str(workdir),
+                        "visemes", "--force"], check=True, capture_output=True, text=True)
     report = json.loads((workdir / "visemes" / "report.json").read_text())
-    return round(time.perf_counter() - t0, 1), {n: {**r["checks"], "residual": r["residual"]}
+    return (round(time.perf_counter() - t0, 1) if run else None), {n: {**r["checks"], "residual": r["residual"]}
                                                 for n, r in report["visemes"].items()}
 
 
@@ -168,8 +171,8 @@ def main(argv=None) -> None:
     results = {}
     for d in (Path(a) for a in args if not a.startswith("--")):
         out = {}
-        if use_cli:
-            out["visemes_seconds"], out["checks"] = cli_report(d)
+        if use_cli or (d / "visemes" / "report.json").is_file():
+            out["visemes_seconds"], out["checks"] = cli_report(d, run=use_cli)
         head, mapping, _ = em.load_head(d)
         out.update(measure(head, mapping))
         results[d.name] = out

@@ -35,7 +35,8 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
     """Draw the mesh ``vertices (n, 3)``, ``faces (m, 3)`` smooth-shaded into ``ax``; ``dim``
     (n,) in [0, 1] darkens vertices (the mouth's cavity, :func:`mouth_cavity`, which a lamp in
     front would light like the skin): a triangle with a vertex of ``dim`` at least 1/2 is drawn
-    dark whole (its light times 0.15; a coarse mouth's few triangles would otherwise streak)."""
+    dark whole (light times 0.15 at those vertices, 0.4 at its others: a coarse mouth's few long
+    triangles would streak if only their dark vertices were darkened)."""
     from matplotlib.colors import LinearSegmentedColormap
 
     from faceforge.geometry.triangles import vertex_normals
@@ -45,14 +46,15 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
     n = n * np.where(n[:, 2:3] < 0.0, -1.0, 1.0)
     light = ambient + (1.0 - ambient) * np.clip(n @ LIGHT, 0.0, 1.0)
     if dim is not None:
-        dark = np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)[f].max(axis=1) >= 0.5
+        dim = np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)
+        dark = (dim[f] >= 0.5).any(axis=1)
         copies = np.unique(f[dark])                        # their vertices, drawn dark
         where = np.zeros(len(v), dtype=np.int64)
         where[copies] = len(v) + np.arange(len(copies))
         f = f.copy()
         f[dark] = where[f[dark]]
         v = np.concatenate([v, v[copies]])
-        light = np.concatenate([light, 0.15 * light[copies]])
+        light = np.concatenate([light, light[copies] * np.where(dim[copies] >= 0.5, 0.15, 0.4)])
     cmap = LinearSegmentedColormap.from_list("skin", [(0, 0, 0), tuple(SKIN)])
     ax.tripcolor(v[:, 0], v[:, 1], f, light, shading="gouraud", cmap=cmap, vmin=0.0, vmax=1.0,
                  rasterized=True)
