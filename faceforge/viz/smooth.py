@@ -81,7 +81,7 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     lo, hi = min(outer[0][1], outer[1][1]) - 2.0 * mm, max(outer[0][1], outer[1][1]) + 2.0 * mm
     cand = np.flatnonzero(box & (rest[:, 2] < z0 - 0.1 * mm) & (rest[:, 1] > lo) & (rest[:, 1] < hi))
     faces = np.asarray(faces, dtype=np.int64)
-    faces = faces[np.all(box[faces], axis=1)]               # the box's triangles
+    faces = faces[np.all(box[faces], axis=1)]               # the box's triangles (all 3 in it)
     hits = np.zeros(len(cand), dtype=int)
     for tilt in (0.0, 0.36, -0.36):                          # rays (0, tilt, 1)
         p = np.column_stack([rest[:, 0], rest[:, 1] - tilt * rest[:, 2], rest[:, 2]])
