@@ -182,7 +182,8 @@ def main(argv=None) -> None:
             folds = out.get("checks", {}).get(n, {}).get("folded_edges", "-")
             print(f"  {n:8s} incisor {r['incisor_gap']:6.2f} aperture {r['lip_aperture']:6.2f} width "
                   f"{r['width_change']:6.2f} protrusion {r['protrusion']:5.2f} ({r['protrusion_upper']:5.2f} / "
-                  f"{r['protrusion_lower']:5.2f}) met {r['n_met']}/4 neutral {r['from_neutral_rms']:5.2f} folds {folds}",
+                  f"{r['protrusion_lower']:5.2f}) met {r['n_met']}/4 neutral {r['from_neutral_rms']:5.2f} "
+                  f"folds {folds}",
                   flush=True)
     write_results("visemes", {"targets_mm": TARGETS, "sources": SOURCES, "heads": results,
                               "load": os.getloadavg()})

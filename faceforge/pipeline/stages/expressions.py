@@ -137,7 +137,8 @@ def _cavity(head, mm: float):
     if not all(k in fv for k in ("2.2", "2.3", "8.1", "8.2", "8.3", "8.4")):
         return None
     r = head.rest
-    return mouth_cavity(r, head.faces, r[fv["2.2"]], r[fv["2.3"]], r[[fv["8.3"], fv["8.4"]]], r[[fv["8.1"], fv["8.2"]]], mm)
+    return mouth_cavity(r, head.faces, r[fv["2.2"]], r[fv["2.3"]], r[[fv["8.3"], fv["8.4"]]],
+                        r[[fv["8.1"], fv["8.2"]]], mm)
 
 
 def _face_region(head):
