@@ -49,7 +49,8 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
                   view: str = "front", cols: int | None = None, title: str | None = None,
                   panel: float = 2.6, dpi: int = 110, focus: bool = False,
                   labels=None, region: np.ndarray | None = None, smooth: bool = True,
-                  heat: float | None = None, heat_label: str | None = None) -> Path:
+                  heat: float | None = None, heat_label: str | None = None,
+                  dim: np.ndarray | None = None) -> Path:
     """Write a grid of shaded renders of ``frames[indices]``.
 
     Parameters
@@ -70,7 +71,8 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     with vertex normals (:mod:`faceforge.viz.smooth`); else one flat colour a triangle. ``heat``
     (units of the frames, e.g. 5 mm): each panel after the first gets a displacement heat map
     of that scale beside it (distance from the first drawn frame; ``heat_label`` names the
-    scale in its title, e.g. "0-8 mm").
+    scale in its title, e.g. "0-8 mm"). ``dim`` ((n,) in [0, 1]): vertices drawn darker in the
+    smooth panels (the mouth's cavity, :func:`faceforge.viz.smooth.mouth_cavity`).
     """
     import matplotlib
 
@@ -108,7 +110,7 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     for k, (i, name) in enumerate(zip(indices, names)):
         pair = flat[per * k:per * k + per]
         if smooth:
-            draw_smooth(pair[0], frames[i], faces, view)
+            draw_smooth(pair[0], frames[i], faces, view, dim=dim)
         else:
             draw_layers(pair[0], [Layer(frames[i], faces)], view, labels=False)
         pair[0].set_title(name, fontsize=8)

@@ -31,8 +31,12 @@ def _project(vertices, faces, view: str):
 
 
 def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front",
-                ambient: float = 0.3) -> None:
-    """Draw the mesh ``vertices (n, 3)``, ``faces (m, 3)`` smooth-shaded into ``ax``."""
+                ambient: float = 0.3, dim: np.ndarray | None = None) -> None:
+    """Draw the mesh ``vertices (n, 3)``, ``faces (m, 3)`` smooth-shaded into ``ax``; ``dim``
+    (n,) in [0, 1] darkens vertices (the mouth's cavity, :func:`mouth_cavity`, which a lamp in
+    front would light like the skin): a triangle with a vertex of ``dim`` at least 1/2 is drawn
+    dark whole (light times 0.15 at those vertices, 0.4 at its others: a coarse mouth's few long
+    triangles would streak if only their dark vertices were darkened)."""
     from matplotlib.colors import LinearSegmentedColormap
 
     from faceforge.geometry.triangles import vertex_normals
@@ -41,9 +45,79 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
     n = vertex_normals(v, np.asarray(faces, dtype=np.int64))
     n = n * np.where(n[:, 2:3] < 0.0, -1.0, 1.0)
     light = ambient + (1.0 - ambient) * np.clip(n @ LIGHT, 0.0, 1.0)
+    if dim is not None:
+        dim = np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)
+        dark = (dim[f] >= 0.5).any(axis=1)
+        copies = np.unique(f[dark])                        # their vertices, drawn dark
+        where = np.zeros(len(v), dtype=np.int64)
+        where[copies] = len(v) + np.arange(len(copies))
+        f = f.copy()
+        f[dark] = where[f[dark]]
+        v = np.concatenate([v, v[copies]])
+        light = np.concatenate([light, light[copies] * np.where(dim[copies] >= 0.5, 0.15, 0.4)])
     cmap = LinearSegmentedColormap.from_list("skin", [(0, 0, 0), tuple(SKIN)])
     ax.tripcolor(v[:, 0], v[:, 1], f, light, shading="gouraud", cmap=cmap, vmin=0.0, vmax=1.0,
                  rasterized=True)
+
+
+def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, corners, outer,
+                 mm: float) -> np.ndarray:
+    """(n,) in [0, 1]: how deep inside the mouth each vertex of ``rest`` (n, 3) lies, from the
+    rest geometry, ``faces`` (m, 3): the vertices of the mouth's box (x between the ``corners``
+    (2, 3) widened by 10 %, y within 15 mm of the inner lip line, FDP 2.2 / 2.3, points (3,))
+    hidden at rest behind the skin (a ray toward the front, straight or tilted 20 degrees up or
+    down, meets the skin: a straight one can escape along the closed lips' seam; or most of its
+    neighbours (half) are hidden), 0 at the inner
+    lip line rising to 1 at 0.5 mm behind it; ``mm`` skin units per mm. +Z is the face's front.
+    The box's height: the outer lip contour (``outer`` (2, 3): FDP 8.1, 8.2) +- 2 mm, so that
+    the hollow under the lower lip (a tilted ray meets the lip) stays skin."""
+    rest = np.asarray(rest, dtype=float)
+    corners = np.asarray(corners, dtype=float)
+    mid_x, half = corners[:, 0].mean(), 0.55 * abs(corners[0, 0] - corners[1, 0])
+    y0 = 0.5 * (inner_upper[1] + inner_lower[1])
+    outer = np.asarray(outer, dtype=float)
+    z0 = max(inner_upper[2], inner_lower[2])
+    box = (np.abs(rest[:, 0] - mid_x) < half) & (np.abs(rest[:, 1] - y0) < 15.0 * mm)
+    lo, hi = min(outer[0][1], outer[1][1]) - 2.0 * mm, max(outer[0][1], outer[1][1]) + 2.0 * mm
+    cand = np.flatnonzero(box & (rest[:, 2] < z0 - 0.1 * mm) & (rest[:, 1] > lo) & (rest[:, 1] < hi))
+    faces = np.asarray(faces, dtype=np.int64)
+    faces = faces[np.all(box[faces], axis=1)]               # the box's triangles (all 3 in it)
+    hits = np.zeros(len(cand), dtype=int)
+    for tilt in (0.0, 0.36, -0.36):                          # rays (0, tilt, 1)
+        p = np.column_stack([rest[:, 0], rest[:, 1] - tilt * rest[:, 2], rest[:, 2]])
+        hits += _hidden(p, faces, cand, 0.5 * mm)
+    out = np.zeros(len(rest))
+    hidden = np.zeros(len(rest), dtype=bool)
+    hidden[cand[hits >= 1]] = True
+    # a candidate most of whose neighbours are hidden is too (a ray can slip through a seam)
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    votes, count = np.zeros(len(rest)), np.zeros(len(rest))
+    for a, b in ((edges[:, 0], edges[:, 1]), (edges[:, 1], edges[:, 0])):
+        np.add.at(votes, a, hidden[b])
+        np.add.at(count, a, 1.0)
+    hidden[cand[votes[cand] >= 0.5 * count[cand]]] = True
+    inside = np.flatnonzero(hidden)
+    out[inside] = np.clip((z0 - rest[inside, 2]) / (0.5 * mm), 0.0, 1.0)
+    return out
+
+
+def _hidden(p: np.ndarray, faces: np.ndarray, cand: np.ndarray, eps: float) -> np.ndarray:
+    """(len(cand),) bool: a ray from ``p[cand]`` toward +Z meets a triangle ``faces`` of ``p``
+    (n, 3) more than ``eps`` in front of it (a few hundred points and triangles: plain numpy)."""
+    tri = p[faces]
+    a, e1, e2 = tri[:, 0, :2], tri[:, 1, :2] - tri[:, 0, :2], tri[:, 2, :2] - tri[:, 0, :2]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    ok = np.abs(det) > 1e-18
+    a, e1, e2, det, tri = a[ok], e1[ok], e2[ok], det[ok], tri[ok]
+    out = np.zeros(len(cand), dtype=bool)
+    for j, i in enumerate(cand):
+        d = p[i, :2] - a
+        u = (d[:, 0] * e2[:, 1] - d[:, 1] * e2[:, 0]) / det
+        v = (e1[:, 0] * d[:, 1] - e1[:, 1] * d[:, 0]) / det
+        k = (u >= 0) & (v >= 0) & (u + v <= 1)
+        z = tri[k, 0, 2] * (1 - u[k] - v[k]) + tri[k, 1, 2] * u[k] + tri[k, 2, 2] * v[k]
+        out[j] = bool(np.any(z > p[i, 2] + eps))
+    return out
 
 
 def draw_heat(ax, vertices: np.ndarray, rest: np.ndarray, faces: np.ndarray, scale: float,

@@ -185,3 +185,54 @@ def test_smooth_sheet_with_heat_maps(tmp_path):
     assert img.shape[1] >= 4 * 250
     hot = (img[:, :, 0] > 200) & (img[:, :, 1] > 200) & (img[:, :, 2] < 200)   # inferno's top: yellow
     assert hot.sum() > 50, "the moved patch shows in the heat map"
+
+
+def _plane(lo: float, hi: float, z: float, n: int = 11):
+    """A square grid (n x n vertices) at depth z: (vertices, faces)."""
+    import numpy as np
+
+    g = np.linspace(lo, hi, n)
+    x, y = np.meshgrid(g, g)
+    v = np.stack([x.ravel(), y.ravel(), np.full(x.size, z)], axis=1)
+    f = [[i * n + j, i * n + j + 1, i * n + j + n + 1] for i in range(n - 1) for j in range(n - 1)]
+    f += [[i * n + j, i * n + j + n + 1, i * n + j + n] for i in range(n - 1) for j in range(n - 1)]
+    return v, np.asarray(f)
+
+
+def test_the_mouth_cavity_is_what_the_lips_hide_and_draws_dark(tmp_path):
+    """A wall behind a closed 'face' plane is the cavity (dark), the face plane is not; a wall
+    nobody hides (the face cut away) is not either. Drawn with it, the cavity's pixels darken."""
+    import numpy as np
+
+    from faceforge.viz.smooth import draw_smooth, mouth_cavity
+
+    front, ff = _plane(-2.0, 2.0, 0.0, 41)   # fine enough that its triangles lie in the box
+    back, bf = _plane(-0.5, 0.5, -0.5)
+    v = np.concatenate([front, back])
+    f = np.concatenate([ff, bf + len(front)])
+    args = ((0, 0.02, 0), (0, -0.02, 0), ((1.0, 0, 0), (-1.0, 0, 0)), ((0, 0.3, 0), (0, -0.3, 0)), 0.01)
+    dim = mouth_cavity(v, f, *args)
+    behind = np.arange(len(front), len(v))
+    in_box = behind[np.abs(v[behind, 1]) < 0.15]
+    assert np.all(dim[in_box] == 1.0) and np.all(dim[: len(front)] == 0.0)
+    assert np.all(dim[behind[np.abs(v[behind, 1]) > 0.35]] == 0.0)        # outside the lips' band
+    alone = mouth_cavity(back, bf, *args)                                   # nothing in front of it
+    assert not alone.any()
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    def mean_light(d):
+        fig, ax = plt.subplots()
+        draw_smooth(ax, back, bf, dim=d)
+        ax.set_xlim(-0.6, 0.6)
+        ax.set_ylim(-0.6, 0.6)
+        ax.axis("off")
+        fig.canvas.draw()
+        img = np.asarray(fig.canvas.buffer_rgba(), dtype=float)[..., :3]
+        plt.close(fig)
+        return img.mean()
+
+    assert mean_light(np.ones(len(back))) < 0.8 * mean_light(None)

@@ -109,7 +109,7 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     mm = units_per_mm(head.landmarks)   # heat maps beside each pose: 0-8 mm of motion
     contact_sheet(ctx.out_dir / f"{stem}.png", poses, head.faces, range(len(names)), 1.0,
                   cols=cols, panel=3.2, dpi=120, labels=names, title=title + ", heat map 0-8 mm",
-                  region=_face_region(head), heat=8.0 * mm, heat_label="0-8 mm")
+                  region=_face_region(head), heat=8.0 * mm, heat_label="0-8 mm", dim=_cavity(head, mm))
     save_npz(ctx.out_dir / f"{stem}.npz", names=np.asarray(names), poses=head.to_user(poses).astype(np.float32),
              contractions=c, controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", report)
@@ -129,6 +129,18 @@ def settled_poses(head, c, jaw, config):
     return poses, stats
 
 
+def _cavity(head, mm: float):
+    """(n,) in [0, 1]: the mouth's inside, drawn dark in the sheets (None without the lip FDPs)."""
+    from faceforge.viz.smooth import mouth_cavity
+
+    fv = head.fdp_vertex
+    if not all(k in fv for k in ("2.2", "2.3", "8.1", "8.2", "8.3", "8.4")):
+        return None
+    r = head.rest
+    return mouth_cavity(r, head.faces, r[fv["2.2"]], r[fv["2.3"]], r[[fv["8.3"], fv["8.4"]]],
+                        r[[fv["8.1"], fv["8.2"]]], mm)
+
+
 def _face_region(head):
     """(n,) bool: the face to frame in a sheet (:func:`faceforge.viz.contact_sheet.face_region`),
     else the whole head above the bone's lowest point."""
@@ -145,11 +157,11 @@ _SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),
-    version="3", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
+    version="4", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
 
 VISEMES_STAGE = register_stage(Stage(
     name="visemes", **_SHEET_STAGE, outputs=("visemes.png", "visemes.npz", "report.json"),
-    version="3", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
+    version="4", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
 
 
 def _sheet_command(stem: str, help_text: str):
