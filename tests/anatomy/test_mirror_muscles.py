@@ -65,9 +65,11 @@ def test_right_twins_are_the_mirror_images_of_the_left(built):
         right = left[:-2] + "_R"
         np.testing.assert_array_equal(mirrored.muscles[right].faces, mirrored.muscles[left].faces[:, ::-1])
         # exact on the bone and on mirrored twins; the depressor labii lies on the midline
-        # mentalis too (closest points on it: 0.1 mm), the muscles above it follow
+        # mentalis too, whose grid mirrors but whose triangles' diagonals do not (closest points
+        # on it: up to 0.5 mm since the mentalis inserts over the chin boss), the muscles above
+        # it follow
         on_midline = left.startswith(("depressor_labii", "depressor_anguli", "risorius"))
-        assert _gap(mirrored.rest_positions, left, skull.diagonal) < (1e-3 if on_midline else 1e-9), left
+        assert _gap(mirrored.rest_positions, left, skull.diagonal) < (2e-3 if on_midline else 1e-9), left
     m = mirrored.muscles["mentalis"]
     h, w = m.topology.h, m.topology.w
     for layer in (0, 1):   # column j mirrors column w - 1 - j
