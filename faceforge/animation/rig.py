@@ -168,10 +168,8 @@ class BoundHead:
         # anchors on the system's own rest bodies (the rebuilt muscles may differ from the meshes
         # bind saw by a projection): then the rest pose is an exact fixed point
         binding = replace(binding, points=binding.targets([system.surface(n) for n in binding.body_names]))
-        mirror, partner = Mirror.from_arrays(fit), None
-        if mirror is not None:
-            partner, gap = mirror.partners(self.rest)
-            partner = partner if gap.max() <= 1e-9 * float(np.ptp(self.rest, axis=0).max()) else None
+        mirror = Mirror.from_arrays(fit)
+        partner = None if mirror is None else mirror.exact_partners(self.rest)
         #: True on a rig symmetric by construction whose skin has an exact mirror partner per vertex
         self.symmetric = partner is not None
         return SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),

@@ -4,6 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+#: largest vertex-to-mirror-partner gap, as a fraction of the mesh's extent, of a mesh taken as
+#: its own mirror image (:meth:`Mirror.exact_partners`): a file's float32 rounding (OBJ, FBX and
+#: glTF exports carry ~6e-8 of the extent; MediaPipe's face 7.8e-8), not a sculpted asymmetry
+EXACT_GAP = 1e-6
+
 
 class Mirror:
     """Reflection about the plane through ``point (3,)`` with unit ``normal (3,)`` (mesh units)."""
@@ -31,6 +36,13 @@ class Mirror:
         v = np.asarray(vertices, dtype=np.float64)
         d, j = cKDTree(v).query(self(v))
         return j, d
+
+    def exact_partners(self, vertices: np.ndarray, gap: float = EXACT_GAP) -> np.ndarray | None:
+        """:meth:`partners` (n,) of ``vertices (n, 3)`` when every vertex has one within ``gap`` x
+        the mesh's largest extent (the mesh is its own mirror image up to rounding), else None."""
+        v = np.asarray(vertices, dtype=np.float64)
+        j, d = self.partners(v)
+        return j if d.max() <= gap * float(np.ptp(v, axis=0).max()) else None
 
     def side(self, p: np.ndarray) -> np.ndarray:
         """Signed distance (...,) of points (..., 3) from the plane (positive: the normal's side)."""

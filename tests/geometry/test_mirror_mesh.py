@@ -40,3 +40,18 @@ def test_no_slivers_at_the_cut():
     edges = np.linalg.norm(hv[hf] - hv[np.roll(hf, 1, axis=1)], axis=2)
     old = np.linalg.norm(v[f] - v[np.roll(f, 1, axis=1)], axis=2)
     assert edges.min() > 0.1 * old.mean()
+
+
+def test_a_mirror_image_rounded_to_float32_has_exact_partners_and_a_sculpted_one_not():
+    from faceforge.geometry.mirror import Mirror
+
+    rng = np.random.default_rng(3)
+    half = rng.random((200, 3)) * [10.0, 20.0, 15.0] + [0.5, 0.0, 0.0]   # x > 0: a head's left half
+    v = np.vstack([half, half * [-1.0, 1.0, 1.0]]).astype(np.float32).astype(np.float64) + [0.3, 0, 0]
+    v = v.astype(np.float32).astype(np.float64)      # shifted, rounded as an OBJ export would be
+    mirror = Mirror([0.3, 0.0, 0.0], [1.0, 0.0, 0.0])
+    partner = mirror.exact_partners(v)
+    assert partner is not None and np.array_equal(partner, np.r_[np.arange(200, 400), np.arange(200)])
+    sculpted = v.copy()
+    sculpted[5, 1] += 1e-4 * 20.0                    # one vertex 1e-4 of the extent off its twin
+    assert mirror.exact_partners(sculpted) is None
