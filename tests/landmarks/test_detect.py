@@ -216,22 +216,27 @@ def test_cli_output_into_a_missing_folder_is_one_line_exit_2_and_creates_nothing
     assert sorted(p.name for p in tmp_path.iterdir()) == ["face.obj"]
 
 
+def _fit_sample(invoke, tmp_path, name):
+    """``faceforge fit`` of a copy of sample ``name`` with no landmark file beside it:
+    ``(mesh, result, fit report)``; the fit must succeed."""
+    mesh = tmp_path / f"{name}.obj"
+    mesh.write_bytes(SAMPLES[name].read_bytes())
+    result = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
+    assert result.exit_code == 0, result.stderr
+    return mesh, result, yaml.safe_load((tmp_path / "w/fit/report.json").read_text())
+
+
 @pytest.mark.slow
 def test_fit_without_a_landmark_file_detects_them_says_so_and_is_cached(invoke, tmp_path):
-    mesh = tmp_path / "face.obj"
-    mesh.write_bytes(SAMPLES["mediapipe"].read_bytes())
     # The mask's fit from detected landmarks failed the fit's own checks (skull 95.7 % inside the
     # skin, muscles 60 % of the diagonal out of the open mask) until the enhancement flows' step
     # limit and the smoothed tissue normal (issue 26/28): now it is a clean fit, no option kept.
-    first = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
-    assert first.exit_code == 0, first.stderr
+    mesh, first, report = _fit_sample(invoke, tmp_path, "mediapipe")
     assert "using the detected landmarks" in first.stderr
     assert "check failed" not in first.stderr
-    report = yaml.safe_load((tmp_path / "w/fit/report.json").read_text())
     assert report["landmarks"]["max_residual"] < 0.05 and all(report["checks"].values()), report["checks"]
     again = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
     assert again.exit_code == 0 and "landmarks: up to date" in again.stderr and "fit: up to date" in again.stderr
-
 
 
 @pytest.mark.slow
@@ -239,12 +244,9 @@ def test_makehuman_fit_from_detected_landmarks_passes_its_checks(invoke, tmp_pat
     # With the detector's brows and inner lips (land2's points) this fit failed its checks on
     # the 2026-11-27 tree (muscles 97.4 % inside the skin, poke 2.0 % of the diagonal); with the
     # brow and inner-lip rules it passes (99.2 %, 0.73 %)
-    mesh = tmp_path / "head.obj"
-    mesh.write_bytes(SAMPLES["makehuman"].read_bytes())
-    res = invoke("-w", tmp_path / "w", "--no-progress", "fit", mesh)
-    assert res.exit_code == 0, res.stderr
-    report = yaml.safe_load((tmp_path / "w/fit/report.json").read_text())
+    _, _, report = _fit_sample(invoke, tmp_path, "makehuman")
     assert all(report["checks"].values()), report["checks"]
+
 
 def test_a_head_turned_between_the_axes_is_found_as_well(detected):
     from faceforge.landmarks.detect import detect_landmarks
