@@ -83,3 +83,25 @@ def test_independent_entries_probed_in_one_simulation_fit_as_alone():
         [(r.fap, r.requested, round(r.achieved, 9)) for r in rows_alone]
     for a, b in zip(alone.entries, together.entries):
         assert np.allclose(a.response, b.response)
+
+
+def test_a_chain_flattened_by_other_motion_below_full_contraction_goes_on():
+    """A brow probe played beside another lane's entries reads their motion too (MediaPipe's
+    mask: the open jaw moves its brows): here the first poses read 8 FAPU more, so the chain's
+    curve looks flat at c = 0.3. It is not at full contraction, so the sweep goes on to the drives
+    that meet the requests (before: held at 27 of 90)."""
+    one = dict(MAPPING, entries=[{"fap": 31, "name": "raise_l_i_eyebrow", "fapu": "ENS", "positive": {"fr": 0.001}}])
+    rest = np.zeros((3, 3))
+    calls = []
+
+    def pose_for(mapping, faps, warm):
+        calls.append(1)
+        skin = rest.copy()
+        skin[2, 1] = (0.1 * float(faps[30]) + (8.0 if len(calls) <= 3 else 0.0)) * 0.01
+        return skin
+
+    probes = {31: Probe(31, 2, -1, np.array([0.0, 1.0, 0.0]), 0.01)}
+    mapping, rows = calibrate_sweep(mapping_from_dict(one), pose_for, rest, probes, {31: [25.0, 50.0, 90.0]})
+    by = {r.requested: r for r in rows}
+    assert by[90.0].error <= 0.02 and by[50.0].error <= 0.02, [(r.requested, r.achieved, r.drive) for r in rows]
+    assert not by[90.0].saturated
