@@ -39,6 +39,17 @@ def test_every_requested_fap_group_is_mapped(mapping):
     assert set(mapping.visemes) == set(VISEME_CODES)
 
 
+def test_no_preset_lowers_the_middle_brow_with_the_inner_and_outer(mapping):
+    # FAP 33/34 down recruits the inner brow's and the outer brow's depressors together and
+    # calibrates to both at full contraction; a muscle takes its largest request, so a preset that
+    # also asks 31/35 got the inner brow 3x and the outer 5x what it asked (ICT anger: a ridged
+    # glabella, 47 folded edges; docs/status.md "the middle brow's saturated drive")
+    for name, row in mapping.expressions.items():
+        for middle, inner, outer in ((33, 31, 35), (34, 32, 36)):
+            if row[inner - 1] < 0 or row[outer - 1] < 0:
+                assert row[middle - 1] >= 0, (name, middle)
+
+
 def test_every_preset_fap_drives_something(mapping):
     # a preset's FAP that no entry maps would be dropped without a word; the lids (19-22) are
     # played over the skin by animation.eyelids
