@@ -43,7 +43,7 @@ class BakedShapes:
 def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest: np.ndarray,
                 lids=None, eyes: dict | None = None, passes: int = 3, ridge: float = 1e-3,
                 twins: np.ndarray | None = None, good_enough: float = 0.02,
-                log=lambda m: None) -> BakedShapes:
+                mirror_frame=None, log=lambda m: None) -> BakedShapes:
     """Settle every made shape of ``specs`` (module docstring).
 
     specs : {name: ShapeSpec} in output order; space : ControlSpace of the head (all controls;
@@ -57,7 +57,11 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         (:func:`faceforge.blendshapes.symmetric.mirror_columns`) on a symmetric rig, else None: then
         a shape that mirrors another is settled at its partner's mirrored pose instead of solved,
         and a midline shape moves twin controls together;
-    good_enough : no Gauss-Newton pass after a solve whose relative FAP error is at most this.
+    good_enough : no Gauss-Newton pass after a solve whose relative FAP error is at most this;
+    mirror_frame : None, or (n, 3) -> (n, 3) the mirror image of a settled skin (a mesh that is its
+        own mirror image, :meth:`faceforge.geometry.mirror.Mirror.exact_partners`): then a shape
+        that mirrors another (with ``twins``) is its partner's settled skin mirrored, not settled
+        again (its pose, the partner's mirrored, is still what it records and plays).
     """
     import time
 
@@ -90,7 +94,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
                                               tie=twins is not None, good_enough=good_enough)
         poses[spec.name] = (c, jaw, frame, row)
     if mirrored:
-        poses.update(_mirrored(mirrored, poses, twins, simulate, observe_probes, probes))
+        poses.update(_mirrored(mirrored, poses, twins, simulate, observe_probes, probes, mirror_frame))
     out = {k: [] for k in ("names", "frames", "cs", "jaws", "faps", "gaze")}
     for spec in todo:
         c, jaw, frame, row = poses[spec.name]
@@ -107,7 +111,8 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
             out[k].append(v)
         log(f"{spec.name}: " + (f"FAP error {row['error']:.0%}" if "error" in row else
                                 "eye rotation" if spec.eye else "lids only")
-            + (" (mirrored pose)" if row.get("mirrored_pose") else ""))
+            + (" (mirrored shape)" if row.get("mirrored_shape") else
+               " (mirrored pose)" if row.get("mirrored_pose") else ""))
     t_solve = time.perf_counter() - t0
     n = len(rest)
 
@@ -198,15 +203,17 @@ def _overlay(spec, frame, row, lids, eyes):
     return frame, f68, gaze
 
 
-def _mirrored(specs, poses, twins, simulate, observe_probes, probes) -> dict:
-    """Each of ``specs`` settled at the mirror image of its partner's solved pose (one batch);
+def _mirrored(specs, poses, twins, simulate, observe_probes, probes, mirror_frame=None) -> dict:
+    """Each of ``specs`` settled at the mirror image of its partner's solved pose (one batch), or,
+    with ``mirror_frame``, its partner's settled skin mirrored (no settle);
     {name: (c, jaw, frame, report row)}, the row measuring its own FAPs as a solve's would."""
     from faceforge.blendshapes.arkit import mirror_name
     from faceforge.blendshapes.symmetric import mirror_pose
 
     c, jaw = mirror_pose(np.stack([poses[s.mirror_of][0] for s in specs]),
                          np.stack([poses[s.mirror_of][1] for s in specs]), twins)
-    frames = simulate(c, jaw)
+    frames = simulate(c, jaw) if mirror_frame is None else \
+        np.stack([mirror_frame(poses[s.mirror_of][2]) for s in specs])
     out = {}
     for i, spec in enumerate(specs):
         target = np.array(list(spec.faps.values()), dtype=float)
@@ -215,7 +222,7 @@ def _mirrored(specs, poses, twins, simulate, observe_probes, probes) -> dict:
         row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
                            for f, t, a in zip(spec.faps, target, got)},
                "error": round(float(np.linalg.norm(got - target) / np.linalg.norm(target)), 3),
-               **_reach(target, got), "mirrored_pose": True,
+               **_reach(target, got), "mirrored_pose": True, "mirrored_shape": mirror_frame is not None,
                "controls": {mirror_name(k) if not k.startswith("jaw.") else k:
                             (-v if k == "jaw.yaw" else v) for k, v in src.get("controls", {}).items()}}
         out[spec.name] = (c[i], jaw[i], frames[i], row)

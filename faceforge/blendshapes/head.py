@@ -36,7 +36,7 @@ class HeadBake:
 
 
 def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, symmetric: bool = False,
-              muscle_probe: float = 1.0, log=lambda m: None) -> HeadBake:
+              muscle_probe: float = 1.0, mirror=None, log=lambda m: None) -> HeadBake:
     """Bake ``kinds`` (``arkit``, ``visemes``, ``expressions``) on ``head``: ``specs`` the ARKit
     mapping (:func:`faceforge.blendshapes.arkit.load_arkit_mapping`), ``mapping`` the FAP mapping
     (muscles, jaw limits, presets, FAP probes), each pose settled ``settle`` frames at ``fps`` (an int)
@@ -45,7 +45,10 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
     least one eye, or None; ``symmetric``: the rig is symmetric by construction (fit.npz has a
     mirror plane): each right shape is settled at its left partner's mirrored pose, not solved
     (:mod:`faceforge.blendshapes.symmetric`); ``muscle_probe``: the contraction each muscle's
-    Jacobian column is settled at (1: full, the pose a shape that saturates the muscle reuses).
+    Jacobian column is settled at (1: full, the pose a shape that saturates the muscle reuses);
+    ``mirror``: the head's :class:`faceforge.geometry.mirror.Mirror` (working frame) to make each
+    right shape the mirror image of its left partner's settled skin instead of settling it (only
+    with ``symmetric`` and a skin with an exact mirror partner per vertex, ``head.symmetric``).
     A pose settled once is not settled again (the frame is kept)."""
     from faceforge.blendshapes.symmetric import mirror_columns
 
@@ -59,6 +62,9 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
     out = {"settle_frames": settle if isinstance(settle, int) else "to convergence (animate.statics; refinements warm)",
            "symmetric_rig": bool(symmetric),
            "shapes": report}
+    mirror_frame = _shape_mirror(head, mirror) if symmetric else None
+    out["right_shapes"] = (_MIRRORED_NOTE if mirror_frame is not None else
+                           "settled at the left partner's mirrored pose" if symmetric else "solved")
     if "arkit" in kinds:
         space = control_space(head.controls, set(mapping.muscles), mapping.jaw_limits, head.levers.pitch,
                               mapping.max_contraction, muscle_probe=muscle_probe)
@@ -67,7 +73,8 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
             log(f"eyeball pieces: {', '.join(f'{s} ({len(v[0])} vertices)' for s, v in eyes.items())}")
         baked = bake_shapes(specs, space, calibration_probes(mapping, head), simulate,
                             lambda probes: probe_observer(head.rest, probes), head.rest, lids, eyes,
-                            twins=mirror_columns(head.controls) if symmetric else None, log=log)
+                            twins=mirror_columns(head.controls) if symmetric else None,
+                            mirror_frame=mirror_frame, log=log)
         index = {n: i for i, n in enumerate(baked.names)}
         for name in ARKIT_NAMES:
             i = index.get(name)
@@ -106,6 +113,23 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
                   contractions=np.stack(c), controls=np.asarray(head.controls, dtype=str), jaw=np.stack(jaw),
                   lids=np.stack(lid_faps), gaze=np.stack(gaze))
     return HeadBake(arrays, out, frames)
+
+
+#: what report.json says of the right shapes when they are mirror images
+_MIRRORED_NOTE = ("the left partner's settled skin mirrored through the mesh's exact vertex partners (a rig "
+                  "symmetric by construction: the same muscles mirrored, mirror-coloured solver); not settled, "
+                  "so the left/right mirror agreement is exact by construction (bake.mirror_shapes)")
+
+
+def _shape_mirror(head, mirror):
+    """(n, 3) -> (n, 3): a settled working skin reflected through ``mirror`` onto the vertices' exact
+    partners; None without a mirror or when the skin is not its own mirror image."""
+    if mirror is None or not getattr(head, "symmetric", False):
+        return None
+    partner = mirror.exact_partners(head.rest)
+    if partner is None:
+        return None
+    return lambda frame: mirror(np.asarray(frame, dtype=float)[partner])
 
 
 def _remembering(settled):

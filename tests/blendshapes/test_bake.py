@@ -164,3 +164,32 @@ def test_mirror_pose_swaps_twins_and_negates_the_yaw_only():
     assert c.tolist() == [0.0, 0.2, 0.7, 0.4, 0.3] and jaw.tolist() == [0.1, -0.05, 0.02]
     c2, jaw2 = mirror_pose(c, jaw, twins)
     assert c2.tolist() == [0.7, 0.2, 0.0, 0.4, 0.3] and jaw2.tolist() == [0.1, 0.05, 0.02]   # an involution
+
+
+def test_mirror_frame_makes_the_right_shape_without_settling_it():
+    # bake.mirror_shapes on a symmetric mesh: smileR is smileL's settled skin reflected onto the
+    # vertices' exact partners (x -> -x here); no pose of zyg_R alone is ever settled
+    from faceforge.blendshapes.symmetric import mirror_columns
+    from faceforge.geometry.mirror import Mirror
+
+    rest, simulate, probes, space = _head()
+    calls = []
+
+    def counted(c, jaw):
+        calls.extend(np.asarray(c, dtype=float).copy())
+        return simulate(c, jaw)
+
+    mirror = Mirror(np.zeros(3), (1.0, 0.0, 0.0))
+    partner = mirror.exact_partners(rest)
+    assert list(partner) == [1, 0, 3, 2, 4, 5]
+    specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",)),
+             "smileR": ShapeSpec("smileR", {13: 10.0}, ("zyg_R",), mirror_of="smileL")}
+    out = bake_shapes(specs, space, probes, counted, lambda ps: probe_observer(rest, ps), rest,
+                      twins=mirror_columns(COLUMNS), mirror_frame=lambda f: mirror(f[partner]))
+    row = out.report["smileR"]
+    assert row["mirrored_shape"] and row["mirrored_pose"] and row["error"] < 2e-3
+    assert out.frames[1] == pytest.approx(mirror(out.frames[0][partner]))
+    assert out.contractions[1] == pytest.approx(out.contractions[0][[1, 0, 2]])   # the pose it plays
+    assert not any(p[1] > 0 and p[0] == 0 for p in calls)                         # never settled
+    # on this symmetric stand-in the mirrored skin is what settling the mirrored pose gives
+    assert out.frames[1] == pytest.approx(simulate(out.contractions[1:2], np.zeros((1, 3)))[0])

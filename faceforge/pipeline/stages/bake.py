@@ -57,7 +57,8 @@ def run_bake(ctx):
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, mapping_path = stage_mapping(ctx)
     lids = head.eyelids(ctx.config)
-    symmetric = Mirror.from_arrays(load_npz(ctx.input("fit") / "fit.npz")) is not None
+    mirror = Mirror.from_arrays(load_npz(ctx.input("fit") / "fit.npz"))
+    symmetric = mirror is not None
     s = SettleSettings.from_config(ctx.config)
     # a baked pose stops at 1e-4 of the diagonal a frame and 60 frames at the most (animate.statics
     # when stricter): measured on MakeHuman, 30% fewer frames than 5e-5 / 150 and every shape's
@@ -65,7 +66,8 @@ def run_bake(ctx):
     s = replace(s, tolerance=max(s.tolerance, BAKE_TOLERANCE), max_frames=min(s.max_frames, BAKE_MAX_FRAMES))
     out = bake_head(head, mapping, specs, kinds, float(ctx.config.get("animate.fps")),
                     s, lids if lids is not None and lids.fields else None,
-                    symmetric=symmetric, log=ctx.log)
+                    symmetric=symmetric, log=ctx.log,
+                    mirror=mirror if ctx.config.get("bake.mirror_shapes") else None)
     save_npz(ctx.out_dir / "shapes.npz", **out.arrays)
     save_json(ctx.out_dir / "report.json", {"mapping": mapping_path, **({"arkit_mapping": str(
         ctx.param("arkit_mapping"))} if specs else {}), **out.report})
@@ -91,14 +93,14 @@ BAKE = register_stage(Stage(
     name="bake", deps=("fit", "bind", "calibrate"),
     # the bound head rebuilds the muscles from the template (faceforge.animation.rig.muscle_system)
     # not the playback-only keys (head rotation, previews, presets' timing): they cost no rebake
-    config_keys=("solver", "skin.stiffness", "skin.carry",
+    config_keys=("bake", "solver", "skin.stiffness", "skin.carry",
                  "skin.join_insertions", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.statics",
                  "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.jaw_glide",
                  "animate.jaw_glide_slope"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="4", run=run_bake,
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="5", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 
