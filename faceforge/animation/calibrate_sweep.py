@@ -237,12 +237,13 @@ def muscle_reach(entry, chains: dict, knots: np.ndarray):
 
 
 def face_lanes(mapping) -> list:
-    """Two lanes of entries that do not interact: the brows (the upper face), and everything
-    else (the jaw, which carries the lower lip and enters the lip entries' couplings, the lips,
-    the cheeks). Entry indices per lane."""
+    """Two lanes of entries that do not interact: the brows and the cheek lift (the upper face:
+    the cheek raiser rings the eye, and probed with the brows MakeHuman's squeeze and outer
+    brow lowering read nothing), and everything else (the jaw, which carries the lower lip and
+    enters the lip entries' couplings, the lips, the cheeks' puff). Entry indices per lane."""
     from faceforge.animation.calibrate import EYEBROW_FAPS
 
-    upper = [i for i, e in enumerate(mapping.entries) if set(e.faps) <= set(EYEBROW_FAPS)]
+    upper = [i for i, e in enumerate(mapping.entries) if set(e.faps) <= set(EYEBROW_FAPS) | {41, 42}]
     return [upper, [i for i in range(len(mapping.entries)) if i not in upper]]
 
 

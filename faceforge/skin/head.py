@@ -75,7 +75,8 @@ def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
-              brow_muscles=(), brow_shared_mm: float = 0.0) -> BoundSkin:
+              brow_muscles=(), brow_shared_mm: float = 0.0, cheek_mm: float = 0.0,
+              cheek_muscles=()) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -111,6 +112,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.brow_shared_mm``: brow skin on one brow muscle also anchors to the nearest other
         insertion within this many mm (scaled by ES0) of its anchor
         (:func:`faceforge.skin.brow.shared_anchors`; 0: off).
+    cheek_mm, cheek_muscles : float, sequence of str
+        ``bind.cheek_mm``, ``bind.cheek_muscles``: cheek skin within this many mm of FDP 5.3 /
+        5.4 that its rays bound to the bone binds to the closest cheek muscle
+        (:mod:`faceforge.skin.cheek`; 0 or none: by its rays, as the paper).
     mirror : faceforge.geometry.mirror.Mirror or None
         A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
         image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
@@ -178,6 +183,12 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
                         modiolus=corner,
                         brow=(brow, brow_ids, ((eye, eye_ids),), shared))
+    cheek_ids, _ = match_insertions(cheek_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
+    if cheek_ids and cheek_mm > 0:   # the cheek's insertion: cheek skin on the bone moves to the cheek raiser
+        from faceforge.skin.cheek import cheek_binding, cheek_mask
+
+        binding, _ = cheek_binding(binding, cut.vertices, bodies, cheek_ids, cheek_mask(cut.vertices, pts, cheek_mm, up),
+                                   max_ray_fraction * diagonal)
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding

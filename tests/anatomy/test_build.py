@@ -54,9 +54,9 @@ def run(system, frames, contractions=None, jaw=None):
 def test_the_map_keeps_its_muscles_and_layers(template):
     _, specs, muscles, system = template
     kinds = [s.type for s in specs]
-    assert kinds.count("linear") == 29 and kinds.count("sphincter") == 1   # Fig. 6 + the brow depressors
+    assert kinds.count("linear") == 31 and kinds.count("sphincter") == 1   # Fig. 6 + brow depressors, cheek raisers
     assert tuple(system.layer_indices) == (0, 1, 2, 3, 4)
-    assert len(muscles) == 30
+    assert len(muscles) == 32
 
 
 def test_rest_meshes_have_no_inverted_or_degenerate_face(template):
@@ -106,7 +106,7 @@ def test_left_and_right_muscles_mirror_each_other(template):
     skull, specs, _, system = template
     names = set(system.muscles)
     pairs = [(n, mirrored_name(n)) for n in names if n.endswith("_L")]
-    assert len(pairs) == 14 and all(r in names for _, r in pairs)
+    assert len(pairs) == 15 and all(r in names for _, r in pairs)
     flip = np.array([-1.0, 1.0, 1.0])
     for left, right in pairs:
         pl, pr = system.rest_positions(left), system.rest_positions(right)
@@ -318,3 +318,19 @@ def test_the_lips_contact_line_lies_on_the_teeth_only_with_inner_on_bone(templat
     n_bone = len(skull.cranium[1]) + len(skull.mandible[1])
     assert np.all(built.lines["A1"].points.face_ids < n_bone)
     assert np.all(built.lines["A1"].points.bary.sum(axis=1) > 0.999)
+
+
+def test_the_cheek_raiser_follows_the_orbits_rim_and_lifts_the_cheek(template):
+    """The cheek raiser's origin (A3, fitted to the rim by tools/cheek_rim.py) lies on the bone
+    as smoothly as its polyline (a straight origin across the rim zigzagged to 1.74 times its
+    length); contracted, its insertion moves up toward the eye."""
+    skull, specs, muscles, system = template
+    spec = next(s for s in specs if s.name == "orbicularis_oculi_lower_L")
+    m = next(x for x in muscles if x.name == spec.name)
+    v, f = underlying_mesh(m.lies_on, skull.cranium, skull.mandible, [x for x in muscles if x.name in m.lies_on])
+    given = np.linalg.norm(np.diff(spec.origin, axis=0), axis=1).sum()
+    assert m.lines["A3"].length(v, f) / given < 1.05
+    top = system.rest_positions(m.name)
+    run(system, FRAMES, {m.name: 1.0})
+    lift = (system.positions(m.name) - top)[:, 1]
+    assert lift.max() > 0.02 * skull.diagonal and lift.min() > -0.002 * skull.diagonal

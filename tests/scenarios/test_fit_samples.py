@@ -114,7 +114,7 @@ def test_modelled_eye_sockets_stay_hollow(fitted, name):
 def test_muscles_inside_the_skin(fitted, name):
     result, report, _ = fitted(name)
     m = report["muscles"]
-    assert len(result.muscles) == 30 and m["count"] > 500
+    assert len(result.muscles) == 32 and m["count"] > 500
     assert m["inside_fraction"] >= 0.98
     assert m["max_outside_rel"] <= 0.01
 
@@ -153,7 +153,7 @@ def test_stage_files_are_what_bind_reads(fitted, tmp_path):
     assert (tmp_path / "fit.png").stat().st_size > 10_000
     head = load_fit(tmp_path)
     np.testing.assert_array_equal(head["vertices"], extra["checked"].vertices)
-    assert len(head["muscles"]) == 30
+    assert len(head["muscles"]) == 32
     np.testing.assert_allclose(head["cranium"][0], result.cranium)
     import json
 

@@ -107,7 +107,9 @@ def run(ctx):
                       modiolus_radius=float(ctx.config.get("bind.modiolus_radius")), mirror=head["mirror"],
                       brow_band_mm=float(ctx.config.get("bind.brow_band_mm")),
                       brow_muscles=tuple(str(n) for n in ctx.config.get("bind.brow_muscles")),
-                      brow_shared_mm=float(ctx.config.get("bind.brow_shared_mm")))
+                      brow_shared_mm=float(ctx.config.get("bind.brow_shared_mm")),
+                      cheek_mm=float(ctx.config.get("bind.cheek_mm")),
+                      cheek_muscles=tuple(str(n) for n in ctx.config.get("bind.cheek_muscles")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
     save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())
