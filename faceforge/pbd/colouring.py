@@ -128,14 +128,19 @@ def mirror_twins(indices: np.ndarray, partner: np.ndarray) -> tuple[np.ndarray, 
     return twin, share
 
 
-def mirror_colouring(indices: np.ndarray, n_particles: int, partner: np.ndarray) -> np.ndarray:
+def mirror_colouring(indices: np.ndarray, n_particles: int, partner: np.ndarray, reverse: bool = False) -> np.ndarray:
     """Colours ``(m,) int64`` as :func:`greedy_colouring` gives, but a constraint and its
     mirror twin (:func:`mirror_twins`) take the same colour whenever they share no particle.
     Within a colour the order of projection does not matter (no shared particle), so a
     colour-by-colour Gauss-Seidel sweep of a mirror-symmetric model is then its own mirror
     image up to the constraints straddling the plane (issue 25: colours given in builder
     order put a left constraint and its right twin in different colours, and the sweep's order
-    alone made symmetric contractions move the two sides 5-37 % differently)."""
+    alone made symmetric contractions move the two sides 5-37 % differently).
+
+    ``reverse``: each pair of twins straddling the plane is coloured in the other order (the
+    one visited second in builder order takes the first colour): the sweep's mirror image,
+    up to the rounding (:class:`faceforge.pbd.Solver` averages the two on small models).
+    """
     idx = np.ascontiguousarray(indices, dtype=np.int64)
     if idx.ndim == 1:
         idx = idx[:, None]
@@ -143,16 +148,38 @@ def mirror_colouring(indices: np.ndarray, n_particles: int, partner: np.ndarray)
         return np.zeros(0, dtype=np.int64)
     twin, share = mirror_twins(idx, partner)
     incidence = np.bincount(idx.ravel(), minlength=n_particles).max()
-    max_colours = 2 * idx.shape[1] * int(incidence) + 1
-    return _greedy_mirror(idx, twin, share, n_particles, (max_colours + 63) // 64)
+    words = (2 * idx.shape[1] * int(incidence) + 1 + 63) // 64
+    if not reverse:
+        return _greedy_mirror(idx, twin, share, n_particles, words)
+    order = np.arange(len(idx))
+    first = np.flatnonzero(share & (twin > order))       # straddling pairs: swap their places
+    order[first], order[twin[first]] = twin[first], first
+    new = np.argsort(order)
+    t = twin[order]
+    colours = _greedy_mirror(idx[order], np.where(t >= 0, new[np.maximum(t, 0)], -1), share[order],
+                             n_particles, words)
+    out = np.empty_like(colours)
+    out[order] = colours
+    return out
 
 
-def colour_order(indices: np.ndarray, n_particles: int, blocks: np.ndarray, partner: np.ndarray | None = None):
+def straddling(indices: np.ndarray, partner: np.ndarray) -> int:
+    """How many constraints ``indices (m, k)`` share a particle with their mirror twin (another
+    constraint) under the particle mirror map ``partner (n,)``: those a colour-by-colour sweep
+    cannot visit in a mirror-symmetric order."""
+    if not len(indices):
+        return 0
+    twin, share = mirror_twins(indices, partner)
+    return int(np.count_nonzero(share & (twin >= 0) & (twin != np.arange(len(twin)))))
+
+
+def colour_order(indices: np.ndarray, n_particles: int, blocks: np.ndarray, partner: np.ndarray | None = None,
+                 reverse: bool = False):
     """Order one kind's constraints colour by colour within each block.
 
     indices : (m, k) int; blocks : (b, 2) int rows (start, stop) of this kind's blocks;
     partner : (n_particles,) int, optional, the particles' mirror map of a mirror-symmetric
-    model (then :func:`mirror_colouring`).
+    model (then :func:`mirror_colouring`, ``reverse`` passed on).
     Returns ``(order (m,) int64, runs (r,) int64)``: the permutation (stable sort by greedy
     colour inside each block) and the sorted boundaries, in the permuted order, of the
     runs of constraints that share no particle (one colour of one block; starts with 0
@@ -163,7 +190,7 @@ def colour_order(indices: np.ndarray, n_particles: int, blocks: np.ndarray, part
     runs = [0, len(idx)]
     # with a mirror map the kind is coloured as a whole: a twin may lie in another block (the
     # skin cut into a left and a right part), and both blocks must then run in mirrored order
-    whole = None if partner is None or not len(idx) else mirror_colouring(idx, n_particles, partner)
+    whole = None if partner is None or not len(idx) else mirror_colouring(idx, n_particles, partner, reverse)
     for start, stop in blocks:
         colours = greedy_colouring(idx[start:stop], n_particles) if whole is None else whole[start:stop]
         perm = np.argsort(colours, kind="stable")

@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from faceforge.pbd._kernels import QUAD, QUAD_AREA, _step, _step_parts, _take_rows
-from faceforge.pbd.colouring import colour_order
+from faceforge.pbd.colouring import colour_order, straddling
 from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
 from faceforge.pbd.constraints.bending import rest_cos_sin
 from faceforge.pbd.constraints.distance import move_weights, pbd_coefficients
@@ -42,7 +42,7 @@ from faceforge.pbd.constraints.quad import (
     area_table, areas_first, match_quad_stretches, match_quad_triangles, stretch_table)
 from faceforge.pbd.constraints.volume import pair_triangles
 from faceforge.pbd.model import AREA, BENDING, DISTANCE, Control, Model, State
-from faceforge.pbd.partition import partitioned, row_cuts
+from faceforge.pbd.partition import MIN_SLAB_CONSTRAINTS, partitioned, row_cuts
 from faceforge.pbd.settings import SolverSettings
 from faceforge.pbd.thread_choice import ThreadChooser
 from faceforge.pbd.threads import threaded, threads_used
@@ -131,7 +131,8 @@ def _volume_arrays(m: Model, part, partitions: int) -> tuple:
 class Solver:
     """Steps a :class:`Model`; holds only derived per-mode arrays and scratch buffers."""
 
-    def __init__(self, model: Model, settings: SolverSettings | None = None, mirror: np.ndarray | None = None):
+    def __init__(self, model: Model, settings: SolverSettings | None = None, mirror: np.ndarray | None = None,
+                 reverse: bool = False):
         """Derive the compiled step's arrays from ``model`` (left untouched) for ``settings``.
 
         model : :class:`Model` (particle ids checked against ``particle_count``; ValueError
@@ -144,17 +145,25 @@ class Solver:
         int, optional): each particle's mirror partner in a mirror-symmetric model; with
         ``colouring`` a constraint and its twin then share a colour
         (:func:`faceforge.pbd.colouring.mirror_colouring`), so the sweep treats both sides alike.
+        Twins sharing a particle (straddling the plane) still take two colours, one side first;
+        a small model (fewer than ``partition.MIN_SLAB_CONSTRAINTS`` constraints: the lip ring)
+        holding such twins is then also stepped by a second solver with those pairs in the
+        other order (``reverse``) and each step averages the two: a symmetric result for about
+        twice the (small) cost (issue 25: the ring's order alone made the levator labii move
+        the two sides 7-9 % apart).
         """
         self.model = model
         self.settings = settings or SolverSettings()
         s = self.settings
         _check_particle_ids(model)
-        m, part = self._partition(model, s)
+        self._reverse = reverse
         self._mirror = None
         if mirror is not None:
             mirror = np.asarray(mirror, dtype=np.int64)
             if mirror.shape != (model.particle_count,):
                 raise ValueError(f"mirror must map each of the {model.particle_count} particles, got {mirror.shape}")
+        m, part = self._partition(model, s, mirror)
+        if mirror is not None:
             self._mirror = mirror if self._particle_order is None else \
                 self._old_order[mirror[self._particle_order]]
         self._w = _own(m.inv_mass)
@@ -175,9 +184,16 @@ class Solver:
         d_weight = self._constraint_arrays(m, s)
         self._sweep_data(m, s, d_weight)
         self._frozen = self._frozen_arguments()
+        self._mirrored = None   # the solver in the other order, averaged with (see above)
+        if self._mirror is not None and s.colouring and not reverse and \
+                model.constraint_count < MIN_SLAB_CONSTRAINTS and any(
+                    straddling(getattr(model, f"{k}_indices"), mirror) for k in ("distance", "bending", "area")):
+            self._mirrored = Solver(model, settings, mirror, reverse=True)
+            self._spare = (model.state(), model.state())
 
-    def _partition(self, model: Model, s: SolverSettings):
-        """Renumber and regroup ``model`` into parts when ``s.partitions > 1``.
+    def _partition(self, model: Model, s: SolverSettings, mirror=None):
+        """Renumber and regroup ``model`` into parts when ``s.partitions > 1`` (cut at the
+        mirror plane when ``mirror``, the particles' partners, is given: :func:`partitioned`).
 
         Sets ``_segment`` ((blocks,) int64: the part of each block row, 0 with one part) and,
         when the numbering changes, ``_particle_order`` / ``_old_order`` / ``_x`` / ``_v``
@@ -188,7 +204,7 @@ class Solver:
         """
         self._position_order = self._particle_order = None
         self._segment = np.zeros(len(model.blocks), dtype=np.int64)
-        split = partitioned(model, s.partitions) if s.partitions > 1 else None
+        split = partitioned(model, s.partitions, mirror) if s.partitions > 1 else None
         if split is None or split.segment.max() <= 0:
             return model, None
         self._segment = split.segment
@@ -221,7 +237,8 @@ class Solver:
             kk, c = self._k[kind]
             if s.colouring:
                 order, runs = colour_order(idx, m.particle_count,
-                                           m.blocks[m.blocks[:, 0] == code, 1:], self._mirror)
+                                           m.blocks[m.blocks[:, 0] == code, 1:], self._mirror,
+                                           self._reverse)
                 idx, rest, kk, c = (np.ascontiguousarray(a[order]) for a in (idx, rest, kk, c))
                 if kind == "distance":
                     d_weight = d_weight[order]
@@ -376,8 +393,23 @@ class Solver:
         """Advance ``state_in`` by ``dt`` seconds into ``state_out`` (may be the same object).
 
         Arrays of ``state_out`` are written in place; they must be C-contiguous float64
-        ``(n, 3)`` like ``state_in``'s.
+        ``(n, 3)`` like ``state_in``'s. With a mirrored twin solver (see ``__init__``) the
+        positions and velocities are the mean of the two orders' steps.
         """
+        if self._mirrored is None:
+            return self._step_one(state_in, state_out, control, dt)
+        a, b = self._spare
+        np.copyto(b.positions, state_in.positions)
+        np.copyto(b.velocities, state_in.velocities)
+        self._mirrored._step_one(b, b, control, dt)
+        self._step_one(state_in, a, control, dt)
+        np.add(a.positions, b.positions, out=state_out.positions)
+        state_out.positions *= 0.5
+        np.add(a.velocities, b.velocities, out=state_out.velocities)
+        state_out.velocities *= 0.5
+
+    def _step_one(self, state_in: State, state_out: State, control: Control, dt: float) -> None:
+        """:meth:`step` in this solver's own order."""
         m = self.model
         n = m.particle_count
         for name, a in (("state_in.positions", state_in.positions),
