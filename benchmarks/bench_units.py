@@ -62,6 +62,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--passes", type=int, default=2)
+    ap.add_argument("--local", type=int, default=0,
+                    help="Gauss-Newton steps with a Jacobian taken at the solution (solve_activations' local)")
     ap.add_argument("--rescale", type=int, default=2,
                     help="magnitude steps after the passes (solve_activations' rescale; 0: none)")
     ap.add_argument("--fields", type=Path, default=None,
@@ -107,7 +109,7 @@ def main(argv=None) -> dict:
         for name, delta in ((n, units["deltas"][names.index(n)]) for n in chosen):
             t0 = time.perf_counter()
             res = solve_activations(delta.astype(float).ravel(), J, space, simulate, observe, passes=args.passes,
-                                     rescale=args.rescale)
+                                     rescale=args.rescale, local=args.local)
             cos, ratio = field_agreement(res.observed, delta)
             used = {n: round(float(v), 3) for n, v in zip(space.names, res.x) if abs(v) > 1e-3}
             fields[str(name)] = res.observed.reshape(-1, 3)
