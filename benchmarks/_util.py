@@ -12,6 +12,7 @@ Benchmarks are scripts, not tests: run them with ``python benchmarks/bench_<name
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -25,6 +26,29 @@ SAMPLE_HEADS = {name: Path(__file__).resolve().parents[1] / "samples" / rel for 
     ("ict", "ict/ict_face_headneck_neutral.obj"),
     ("mediapipe", "mediapipe/face_model_with_iris.obj"),
 )}
+
+
+def workdir_args(doc: str, argv=None, flags: dict[str, str] | None = None) -> argparse.Namespace:
+    """Parse ``WORKDIR [WORKDIR ...] [--flag ...]`` for a benchmark that measures fitted workdirs.
+
+    ``doc`` is the benchmark's module docstring (its first line is the ``--help`` text);
+    ``flags`` maps each on/off option (``"--signed"``) to its help. Every workdir must be an
+    existing directory: a mistyped path or ``--help`` is never taken for one (a benchmark
+    would otherwise write an empty results file). Returns the namespace: ``.workdirs``
+    (list of Path) and one boolean per flag (``--no-cli`` -> ``.no_cli``).
+    """
+    def existing_dir(text: str) -> Path:
+        path = Path(text)
+        if not path.is_dir():
+            raise argparse.ArgumentTypeError(f"{text}: not a directory (a fitted workdir)")
+        return path
+
+    ap = argparse.ArgumentParser(description=doc.strip().splitlines()[0])
+    ap.add_argument("workdirs", nargs="+", type=existing_dir, metavar="WORKDIR",
+                    help="fitted (and bound) workdirs, e.g. made with faceforge -w W fit head.obj")
+    for flag, help_text in (flags or {}).items():
+        ap.add_argument(flag, action="store_true", help=help_text)
+    return ap.parse_args(argv)
 
 
 def timeit(fn, repeat: int = 5, number: int = 1, warmup: int = 1, clock=time.perf_counter) -> dict:

@@ -19,13 +19,13 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import bench_fap_played as fp  # noqa: E402
-from _util import write_results  # noqa: E402
+from _util import workdir_args, write_results  # noqa: E402
 
 BROWS = range(31, 39)
 
 
 def main(argv=None) -> None:
-    dirs = [Path(a) for a in (argv if argv is not None else sys.argv[1:])]
+    dirs = workdir_args(__doc__, argv).workdirs
     every = fp.requests
     fp.requests = lambda *a, **k: [(f, v) for f, v in every(*a, **k) if f in BROWS]
     results = {}

@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import write_results  # noqa: E402
+from _util import workdir_args, write_results  # noqa: E402
 
 
 def time_calibrate(workdir: Path) -> dict:
@@ -50,7 +50,7 @@ def time_calibrate(workdir: Path) -> dict:
 
 
 def main(argv=None) -> None:
-    dirs = [Path(a) for a in (argv if argv is not None else sys.argv[1:])]
+    dirs = workdir_args(__doc__, argv).workdirs
     results = {}
     for d in dirs:
         r = results[d.name] = time_calibrate(d)

@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import write_results  # noqa: E402
+from _util import workdir_args, write_results  # noqa: E402
 import expr_measure as em  # noqa: E402
 
 
@@ -51,7 +51,7 @@ def head_figures(workdir: Path) -> dict:
 
 
 def main(argv=None) -> None:
-    dirs = [Path(a) for a in (argv if argv is not None else sys.argv[1:])]
+    dirs = workdir_args(__doc__, argv).workdirs
     results = {d.name: head_figures(d) for d in dirs}
     for name, r in results.items():
         print(name, "chin path", [(c["open_jaw"], c["down_mns"], c["back_mns"]) for c in r["chin_path"]])

@@ -13,6 +13,7 @@ and lists the muscles whose rest mesh has sheet faces turned over.
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -109,10 +110,13 @@ def template_scene():
                                                            skull.diagonal, stiffness)
 
 
-def main():
+def main(argv=None):
     from faceforge.anatomy.layers import MusculoskeletalSystem
 
-    use_template = "--template" in sys.argv
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--template", action="store_true",
+                    help="the shipped template skull and muscle map instead of the synthetic scene")
+    use_template = ap.parse_args(argv).template
     t0 = time.perf_counter()
     cranium, mandible, muscles = template_scene() if use_template else scene()
     build_s = time.perf_counter() - t0

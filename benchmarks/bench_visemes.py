@@ -44,7 +44,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import expr_measure as em  # noqa: E402
-from _util import write_results  # noqa: E402
+from _util import workdir_args, write_results  # noqa: E402
 
 #: lip FDPs whose motion is a viseme's mouth shape
 SHAPE_FDPS = ("2.2", "2.3", "2.4", "2.5", "2.6", "2.7", "2.8", "2.9",
@@ -166,10 +166,11 @@ def measure(head, mapping, names=None) -> dict:
 
 
 def main(argv=None) -> None:
-    args = list(sys.argv[1:] if argv is None else argv)
-    use_cli = "--no-cli" not in args
+    args = workdir_args(__doc__, argv, {"--no-cli": "measure the visemes stage already in each workdir "
+                                                   "instead of running it"})
+    use_cli = not args.no_cli
     results = {}
-    for d in (Path(a) for a in args if not a.startswith("--")):
+    for d in args.workdirs:
         out = {}
         if use_cli or (d / "visemes" / "report.json").is_file():
             out["visemes_seconds"], out["checks"] = cli_report(d, run=use_cli)

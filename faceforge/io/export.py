@@ -132,10 +132,18 @@ def protect_inputs(path: str | Path, inputs: Mapping[str, str | Path | None]) ->
 
 def check_output(path: str | Path, inputs: Mapping[str, str | Path | None] | None = None) -> None:
     """Fail early (before any simulation) on an output the export could not write or must not
-    write: one of ``inputs`` (see :func:`protect_inputs`), an unknown suffix, or binary USD
-    without ``usd-core``. Raises ExportError."""
+    write: one of ``inputs`` (see :func:`protect_inputs`), an unknown suffix, a folder that does
+    not exist or is not writable (a cache, or an OBJ sequence's folder, is written into it), or
+    binary USD without ``usd-core``. Raises ExportError."""
+    import os
+
     protect_inputs(path, inputs or {})
     exporter_for(path)
+    parent = Path(path).parent
+    if not parent.is_dir():
+        raise ExportError(f"-o: folder {parent} does not exist", path)
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ExportError(f"-o: folder {parent} is not writable", path)
     if Path(path).suffix.lower() in (".usdc", ".usd"):
         export_usd.require_usd_core(path)
 

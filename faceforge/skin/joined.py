@@ -64,23 +64,22 @@ def join(t, rows, starts, p0):  # pragma: no cover - numba
     (k, 3) become ``p0 + sum |d_i|^2 d_i / sum |d_i|^2`` with ``d_i = t[row_i] - p0_i``."""
     for j in range(starts.shape[0] - 1):
         a, b = starts[j], starts[j + 1]
-        acc = np.zeros(3)
-        wsum = 0.0
+        ax = ay = az = wsum = 0.0          # scalars: no array allocated per group
         for i in range(a, b):
             r = rows[i]
-            w = 0.0
-            for c in range(3):
-                dc = t[r, c] - p0[i, c]
-                w += dc * dc
-            for c in range(3):
-                acc[c] += w * (t[r, c] - p0[i, c])
+            dx, dy, dz = t[r, 0] - p0[i, 0], t[r, 1] - p0[i, 1], t[r, 2] - p0[i, 2]
+            w = dx * dx + dy * dy + dz * dz
+            ax += w * dx
+            ay += w * dy
+            az += w * dz
             wsum += w
         if wsum <= 0.0:
             continue
         for i in range(a, b):
             r = rows[i]
-            for c in range(3):
-                t[r, c] = p0[i, c] + acc[c] / wsum
+            t[r, 0] = p0[i, 0] + ax / wsum
+            t[r, 1] = p0[i, 1] + ay / wsum
+            t[r, 2] = p0[i, 2] + az / wsum
 
 
 def join_args(rest, vertex_ids, carried):

@@ -85,6 +85,11 @@ CASES = {
     "preview unwritable": ({}, ["animate", "--expression", "joy", "--preview", "{tmp}/no/such/p.png"],
                            ["p.png", "does not exist"]),
     "output unknown suffix": ({}, ["animate", "--expression", "joy", "-o", "{tmp}/a.xyz"], ["a.xyz"]),
+    # (a missing folder used to fail after the whole simulation, with "cannot write here")
+    "output folder missing": ({}, ["animate", "--expression", "joy", "-o", "{tmp}/no/a.pc2"],
+                              ["a.pc2", "-o: folder", "does not exist"]),
+    "obj sequence parent missing": ({}, ["animate", "--expression", "joy", "-o", "{tmp}/no/frames"],
+                                    ["frames", "-o: folder", "does not exist"]),
     # (a landmark file without pupils is no longer bad input: the landmarks stage detects the
     # missing FDPs; the fit still refuses landmarks it cannot measure the FAP units on)
     "landmarks huge int": ({"lm.yaml": 'landmarks:\n  "2.1": {vertex: 99999999999999999999}\n'},

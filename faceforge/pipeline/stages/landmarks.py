@@ -52,7 +52,7 @@ def run(ctx) -> None:
     save_png(out / "landmarks.png", det, found.vertices, found.faces, title=f"landmarks: {Path(mesh).name}")
     n_given = sum(m.startswith("given") for m in det.method)
     what = (f"{len(det.ids) - n_given} FDPs detected" + (f", {n_given} given in {found.given_path}" if n_given else ""))
-    ctx.log(f"{what} (face {det.info['search']}, {len(set(v for vs in det.views for v in vs))} views)")
+    ctx.log(f"{what} (the face seen {det.info['search']}, {len(set(v for vs in det.views for v in vs))} views)")
 
 
 def landmark_file(workdir_stage_dir) -> tuple[str, str]:
