@@ -62,7 +62,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--passes", type=int, default=2)
-    ap.add_argument("--local", type=int, default=0,
+    ap.add_argument("--local", type=int, default=2,
                     help="Gauss-Newton steps with a Jacobian taken at the solution (solve_activations' local)")
     ap.add_argument("--rescale", type=int, default=2,
                     help="magnitude steps after the passes (solve_activations' rescale; 0: none)")
