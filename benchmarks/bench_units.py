@@ -62,6 +62,12 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--passes", type=int, default=2)
+    ap.add_argument("--local", type=int, default=2,
+                    help="Gauss-Newton steps with a Jacobian taken at the solution (solve_activations' local)")
+    ap.add_argument("--rescale", type=int, default=2,
+                    help="magnitude steps after the passes (solve_activations' rescale; 0: none)")
+    ap.add_argument("--fields", type=Path, default=None,
+                    help="also write the Jacobian, the control names and each unit's solved field (.npz)")
     ap.add_argument("--brows", action="store_true",
                     help="the brow units only, solved with the brow muscles only (frontalis, corrugator, "
                          "depressor supercilii, orbicularis oculi; no jaw): results units_brows.json")
@@ -76,7 +82,8 @@ def main(argv=None) -> dict:
 
     with tempfile.TemporaryDirectory() as tmp:
         work = args.workdir or fitted_workdir(Path(tmp))
-        cfg = load_config()
+        # the workdir's remembered overrides (``--config`` given to its stages), as its stages ran
+        cfg = load_config(remembered=work / "config.yaml")
         head = BoundHead(work / "fit", work / "bind", cfg)
         mapping = load_fap_mapping(mapping_template_path(cfg))
         # held poses settle until the skin stops moving (animate.statics), as the sheets and the
@@ -101,7 +108,8 @@ def main(argv=None) -> dict:
         rows, fields = {}, {}
         for name, delta in ((n, units["deltas"][names.index(n)]) for n in chosen):
             t0 = time.perf_counter()
-            res = solve_activations(delta.astype(float).ravel(), J, space, simulate, observe, passes=args.passes)
+            res = solve_activations(delta.astype(float).ravel(), J, space, simulate, observe, passes=args.passes,
+                                     rescale=args.rescale, local=args.local)
             cos, ratio = field_agreement(res.observed, delta)
             used = {n: round(float(v), 3) for n, v in zip(space.names, res.x) if abs(v) > 1e-3}
             fields[str(name)] = res.observed.reshape(-1, 3)
@@ -127,6 +135,10 @@ def main(argv=None) -> dict:
                "passing": sum(r["ok"] for r in rows.values()), "of": len(rows),
                "mirror_rel_diff": mirror}
         print(f"worst {worst}; {out['passing']}/{len(rows)} pass; jacobian {t_jac:.1f} s; mirror {mirror}")
+        if args.fields:
+            np.savez_compressed(args.fields, J=J, controls=np.array(space.names), names=np.array(list(fields)),
+                                solved=np.stack(list(fields.values())), user_rest=user_rest,
+                                x=np.stack([[rows[n]["controls"].get(c, 0.0) for c in space.names] for n in fields]))
         write_results("units_brows" if args.brows else "units", out)
         return out
 

@@ -150,13 +150,22 @@ def bounded_lsq(J: np.ndarray, y: np.ndarray, lower, upper, ridge: float = 1e-3)
 
 
 def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, simulate, observe,
-                      passes: int = 2, ridge: float = 1e-3, good_enough: float = 0.0) -> SolveResult:
+                      passes: int = 2, ridge: float = 1e-3, good_enough: float = 0.0,
+                      rescale: int = 0, local: int = 0) -> SolveResult:
     """Controls whose settled skin best matches ``target`` (d,) (module docstring).
 
     J : (d, q) Jacobian of ``space`` (:func:`jacobian`); passes : Gauss-Newton (chord) passes
     after the linear solve, each one more settled pose; a pass that does not lower the residual
     ends the refinement (its pose is discarded), and so does a residual at or below
     ``good_enough`` (relative; 0: refine all ``passes``).
+    rescale : after the passes, up to this many magnitude steps (:func:`_rescaled`): the pose
+        scaled along its own direction by the least-squares factor of its observed field, kept
+        when the residual falls (the secant Jacobian of a saturating skin leaves the settled
+        field short: its magnitude below its cosine). 0: none.
+    local : before the magnitude steps, up to this many Gauss-Newton steps with a Jacobian taken
+        at the solution (:func:`_local_step`: the controls in use, each moved by a tenth of its
+        range, settled together in one batch): muscles that share skin do not add up (the brow's
+        joined insertions, the modiolus), so the secants from rest mispredict their sum. 0: none.
     """
     y = np.asarray(target, dtype=float)
     J = np.asarray(J, dtype=float)
@@ -194,7 +203,63 @@ def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, si
         best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
         if stalled:   # less than a tenth off the residual: the next pass would not pay its pose
             break
+    for _ in range(local):
+        x_new = _local_step(best, y, space, simulate, observe, lo, hi, ridge)
+        if x_new is None:
+            break
+        frame, f = evaluate(x_new)
+        err = float(np.linalg.norm(y - f)) / norm
+        if not err < best.residuals[-1]:
+            break
+        best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
+    for _ in range(rescale):
+        x_new = _rescaled(best.x, best.observed, y, lo, hi)
+        if x_new is None:
+            break
+        frame, f = evaluate(x_new)
+        err = float(np.linalg.norm(y - f)) / norm
+        if not err < best.residuals[-1]:
+            break
+        best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
     return best
+
+
+def _local_step(best: SolveResult, y: np.ndarray, space: ControlSpace, simulate, observe, lo: np.ndarray,
+                hi: np.ndarray, ridge: float, step: float = 0.1, used: float = 1e-3):
+    """One Gauss-Newton step from ``best.x`` with forward differences at it: each control whose
+    value is above ``used`` (or off its lower bound) moved by ``step`` x its range towards the
+    interior, all settled as one batch; the bounded step solved on those columns alone.
+    Returns the new (q,) pose, or None when no control is in use."""
+    x = np.asarray(best.x, dtype=float)
+    active = np.flatnonzero(np.abs(x - lo) > used)
+    if active.size == 0:
+        return None
+    h = step * (hi - lo)[active]
+    h = np.where(x[active] + h <= hi[active], h, -h)
+    X = np.repeat(x[None, :], active.size, axis=0)
+    X[np.arange(active.size), active] += h
+    c, jaw = space.pose(X)
+    F = np.asarray(observe(simulate(c, jaw)), dtype=float)
+    Jl = ((F - best.observed[None, :]) / h[:, None]).T
+    dx = bounded_lsq(Jl, y - best.observed, (lo - x)[active], (hi - x)[active], ridge)
+    x_new = x.copy()
+    x_new[active] = np.clip(x[active] + dx, lo[active], hi[active])
+    return None if np.allclose(x_new, x) else x_new
+
+
+def _rescaled(x: np.ndarray, f: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+              least: float = 0.01):
+    """The magnitude step: ``x (q,)`` scaled by ``s = <f, y> / |f|^2`` (the factor that brings the
+    observed field ``f (d,)`` closest to the target ``y (d,)`` along its own direction, were the
+    skin linear in ``x``), clipped to the bounds; None when ``|s - 1| < least`` or nothing moves."""
+    ff = float(f @ f)
+    if ff == 0.0:
+        return None
+    s = float(f @ y) / ff
+    if abs(s - 1.0) < least or s <= 0.0:
+        return None
+    x_new = np.clip(s * x, lo, hi)
+    return None if np.allclose(x_new, x) else x_new
 
 
 def _broyden(J: np.ndarray, x: np.ndarray, f: np.ndarray) -> np.ndarray:

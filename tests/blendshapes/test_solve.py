@@ -101,3 +101,48 @@ def test_field_agreement():
     assert field_agreement(-a, a)[0] == pytest.approx(-1.0)
     with pytest.raises(ValueError):
         field_agreement(a, 0 * a)
+
+
+def test_magnitude_step_brings_a_short_field_to_its_target_size():
+    """A skin that responds at half the secant's gain beyond the probe (it saturates): the passes
+    are skipped, the linear solve leaves the field short; the magnitude step scales the pose until
+    the field's size matches its projection on the target, and never leaves the bounds."""
+    rng = np.random.default_rng(3)
+    B = rng.normal(size=(30, 6))
+
+    def simulate(c, jaw):
+        x = np.hstack([np.where(c < 0.5, c, 0.5 + 0.5 * (c - 0.5)), jaw])   # gain halves above 0.5
+        return (x @ B.T).reshape(len(x), -1, 3)
+
+    observe = lambda frames: np.asarray(frames).reshape(len(frames), -1)  # noqa: E731
+    s = _space()
+    J = jacobian(simulate, observe, s)
+    target = observe(simulate(*s.pose(np.array([0.9, 0.0, 0.0, 0.0]))))[0]
+    plain = solve_activations(target, J, s, simulate, observe, passes=0, ridge=0.0)
+    _, short = field_agreement(plain.observed, target)
+    res = solve_activations(target, J, s, simulate, observe, passes=0, ridge=0.0, rescale=3)
+    cos, ratio = field_agreement(res.observed, target)
+    assert short < 0.9 and ratio > short and ratio == pytest.approx(cos, abs=0.05)
+    assert res.residuals[-1] < plain.residuals[-1]
+    assert np.all(res.x <= s.upper + 1e-12) and np.all(res.x >= s.lower - 1e-12)
+
+
+def test_local_step_fixes_controls_that_do_not_add_up():
+    """Two controls whose effects multiply (a shared insertion): the secants from rest predict
+    their sum wrongly and the chord passes stall; a Jacobian taken at the solution closes in."""
+    rng = np.random.default_rng(4)
+    B = rng.normal(size=(30, 6))
+
+    def simulate(c, jaw):
+        x = np.hstack([c, jaw]).copy()
+        x[:, 2] = x[:, 2] + 3.0 * c[:, 0] * c[:, 1]        # a and b together move c's field
+        return (x @ B.T).reshape(len(x), -1, 3)
+
+    observe = lambda frames: np.asarray(frames).reshape(len(frames), -1)  # noqa: E731
+    s = _space()
+    J = jacobian(simulate, observe, s)
+    target = observe(simulate(*s.pose(np.array([0.6, 0.5, 0.1, 0.0]))))[0]
+    plain = solve_activations(target, J, s, simulate, observe, passes=2, ridge=0.0)
+    res = solve_activations(target, J, s, simulate, observe, passes=2, ridge=0.0, local=3)
+    assert res.residuals[-1] < 0.5 * plain.residuals[-1], (plain.residuals, res.residuals)
+    assert np.all(res.x <= s.upper + 1e-12) and np.all(res.x >= s.lower - 1e-12)

@@ -183,7 +183,8 @@ def test_the_pucker_pushes_both_lips_forward_and_turns_them_out(head):
     the MakeHuman units' mouth-protusion moves 8.1 5 mm up and 5 forward, 8.2 11 down and 5
     forward). Along the mouth plane's normal alone the upper lip went down (0.5 mm for 1.8
     forward at 0.5); with the eversion (sphincter.EVERSION 1.0) measured: 8.1 forward 1.9,
-    up 0.5 mm; 8.2 forward 1.2, down 1.9 mm."""
+    up 0.5 mm; 8.2 forward 1.2, down 1.9 mm; with ``muscle.sphincter.protrusion`` 1.0 (was 0.5,
+    benchmarks/bench_units.py) 8.1 forward 2.9, up 2.2; 8.2 forward 2.7, down 4.0."""
     from faceforge.anatomy.tissue import units_per_mm
     from faceforge.animation.playback import static_poses
 
