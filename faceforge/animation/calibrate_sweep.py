@@ -237,13 +237,16 @@ def muscle_reach(entry, chains: dict, knots: np.ndarray):
 
 
 def face_lanes(mapping) -> list:
-    """Two lanes of entries that do not interact: the brows and the cheek lift (the upper face:
-    the cheek raiser rings the eye, and probed with the brows MakeHuman's squeeze and outer
-    brow lowering read nothing), and everything else (the jaw, which carries the lower lip and
-    enters the lip entries' couplings, the lips, the cheeks' puff). Entry indices per lane."""
+    """Two lanes of entries that do not interact: the brows (the upper face), and everything
+    else (the jaw, which carries the lower lip and enters the lip entries' couplings, the lips,
+    the cheeks). Entry indices per lane. (The cheek lift 41/42 was tried in the brows' lane
+    (cheek5): with the other branches of 2026-11-28 merged it paired MakeHuman's middle-brow
+    lowering 33/34 with another probe that cancelled it, 0.3 ENS at every request, and the
+    played -35 came out -0.7; in this lane 33 reaches -42, 35 -34 and 37 60 of 80.)
+    """
     from faceforge.animation.calibrate import EYEBROW_FAPS
 
-    upper = [i for i, e in enumerate(mapping.entries) if set(e.faps) <= set(EYEBROW_FAPS) | {41, 42}]
+    upper = [i for i, e in enumerate(mapping.entries) if set(e.faps) <= set(EYEBROW_FAPS)]
     return [upper, [i for i in range(len(mapping.entries)) if i not in upper]]
 
 
