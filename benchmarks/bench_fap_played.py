@@ -44,7 +44,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _util import write_results  # noqa: E402
+from _util import workdir_args, write_results  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RAMP, HOLD = 10, 20
@@ -201,10 +201,12 @@ def chin_from_frames(head, skins, rest, asked, ends) -> list[dict]:
 
 
 def main(argv=None) -> None:
-    args = list(argv if argv is not None else sys.argv[1:])
-    fractions = (1.0, 0.5) if "--half" in args else (1.0,)
-    protocols = ("signed",) if "--signed" in args else ("signed", "context", "abs")
-    dirs = [Path(a) for a in args if not a.startswith("--")]
+    args = workdir_args(__doc__, argv, {"--signed": "each FAP alone at the largest magnitude of each sign "
+                                                    "the Xface files use (the issue's protocol) only",
+                                        "--half": "also at half those magnitudes"})
+    fractions = (1.0, 0.5) if args.half else (1.0,)
+    protocols = ("signed",) if args.signed else ("signed", "context", "abs")
+    dirs = args.workdirs
     results = {}
     for protocol in protocols:
         for fraction in fractions:

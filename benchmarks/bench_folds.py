@@ -29,7 +29,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import expr_measure as em  # noqa: E402
-from _util import write_results  # noqa: E402
+from _util import workdir_args, write_results  # noqa: E402
 
 PRESETS = ("joy", "sadness", "anger", "fear", "disgust", "surprise")
 GROUPS = {"2": "lips", "8": "lips", "3": "lids", "4": "brows", "5": "cheeks", "9": "nose"}
@@ -105,9 +105,9 @@ def head_figures(workdir: Path, bake: bool) -> dict:
 
 
 def main(argv=None) -> None:
-    args = list(sys.argv[1:] if argv is None else argv)
-    bake = "--bake" in args
-    dirs = [Path(a) for a in args if a != "--bake"]
+    args = workdir_args(__doc__, argv, {"--bake": "also bake every shape (bake --shapes all) and count its folds"})
+    bake = args.bake
+    dirs = args.workdirs
     results = {}
     for d in dirs:
         results[d.name] = r = head_figures(d, bake)
