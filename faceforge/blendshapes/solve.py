@@ -203,24 +203,19 @@ def solve_activations(target: np.ndarray, J: np.ndarray, space: ControlSpace, si
         best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
         if stalled:   # less than a tenth off the residual: the next pass would not pay its pose
             break
-    for _ in range(local):
-        x_new = _local_step(best, y, space, simulate, observe, lo, hi, ridge)
-        if x_new is None:
-            break
-        frame, f = evaluate(x_new)
-        err = float(np.linalg.norm(y - f)) / norm
-        if not err < best.residuals[-1]:
-            break
-        best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
-    for _ in range(rescale):
-        x_new = _rescaled(best.x, best.observed, y, lo, hi)
-        if x_new is None:
-            break
-        frame, f = evaluate(x_new)
-        err = float(np.linalg.norm(y - f)) / norm
-        if not err < best.residuals[-1]:
-            break
-        best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
+    # then the local Gauss-Newton steps, then the magnitude steps: each kept while it lowers the residual
+    refinements = ((local, lambda b: _local_step(b, y, space, simulate, observe, lo, hi, ridge)),
+                   (rescale, lambda b: _rescaled(b.x, b.observed, y, lo, hi)))
+    for count, propose in refinements:
+        for _ in range(count):
+            x_new = propose(best)
+            if x_new is None:
+                break
+            frame, f = evaluate(x_new)
+            err = float(np.linalg.norm(y - f)) / norm
+            if not err < best.residuals[-1]:
+                break
+            best = SolveResult(x_new, *(a[0] for a in space.pose(x_new)), frame, f, best.residuals + [err])
     return best
 
 
