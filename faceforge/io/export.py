@@ -135,15 +135,11 @@ def check_output(path: str | Path, inputs: Mapping[str, str | Path | None] | Non
     write: one of ``inputs`` (see :func:`protect_inputs`), an unknown suffix, a folder that does
     not exist or is not writable (a cache, or an OBJ sequence's folder, is written into it), or
     binary USD without ``usd-core``. Raises ExportError."""
-    import os
+    from faceforge.io.writable import check_folder
 
     protect_inputs(path, inputs or {})
     exporter_for(path)
-    parent = Path(path).parent
-    if not parent.is_dir():
-        raise ExportError(f"-o: folder {parent} does not exist", path)
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise ExportError(f"-o: folder {parent} is not writable", path)
+    check_folder(path, "-o", ExportError)
     if Path(path).suffix.lower() in (".usdc", ".usd"):
         export_usd.require_usd_core(path)
 
