@@ -9,7 +9,7 @@ Importing this module imports click and the stage registry only, so
 ``faceforge --help`` stays instant; numpy, numba and trimesh are imported inside
 the stages that use them. Every :class:`~faceforge.exceptions.FaceforgeError` is
 printed as ``faceforge: error: <file>: <cause>`` with exit status 2 (traceback
-with ``-v``).
+with ``-v``); a result that failed its checks (:class:`~faceforge.exceptions.ChecksFailed`) exits 3.
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ from pathlib import Path
 
 import click
 
-from faceforge.exceptions import FaceforgeError
+from faceforge.exceptions import ChecksFailed, FaceforgeError
 from faceforge.pipeline import stage as registry
+from faceforge.pipeline.result_checks import keep_going_option
 
 _BUILTIN_ORDER = ("status", "run", "clean", "config")
 
@@ -59,6 +60,9 @@ class App:
         self.config = load_config(config_file, sets, remembered=self._remembered_config())
         self._pending_params: dict | None = None   # written by commit_remembered() on success
         self._pending_overrides = False
+        #: accept results that fail their checks (a command's ``--keep-going``,
+        #: :mod:`faceforge.pipeline.result_checks`)
+        self.keep_going = False
 
     def add_sets(self, *sets: str) -> None:
         """More ``KEY.PATH=VALUE`` overrides, as if given with ``--set`` (a command's own
@@ -143,8 +147,14 @@ class App:
         if params:
             self._pending_params = remembered
         self._pending_overrides = True
-        return runner.run(self.workspace, self.config, remembered, [stage.name], force=force,
-                          log=self.log, progress=self.progress)
+        statuses = runner.run(self.workspace, self.config, remembered, [stage.name], force=force,
+                              log=self.log, progress=self.progress)
+        from faceforge.pipeline.result_checks import enforce
+
+        # ran now or up to date: a failed result is an error every time it is asked for
+        enforce(self.workspace.stage_dir(stage.name), stage.name, self.keep_going,
+                lambda line: click.echo(line, err=True))   # shown with -q too, as warnings are
+        return statuses
 
 
 class FaceforgeGroup(click.Group):
@@ -168,6 +178,8 @@ class FaceforgeGroup(click.Group):
                 ctx.obj.commit_remembered()
             return result
         except FaceforgeError as exc:
+            if isinstance(exc, ChecksFailed) and exc.kept and isinstance(ctx.obj, App):
+                ctx.obj.commit_remembered()   # the stage folders hold this run's inputs' result
             verbose = ctx.params.get("verbose", 0) > 0
             if verbose:
                 traceback.print_exc()
@@ -250,7 +262,10 @@ def status(app: App):
     width = max(len(s.stage.name) for s in statuses)
     for s in statuses:
         if s.up_to_date:
-            state = "up to date"
+            from faceforge.pipeline.result_checks import stage_failures
+
+            failures = stage_failures(app.workspace.stage_dir(s.stage.name))
+            state = "up to date" + (f"; failed its checks: {'; '.join(failures)}" if failures else "")
         else:
             state = ("stale: " if s.key else "cannot run: ") + "; ".join(s.reasons)
         click.echo(f"{s.stage.name:<{width}}  {state}")
@@ -263,6 +278,7 @@ def status(app: App):
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="Set a remembered input (a path for names listed in the stage's inputs).")
 @click.option("--force", is_flag=True, help="Rerun STAGE even if it is up to date.")
+@keep_going_option
 @click.pass_obj
 def run_command(app: App, stage_name, params, force):
     """Bring STAGE and everything upstream of it up to date."""

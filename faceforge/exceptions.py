@@ -51,3 +51,14 @@ class StageError(FaceforgeError):
 
 class TemplateError(FaceforgeError):
     """The skull / muscle-map template is inconsistent."""
+
+
+class ChecksFailed(FaceforgeError):
+    """A stage ran (or was up to date) but its result failed its own checks: exit status 3, so
+    scripts tell a broken result from bad input (2). The stage's files stay in the workdir;
+    ``--keep-going`` accepts them (:mod:`faceforge.pipeline.result_checks`)."""
+
+    exit_code = 3
+    #: the stage's folder was committed (its result is in the workdir); False when the stage
+    #: itself refused to commit (a failed fit)
+    kept = False

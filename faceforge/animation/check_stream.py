@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.animation.checks import (FrameReport, _depth_below, fold_limit, folded_edges, inverted_faces,
-                                        points_inside)
+from faceforge.animation.checks import (FrameReport, _depth_below, _where, fold_limit, folded_edges,
+                                        inverted_faces, points_inside)
 
 
 class StreamChecker:
@@ -43,6 +43,7 @@ class StreamChecker:
         self.folded_any = None
         self.folded_max = 0
         self.n_edges = 0
+        self.where: dict = {}
 
     def add(self, frames: np.ndarray) -> None:
         """The next ``frames (k, n, 3)`` of the animation (copied where kept)."""
@@ -50,7 +51,8 @@ class StreamChecker:
         k, start = len(frames), self.seen
         if start + k > self.n_frames:
             raise ValueError(f"more than the {self.n_frames} frames announced")
-        self.non_finite += int(np.count_nonzero(~np.isfinite(frames).all(axis=(1, 2))))
+        finite = np.isfinite(frames).all(axis=(1, 2))
+        self.non_finite += int(np.count_nonzero(~finite))
         clean = np.nan_to_num(frames)
         disp = np.linalg.norm(clean - self.rest, axis=2).max(axis=1)
         self.disp[start:start + k] = disp
@@ -68,6 +70,10 @@ class StreamChecker:
         self.n_edges = folds.shape[1]
         self.folded_any = folds.any(axis=0) if self.folded_any is None else self.folded_any | folds.any(axis=0)
         self.folded_max = max(self.folded_max, int(folds.sum(axis=1).max()) if len(folds) else 0)
+        found = _where(finite, inv, folds.sum(axis=1), start)
+        for name, value in found.items():   # the first frame, or the most folded (the first of them)
+            if name not in self.where or (name == "folded" and value[1] > self.where[name][1]):
+                self.where[name] = value
         self.seen += k
 
     def report(self, skull=None) -> FrameReport:
@@ -75,7 +81,7 @@ class StreamChecker:
         ``frame_index -> [(vertices, faces)]`` as for ``check_animation``."""
         if self.seen != self.n_frames:
             raise ValueError(f"{self.seen} frames added, {self.n_frames} announced")
-        inside_total = 0
+        inside_total, where = 0, dict(self.where)
         if skull is not None and self.n_frames:
             frames = dict(self.kept)
             frames[self.worst] = self.worst_frame
@@ -92,7 +98,10 @@ class StreamChecker:
                     if inside.any() and self.tolerance > 0:
                         inside[inside] = _depth_below(frames[i][inside], v, f) > self.tolerance
                     now |= inside
-                inside_total += int(np.count_nonzero(now & ~base))
+                count = int(np.count_nonzero(now & ~base))
+                inside_total += count
+                if count:
+                    where.setdefault("inside_skull", {})[str(int(i))] = count
         if self.folded_any is None:   # no frame: the edge count from an empty pass
             self.n_edges = folded_edges(self.rest, np.zeros((0,) + self.rest.shape), self.faces).shape[1]
         return FrameReport(frames=self.n_frames, non_finite=self.non_finite,
@@ -103,4 +112,4 @@ class StreamChecker:
                            inverted_max_per_frame=self.inverted_max,
                            folded_edges=int(self.folded_any.sum()) if self.folded_any is not None else 0,
                            folded_max_per_frame=self.folded_max,
-                           fold_limit=fold_limit(self.n_edges))
+                           fold_limit=fold_limit(self.n_edges), where=where)

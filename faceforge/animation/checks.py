@@ -143,6 +143,10 @@ class FrameReport:
     folded_edges: int = 0
     folded_max_per_frame: int = 0
     fold_limit: int = 1 << 62
+    #: where each check failed: ``{"non_finite": first frame, "inverted": first frame,
+    #: "folded": the frame folding the most edges, "inside_skull": {frame: vertices}}`` (only
+    #: the checks that found something; the skull is tested on the sampled frames only)
+    where: dict = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -161,7 +165,7 @@ class FrameReport:
                 "fold_limit": self.fold_limit,
                 "skin_inside_skull": self.skin_inside_skull,
                 "max_displacement": self.max_displacement, "worst_frame": self.worst_frame,
-                "ok": self.ok, "notes": list(self.notes)}
+                "ok": self.ok, "notes": list(self.notes), "where": dict(self.where)}
 
 
 def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
@@ -191,7 +195,7 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     flips = inverted_faces(rest, np.nan_to_num(frames), faces)
     inv = flips.sum(axis=1)
     folds = folded_edges(rest, np.nan_to_num(frames), faces)
-    inside_total = 0
+    inside_total, where = 0, _where(finite, inv, folds.sum(axis=1))
     if skull is not None and len(frames):
         idx = sorted(set(np.linspace(0, len(frames) - 1, min(sample, len(frames))).astype(int)) | {worst})
         base = inside_at_rest
@@ -205,7 +209,10 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
                 if inside.any() and tolerance > 0:
                     inside[inside] = _depth_below(frames[i][inside], v, f) > tolerance
                 now |= inside
-            inside_total += int(np.count_nonzero(now & ~base))
+            count = int(np.count_nonzero(now & ~base))
+            inside_total += count
+            if count:
+                where.setdefault("inside_skull", {})[str(int(i))] = count
     return FrameReport(frames=len(frames), non_finite=int(np.count_nonzero(~finite)),
                        inverted_triangles=int(inv.sum()), skin_inside_skull=inside_total,
                        max_displacement=float(disp.max()) if len(disp) else 0.0, worst_frame=worst,
@@ -213,4 +220,18 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
                        inverted_max_per_frame=int(inv.max()) if len(inv) else 0,
                        folded_edges=int(folds.any(axis=0).sum()),
                        folded_max_per_frame=int(folds.sum(axis=1).max()) if len(folds) else 0,
-                       fold_limit=fold_limit(folds.shape[1]))
+                       fold_limit=fold_limit(folds.shape[1]), where=where)
+
+
+def _where(finite: np.ndarray, inverted: np.ndarray, folded: np.ndarray, start: int = 0) -> dict:
+    """The frames where the per-frame checks found something: ``finite (F,) bool``,
+    ``inverted (F,)`` and ``folded (F,)`` counts -> ``{"non_finite": first frame, "inverted": first
+    frame, "folded": [frame, count] of the most folded}`` (frame numbers offset by ``start``)."""
+    out: dict = {}
+    if len(finite) and not finite.all():
+        out["non_finite"] = start + int(np.argmin(finite))
+    if len(inverted) and inverted.any():
+        out["inverted"] = start + int(np.argmax(inverted > 0))
+    if len(folded) and folded.any():
+        out["folded"] = [start + int(np.argmax(folded)), int(folded.max())]
+    return out

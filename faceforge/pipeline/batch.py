@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping, Sequence
 
-from faceforge.exceptions import FaceforgeError, StageError
+from faceforge.exceptions import ChecksFailed, FaceforgeError, StageError
 from faceforge.pipeline.batch_plan import (  # noqa: F401  (the planning API, re-exported)
     DEFAULT_TARGETS, EXPRESSIONS, HeadJob, SharedOptions, check_unique, flatten, import_plugins,
     is_manifest, jobs_from_meshes, load_manifest, make_job, nest, output_path, validate_overrides)
@@ -63,6 +63,8 @@ class HeadResult:
     metrics: dict = field(default_factory=dict)
     outputs: dict = field(default_factory=dict)
     seconds: float = 0.0
+    #: failed because a stage's result failed its checks (not an error)
+    failed_checks: bool = False
 
     @property
     def ok(self) -> bool:
@@ -211,6 +213,7 @@ def run_head(job: HeadJob) -> HeadResult:
     Runs anywhere: it reads only the job and files.
     """
     from faceforge.pipeline import runner
+    from faceforge.pipeline.result_checks import enforce
     from faceforge.pipeline.stage import stage_order
 
     start = time.perf_counter()
@@ -232,6 +235,7 @@ def run_head(job: HeadJob) -> HeadResult:
             current, t0 = name, time.perf_counter()
             statuses = runner.run(workspace, config, params, [name], log=_stage_logger(log_path, name))
             status = next(s for s in statuses if s.stage.name == name)
+            enforce(workspace.stage_dir(name), name, job.keep_going, lambda m: _append_log(log_path, m))
             result.stages[name] = {"state": "ran" if status.ran else "cached",
                                    "seconds": round(status.seconds if status.ran else 0.0, 3)}
             current = None
@@ -242,6 +246,7 @@ def run_head(job: HeadJob) -> HeadResult:
         result.status = "ok"
     except FaceforgeError as exc:
         result.error = str(exc)
+        result.failed_checks = isinstance(exc, ChecksFailed)
     except Exception as exc:  # a bug must fail this head only, with its traceback kept
         result.error = f"{type(exc).__name__}: {exc}".splitlines()[0]
         _append_log(log_path, traceback.format_exc())

@@ -45,6 +45,8 @@ class HeadJob:
         paths in ``overrides`` resolve against.
     targets : stage names to bring up to date, in order. plugins : modules (dotted names
         or ``.py`` paths) imported before running, e.g. to register extra stages.
+    keep_going : accept a stage result that fails its checks (else the head fails,
+        :mod:`faceforge.pipeline.result_checks`).
     """
 
     name: str
@@ -61,6 +63,7 @@ class HeadJob:
     base: str = "."
     targets: tuple[str, ...] = DEFAULT_TARGETS
     plugins: tuple[str, ...] = ()
+    keep_going: bool = False
 
 
 # --------------------------------------------------------------------------- planning

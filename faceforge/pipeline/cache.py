@@ -5,12 +5,18 @@ A stage's record holds exactly what its key hashes::
     {"stage": "bind", "version": "1",
      "config": {"bind": {...}},                                # values of its config keys
      "inputs": {"mesh": {"path": "/abs/head.obj", "sha256": "..."}},
-     "upstream": {"fit": "<fit's key>"}}
+     "upstream": {"fit": "<digest of fit's files>"}}
 
 The key is the SHA-256 of the record's canonical JSON with input *paths* left out,
 so moving an unchanged file does not rerun anything. ``<workdir>/<name>/stage.json``
-stores the record, the key and the outputs; :func:`stale_reasons` compares it with
+stores the record, the key, the outputs and ``output_sha256`` (every file the stage wrote ->
+its SHA-256, computed once when it writes them); :func:`stale_reasons` compares it with
 the current record and says why in words ("`skin.stiffness.bending` changed").
+
+An upstream enters a key by the *content* of what it wrote (:func:`outputs_digest`), not by its
+own key: ``calibrate --force`` after a code change that writes a different mapping makes
+``animate`` stale even without a stage-version bump, and an upstream rerun that writes the same
+bytes leaves its downstream up to date.
 """
 
 from __future__ import annotations
@@ -43,6 +49,23 @@ def file_digest(path: str | Path) -> str:
     except OSError as exc:
         raise StageError(f"cannot read input: {exc.strerror}", path) from None
     return digest.hexdigest()
+
+
+def folder_digests(folder: Path) -> dict[str, str]:
+    """``{relative file name: SHA-256}`` of every file under ``folder`` but ``stage.json``."""
+    folder = Path(folder)
+    return {p.relative_to(folder).as_posix(): file_digest(p)
+            for p in sorted(folder.rglob("*")) if p.is_file() and p.relative_to(folder).as_posix() != "stage.json"}
+
+
+def outputs_digest(stage_dir: Path, stored: Mapping | None) -> str:
+    """The digest by which a complete stage enters its downstream keys: SHA-256 of its files'
+    digests (``stored["output_sha256"]``, recorded when it wrote them; recomputed from the files
+    for a stage written by an older faceforge)."""
+    digests = (stored or {}).get("output_sha256")
+    if not isinstance(digests, dict):
+        digests = folder_digests(stage_dir)
+    return hashlib.sha256(canonical_json(digests).encode("utf-8")).hexdigest()
 
 
 def canonical_json(value: Any) -> str:

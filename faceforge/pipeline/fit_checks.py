@@ -2,7 +2,7 @@
 
 The fit report (:func:`faceforge.fit.report.build_report`) carries four named
 checks. A fit whose skull ended up outside the skin used to exit 0, and bind and animate
-then ran on it (issue 28); now the fit stage stops with exit 2 naming each failed check and
+then ran on it (issue 28); now the fit stage stops with exit 3 naming each failed check and
 its figure, and ``fit.allow_failed_checks: true`` (``--set fit.allow_failed_checks=true``)
 keeps such a fit, with a warning line per check.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Callable
 
-from faceforge.exceptions import StageError
+from faceforge.exceptions import ChecksFailed
 
 
 def failed_checks(report: dict) -> list[str]:
@@ -35,7 +35,7 @@ def failed_checks(report: dict) -> list[str]:
 
 
 def enforce_checks(report: dict, allow: bool, source, log: Callable[[str], None] = lambda m: None) -> None:
-    """Raise :class:`StageError` (naming ``source``, the mesh) when the fit failed a check and
+    """Raise :class:`ChecksFailed` (exit 3, naming ``source``, the mesh) when the fit failed a check and
     ``allow`` is False; with ``allow`` log each failed check and go on."""
     failed = failed_checks(report)
     if not failed:
@@ -44,6 +44,6 @@ def enforce_checks(report: dict, allow: bool, source, log: Callable[[str], None]
         for phrase in failed:
             log(f"check failed, kept (fit.allow_failed_checks): {phrase}")
         return
-    raise StageError("the fit failed its checks: " + "; ".join(failed)
+    raise ChecksFailed("the fit failed its checks: " + "; ".join(failed)
                      + "; keep it anyway with --set fit.allow_failed_checks=true and look at fit/fit.png",
                      source)

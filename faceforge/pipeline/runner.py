@@ -27,7 +27,8 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping
 
 from faceforge.exceptions import StageError
-from faceforge.pipeline.cache import file_digest, read_stage_json, record_key, stale_reasons
+from faceforge.pipeline.cache import (file_digest, folder_digests, outputs_digest, read_stage_json, record_key,
+                                      stale_reasons)
 from faceforge.pipeline.lock import WorkdirLock
 from faceforge.pipeline.stage import COMMANDS, STAGES, Stage, StageContext, broken_stages, stage_order
 
@@ -135,8 +136,11 @@ def _resolve_input(name: str, config, params: Mapping) -> str | None:
     return None if value in (None, "") else str(value)
 
 
-def current_record(stage: Stage, config, params: Mapping, upstream: Mapping[str, str]) -> tuple[dict, list[str]]:
-    """The record of ``stage`` for the present inputs, and the names of missing required inputs."""
+def current_record(stage: Stage, config, params: Mapping,
+                   upstream: Mapping[str, str | None]) -> tuple[dict, list[str]]:
+    """The record of ``stage`` for the present inputs, and the names of missing required inputs.
+    ``upstream``: each dep's :func:`~faceforge.pipeline.cache.outputs_digest` (None: the dep is
+    stale, its output not known yet)."""
     missing, inputs = [], {}
     for name in stage.inputs:
         path = _resolve_input(name, config, params)
@@ -169,24 +173,41 @@ def plan(workspace: Workspace, config, params: Mapping,
     the reason instead of failing the whole listing.
     """
     statuses: list[StageStatus] = []
-    keys: dict[str, str] = {}
-    for stage in stage_order(targets):
-        record, missing = current_record(stage, config, params, keys)
-        key = record_key(record)
-        keys[stage.name] = key
-        previous = read_stage_json(workspace.stage_dir(stage.name))
-        if missing:
-            reasons = [f"needs input {', '.join(missing)}"]
-        else:
-            reasons = stale_reasons(record, previous)
-            if not reasons:
-                absent = [o for o in stage.outputs if not (workspace.stage_dir(stage.name) / o).exists()]
-                if absent:
-                    reasons = [f"output missing: {', '.join(absent)}"]
-        statuses.append(StageStatus(stage, record, key, reasons, missing=tuple(m.split(" (")[0] for m in missing)))
+    digests: dict[str, str | None] = {}
+    order = stage_order(targets)
+    read = {dep for stage in order for dep in stage.deps}   # a leaf's files (a long take) are not hashed
+    for stage in order:
+        record, missing = current_record(stage, config, params, digests)
+        status = StageStatus(stage, record, None, [], missing=tuple(m.split(" (")[0] for m in missing))
+        _judge(workspace, status, [f"needs input {', '.join(missing)}"] if missing else None)
+        if stage.name in read:
+            digests[stage.name] = _digest_if_current(workspace, status)
+        statuses.append(status)
     if targets is None:
         statuses += [StageStatus(STAGES[n], None, None, [r]) for n, r in broken_stages().items()]
     return statuses
+
+
+def _judge(workspace: Workspace, status: StageStatus, reasons: list[str] | None = None) -> None:
+    """Set ``status.key`` from its record and ``status.reasons`` (``reasons`` when given, else
+    why the stored stage.json differs, or a missing output)."""
+    status.key = record_key(status.record)
+    if reasons is None:
+        folder = workspace.stage_dir(status.stage.name)
+        reasons = stale_reasons(status.record, read_stage_json(folder))
+        if not reasons:
+            absent = [o for o in status.stage.outputs if not (folder / o).exists()]
+            if absent:
+                reasons = [f"output missing: {', '.join(absent)}"]
+    status.reasons = reasons
+
+
+def _digest_if_current(workspace: Workspace, status: StageStatus) -> str | None:
+    """The stage's outputs digest when it is up to date, else None (it reruns first)."""
+    if status.reasons:
+        return None
+    folder = workspace.stage_dir(status.stage.name)
+    return outputs_digest(folder, read_stage_json(folder))
 
 
 def _commit(workspace: Workspace, tmp: Path, name: str) -> None:
@@ -223,7 +244,7 @@ def run_stage(workspace: Workspace, status: StageStatus, config, params: Mapping
         status.seconds = time.perf_counter() - start
         # no timings or dates: same inputs give the same bytes
         save_json(tmp / "stage.json", {**status.record, "key": status.key, "outputs": list(stage.outputs),
-                                        "faceforge_version": __version__})
+                                        "output_sha256": folder_digests(tmp), "faceforge_version": __version__})
         _commit(workspace, tmp, stage.name)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -245,12 +266,18 @@ def run(workspace: Workspace, config, params: Mapping, targets: Iterable[str], f
         for leftover in workspace.clean_temp():
             log(f"removed {leftover.name} left by an interrupted run")
         statuses = plan(workspace, config, params, targets)
-        if force:
-            for status in statuses:
-                if status.stage.name in targets and not status.reasons:
-                    status.reasons = ["--force"]
+        digests: dict[str, str | None] = {}
+        read = {dep for status in statuses for dep in status.stage.deps}
         for status in statuses:
             name = status.stage.name
+            upstream = {dep: digests[dep] for dep in status.stage.deps}
+            if upstream != status.record["upstream"] and not status.missing:
+                # an upstream ran: this stage's key holds what it wrote now (an upstream that wrote
+                # the same bytes as before leaves this stage up to date)
+                status.record = {**status.record, "upstream": upstream}
+                _judge(workspace, status)
+            if force and name in targets and not status.reasons:
+                status.reasons = ["--force"]
             if status.reasons and status.reasons[0].startswith("needs input"):
                 # said as the last stage of the plan that reads the same inputs (the mesh is read
                 # by the landmarks stage, then by fit: `bind` in a new workdir says to run fit);
@@ -263,12 +290,16 @@ def run(workspace: Workspace, config, params: Mapping, targets: Iterable[str], f
                 raise StageError(f"stage {owner} {status.reasons[0]}{hint}", workspace.root)
             if not status.reasons:
                 log(f"{name}: up to date")
+                if name in read:
+                    digests[name] = _digest_if_current(workspace, status)
                 continue
             log(f"{name}: running ({'; '.join(status.reasons)})")
             if status.stage.background is not None:
                 status.stage.background(log)
             run_stage(workspace, status, config, params, log=log, progress=progress)
             log(f"{name}: done in {status.seconds:.1f} s")
+            if name in read:
+                digests[name] = outputs_digest(workspace.stage_dir(name), read_stage_json(workspace.stage_dir(name)))
     return statuses
 
 

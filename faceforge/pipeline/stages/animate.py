@@ -28,6 +28,7 @@ from pathlib import Path
 import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
+from faceforge.pipeline.result_checks import keep_going_option
 
 
 def run_animate(ctx):
@@ -169,6 +170,7 @@ def _viseme_file(app, text: str) -> Path:
 @click.option("--preview", type=click.Path(dir_okay=False), default=None, help="Contact sheet PNG.")
 @click.option("--preview-frames", default=None, help="Frames for --preview, e.g. 0,20,40 [default: evenly spaced].")
 @click.option("--force", is_flag=True, help="Resimulate even if up to date.")
+@keep_going_option
 @click.pass_obj
 def animate_command(app, fap, expression, intensity, seconds, visemes, output, preview, preview_frames, force):
     from faceforge.exceptions import StageError

@@ -32,6 +32,7 @@ from pathlib import Path
 import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
+from faceforge.pipeline.result_checks import keep_going_option
 
 KINDS = ("arkit", "visemes", "expressions")
 #: the bake's own bounds on settling a pose (run_bake)
@@ -170,6 +171,7 @@ def export_shapes(app, output: str, weights=None, fps: float = 25.0, names_only=
 @click.option("--mapping", type=click.Path(dir_okay=False, exists=True), default=None,
               help="ARKit -> pose mapping [default: templates/arkit_mapping.yaml].")
 @click.option("--force", is_flag=True, help="Rebake even if up to date.")
+@keep_going_option
 @click.pass_obj
 def bake_command(app, output, shapes, mapping, force):
     from faceforge.exceptions import StageError

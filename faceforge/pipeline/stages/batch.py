@@ -10,6 +10,7 @@ from __future__ import annotations
 import click
 
 from faceforge.pipeline import register_command
+from faceforge.pipeline.result_checks import keep_going_option
 
 _EXPRESSIONS = ("joy", "sadness", "surprise", "anger", "disgust", "fear")
 
@@ -22,7 +23,8 @@ faceforge batch manifest.yaml --scheduler tcp://host:8786
 
 INPUTS are head meshes (landmarks: <mesh stem>.fdp.yaml next to each, found
 automatically where there is none) or one manifest (.yaml). A rerun skips stages already done. --config/--set of the faceforge group apply
-to every head. Exit status: 0 all heads ok, 1 some failed, 2 bad invocation or manifest.
+to every head. Exit status: 0 all heads ok, 1 some failed, 3 the only failures are results that
+failed their checks (--keep-going accepts them), 2 bad invocation or manifest.
 Writes <out>/batch_report.json.""")
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--fap", type=click.Path(dir_okay=False), default=None, help="FAP track played on every head.")
@@ -41,6 +43,7 @@ Writes <out>/batch_report.json.""")
               help="Run on this Dask distributed scheduler instead (needs faceforge[dask]).")
 @click.option("--plugin", "plugins", multiple=True, metavar="MODULE|FILE.py",
               help="Import this in every worker before running (e.g. extra stages); repeatable.")
+@keep_going_option
 @click.pass_context
 def command(ctx, inputs, fap, expression, intensity, seconds, out, output, jobs, scheduler, plugins):
     import os
@@ -74,6 +77,10 @@ def command(ctx, inputs, fap, expression, intensity, seconds, out, output, jobs,
     else:
         heads = batch.jobs_from_meshes(list(inputs), out, shared)
 
+    if app.keep_going:
+        from dataclasses import replace
+
+        heads = [replace(h, keep_going=True) for h in heads]
     n = min(jobs or os.cpu_count() or 1, len(heads))
     executor = f"dask {scheduler}" if scheduler else (f"processes x{n}" if n > 1 else "in-process")
     app.log(f"batch: {len(heads)} heads -> {Path(out).absolute()} ({executor})")
@@ -111,7 +118,8 @@ def command(ctx, inputs, fap, expression, intensity, seconds, out, output, jobs,
         click.echo("faceforge: batch interrupted; run the same command again to resume", err=True)
         ctx.exit(130)
     if report["failed"]:
-        ctx.exit(1)
+        failed = [r for r in results if r.status == "failed"]
+        ctx.exit(3 if all(r.failed_checks for r in failed) else 1)
 
 
 register_command(command)

@@ -32,6 +32,7 @@ from pathlib import Path
 import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
+from faceforge.pipeline.result_checks import keep_going_option
 
 
 def run_expressions(ctx):
@@ -171,6 +172,7 @@ def _sheet_command(stem: str, help_text: str):
     @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
                   help="Also copy the sheet (PNG) here.")
     @click.option("--force", is_flag=True, help="Rerun even if up to date.")
+    @keep_going_option
     @click.pass_obj
     def command(app, output, force):
         from faceforge.exceptions import StageError
