@@ -6,7 +6,8 @@ garbage OBJ fails with the real MeshError; the FAP track through ``read_fap``) a
 the files the batch reads (``report.json`` metrics, ``animation.npz`` frames), in well
 under a second, so the batch machinery is tested without the minutes the real
 stages take. ``FACEFORGE_FAKE_DELAY`` (seconds, default 0) makes each stage slower, for
-the kill test; ``FACEFORGE_FAKE_CRASH=<mesh stem>`` makes fit SIGKILL its own process on that head.
+the kill test; ``FACEFORGE_FAKE_CRASH=<mesh stem>`` makes fit SIGKILL its own process on that head;
+``FACEFORGE_FAKE_FAIL_CHECKS=<mesh stem>`` makes animate's report say a check failed on that head.
 """
 
 from __future__ import annotations
@@ -62,7 +63,9 @@ def run_animate(ctx):
     t = np.arange(track.n_frames, dtype=np.float64)[:, None, None]
     frames = (rest[None] + 0.001 * t).astype(np.float32)
     save_npz(ctx.out_dir / "animation.npz", frames=frames, fps=np.float64(track.fps))
-    save_json(ctx.out_dir / "report.json", {"frames": int(track.n_frames)})
+    bad = os.environ.get("FACEFORGE_FAKE_FAIL_CHECKS") == Path(ctx.param("mesh")).stem
+    save_json(ctx.out_dir / "report.json", {"frames": int(track.n_frames), "checks": {
+        "ok": not bad, "skin_inside_skull": 2 if bad else 0, "where": {"inside_skull": {"3": 2}} if bad else {}}})
 
 
 discover()   # the real stages first, so these replace them for good

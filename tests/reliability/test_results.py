@@ -10,7 +10,7 @@ import pytest
 
 from faceforge.animation.checks import FrameReport, fold_limit
 from faceforge.animation.head_parts import detached_vertices
-from faceforge.exceptions import FapError, StageError
+from faceforge.exceptions import ChecksFailed, FapError, StageError
 from faceforge.mpeg4 import FapWarning, parse_fap
 from faceforge.mpeg4.fap_range import LIMITS, MAX_ANGLE_UNITS, MAX_LENGTH_UNITS
 from faceforge.pipeline.fit_checks import enforce_checks, failed_checks
@@ -80,7 +80,7 @@ def test_a_failed_fit_check_is_an_error_naming_the_check_and_the_figure():
     assert failed_checks(REPORT) == [
         "skull_inside_98pct (skull 0.0% inside the skin, needs 98%)",
         "muscles_poke_below_1pct (muscles poke 5.1% of the diagonal out of the skin, needs <= 1%)"]
-    with pytest.raises(StageError, match=r"^head.obj: the fit failed its checks: skull_inside_98pct "
+    with pytest.raises(ChecksFailed, match=r"^head.obj: the fit failed its checks: skull_inside_98pct "
                                          r"\(skull 0.0% inside.*fit.allow_failed_checks=true"):
         enforce_checks(REPORT, False, "head.obj")
     seen = []

@@ -34,7 +34,7 @@ def test_the_makehuman_identity_fits_cleanly_and_a_failed_check_stops_a_fit(tmp_
     """The identity head fit: a sphere around the head once (0 % inside), then 96 % with the
     enhancement flows stretching the bone out through the lids (issue 28); with their step
     limit (``fit.enhancement_max_step``) it passes every check. Without the limit it still
-    fails, and a failed check is exit 2 naming it, unless the user keeps it."""
+    fails, and a failed check is exit 3 naming it, unless the user keeps it."""
     mesh, lm = DATA / "mh_head_caucasian_female_young.obj", DATA / "mh_head_caucasian_female_young.fdp.yaml"
     r = cli_run("-w", tmp_path / "ok", "fit", mesh, "--landmarks", lm)
     assert r.exit_code == 0, r.stderr
@@ -42,7 +42,7 @@ def test_the_makehuman_identity_fits_cleanly_and_a_failed_check_stops_a_fit(tmp_
     assert all(report["checks"].values()), report["checks"]
     assert report["skull"]["inside_fraction"] >= 0.98 and report["muscles"]["inside_fraction"] >= 0.98
     r = cli_run("-w", tmp_path / "w", "--set", "fit.enhancement_max_step=0", "fit", mesh, "--landmarks", lm)
-    assert r.exit_code == 2
+    assert r.exit_code == 3
     line = r.stderr.splitlines()[-1]
     assert line.startswith(f"faceforge: error: {mesh}: the fit failed its checks: ")
     # the check that fails names its figure: without the step limit the skull was ~96 % inside
