@@ -58,13 +58,14 @@ def folder_digests(folder: Path) -> dict[str, str]:
             for p in sorted(folder.rglob("*")) if p.is_file() and p.relative_to(folder).as_posix() != "stage.json"}
 
 
-def outputs_digest(stage_dir: Path, stored: Mapping | None) -> str:
-    """The digest by which a complete stage enters its downstream keys: SHA-256 of its files'
-    digests (``stored["output_sha256"]``, recorded when it wrote them; recomputed from the files
-    for a stage written by an older faceforge)."""
-    digests = (stored or {}).get("output_sha256")
+def outputs_digest(stored: Mapping) -> str:
+    """The digest by which a complete stage (its ``stage.json``, ``stored``) enters its downstream
+    keys: SHA-256 of its files' digests (``stored["output_sha256"]``, recorded when it wrote them).
+    A stage written by an older faceforge (no digests) enters by its key, as it did then, so an
+    upgrade does not rerun every workdir's downstream stages; its next run records digests."""
+    digests = stored.get("output_sha256")
     if not isinstance(digests, dict):
-        digests = folder_digests(stage_dir)
+        return str(stored.get("key"))
     return hashlib.sha256(canonical_json(digests).encode("utf-8")).hexdigest()
 
 

@@ -206,8 +206,7 @@ def _digest_if_current(workspace: Workspace, status: StageStatus) -> str | None:
     """The stage's outputs digest when it is up to date, else None (it reruns first)."""
     if status.reasons:
         return None
-    folder = workspace.stage_dir(status.stage.name)
-    return outputs_digest(folder, read_stage_json(folder))
+    return outputs_digest(read_stage_json(workspace.stage_dir(status.stage.name)) or {})
 
 
 def _commit(workspace: Workspace, tmp: Path, name: str) -> None:
@@ -232,7 +231,10 @@ def run_stage(workspace: Workspace, status: StageStatus, config, params: Mapping
 
     stage = status.stage
     tmp = workspace.root / f".tmp-{stage.name}-{os.getpid()}-{secrets.token_hex(4)}"
-    tmp.mkdir(parents=True)
+    try:
+        tmp.mkdir(parents=True)
+    except OSError as exc:   # a read-only workdir: said before the stage's work, not after
+        raise StageError(f"cannot write in the workdir: {exc.strerror or exc}", workspace.root) from None
     ctx = StageContext(name=stage.name, config=config, params=dict(params), out_dir=tmp,
                        workdir=workspace.root, deps=stage.deps, progress_enabled=progress, logger=log)
     start = time.perf_counter()
@@ -299,7 +301,7 @@ def run(workspace: Workspace, config, params: Mapping, targets: Iterable[str], f
             run_stage(workspace, status, config, params, log=log, progress=progress)
             log(f"{name}: done in {status.seconds:.1f} s")
             if name in read:
-                digests[name] = outputs_digest(workspace.stage_dir(name), read_stage_json(workspace.stage_dir(name)))
+                digests[name] = outputs_digest(read_stage_json(workspace.stage_dir(name)) or {})
     return statuses
 
 

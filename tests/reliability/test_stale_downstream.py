@@ -11,6 +11,7 @@ import pytest
 
 from faceforge.io.config import load_config
 from faceforge.pipeline import Stage, runner
+from faceforge.pipeline.cache import record_key
 
 
 @pytest.fixture
@@ -78,14 +79,22 @@ def test_a_rerun_upstream_in_the_same_run_keys_the_downstream_by_its_new_files(m
     assert (ws.stage_dir("t_play") / "take.txt").read_text() == "scale 4 played"
 
 
-def test_a_stage_written_before_the_digests_is_digested_from_its_files(mapping_chain):
+def test_a_stage_written_before_the_digests_enters_by_its_key(mapping_chain):
+    """An upgrade does not rerun every downstream stage: an upstream without recorded digests
+    (an older faceforge) counts as before, by its key, until it runs again."""
     calls, code, ws = mapping_chain
     _run(ws, "t_play")
-    path = ws.stage_dir("t_cal") / "stage.json"
-    record = json.loads(path.read_text())
-    del record["output_sha256"]                          # as an older faceforge wrote it
-    path.write_text(json.dumps(record))
+    for name in ("t_cal", "t_play"):                     # as an older faceforge wrote them
+        path = ws.stage_dir(name) / "stage.json"
+        record = json.loads(path.read_text())
+        del record["output_sha256"]
+        if name == "t_play":
+            record["upstream"] = {"t_cal": json.loads((ws.stage_dir("t_cal") / "stage.json").read_text())["key"]}
+            record["key"] = record_key({k: v for k, v in record.items() if k not in ("key", "outputs",
+                                                                                   "faceforge_version")})
+        path.write_text(json.dumps(record))
     calls.clear()
     assert _run(ws, "t_play") == ["t_cal: up to date", "t_play: up to date"] and calls == []
-    (ws.stage_dir("t_cal") / "mapping.txt").write_text("scale 9")   # and its files are what counts
+    code["scale"] = 5
+    _run(ws, "t_cal", force=True)                         # its next run records digests
     assert "t_play: running (upstream t_cal changed)" in _run(ws, "t_play")

@@ -29,6 +29,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 from faceforge.pipeline.result_checks import keep_going_option
+from faceforge.pipeline.workdir_guard import check_outside_workdir
 
 
 def run_animate(ctx):
@@ -177,6 +178,8 @@ def animate_command(app, fap, expression, intensity, seconds, visemes, output, p
 
     if sum(x is not None for x in (fap, expression, visemes)) != 1:
         raise StageError("give exactly one of --fap FILE, --expression NAME or --visemes V1,V2,...")
+    check_outside_workdir(app.workspace, output, "-o")
+    check_outside_workdir(app.workspace, preview, "--preview")
     if output or preview:
         from faceforge.io.export import check_output, protect_inputs
 

@@ -192,6 +192,7 @@ def _arkit_or_curves(app, orig, arkit, curves, kw):
     from faceforge.exceptions import StageError
     from faceforge.pipeline.outputs import export_outputs
     from faceforge.pipeline.stages.bake import bake_params
+    from faceforge.pipeline.workdir_guard import check_outside_workdir
 
     output, preview = kw.get("output"), kw.get("preview")
     if arkit is not None and any(kw.get(k) is not None for k in ("fap", "expression", "visemes")):
@@ -199,6 +200,8 @@ def _arkit_or_curves(app, orig, arkit, curves, kw):
                          "or --arkit FILE")
     if curves and Path(curves).suffix.lower() not in (".csv", ".json"):
         raise StageError("--curves writes .csv or .json", curves)
+    for path, option in ((output, "-o"), (preview, "--preview"), (curves, "--curves")):
+        check_outside_workdir(app.workspace, path, option)
     shapes_out = bool(curves) and bool(output) and Path(output).suffix.lower() in (".glb", ".usda", ".usd")
     from faceforge.io.export import check_output, protect_inputs
 

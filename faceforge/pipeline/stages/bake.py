@@ -33,6 +33,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 from faceforge.pipeline.result_checks import keep_going_option
+from faceforge.pipeline.workdir_guard import check_outside_workdir
 
 KINDS = ("arkit", "visemes", "expressions")
 #: the bake's own bounds on settling a pose (run_bake)
@@ -178,6 +179,7 @@ def bake_command(app, output, shapes, mapping, force):
 
     if output and Path(output).suffix.lower() not in (".glb", ".usda", ".usd", ".npz"):
         raise StageError("bake writes .glb, .usda or .npz", output)
+    check_outside_workdir(app.workspace, output, "-o")
     if output:
         from faceforge.io.export import protect_inputs
 

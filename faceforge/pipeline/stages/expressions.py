@@ -33,6 +33,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 from faceforge.pipeline.result_checks import keep_going_option
+from faceforge.pipeline.workdir_guard import check_outside_workdir
 
 
 def run_expressions(ctx):
@@ -180,6 +181,7 @@ def _sheet_command(stem: str, help_text: str):
 
         if output and not str(output).lower().endswith(".png"):
             raise StageError("the sheet is a PNG: give -o a .png path", output)
+        check_outside_workdir(app.workspace, output, "-o")
         playback_mapping(app, stem)
         app.run_stage(stem, params={"animate_mapping": None}, force=force)   # forgets an old one
         sheet = app.workspace.stage_dir(stem) / f"{stem}.png"

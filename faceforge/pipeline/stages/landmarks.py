@@ -25,6 +25,7 @@ from __future__ import annotations
 import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
+from faceforge.pipeline.workdir_guard import check_outside_workdir
 
 VERSION = "1"
 
@@ -95,6 +96,7 @@ def command(app, mesh, landmarks, output, force):
 
         protect_inputs(output, {"mesh": mesh, "landmark file": landmarks})
         check_writable(output, "-o")
+        check_outside_workdir(app.workspace, output, "-o")
     app.run_stage("landmarks", params={"mesh": mesh, "landmarks": landmarks}, force=force)
     folder = app.workspace.stage_dir("landmarks")
     if output:
