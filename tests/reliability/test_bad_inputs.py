@@ -144,6 +144,17 @@ CASES = {
     "landmarks output is the mesh": ({}, ["landmarks", "{mesh}", "-o", "{mesh}"], ["is your mesh"]),
     "landmarks output folder missing": ({}, ["landmarks", "{mesh}", "-o", "{tmp}/no/x.yaml"],
                                         ["x.yaml", "does not exist"]),
+    # outputs inside the workdir's own files (a --preview overwrote fit/fit.png; a file added to a
+    # stage folder was deleted with the stage's next run)
+    "preview into a stage folder": ({}, ["animate", "--expression", "joy", "--preview", "{work}/fit/fit.png"],
+                                    ["fit.png", "--preview", "stage folder fit/"]),
+    "output into a stage folder": ({}, ["animate", "--expression", "joy", "-o", "{work}/bind/x.pc2"],
+                                   ["x.pc2", "-o", "stage folder bind/"]),
+    "sheet into a stage folder": ({}, ["expressions", "-o", "{work}/fit/x.png"], ["x.png", "stage folder fit/"]),
+    "landmarks output is faceforge.yaml": ({}, ["landmarks", "{mesh}", "-o", "{work}/faceforge.yaml"],
+                                           ["faceforge.yaml", "workdir's own"]),
+    "mesh with a NaN vertex": ({"nan.obj": "v 0 0 0\nv 1 0 0\nv nan 1 0\nv 0 1 1\nf 1 2 3\nf 1 3 4\n"},
+                               ["fit", "{tmp}/nan.obj", "--landmarks", "{lm}"], ["nan.obj", "NaN"]),
     "batch manifest name escapes": ({"m.yaml": "heads:\n  - mesh: x.obj\n    name: ../../etc\n"},
                                     ["batch", "{tmp}/m.yaml", "--out", "{tmp}/out", "--expression", "joy"],
                                     ["m.yaml:3", "name"]),
