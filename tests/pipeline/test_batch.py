@@ -95,9 +95,11 @@ def test_a_per_head_override_reruns_only_that_head(invoke, fake_stages, tmp_path
     assert manifest(False).exit_code == 0
     after = _stage_mtimes(out, ("anna", "ben"))
     states = {r["name"]: [s["state"] for s in r["stages"].values()] for r in _report(out)["results"]}
-    assert states == {"anna": ["cached"] * 3, "ben": ["ran"] * 3}
-    assert all(after[k] == before[k] for k in before if k[0] == "anna")
-    assert all(after[k] != before[k] for k in before if k[0] == "ben")
+    # ben's fit reran; it wrote the same files (the fake fit does not read fit.refit), so its
+    # downstream stages, keyed by what their upstream wrote, stay cached
+    assert states == {"anna": ["cached"] * 3, "ben": ["cached", "cached", "ran"]}   # animate, bind, fit
+    assert all(after[k] == before[k] for k in before if k != ("ben", "fit"))
+    assert after[("ben", "fit")] != before[("ben", "fit")]
     # the head's workdir remembers its overrides: the single-head commands agree with the batch
     status = invoke("--workdir", out / "ben", "status")
     lines = {line.split()[0]: line for line in status.stdout.splitlines() if line.strip()}

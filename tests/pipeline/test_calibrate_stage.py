@@ -21,16 +21,19 @@ def stand_ins(monkeypatch):
     registry.discover()
     ran = []
 
-    def body(name, outputs):
+    def body(name, outputs, keys):
         def run(ctx):
             ran.append(name)
+            # what the stage writes depends on its settings, as the real one's does (a downstream
+            # stage is keyed by what its upstream wrote)
+            settings = repr([ctx.config.get(k) for k in keys])
             for out in outputs:
-                (ctx.out_dir / out).write_text(name)
+                (ctx.out_dir / out).write_text(name + settings)
         return run
 
     for name in ("landmarks", "fit", "bind", "calibrate", "animate", "expressions", "visemes", "bake"):
         st = registry.STAGES[name]
-        monkeypatch.setitem(registry.STAGES, name, replace(st, run=body(name, st.outputs)))
+        monkeypatch.setitem(registry.STAGES, name, replace(st, run=body(name, st.outputs, st.config_keys)))
     return ran
 
 
