@@ -250,7 +250,7 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
     # triangulated-shut ones, leave the corners the detector's guess, as biased as its brows)
     from faceforge.landmarks.brows import EYE_CORNERS, brows
     if all(k in moved for k in EYE_CORNERS):
-        place("eyebrow height (MediaPipe's canonical face over the eye corners)",
+        place("eyebrow height, the outer brows' side position (MediaPipe's canonical face over the eye corners)",
               brows(caster, pos(), frame, diagonal))
     from faceforge.geometry.triangles import vertex_normals
     from faceforge.landmarks.lips import inner_corners, inner_lips
