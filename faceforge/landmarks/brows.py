@@ -56,10 +56,17 @@ def eye_frame(pos: dict, left: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 @lru_cache(maxsize=1)
+def canonical_model() -> np.ndarray:
+    """MediaPipe's canonical face (478, 3), +Y up, +X the subject's left, cm
+    (``data/mediapipe_canonical_478.txt``)."""
+    return np.loadtxt(Path(__file__).with_name("data") / "mediapipe_canonical_478.txt")
+
+
+@lru_cache(maxsize=1)
 def canonical_lateral() -> dict:
     """{brow fdp: side-to-side offset from the eye frame's origin (+ the subject's left) / the
     eye frame's scale} on MediaPipe's canonical face (as :func:`canonical_height`)."""
-    model = np.loadtxt(Path(__file__).with_name("data") / "mediapipe_canonical_478.txt")
+    model = canonical_model()
     pos = {k: model[i] for k, i in {**EYE_CORNERS, **BROW_POINTS}.items()}
     o, s = eye_frame(pos, np.array([1.0, 0.0, 0.0]))
     return {k: float((pos[k] - o)[0] / s) for k in BROW_POINTS}
@@ -69,7 +76,7 @@ def canonical_lateral() -> dict:
 def canonical_height() -> dict:
     """{brow fdp: height above the eye frame's origin / the eye frame's scale} on MediaPipe's
     canonical face (+Y up, +X the subject's left, cm; ``data/mediapipe_canonical_478.txt``)."""
-    model = np.loadtxt(Path(__file__).with_name("data") / "mediapipe_canonical_478.txt")
+    model = canonical_model()
     pos = {k: model[i] for k, i in {**EYE_CORNERS, **BROW_POINTS}.items()}
     o, s = eye_frame(pos, np.array([1.0, 0.0, 0.0]))
     return {k: float((pos[k] - o)[1] / s) for k in BROW_POINTS}

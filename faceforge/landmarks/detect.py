@@ -242,8 +242,7 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
           rules.jaw_angles(v, f, pos(), frame, diagonal))
     for name, found in (("eye opening (recess in the frontal render)", sockets),
                         ("eye opening (boundary loop)", {k: p for k, p in loops.items() if k not in sockets}),
-                        ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal, normals)),
-                        ("cheek construction", rules.cheeks(caster, pos(), frame, diagonal))):
+                        ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal, normals))):
         place(name, found)
     # after the eye rules, and only where they placed all four eye corners from the mesh: the
     # brows' height is measured from those corners (featureless eyes, e.g. the MediaPipe mask's
@@ -259,6 +258,14 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
                          inner_lips(v, f, normals, pos(), frame)),
                         ("inner lip corner (the slit's end wall)", inner_corners(v, normals, pos(), frame))):
         place(name, {k: v[i] for k, i in found.items()})
+    # the outer corners from the inner ones, where those came from the mesh's slit (on the mask, whose
+    # mesh is the canonical face, the offset is its own: not an independent check there)
+    from faceforge.landmarks.lips import outer_corners
+    if all(k in moved for k in ("2.4", "2.5")):
+        place("outer lip corner (the inner corner plus MediaPipe's canonical offset)",
+              outer_corners(caster, pos(), frame, diagonal))
+    # last: the cheeks' construction measures from the subnasale and the outer lip corners
+    place("cheek construction", rules.cheeks(caster, pos(), frame, diagonal))
     det.info["rules"] = moved
 
 
