@@ -264,7 +264,10 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
     if all(k in moved for k in ("2.4", "2.5")):
         place("outer lip corner (the inner corner plus MediaPipe's canonical offset)",
               outer_corners(caster, pos(), frame, diagonal))
-    # last: the cheeks' construction measures from the subnasale and the outer lip corners
+    from faceforge.landmarks.nose import alae
+    place("alare (the nose wing's lateral edge, where the skin faces sideways)",
+          {k: v[i] for k, i in alae(v, f, normals, pos(), frame, diagonal).items()})
+    # last: the cheeks' construction measures from the subnasale, the outer lip corners and the alae
     place("cheek construction", rules.cheeks(caster, pos(), frame, diagonal))
     det.info["rules"] = moved
 

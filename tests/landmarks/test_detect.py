@@ -280,6 +280,9 @@ def test_brows_and_inner_lips_are_placed_by_the_rules_where_the_mesh_allows(dete
         for k in ("2.2", "2.3", "2.4", "2.5"):
             assert "rule: inner lip" in det.method[at[k]], (name, k)
             assert off(k) < 0.0035, (name, k)
+        for k in ("9.1", "9.2"):      # the wing's lateral edge (detector: MakeHuman 0.61, ICT 1.14 %)
+            assert "rule: alare" in det.method[at[k]], (name, k)
+            assert off(k) < 0.005, (name, k)
         for k in ("8.3", "8.4"):      # the inner corner + the canonical offset (detector: 0.51 / 0.16 %)
             assert "rule: outer lip corner" in det.method[at[k]], (name, k)
             assert off(k) < 0.0015, (name, k)
