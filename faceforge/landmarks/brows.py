@@ -15,7 +15,8 @@ the face's left and up axes, scale ``s`` the outer corners' distance |3.7 - 3.12
 point (:data:`MOVED`) keeps the detector's side-to-side coordinate; its height above ``o`` becomes the
 canonical face's (:func:`canonical_height`, read off MediaPipe's canonical face model,
 points 336/107, 334/105, 300/70 over 263, 362, 133, 33); the point is then put on the skin
-from in front (along -forward). One set of proportions for every head: no constant comes
+from in front (along -forward). The outer brows (:data:`SIDEWAYS`) keep the detector's height
+and take their side-to-side coordinate from the canonical face (:func:`canonical_lateral`). One set of proportions for every head: no constant comes
 from the heads it is measured on (the canonical face is the MediaPipe sample head, so that
 head's brows are not an independent check of it).
 """
@@ -39,6 +40,12 @@ EYE_CORNERS = {"3.7": 263, "3.11": 362, "3.8": 133, "3.12": 33}
 #: and the MakeHuman fit from them failed its muscle check (poke 1.0 %): they are left to the
 #: detector, whose outer brow follows the orbit's lateral rim
 MOVED = ("4.1", "4.2", "4.3", "4.4")
+#: the brows whose side-to-side position (not height) comes from the canonical face: the outer ones.
+#: The detector puts them where the forehead turns into the temple, 0.02-0.03 of the eye span short
+#: of the hand points (in the eye frame, hand files: 0.649 MakeHuman, 0.657 its identity, 0.650 ICT,
+#: 0.644 the mask; canonical 0.643; detector 0.623-0.645), and on that steep surface the shortfall
+#: is mostly depth: the MakeHuman heads' 4.5 sat 1.0-1.6 % of the diagonal in front of the hand point
+SIDEWAYS = ("4.5", "4.6")
 
 
 def eye_frame(pos: dict, left: np.ndarray) -> tuple[np.ndarray, float]:
@@ -49,16 +56,33 @@ def eye_frame(pos: dict, left: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 @lru_cache(maxsize=1)
+def canonical_model() -> np.ndarray:
+    """MediaPipe's canonical face (478, 3), +Y up, +X the subject's left, cm
+    (``data/mediapipe_canonical_478.txt``)."""
+    return np.loadtxt(Path(__file__).with_name("data") / "mediapipe_canonical_478.txt")
+
+
+@lru_cache(maxsize=1)
+def canonical_lateral() -> dict:
+    """{brow fdp: side-to-side offset from the eye frame's origin (+ the subject's left) / the
+    eye frame's scale} on MediaPipe's canonical face (as :func:`canonical_height`)."""
+    model = canonical_model()
+    pos = {k: model[i] for k, i in {**EYE_CORNERS, **BROW_POINTS}.items()}
+    o, s = eye_frame(pos, np.array([1.0, 0.0, 0.0]))
+    return {k: float((pos[k] - o)[0] / s) for k in BROW_POINTS}
+
+
+@lru_cache(maxsize=1)
 def canonical_height() -> dict:
     """{brow fdp: height above the eye frame's origin / the eye frame's scale} on MediaPipe's
     canonical face (+Y up, +X the subject's left, cm; ``data/mediapipe_canonical_478.txt``)."""
-    model = np.loadtxt(Path(__file__).with_name("data") / "mediapipe_canonical_478.txt")
+    model = canonical_model()
     pos = {k: model[i] for k, i in {**EYE_CORNERS, **BROW_POINTS}.items()}
     o, s = eye_frame(pos, np.array([1.0, 0.0, 0.0]))
     return {k: float((pos[k] - o)[1] / s) for k in BROW_POINTS}
 
 
-def brows(caster, pos: dict, frame, diagonal: float, moved=MOVED) -> dict:
+def brows(caster, pos: dict, frame, diagonal: float, moved=MOVED, sideways=SIDEWAYS) -> dict:
     """{brow fdp: (3,)} for the brows of ``moved`` found in ``pos`` {fdp: (3,)} (needs the four
     eye corners), at the canonical height over the eyes (module docstring), put on the skin by
     :func:`faceforge.landmarks.rules._onto_skin` (``caster``: a RayCaster or the frontal
@@ -69,10 +93,11 @@ def brows(caster, pos: dict, frame, diagonal: float, moved=MOVED) -> dict:
     if not all(k in pos for k in EYE_CORNERS):
         return {}
     o, s = eye_frame(pos, left)
-    heights = canonical_height()
-    ids = [k for k in moved if k in pos]
+    heights, lateral = canonical_height(), canonical_lateral()
+    ids = [k for k in moved if k in pos] + [k for k in sideways if k in pos]
     if not ids or s <= 0:
         return {}
-    targets = np.array([pos[k] + up * (o @ up + heights[k] * s - pos[k] @ up) for k in ids])
+    targets = np.array([pos[k] + up * (o @ up + heights[k] * s - pos[k] @ up) if k in moved else
+                        pos[k] + left * (o @ left + lateral[k] * s - pos[k] @ left) for k in ids])
     hits = _onto_skin(caster, targets, fwd, diagonal)
     return {k: p for k, p in zip(ids, hits) if np.isfinite(p).all()}

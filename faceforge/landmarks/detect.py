@@ -242,15 +242,14 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
           rules.jaw_angles(v, f, pos(), frame, diagonal))
     for name, found in (("eye opening (recess in the frontal render)", sockets),
                         ("eye opening (boundary loop)", {k: p for k, p in loops.items() if k not in sockets}),
-                        ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal, normals)),
-                        ("cheek construction", rules.cheeks(caster, pos(), frame, diagonal))):
+                        ("midline profile", rules.chin(v, f, pos(), frame, origin, normal, diagonal, normals))):
         place(name, found)
     # after the eye rules, and only where they placed all four eye corners from the mesh: the
     # brows' height is measured from those corners (featureless eyes, e.g. the MediaPipe mask's
     # triangulated-shut ones, leave the corners the detector's guess, as biased as its brows)
     from faceforge.landmarks.brows import EYE_CORNERS, brows
     if all(k in moved for k in EYE_CORNERS):
-        place("eyebrow height (MediaPipe's canonical face over the eye corners)",
+        place("eyebrow height, the outer brows' side position (MediaPipe's canonical face over the eye corners)",
               brows(caster, pos(), frame, diagonal))
     from faceforge.geometry.triangles import vertex_normals
     from faceforge.landmarks.lips import inner_corners, inner_lips
@@ -259,6 +258,20 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
                          inner_lips(v, f, normals, pos(), frame)),
                         ("inner lip corner (the slit's end wall)", inner_corners(v, normals, pos(), frame))):
         place(name, {k: v[i] for k, i in found.items()})
+    # the outer corners from the inner ones, where those came from the mesh's slit (on the mask, whose
+    # mesh is the canonical face, the offset is its own: not an independent check there)
+    from faceforge.landmarks.lips import outer_corners
+    if all(k in moved for k in ("2.4", "2.5")):
+        place("outer lip corner (the inner corner plus MediaPipe's canonical offset)",
+              outer_corners(caster, pos(), frame, diagonal))
+    # the cheeks' construction measures from the subnasale, the outer lip corners and the detector's
+    # alae: built from the alae rule's instead, MakeHuman's 5.3 went 0.22 -> 0.24 % and its joy after
+    # calibration folded 55 skin edges at the outer eye corners instead of 24 (the calibration of
+    # the cheek rows moves with 5.3/5.4; the alae themselves change nothing downstream there)
+    place("cheek construction", rules.cheeks(caster, pos(), frame, diagonal))
+    from faceforge.landmarks.nose import alae
+    place("alare (the nose wing's lateral edge, where the skin faces sideways)",
+          {k: v[i] for k, i in alae(v, f, normals, pos(), frame, diagonal).items()})
     det.info["rules"] = moved
 
 

@@ -124,3 +124,48 @@ def inner_corners(vertices: np.ndarray, normals: np.ndarray, pos: dict, frame) -
         if inward.max() >= ROLL:
             out[k] = int(near[np.argmax(inward)])
     return out
+
+
+#: outer lip corner FDP -> (its inner corner FDP, MediaPipe canonical-face points of the pair)
+OUTER_CORNERS = {"8.3": ("2.4", 291, 308), "8.4": ("2.5", 61, 78)}
+
+
+def outer_corners(caster, pos: dict, frame, diagonal: float) -> dict:
+    """{8.3 / 8.4: (3,)}: the outer lip corners from the inner ones (2.4/2.5, the slit's end wall
+    of :func:`inner_corners`) and MediaPipe's canonical face.
+
+    Why. The detector puts the outer corner at the end of the lips' slit, on the upper lip's
+    underside (MakeHuman and its identity 0.51 % of the diagonal off, 0.3 % towards the midline
+    and 0.3 % up; the calibration's MW 5.5 % small); the mesh shows no feature where the hand
+    points lie (the crease fades gradually). But in the eye frame of :mod:`brows` (scale: the
+    outer eye corners' span ``s``) the hand files put 8.3 at the same offset from 2.4 on every
+    head: (0.035, -0.011) MakeHuman, (0.036, -0.004) ICT, (0.031, -0.009) the identity,
+    (0.033, -0.009) the mask; MediaPipe's canonical face (0.034, -0.008). So: the inner corner
+    plus the canonical offset (side-to-side and height, times ``s``), put on the skin from in
+    front by :func:`faceforge.landmarks.rules._onto_skin` (``caster``: a RayCaster or the
+    frontal render). Needs 2.4/2.5 and the four eye corners in ``pos`` {fdp: (3,)}.
+    """
+    from faceforge.landmarks.brows import EYE_CORNERS, eye_frame
+    from faceforge.landmarks.rules import _onto_skin
+
+    left, up, fwd = (np.asarray(a, dtype=np.float64) for a in frame)
+    ids = [k for k, (inner, _, _) in OUTER_CORNERS.items() if inner in pos]
+    if not ids or not all(k in pos for k in EYE_CORNERS):
+        return {}
+    _, s = eye_frame(pos, left)
+    model = _canonical()
+    _, cs = eye_frame({k: model[i] for k, i in EYE_CORNERS.items()}, np.array([1.0, 0.0, 0.0]))
+    targets = []
+    for k in ids:
+        inner, outer_i, inner_i = OUTER_CORNERS[k]
+        off = (model[outer_i] - model[inner_i]) / cs          # +X the subject's left, +Y up
+        targets.append(pos[inner] + (left * off[0] + up * off[1]) * s)
+    hits = _onto_skin(caster, np.array(targets), fwd, diagonal)
+    return {k: p for k, p in zip(ids, hits) if np.isfinite(p).all()}
+
+
+def _canonical() -> np.ndarray:
+    """MediaPipe's canonical face, (478, 3) cm (``data/mediapipe_canonical_478.txt``)."""
+    from faceforge.landmarks.brows import canonical_model
+
+    return canonical_model()
