@@ -61,7 +61,8 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     mirror_frame : None, or (n, 3) -> (n, 3) the mirror image of a settled skin (a mesh that is its
         own mirror image, :meth:`faceforge.geometry.mirror.Mirror.exact_partners`): then a shape
         that mirrors another (with ``twins``) is its partner's settled skin mirrored, not settled
-        again (its pose, the partner's mirrored, is still what it records and plays).
+        again (its pose, the partner's mirrored, is still what it records and plays); and the
+        Jacobian's probe of a control whose twin was probed before it is the twin's skin mirrored.
     """
     import time
 
@@ -81,7 +82,12 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     sub = space.subset(used)
     observe = observe_probes([probes[f] for f in faps])
     t0 = time.perf_counter()
-    J = jacobian(simulate, observe, sub) if used else np.zeros((len(faps), 0))
+    if not used:
+        J = np.zeros((len(faps), 0))
+    elif mirror_frame is not None and twins is not None:
+        J = _mirrored_jacobian(simulate, observe, sub, twins, mirror_frame)
+    else:
+        J = jacobian(simulate, observe, sub)
     t_jac = time.perf_counter() - t0
     log(f"Jacobian: {len(used)} controls x {len(faps)} FAPs in {t_jac:.1f} s")
     m = len(space.columns)
@@ -227,6 +233,34 @@ def _mirrored(specs, poses, twins, simulate, observe_probes, probes, mirror_fram
                             (-v if k == "jaw.yaw" else v) for k, v in src.get("controls", {}).items()}}
         out[spec.name] = (c[i], jaw[i], frames[i], row)
     return out
+
+
+def _mirrored_jacobian(simulate, observe, space, twins, mirror_frame) -> np.ndarray:
+    """:func:`faceforge.blendshapes.solve.jacobian` on a mirror-symmetric skin: a probe pose that is
+    the mirror image of one settled before it (a right muscle alone, its left twin probed) is that
+    pose's settled skin mirrored (``mirror_frame``), not settled again (``twins`` as in
+    :func:`bake_shapes`). J (d, q). On MakeHuman the mirrored and the settled skins of a pose differ
+    by 0-4 % (``mirror_rel_diff``); the Jacobian only steers the solve, each shape's own pose is
+    still settled."""
+    from faceforge.blendshapes.symmetric import mirror_pose
+
+    probe = np.asarray(space.probe, dtype=float)
+    c, jaw = space.pose(np.diag(probe))
+    mc, mj = mirror_pose(c, jaw, twins)
+    def key(a, b):   # + 0.0: a negated zero yaw is the same pose
+        return (np.concatenate([a, b]) + 0.0).tobytes()
+
+    first = {}
+    for i, (a, b) in enumerate(zip(c, jaw)):
+        first.setdefault(key(a, b), i)
+    source = [first.get(key(a, b), i) for i, (a, b) in enumerate(zip(mc, mj))]
+    source = [s if s < i else i for i, s in enumerate(source)]        # mirror only what came before
+    own = [i for i, s in enumerate(source) if s == i]
+    settled = simulate(c[own], jaw[own])
+    frames = {i: f for i, f in zip(own, settled)}
+    obs = np.asarray(observe(np.stack([frames[i] if s == i else mirror_frame(frames[s])
+                                       for i, s in enumerate(source)])), dtype=float)
+    return (obs / probe[:, None]).T
 
 
 def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie=False, good_enough=0.0):

@@ -193,3 +193,34 @@ def test_mirror_frame_makes_the_right_shape_without_settling_it():
     assert not any(p[1] > 0 and p[0] == 0 for p in calls)                         # never settled
     # on this symmetric stand-in the mirrored skin is what settling the mirrored pose gives
     assert out.frames[1] == pytest.approx(simulate(out.contractions[1:2], np.zeros((1, 3)))[0])
+
+
+def test_mirror_frame_mirrors_the_jacobian_probe_of_a_twin():
+    # with mirror_frame a midline shape's Jacobian probes zyg_L alone and mirrors it for zyg_R:
+    # the same Jacobian (a symmetric stand-in) and the same solve, one settle fewer
+    from faceforge.blendshapes.bake import _mirrored_jacobian
+    from faceforge.blendshapes.solve import jacobian
+    from faceforge.blendshapes.symmetric import mirror_columns
+    from faceforge.geometry.mirror import Mirror
+
+    rest, simulate, probes, space = _head()
+    calls = []
+
+    def counted(c, jaw):
+        calls.extend(np.asarray(c, dtype=float).copy())
+        return simulate(c, jaw)
+
+    mirror = Mirror(np.zeros(3), (1.0, 0.0, 0.0))
+    partner = mirror.exact_partners(rest)
+    observe = probe_observer(rest, [probes[12], probes[13], probes[31]])
+    twins = mirror_columns(COLUMNS)
+    J = _mirrored_jacobian(counted, observe, space, twins, lambda f: mirror(f[partner]))
+    assert J == pytest.approx(jacobian(simulate, observe, space))
+    assert len(calls) == len(space.names) - 1 and not any(p[1] > 0 for p in calls)   # zyg_R never settled
+    # a skin that is not symmetric gives a different column: the mirror is really used
+    skew = _mirrored_jacobian(simulate, observe, space, twins, lambda f: mirror(f[partner]) * 1.5)
+    assert not np.allclose(skew, J)
+    specs = {"both": ShapeSpec("both", {12: 10.0, 13: 6.0}, ("zyg_L", "zyg_R"))}
+    out = bake_shapes(specs, space, probes, simulate, lambda ps: probe_observer(rest, ps), rest, twins=twins,
+                      mirror_frame=lambda f: mirror(f[partner]))
+    assert out.report["both"]["targets"]["12"]["achieved"] == pytest.approx(8.0, abs=0.05)
