@@ -14,7 +14,7 @@ Everything is in the working mesh and the head's frame; the stage turns it into 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,7 +43,7 @@ class BakedShapes:
 def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest: np.ndarray,
                 lids=None, eyes: dict | None = None, passes: int = 3, ridge: float = 1e-3,
                 twins: np.ndarray | None = None, good_enough: float = 0.02,
-                mirror_frame=None, log=lambda m: None) -> BakedShapes:
+                mirror_frame=None, folds=None, log=lambda m: None) -> BakedShapes:
     """Settle every made shape of ``specs`` (module docstring).
 
     specs : {name: ShapeSpec} in output order; space : ControlSpace of the head (all controls;
@@ -62,7 +62,10 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         own mirror image, :meth:`faceforge.geometry.mirror.Mirror.exact_partners`): then a shape
         that mirrors another (with ``twins``) is its partner's settled skin mirrored, not settled
         again (its pose, the partner's mirrored, is still what it records and plays); and the
-        Jacobian's probe of a control whose twin was probed before it is the twin's skin mirrored.
+        Jacobian's probe of a control whose twin was probed before it is the twin's skin mirrored;
+    folds : None, or (n, 3) -> int, the folded edges of a settled skin: a shape whose pose was
+        last settled warm (continuing from the pose before) and folds is settled again from rest
+        at the same pose, and that frame is the shape (:func:`_cold_if_folded`).
     """
     import time
 
@@ -97,7 +100,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         c, jaw, frame, row = np.zeros(m), np.zeros(3), np.asarray(rest, dtype=float), {}
         if spec.faps:
             c, jaw, frame, row = _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge,
-                                              tie=twins is not None, good_enough=good_enough)
+                                              tie=twins is not None, good_enough=good_enough, folds=folds)
         poses[spec.name] = (c, jaw, frame, row)
     if mirrored:
         poses.update(_mirrored(mirrored, poses, twins, simulate, observe_probes, probes, mirror_frame))
@@ -263,7 +266,8 @@ def _mirrored_jacobian(simulate, observe, space, twins, mirror_frame) -> np.ndar
     return (obs / probe[:, None]).T
 
 
-def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie=False, good_enough=0.0):
+def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie=False, good_enough=0.0,
+                 folds=None):
     """One shape's activations on the rows (its FAPs) and columns (its controls) of the shared
     Jacobian -> contractions (m,), jaw (3,), settled frame (n, 3), its report row. ``tie``: a
     midline shape (its name has no side) moves each pair of twin controls as one."""
@@ -272,11 +276,14 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
 
     rows = [faps.index(f) for f in spec.faps]
     space = sub.subset(spec.controls)
-    calls, warm = [0], getattr(simulate, "warm", None)
+    calls, warm, warmed = [0], getattr(simulate, "warm", None), []
 
     def settle(c, jaw):   # the first pose from rest, each refinement continuing from the one before
         calls[0] += 1
-        return (simulate if calls[0] == 1 or warm is None else warm)(c, jaw)
+        out = (simulate if calls[0] == 1 or warm is None else warm)(c, jaw)
+        if calls[0] > 1 and warm is not None:
+            warmed.extend(out)
+        return out
 
     Js = J[np.ix_(rows, [used.index(n) for n in space.names])]
     tied = tie_twins(space) if tie and mirror_name(spec.name) == spec.name else None
@@ -285,6 +292,8 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
                             settle, lambda fr: observe(fr)[:, rows], passes=passes, ridge=ridge,
                             good_enough=good_enough)
     x = res.x if tied is None else tied.expand(res.x)
+    frame, observed, cold = _cold_if_folded(res, warmed, simulate, lambda fr: observe(fr)[:, rows], folds)
+    res = replace(res, frame=frame, observed=observed)
     row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
                        for f, t, a in zip(spec.faps, target, res.observed)},
            "error": round(float(np.linalg.norm(res.observed - target) / np.linalg.norm(target)), 3),
@@ -293,7 +302,26 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
            "controls": {n: round(float(v), 4) for n, v in zip(space.names, x)}}
     if tied is not None:
         row["tied"] = [n for n in tied.names if "+" in n]
+    if cold:
+        row["settled_from_rest"] = cold
     return res.contractions, res.jaw, res.frame, row
+
+
+def _cold_if_folded(res, warmed, simulate, observe, folds):
+    """The shape's frame and observation (d,): ``res``'s, or, when ``res.frame`` is one of the
+    ``warmed`` frames (settled continuing from the pose before) and has folded edges (``folds``),
+    its pose settled again from rest (a held pose's skin keeps creases the path through the poses
+    before left in it: ICT's mouthPucker 44 folded edges warm, 23 from rest; cheekSquint 7 and 1).
+    Returns (frame (n, 3), observed (d,), {"warm_folds", "folds"} or None)."""
+    if folds is None or not any(res.frame is f or np.array_equal(res.frame, f) for f in warmed):
+        return res.frame, res.observed, None
+    before = int(folds(res.frame))
+    if not before:
+        return res.frame, res.observed, None
+    frame = simulate(res.contractions[None], res.jaw[None])
+    if not np.all(np.isfinite(frame)):
+        return res.frame, res.observed, None
+    return frame[0], np.asarray(observe(frame), dtype=float)[0], {"warm_folds": before, "folds": int(folds(frame[0]))}
 
 
 def _at_limit(names, x, lower, upper) -> list:
