@@ -73,7 +73,7 @@ def validator(glb: Path):
 def blender(glb: Path, frames=None, shapes=None):
     py = os.environ.get("FACEFORGE_BLENDER_PYTHON")
     if not py:
-        return None
+        return {"not_run": "FACEFORGE_BLENDER_PYTHON not set (no Python with bpy here)"}
     args = [py, str(ROOT / "tools" / "blender_shapes_check.py"), str(glb)]
     if frames is not None:
         args += ["--expect-frames", str(frames)]
@@ -200,9 +200,28 @@ def round_trips(work: Path, tmp: Path) -> dict:
         "largest_diffs": {names[j]: round(float(np.abs(w[:, j] - w2[:, j]).max()), 3)
                           for j in np.argsort(-np.abs(w - w2).max(axis=0))[:4]},
         "replayed_curves": [x for x in log.splitlines() if "reproduce" in x][-1].split("curves: ", 1)[1]}
+    out["bad_takes"] = bad_takes(work, tmp)
     glb = tmp / "joy_without_head_rotation.glb"
     out["joy_glb_validator"] = validator(glb)
     out["joy_glb_blender"] = blender(glb, frames=len(w))
+    return out
+
+
+def bad_takes(work: Path, tmp: Path) -> dict:
+    """``animate --arkit`` on three bad Live Link takes (an unknown name, a weight of 1.5, a ragged
+    row): {case: {"exit": code, "message": its stderr}} (expected: exit 2, one line naming file:line)."""
+    hdr = "Timecode,BlendShapeCount,EyeBlinkLeft,JawOpen,MouthSmileLeft"
+    row = "00:00:00:00.000,3,0.1,0.2,0.3"
+    cases = {"unknown_name": hdr.replace("JawOpen", "JawOpn") + "\n" + row + "\n",
+             "weight_out_of_range": hdr + "\n" + row + "\n00:00:00:01.000,3,0.1,1.5,0.3\n",
+             "ragged_row": hdr + "\n" + row + "\n00:00:00:01.000,3,0.1,0.2\n"}
+    out = {}
+    for case, text in cases.items():
+        f = tmp / f"bad_{case}.csv"
+        f.write_text(text)
+        p = subprocess.run(CLI + ["--workdir", str(work), "animate", "--arkit", str(f), "-o", str(tmp / "bad.pc2")],
+                           capture_output=True, text=True)
+        out[case] = {"exit": p.returncode, "message": p.stderr.strip().replace(str(tmp) + "/", "")}
     return out
 
 

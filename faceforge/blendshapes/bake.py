@@ -14,7 +14,7 @@ Everything is in the working mesh and the head's frame; the stage turns it into 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,7 +43,7 @@ class BakedShapes:
 def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest: np.ndarray,
                 lids=None, eyes: dict | None = None, passes: int = 3, ridge: float = 1e-3,
                 twins: np.ndarray | None = None, good_enough: float = 0.02,
-                mirror_frame=None, log=lambda m: None) -> BakedShapes:
+                mirror_frame=None, folds=None, log=lambda m: None) -> BakedShapes:
     """Settle every made shape of ``specs`` (module docstring).
 
     specs : {name: ShapeSpec} in output order; space : ControlSpace of the head (all controls;
@@ -61,7 +61,11 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     mirror_frame : None, or (n, 3) -> (n, 3) the mirror image of a settled skin (a mesh that is its
         own mirror image, :meth:`faceforge.geometry.mirror.Mirror.exact_partners`): then a shape
         that mirrors another (with ``twins``) is its partner's settled skin mirrored, not settled
-        again (its pose, the partner's mirrored, is still what it records and plays).
+        again (its pose, the partner's mirrored, is still what it records and plays); and the
+        Jacobian's probe of a control whose twin was probed before it is the twin's skin mirrored;
+    folds : None, or (n, 3) -> int, the folded edges of a settled skin: a shape whose pose was
+        last settled warm (continuing from the pose before) and folds is settled again from rest
+        at the same pose, and that frame is the shape (:func:`_cold_if_folded`).
     """
     import time
 
@@ -81,7 +85,12 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
     sub = space.subset(used)
     observe = observe_probes([probes[f] for f in faps])
     t0 = time.perf_counter()
-    J = jacobian(simulate, observe, sub) if used else np.zeros((len(faps), 0))
+    if not used:
+        J = np.zeros((len(faps), 0))
+    elif mirror_frame is not None and twins is not None:
+        J = _mirrored_jacobian(simulate, observe, sub, twins, mirror_frame)
+    else:
+        J = jacobian(simulate, observe, sub)
     t_jac = time.perf_counter() - t0
     log(f"Jacobian: {len(used)} controls x {len(faps)} FAPs in {t_jac:.1f} s")
     m = len(space.columns)
@@ -91,7 +100,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         c, jaw, frame, row = np.zeros(m), np.zeros(3), np.asarray(rest, dtype=float), {}
         if spec.faps:
             c, jaw, frame, row = _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge,
-                                              tie=twins is not None, good_enough=good_enough)
+                                              tie=twins is not None, good_enough=good_enough, folds=folds)
         poses[spec.name] = (c, jaw, frame, row)
     if mirrored:
         poses.update(_mirrored(mirrored, poses, twins, simulate, observe_probes, probes, mirror_frame))
@@ -229,7 +238,36 @@ def _mirrored(specs, poses, twins, simulate, observe_probes, probes, mirror_fram
     return out
 
 
-def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie=False, good_enough=0.0):
+def _mirrored_jacobian(simulate, observe, space, twins, mirror_frame) -> np.ndarray:
+    """:func:`faceforge.blendshapes.solve.jacobian` on a mirror-symmetric skin: a probe pose that is
+    the mirror image of one settled before it (a right muscle alone, its left twin probed) is that
+    pose's settled skin mirrored (``mirror_frame``), not settled again (``twins`` as in
+    :func:`bake_shapes`). J (d, q). On MakeHuman the mirrored and the settled skins of a pose differ
+    by 0-4 % (``mirror_rel_diff``); the Jacobian only steers the solve, each shape's own pose is
+    still settled."""
+    from faceforge.blendshapes.symmetric import mirror_pose
+
+    probe = np.asarray(space.probe, dtype=float)
+    c, jaw = space.pose(np.diag(probe))
+    mc, mj = mirror_pose(c, jaw, twins)
+    def key(a, b):   # + 0.0: a negated zero yaw is the same pose
+        return (np.concatenate([a, b]) + 0.0).tobytes()
+
+    first = {}
+    for i, (a, b) in enumerate(zip(c, jaw)):
+        first.setdefault(key(a, b), i)
+    source = [first.get(key(a, b), i) for i, (a, b) in enumerate(zip(mc, mj))]
+    source = [s if s < i else i for i, s in enumerate(source)]        # mirror only what came before
+    own = [i for i, s in enumerate(source) if s == i]
+    settled = simulate(c[own], jaw[own])
+    frames = {i: f for i, f in zip(own, settled)}
+    obs = np.asarray(observe(np.stack([frames[i] if s == i else mirror_frame(frames[s])
+                                       for i, s in enumerate(source)])), dtype=float)
+    return (obs / probe[:, None]).T
+
+
+def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie=False, good_enough=0.0,
+                 folds=None):
     """One shape's activations on the rows (its FAPs) and columns (its controls) of the shared
     Jacobian -> contractions (m,), jaw (3,), settled frame (n, 3), its report row. ``tie``: a
     midline shape (its name has no side) moves each pair of twin controls as one."""
@@ -238,11 +276,14 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
 
     rows = [faps.index(f) for f in spec.faps]
     space = sub.subset(spec.controls)
-    calls, warm = [0], getattr(simulate, "warm", None)
+    calls, warm, warmed = [0], getattr(simulate, "warm", None), []
 
     def settle(c, jaw):   # the first pose from rest, each refinement continuing from the one before
         calls[0] += 1
-        return (simulate if calls[0] == 1 or warm is None else warm)(c, jaw)
+        out = (simulate if calls[0] == 1 or warm is None else warm)(c, jaw)
+        if calls[0] > 1 and warm is not None:
+            warmed.extend(out)
+        return out
 
     Js = J[np.ix_(rows, [used.index(n) for n in space.names])]
     tied = tie_twins(space) if tie and mirror_name(spec.name) == spec.name else None
@@ -251,6 +292,8 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
                             settle, lambda fr: observe(fr)[:, rows], passes=passes, ridge=ridge,
                             good_enough=good_enough)
     x = res.x if tied is None else tied.expand(res.x)
+    frame, observed, cold = _cold_if_folded(res, warmed, simulate, lambda fr: observe(fr)[:, rows], folds)
+    res = replace(res, frame=frame, observed=observed)
     row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
                        for f, t, a in zip(spec.faps, target, res.observed)},
            "error": round(float(np.linalg.norm(res.observed - target) / np.linalg.norm(target)), 3),
@@ -259,7 +302,26 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
            "controls": {n: round(float(v), 4) for n, v in zip(space.names, x)}}
     if tied is not None:
         row["tied"] = [n for n in tied.names if "+" in n]
+    if cold:
+        row["settled_from_rest"] = cold
     return res.contractions, res.jaw, res.frame, row
+
+
+def _cold_if_folded(res, warmed, simulate, observe, folds):
+    """The shape's frame and observation (d,): ``res``'s, or, when ``res.frame`` is one of the
+    ``warmed`` frames (settled continuing from the pose before) and has folded edges (``folds``),
+    its pose settled again from rest (a held pose's skin keeps creases the path through the poses
+    before left in it: ICT's mouthPucker 44 folded edges warm, 23 from rest; cheekSquint 7 and 1).
+    Returns (frame (n, 3), observed (d,), {"warm_folds", "folds"} or None)."""
+    if folds is None or not any(res.frame is f or np.array_equal(res.frame, f) for f in warmed):
+        return res.frame, res.observed, None
+    before = int(folds(res.frame))
+    if not before:
+        return res.frame, res.observed, None
+    frame = simulate(res.contractions[None], res.jaw[None])
+    if not np.all(np.isfinite(frame)):
+        return res.frame, res.observed, None
+    return frame[0], np.asarray(observe(frame), dtype=float)[0], {"warm_folds": before, "folds": int(folds(frame[0]))}
 
 
 def _at_limit(names, x, lower, upper) -> list:

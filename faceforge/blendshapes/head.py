@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from faceforge.animation.calibrate_head import calibration_probes
-from faceforge.animation.checks import check_animation, inside_bones
+from faceforge.animation.checks import check_animation, folded_edges, inside_bones
 from faceforge.animation.controls import controls
 from faceforge.blendshapes.arkit import ARKIT_NAMES, mirror_name
 from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
@@ -74,7 +74,8 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
         baked = bake_shapes(specs, space, calibration_probes(mapping, head), simulate,
                             lambda probes: probe_observer(head.rest, probes), head.rest, lids, eyes,
                             twins=mirror_columns(head.controls) if symmetric else None,
-                            mirror_frame=mirror_frame, log=log)
+                            mirror_frame=mirror_frame, log=log,
+                            folds=lambda f: int(folded_edges(head.rest, f[None], head.faces).sum()))
         index = {n: i for i, n in enumerate(baked.names)}
         for name in ARKIT_NAMES:
             i = index.get(name)
