@@ -52,7 +52,7 @@ SHAPE_FDPS = ("2.2", "2.3", "2.4", "2.5", "2.6", "2.7", "2.8", "2.9",
 #: viseme -> {measure: (low, high) mm}. incisor: interincisal opening; aperture: inner lip gap
 #: (closed lips pressed and rolled in pass each other: negative); width: change of the corners'
 #: distance; protrusion: outer lip middles. Widened after the first measurement (said in
-#: docs/status.md): p_b_m's aperture from -1 to -5 (pressed lips roll in), the spread and open
+#: docs/notes/visemes.md): p_b_m's aperture from -1 to -5 (pressed lips roll in), the spread and open
 #: visemes' protrusion (a, e, s_z) from -1 to -2.5 (the jaw's turn carries the lower lip back and
 #: spread corners retract the lips, Fromkin 1964)
 TARGETS = {

@@ -43,7 +43,7 @@ def test_no_preset_lowers_the_middle_brow_with_the_inner_and_outer(mapping):
     # FAP 33/34 down recruits the inner brow's and the outer brow's depressors together and
     # calibrates to both at full contraction; a muscle takes its largest request, so a preset that
     # also asks 31/35 got the inner brow 3x and the outer 5x what it asked (ICT anger: a ridged
-    # glabella, 47 folded edges; docs/status.md "the middle brow's saturated drive")
+    # glabella, 47 folded edges; docs/notes/folds.md "the middle brow's saturated drive")
     for name, row in mapping.expressions.items():
         for middle, inner, outer in ((33, 31, 35), (34, 32, 36)):
             if row[inner - 1] < 0 or row[outer - 1] < 0:
