@@ -238,7 +238,8 @@ JAW_SWEEP_PITCH, JAW_SWEEP_YAW = 0.4, 0.1
 def jaw_sweep(skull, mandible_vertices, reach: float) -> np.ndarray:
     """(p, 4, 4) mandible transforms over its opening (0 .. JAW_SWEEP_PITCH rad, with the glide)
     and side shift (+-JAW_SWEEP_YAW at half the opening), spaced so that no vertex of the
-    mandible (``(v, 3)``, skin units) moves more than ``reach / 2`` between neighbours: skin within
+    mandible (``(v, 3)``, skin units) moves more than ``reach / 2`` between neighbours (at most 64
+    openings; both side shifts keep a symmetric rig's guard symmetric): skin within
     ``reach`` of any of them is guarded by the bone collision (it may meet the moving jaw)."""
     j = skull.jaw
     v = np.asarray(mandible_vertices, dtype=float)
