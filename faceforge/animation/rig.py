@@ -189,7 +189,8 @@ class BoundHead:
                                 keep=keep)
         reach = float(config.get("animate.skull_guard.collision_reach")) * diag
         self.collision = BoneCollision(self.rest, bones, reach=reach, keep=float(
-            config.get("animate.skull_guard.collision_keep"))) if reach > 0 else None
+            config.get("animate.skull_guard.collision_keep")),
+            sweeps={"mandible": jaw_sweep(self.skull, self.mandible[0], reach)}) if reach > 0 else None
         rounds = int(config.get("animate.orientation_guard.rounds"))
         self.orientation = OrientationGuard(
             self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \
@@ -227,6 +228,28 @@ class BoundHead:
         """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order and frame."""
         out = frames[:, self.user_index]
         return out if np.array_equal(self.user_rotation, np.eye(3)) else out @ self.user_rotation
+
+
+#: the jaw's range the bone collision guards against (rad): the template's limits (jaw.yaml),
+#: which the fitted skull does not carry; 0.4 rad parts the incisors ~3.5 cm
+JAW_SWEEP_PITCH, JAW_SWEEP_YAW = 0.4, 0.1
+
+
+def jaw_sweep(skull, mandible_vertices, reach: float) -> np.ndarray:
+    """(p, 4, 4) mandible transforms over its opening (0 .. JAW_SWEEP_PITCH rad, with the glide)
+    and side shift (+-JAW_SWEEP_YAW at half the opening), spaced so that no vertex of the
+    mandible (``(v, 3)``, skin units) moves more than ``reach / 2`` between neighbours (at most 64
+    openings; both side shifts keep a symmetric rig's guard symmetric): skin within
+    ``reach`` of any of them is guarded by the bone collision (it may meet the moving jaw)."""
+    j = skull.jaw
+    v = np.asarray(mandible_vertices, dtype=float)
+    radius = float(np.max(np.linalg.norm(np.cross(v - j.pitch_point, j.pitch_dir), axis=1)))
+    per_rad = radius / float(np.linalg.norm(j.pitch_dir)) + (
+        float(np.linalg.norm(j.glide)) if j.glide is not None else 0.0)
+    n = max(2, int(np.ceil(JAW_SWEEP_PITCH * per_rad / max(0.5 * reach, 1e-12))) + 1)
+    poses = [(p, 0.0) for p in np.linspace(0.0, JAW_SWEEP_PITCH, min(n, 64))[1:]]
+    poses += [(0.5 * JAW_SWEEP_PITCH, s * JAW_SWEEP_YAW) for s in (-1.0, 1.0)]
+    return np.stack([skull.jaw_transform(p, y, 0.0) for p, y in poses])
 
 
 def carried_anchors(binding, carry: str):

@@ -115,3 +115,40 @@ def test_a_repeat_pass_tests_only_what_moved_and_finds_the_same():
     b[2] = [-0.5, 0.05, 0.97]                      # moved back in, but not listed: left alone
     assert part.apply(b, {}, np.array([1])) == 0 and len(part.moved) == 0
     assert part.apply(b, {}, np.array([2])) == 1 and part.moved.tolist() == [2]
+
+
+def test_skin_beyond_reach_that_the_moving_bone_meets_is_guarded_through_its_sweep():
+    # a vertex 1.0 in front of the bone (reach 0.5): unguarded at rest; the bone then slides 1.2
+    # forward into it (MediaPipe's upper lip and the gliding mandible, fear.fap)
+    bv, bf = box()
+    rest = np.array([[0.0, 0.0, 2.0]])
+    slide = rigid(0.0, [0.0, 0.0, 1.2])
+    moved_bone = bv @ slide[:3, :3].T + slide[:3, 3]
+    assert points_inside(rest, moved_bone, bf).all()
+    plain = BoneCollision(rest, {"mandible": (bv, bf)}, reach=0.5, keep=0.05)
+    assert len(plain.guarded["mandible"][0]) == 0
+    x = rest.copy()
+    assert plain.apply(x, {"mandible": slide}) == 0 and points_inside(x, moved_bone, bf).all()
+    sweep = np.stack([rigid(0.0, [0.0, 0.0, s]) for s in (0.4, 0.8, 1.2)])
+    swept = BoneCollision(rest, {"mandible": (bv, bf)}, reach=0.5, keep=0.05, sweeps={"mandible": sweep})
+    assert swept.guarded["mandible"][0].tolist() == [0]
+    assert np.allclose(swept.guarded["mandible"][2], 0.05)          # floor: keep x rest distance
+    assert swept.apply(x, {"mandible": slide}) == 1
+    assert not points_inside(x, moved_bone, bf).any()
+
+
+def test_jaw_sweep_spaces_the_opening_by_half_the_reach():
+    from faceforge.anatomy.skull import JawAxes, Skull
+    from faceforge.animation.rig import JAW_SWEEP_PITCH, jaw_sweep
+
+    bv, bf = box((0.0, -3.0, 4.0))
+    axes = JawAxes(pitch_point=np.zeros(3), pitch_dir=np.array([1.0, 0.0, 0.0]), yaw_point=np.zeros(3),
+                   yaw_dir=np.array([0.0, 1.0, 0.0]), protrusion_dir=np.array([0.0, 0.0, 1.0]), limits={},
+                   condyles=np.zeros((2, 3)), glide=np.array([0.0, -1.0, 2.0]))
+    skull = Skull(cranium=(bv, bf), mandible=(bv, bf), landmarks={}, bones={}, jaw=axes)
+    t = jaw_sweep(skull, bv, reach=0.5)
+    assert t.shape[1:] == (4, 4)
+    posed = np.einsum("pij,vj->pvi", t[:, :3, :3], bv) + t[:, None, :3, 3]
+    opening = np.concatenate([bv[None], posed[:-2]])   # the last two: the side shifts
+    assert np.linalg.norm(np.diff(opening, axis=0), axis=2).max() <= 0.25 + 1e-9
+    assert np.allclose(t[-3], skull.jaw_transform(JAW_SWEEP_PITCH, 0.0, 0.0))

@@ -15,6 +15,12 @@ The bones are rigid: each is tested in its rest pose, the skin brought into the 
 frame, so each bone's parity grid is built once. Only vertices that may be inside are
 cast: the distance to a rigid bone is 1-Lipschitz, so a vertex nearer than ``d0`` to where
 its rest position went with the bone (``d0`` its rest distance) is still outside.
+
+A bone that moves (the mandible) reaches skin that was far from it at rest: opening with the
+condylar glide carries the mandible's front 1.2 cm forward-down at 0.16 rad on MediaPipe, into
+the upper lip's inner midline, 1.3 cm (beyond ``reach``) from the bone at rest; that vertex was
+not guarded and ended inside (the Xface sweep's fear.fap). ``sweeps`` gives a bone's poses over
+its range: skin within ``reach`` of the bone in any of them is guarded too.
 """
 
 from __future__ import annotations
@@ -38,6 +44,9 @@ class BoneCollision:
     bodies : dict name -> (vertices (v, 3), faces (f, 3)), the bones at rest, closed
     reach : float, skin units: vertices outside a bone and within this of it at rest are guarded
     keep : float in [0, 1): a vertex put back out sits at ``keep * d0`` from the bone
+    sweeps : optional dict name -> (p, 4, 4) rigid transforms of that bone from its rest pose
+        over its range of motion: vertices within ``reach`` of the bone in any of them (brought
+        into its rest frame) are guarded as well
 
     Attributes
     ----------
@@ -45,7 +54,8 @@ class BoneCollision:
         floor (k,), rest distance (k,))
     """
 
-    def __init__(self, rest: np.ndarray, bodies: dict, reach: float, keep: float = 0.5):
+    def __init__(self, rest: np.ndarray, bodies: dict, reach: float, keep: float = 0.5,
+                 sweeps: dict | None = None):
         import trimesh
 
         from faceforge.geometry.parity import ParityGrid
@@ -60,7 +70,11 @@ class BoneCollision:
             proj = projector(mesh.vertices, mesh.faces)
             _, dist, _ = proj.closest(rest)
             grid = ParityGrid(mesh.vertices, mesh.faces)
-            ids = np.flatnonzero((dist < reach) & (dist > 0.0) & ~grid.contains(rest))
+            near = dist < reach
+            for t in np.asarray((sweeps or {}).get(name, np.zeros((0, 4, 4))), dtype=np.float64):
+                # the skin in the bone's rest frame with the bone at pose t: R^T (x - t)
+                near |= proj.closest((rest - t[:3, 3]) @ t[:3, :3])[1] < reach
+            ids = np.flatnonzero(near & (dist > 0.0) & ~grid.contains(rest))
             self.names.append(name)
             self.guarded[name] = (ids, rest[ids], keep * dist[ids], dist[ids])
             self._grids[name] = grid
