@@ -16,6 +16,11 @@ in far fewer frames:
   ``max_steps`` poses, keeping the best drive sampled;
 * **no verification pass**: the knots are the sampled drives, so the achieved values are the
   ones measured at them.
+* **stalled probes again, alone**: two lanes (:func:`face_lanes`) are probed in one
+  simulation; a pairing can cancel a probe (with the frontalis in thirds, MakeHuman's lowered
+  outer brow 35 and squeeze 37 read 0.4 and -0.3 ENS at every request, the sweep's fallback
+  left them at 98-100 % error; alone they reach -34 and 63). An entry whose FDP moved less than
+  :data:`STALL_FRACTION` of its smallest request on every chain is probed again in a lane of its own.
 
 The requests are the magnitudes users play (``animate.calibrate.magnitudes``, from the Xface
 files' largest values per sign; :func:`requested_values`).
@@ -158,13 +163,32 @@ def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tole
     ticks = iter(tick) if tick is not None else None
     gens = [_lane(lane, mapping, probes, rest, requested, tolerance, max_steps, max_drive, done, ticks)
             for lane in lanes if lane]
+    _play_lanes(gens, mapping, pose_for)
+    stalled = [i for i in sorted(done) if len(gens) > 1 and _stalled(*done[i])]
+    if stalled:   # probed again alone (lanes' pairings can cancel a probe; module docstring)
+        _play_lanes([_lane(stalled, mapping, probes, rest, requested, tolerance, max_steps, max_drive, done,
+                           None)], mapping, pose_for)
+    rows, calibrated = [], mapping
+    for idx in sorted(done):
+        req, drive, chains = done[idx]
+        ok = np.isfinite(drive)
+        knots = _monotone_knots(np.column_stack([req, np.where(ok, drive, 0.0)]))
+        reach, knots = muscle_reach(mapping.entries[idx], chains, knots)
+        calibrated = with_entry(calibrated, idx, response=knots, muscle_reach=reach)
+        rows += _rows(mapping.entries[idx], calibrated, req, drive, ok, knots, chains, probes)
+    return calibrated, rows
+
+
+def _play_lanes(gens, mapping, pose_for) -> None:
+    """Run the lanes' generators (:func:`_lane`) to the end, one simulation per step: every
+    lane's current entry, their FAPs played together."""
     asked = {}
     for k, g in enumerate(gens):
         try:
             asked[k] = next(g)
         except StopIteration:
             pass
-    while asked:   # one simulation per step: every lane's current entry, their FAPs together
+    while asked:
         identity, faps, warm = mapping, np.zeros(68), True
         for idx, f, w in asked.values():
             identity = with_entry(identity, idx, response=None, muscle_reach=None)   # the muscles alone
@@ -175,15 +199,19 @@ def calibrate_sweep(mapping, pose_for, rest, probes: dict, requested: dict, tole
                 asked[k] = gens[k].send(skin)
             except StopIteration:
                 del asked[k]
-    rows, calibrated = [], mapping
-    for idx in sorted(done):
-        req, drive, chains = done[idx]
-        ok = np.isfinite(drive)
-        knots = _monotone_knots(np.column_stack([req, np.where(ok, drive, 0.0)]))
-        reach, knots = muscle_reach(mapping.entries[idx], chains, knots)
-        calibrated = with_entry(calibrated, idx, response=knots, muscle_reach=reach)
-        rows += _rows(mapping.entries[idx], calibrated, req, drive, ok, knots, chains, probes)
-    return calibrated, rows
+
+
+#: a probe whose FDP moved less than this fraction of its smallest request at every drive of
+#: every sense was cancelled, not probed (:func:`_stalled`)
+STALL_FRACTION = 0.1
+
+
+def _stalled(req, drive, chains) -> bool:
+    """Whether an entry's probes moved its FDP less than :data:`STALL_FRACTION` of the smallest
+    |request| (req (k,) FAPU) on every chain (chains: sense -> chain with ``mean``, FAPU)."""
+    least = STALL_FRACTION * float(np.min(np.abs(req))) if len(req) else 0.0
+    moved = [np.max(np.abs(np.asarray(c.mean, float))) for c in chains.values() if c is not None and len(c.mean)]
+    return bool(least > 0.0) and (not moved or max(moved) < least)
 
 
 def _lane(indices, mapping, probes, rest, requested, tolerance, max_steps, max_drive, done, ticks):
