@@ -20,7 +20,8 @@ in far fewer frames:
   simulation; a pairing can cancel a probe (with the frontalis in thirds, MakeHuman's lowered
   outer brow 35 and squeeze 37 read 0.4 and -0.3 ENS at every request, the sweep's fallback
   left them at 98-100 % error; alone they reach -34 and 63). An entry whose FDP moved less than
-  :data:`STALL_FRACTION` of its smallest request on every chain is probed again in a lane of its own.
+  :data:`STALL_FRACTION` of its smallest request on a chain (one sense) is probed again in a lane
+  of its own.
 
 The requests are the magnitudes users play (``animate.calibrate.magnitudes``, from the Xface
 files' largest values per sign; :func:`requested_values`).
@@ -201,17 +202,23 @@ def _play_lanes(gens, mapping, pose_for) -> None:
                 del asked[k]
 
 
-#: a probe whose FDP moved less than this fraction of its smallest request at every drive of
-#: every sense was cancelled, not probed (:func:`_stalled`)
+#: a probe whose FDP moved less than this fraction of its smallest request (of one sense) at
+#: every drive of that sense was cancelled, not probed (:func:`_stalled`)
 STALL_FRACTION = 0.1
 
 
 def _stalled(req, drive, chains) -> bool:
-    """Whether an entry's probes moved its FDP less than :data:`STALL_FRACTION` of the smallest
-    |request| (req (k,) FAPU) on every chain (chains: sense -> chain with ``mean``, FAPU)."""
-    least = STALL_FRACTION * float(np.min(np.abs(req))) if len(req) else 0.0
-    moved = [np.max(np.abs(np.asarray(c.mean, float))) for c in chains.values() if c is not None and len(c.mean)]
-    return bool(least > 0.0) and (not moved or max(moved) < least)
+    """Whether an entry's probes of one sense moved its FDP less than :data:`STALL_FRACTION`
+    of that sense's smallest |request| (req (k,) FAPU) at every drive (chains: sense -> chain
+    with ``mean``, FAPU)."""
+    req = np.asarray(req, float)
+    for sense, chain in chains.items():
+        r = np.abs(req[np.sign(req) == sense])
+        if chain is None or not len(chain.mean) or not len(r):
+            continue
+        if np.max(np.abs(np.asarray(chain.mean, float))) < STALL_FRACTION * float(np.min(r)):
+            return True
+    return False
 
 
 def _lane(indices, mapping, probes, rest, requested, tolerance, max_steps, max_drive, done, ticks):

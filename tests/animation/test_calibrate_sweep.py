@@ -108,25 +108,25 @@ def test_a_chain_flattened_by_other_motion_below_full_contraction_goes_on():
 
 
 def test_a_probe_cancelled_by_its_lane_partner_is_probed_again_alone():
-    """Two lanes in one simulation: while the lip corner is driven, this head's brow does not
-    move (a pairing that cancels the probe; MakeHuman's squeeze 37 read -0.3 ENS at every
+    """Two lanes in one simulation: while the lip corner is driven, this head's brow is not
+    lowered (a pairing that cancels one sense of the probe; MakeHuman's squeeze 37 read -0.3 ENS at every
     request beside the lower face's entries). The stalled brow entry is probed again alone and
     fits as it does alone; the lip entry is unchanged."""
     two = dict(MAPPING, entries=MAPPING["entries"] + [
-        {"fap": 31, "name": "raise_l_i_eyebrow", "fapu": "ENS", "positive": {"fr": 0.002}}])
+        {"fap": 31, "name": "raise_l_i_eyebrow", "fapu": "ENS", "positive": {"fr": 0.002}, "negative": {"ds": 0.002}}])
     rest = np.zeros((3, 3))
 
     def pose_for(mapping, faps, warm):
         skin = rest.copy()
         skin[0, 1] = skin[1, 1] = response(float(faps[58])) * 0.01
-        if faps[58] == 0.0:                                # the brow moves only without the lip
+        if faps[58] == 0.0 or faps[30] > 0.0:              # lowered only without the lip
             skin[2, 1] = 0.8 * float(faps[30]) * 0.01
         return skin
 
     probes = {59: Probe(59, 0, -1, np.array([0.0, 1.0, 0.0]), 0.01),
               12: Probe(12, 1, -1, np.array([0.0, 1.0, 0.0]), 0.01),
               31: Probe(31, 2, -1, np.array([0.0, 1.0, 0.0]), 0.01)}
-    requested = {59: [15.0, 30.0, -50.0, -100.0], 31: [20.0, 40.0]}
+    requested = {59: [15.0, 30.0, -50.0, -100.0], 31: [-40.0, -20.0, 20.0, 40.0]}
     mapping = mapping_from_dict(two)
     alone, rows_alone = calibrate_sweep(mapping, pose_for, rest, probes, requested)
     together, rows = calibrate_sweep(mapping, pose_for, rest, probes, requested, lanes=[[0], [1]])
