@@ -219,19 +219,6 @@ def test_the_inner_brow_raise_lifts_the_brow_not_the_forehead_above_it(head):
     assert -d[brow, 2] < 0.4 * d[brow, 1], d[brow]              # up, not back
 
 
-@pytest.mark.parametrize("muscle, fdp", [("frontalis_inner_L", "4.1"), ("frontalis_middle_L", "4.3"),
-                                         ("frontalis_outer_L", "4.5")])
-def test_each_third_of_the_frontalis_raises_its_own_part_of_the_brow_most(head, muscle, fdp):
-    """The frontalis in thirds (issue 25: MakeHuman's eyebrows-*-inner-up, -up and -extern-up
-    units raise the inner, middle and outer thirds of the brow apart; with two parts the
-    middle-brow unit fitted at cosine 0.36): each part at 0.5 lifts its own brow FDP more than
-    the other two."""
-    h, _ = head
-    d = moved(h, muscle)
-    up = {f: d[h.fdp_vertex[f], 1] for f in ("4.1", "4.3", "4.5")}
-    assert up[fdp] > 0.0 and all(up[fdp] > v for f, v in up.items() if f != fdp), up
-
-
 def test_the_lower_part_of_the_ring_raises_the_lower_lip_and_tucks_it_in(head):
     """orbicularis_oris.lower (FAPs 52/5, 57/10, 58/11 positive; a lip press) at 0.4: the lower
     lip's middle and both its sides rise alike and move in, the upper lip stays, no skin edge
