@@ -310,8 +310,8 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
 def _cold_if_folded(res, warmed, simulate, observe, folds):
     """The shape's frame and observation (d,): ``res``'s, or, when ``res.frame`` is one of the
     ``warmed`` frames (settled continuing from the pose before) and has folded edges (``folds``),
-    its pose settled again from rest (a held pose's skin keeps creases the path through the poses
-    before left in it: ICT's mouthPucker 44 folded edges warm, 23 from rest; cheekSquint 7 and 1).
+    its pose settled again from rest when that folds less (a held pose's skin keeps creases the path
+    through the poses before left in it: ICT's mouthPucker 44 folded edges warm, 23 from rest).
     Returns (frame (n, 3), observed (d,), {"warm_folds", "folds"} or None)."""
     if folds is None or not any(res.frame is f or np.array_equal(res.frame, f) for f in warmed):
         return res.frame, res.observed, None
@@ -321,7 +321,10 @@ def _cold_if_folded(res, warmed, simulate, observe, folds):
     frame = simulate(res.contractions[None], res.jaw[None])
     if not np.all(np.isfinite(frame)):
         return res.frame, res.observed, None
-    return frame[0], np.asarray(observe(frame), dtype=float)[0], {"warm_folds": before, "folds": int(folds(frame[0]))}
+    after = int(folds(frame[0]))
+    if after >= before:   # from rest folds no less (ICT's mouthLeft 4 -> 5): the warm frame stays
+        return res.frame, res.observed, {"warm_folds": before, "folds": before, "cold_folds": after}
+    return frame[0], np.asarray(observe(frame), dtype=float)[0], {"warm_folds": before, "folds": after}
 
 
 def _at_limit(names, x, lower, upper) -> list:

@@ -253,3 +253,24 @@ def test_a_folded_warm_result_is_settled_again_from_rest():
     assert flagged.frames[0] == pytest.approx(cold(flagged.contractions[:1], np.zeros((1, 3)))[0])
     assert row["targets"]["12"]["achieved"] == pytest.approx(
         float(observe([probes[12]])(flagged.frames[:1])[0, 0]), abs=0.05)          # measured on that frame
+
+
+def test_a_warm_result_stays_when_settling_from_rest_folds_no_less():
+    # the same skin, but every frame counts as folded: settling from rest does not help, so the
+    # warm frame stays the shape and the report says both counts
+    rest, simulate, probes, space = _head()
+
+    def cold(c, jaw):
+        return simulate(np.asarray(c) ** 2, jaw)
+
+    def warm(c, jaw):
+        out = cold(c, jaw)
+        out[:, 0, 1] += 0.05
+        return out
+
+    cold.warm = warm
+    specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",))}
+    out = bake_shapes(specs, space, probes, cold, lambda ps: probe_observer(rest, ps), rest, passes=3,
+                      folds=lambda f: 2)
+    assert out.report["smileL"]["settled_from_rest"] == {"warm_folds": 2, "folds": 2, "cold_folds": 2}
+    assert out.frames[0, 0, 1] == pytest.approx(cold(out.contractions[:1], np.zeros((1, 3)))[0, 0, 1] + 0.05)
