@@ -166,10 +166,9 @@ def test_mirror_pose_swaps_twins_and_negates_the_yaw_only():
     assert c2.tolist() == [0.7, 0.2, 0.0, 0.4, 0.3] and jaw2.tolist() == [0.1, 0.05, 0.02]   # an involution
 
 
-def test_mirror_frame_makes_the_right_shape_without_settling_it():
-    # bake.mirror_shapes on a symmetric mesh: smileR is smileL's settled skin reflected onto the
-    # vertices' exact partners (x -> -x here); no pose of zyg_R alone is ever settled
-    from faceforge.blendshapes.symmetric import mirror_columns
+def _mirrored_head():
+    """_head with a settle that records every pose it settles (``calls``), the mirror x -> -x and
+    the vertices' exact partners: (rest, simulate, probes, space, counted, calls, mirror, partner)."""
     from faceforge.geometry.mirror import Mirror
 
     rest, simulate, probes, space = _head()
@@ -180,7 +179,15 @@ def test_mirror_frame_makes_the_right_shape_without_settling_it():
         return simulate(c, jaw)
 
     mirror = Mirror(np.zeros(3), (1.0, 0.0, 0.0))
-    partner = mirror.exact_partners(rest)
+    return rest, simulate, probes, space, counted, calls, mirror, mirror.exact_partners(rest)
+
+
+def test_mirror_frame_makes_the_right_shape_without_settling_it():
+    # bake.mirror_shapes on a symmetric mesh: smileR is smileL's settled skin reflected onto the
+    # vertices' exact partners (x -> -x here); no pose of zyg_R alone is ever settled
+    from faceforge.blendshapes.symmetric import mirror_columns
+
+    rest, simulate, probes, space, counted, calls, mirror, partner = _mirrored_head()
     assert list(partner) == [1, 0, 3, 2, 4, 5]
     specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",)),
              "smileR": ShapeSpec("smileR", {13: 10.0}, ("zyg_R",), mirror_of="smileL")}
@@ -201,17 +208,8 @@ def test_mirror_frame_mirrors_the_jacobian_probe_of_a_twin():
     from faceforge.blendshapes.bake import _mirrored_jacobian
     from faceforge.blendshapes.solve import jacobian
     from faceforge.blendshapes.symmetric import mirror_columns
-    from faceforge.geometry.mirror import Mirror
 
-    rest, simulate, probes, space = _head()
-    calls = []
-
-    def counted(c, jaw):
-        calls.extend(np.asarray(c, dtype=float).copy())
-        return simulate(c, jaw)
-
-    mirror = Mirror(np.zeros(3), (1.0, 0.0, 0.0))
-    partner = mirror.exact_partners(rest)
+    rest, simulate, probes, space, counted, calls, mirror, partner = _mirrored_head()
     observe = probe_observer(rest, [probes[12], probes[13], probes[31]])
     twins = mirror_columns(COLUMNS)
     J = _mirrored_jacobian(counted, observe, space, twins, lambda f: mirror(f[partner]))
@@ -226,10 +224,9 @@ def test_mirror_frame_mirrors_the_jacobian_probe_of_a_twin():
     assert out.report["both"]["targets"]["12"]["achieved"] == pytest.approx(8.0, abs=0.05)
 
 
-def test_a_folded_warm_result_is_settled_again_from_rest():
-    # a skin answering c^2 (the secant Jacobian overshoots: the solve refines, warm) whose warm
-    # settles leave the corner 0.05 too high, counted as a fold: the shape is its pose settled
-    # from rest instead, said so in the report; without ``folds`` nothing is settled again
+def _warm_off_skin():
+    """_head's skin answering c^2 (the secant Jacobian overshoots: the solve refines, warm), whose
+    warm settles leave the corner 0.05 too high: (rest, cold simulate with ``.warm``, probes, space)."""
     rest, simulate, probes, space = _head()
 
     def cold(c, jaw):
@@ -241,6 +238,14 @@ def test_a_folded_warm_result_is_settled_again_from_rest():
         return out
 
     cold.warm = warm
+    return rest, cold, probes, space
+
+
+def test_a_folded_warm_result_is_settled_again_from_rest():
+    # a skin answering c^2 (the secant Jacobian overshoots: the solve refines, warm) whose warm
+    # settles leave the corner 0.05 too high, counted as a fold: the shape is its pose settled
+    # from rest instead, said so in the report; without ``folds`` nothing is settled again
+    rest, cold, probes, space = _warm_off_skin()
     specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",))}
     observe = lambda ps: probe_observer(rest, ps)                                # noqa: E731
     plain = bake_shapes(specs, space, probes, cold, observe, rest, passes=3)
@@ -258,17 +263,7 @@ def test_a_folded_warm_result_is_settled_again_from_rest():
 def test_a_warm_result_stays_when_settling_from_rest_folds_no_less():
     # the same skin, but every frame counts as folded: settling from rest does not help, so the
     # warm frame stays the shape and the report says both counts
-    rest, simulate, probes, space = _head()
-
-    def cold(c, jaw):
-        return simulate(np.asarray(c) ** 2, jaw)
-
-    def warm(c, jaw):
-        out = cold(c, jaw)
-        out[:, 0, 1] += 0.05
-        return out
-
-    cold.warm = warm
+    rest, cold, probes, space = _warm_off_skin()
     specs = {"smileL": ShapeSpec("smileL", {12: 10.0}, ("zyg_L",))}
     out = bake_shapes(specs, space, probes, cold, lambda ps: probe_observer(rest, ps), rest, passes=3,
                       folds=lambda f: 2)
