@@ -159,12 +159,22 @@ class PathValue(Rule):
 
 @dataclass(frozen=True)
 class ListOf(Rule):
+    """A list, each item checked by ``item``, with at least ``min_items`` items."""
+
     item: Rule | None = None
+    min_items: int = 0
 
     def check(self, value, base):
         if not isinstance(value, list):
             raise ValueError("a list")
-        return [v if self.item is None else self.item.check(v, base) for v in value]
+        if len(value) < self.min_items:
+            raise ValueError(f"a list of at least {self.min_items} item{'s' if self.min_items > 1 else ''}")
+        if self.item is None:
+            return list(value)
+        try:
+            return [self.item.check(v, base) for v in value]
+        except ValueError as exc:
+            raise ValueError(f"each item to be {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -200,6 +210,8 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.fap_mapping", PathValue()),
     ("animate.calibrate.magnitudes", PathValue()),
     ("animate.quality", Choice(("realtime", "offline"))),
+    # no fraction, no probe: the calibration wrote an empty mapping and said nothing
+    ("animate.calibrate.fractions", ListOf(Number(0.01, 1.0), min_items=1)),
     ("animate.calibrate.fractions.*", Number(0.01, 1.0)),
     ("animate.calibrate.tolerance", Number(0.0, 0.5)),
     ("animate.statics.tolerance", Number(0.0, 0.01)),
@@ -391,7 +403,8 @@ def _describe_got(value: Any) -> str:
     if isinstance(value, dict):
         return "a mapping"
     if isinstance(value, list):
-        return "a list"
+        short = len(value) <= 8 and all(isinstance(v, (int, float, str, bool)) or v is None for v in value)
+        return repr(value) if short and len(repr(value)) <= 60 else "a list"
     return repr(value)
 
 

@@ -80,7 +80,12 @@ def test_unknown_top_level_key_without_near_match(tmp_path):
     ("fit:\n  refit: 1\n", "fit.refit: expected true or false, got 1"),
     ("solver:\n  damping: .nan\n", "solver.damping: expected a number in [0, 1], got nan"),
     ("skin: 3\n", "skin: expected a mapping, got 3"),
-    ("skin:\n  stiffness:\n    bending: [1]\n", "skin.stiffness.bending: expected a number in [0, 1], got a list"),
+    ("skin:\n  stiffness:\n    bending: [1]\n", "skin.stiffness.bending: expected a number in [0, 1], got [1]"),
+    # no fraction, no probe: the calibration wrote an empty mapping and said nothing
+    ("animate:\n  calibrate:\n    fractions: []\n",
+     "animate.calibrate.fractions: expected a list of at least 1 item, got []"),
+    ("animate:\n  calibrate:\n    fractions: [0.5, 2]\n",
+     "animate.calibrate.fractions: expected each item to be a number in [0.01, 1], got [0.5, 2]"),
 ])
 def test_type_and_range_errors(tmp_path, text, expected):
     path = write(tmp_path, text)
@@ -110,7 +115,7 @@ def test_duplicate_key_and_yaml_syntax_errors_have_lines(tmp_path):
 def test_missing_file_and_non_mapping(tmp_path):
     with pytest.raises(ConfigError, match=r"nope.yaml: config file not found$"):
         read_config_file(tmp_path / "nope.yaml")
-    with pytest.raises(ConfigError, match=r"list.yaml:1: expected a mapping of settings, got a list"):
+    with pytest.raises(ConfigError, match=r"list.yaml:1: expected a mapping of settings, got \[1, 2\]"):
         read_config_file(write(tmp_path, "- 1\n- 2\n", "list.yaml"))
     assert read_config_file(write(tmp_path, "# only a comment\n", "empty.yaml")).tree == {}
 
