@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.animation.checks import (FrameReport, _depth_below, _where, fold_limit, folded_edges,
-                                        inverted_faces, points_inside)
+from faceforge.animation.checks import (FrameReport, _where, fold_limit, folded_edges, inside_skull,
+                                        inverted_faces)
 
 
 class StreamChecker:
@@ -81,27 +81,14 @@ class StreamChecker:
         ``frame_index -> [(vertices, faces)]`` as for ``check_animation``."""
         if self.seen != self.n_frames:
             raise ValueError(f"{self.seen} frames added, {self.n_frames} announced")
-        inside_total, where = 0, dict(self.where)
+        where, inside = dict(self.where), {}
         if skull is not None and self.n_frames:
             frames = dict(self.kept)
             frames[self.worst] = self.worst_frame
-            base = None
-            for i in sorted(self.sampled | {self.worst}):
-                bodies = skull(i)
-                if base is None:
-                    base = np.zeros(len(self.rest), dtype=bool)
-                    for v, f in skull(-1):
-                        base |= points_inside(self.rest, v, f)
-                now = np.zeros(len(self.rest), dtype=bool)
-                for v, f in bodies:
-                    inside = points_inside(frames[i], v, f)
-                    if inside.any() and self.tolerance > 0:
-                        inside[inside] = _depth_below(frames[i][inside], v, f) > self.tolerance
-                    now |= inside
-                count = int(np.count_nonzero(now & ~base))
-                inside_total += count
-                if count:
-                    where.setdefault("inside_skull", {})[str(int(i))] = count
+            inside = inside_skull(self.rest, frames, sorted(self.sampled | {self.worst}), skull, self.tolerance)
+            if inside:
+                where["inside_skull"] = inside
+        inside_total = sum(inside.values())
         if self.folded_any is None:   # no frame: the edge count from an empty pass
             self.n_edges = folded_edges(self.rest, np.zeros((0,) + self.rest.shape), self.faces).shape[1]
         return FrameReport(frames=self.n_frames, non_finite=self.non_finite,

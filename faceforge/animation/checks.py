@@ -195,24 +195,14 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     flips = inverted_faces(rest, np.nan_to_num(frames), faces)
     inv = flips.sum(axis=1)
     folds = folded_edges(rest, np.nan_to_num(frames), faces)
-    inside_total, where = 0, _where(finite, inv, folds.sum(axis=1))
+    where = _where(finite, inv, folds.sum(axis=1))
+    inside = {}
     if skull is not None and len(frames):
         idx = sorted(set(np.linspace(0, len(frames) - 1, min(sample, len(frames))).astype(int)) | {worst})
-        base = inside_at_rest
-        for i in idx:
-            bodies = skull(i)
-            if base is None:
-                base = inside_bones(rest, skull(-1))
-            now = np.zeros(len(rest), dtype=bool)
-            for v, f in bodies:
-                inside = points_inside(frames[i], v, f)
-                if inside.any() and tolerance > 0:
-                    inside[inside] = _depth_below(frames[i][inside], v, f) > tolerance
-                now |= inside
-            count = int(np.count_nonzero(now & ~base))
-            inside_total += count
-            if count:
-                where.setdefault("inside_skull", {})[str(int(i))] = count
+        inside = inside_skull(rest, frames, idx, skull, tolerance, inside_at_rest)
+        if inside:
+            where["inside_skull"] = inside
+    inside_total = sum(inside.values())
     return FrameReport(frames=len(frames), non_finite=int(np.count_nonzero(~finite)),
                        inverted_triangles=int(inv.sum()), skin_inside_skull=inside_total,
                        max_displacement=float(disp.max()) if len(disp) else 0.0, worst_frame=worst,
@@ -221,6 +211,30 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
                        folded_edges=int(folds.any(axis=0).sum()),
                        folded_max_per_frame=int(folds.sum(axis=1).max()) if len(folds) else 0,
                        fold_limit=fold_limit(folds.shape[1]), where=where)
+
+
+def inside_skull(rest: np.ndarray, frames, idx, skull, tolerance: float,
+                 inside_at_rest: np.ndarray | None = None) -> dict:
+    """``{str(frame): count}`` of the skin vertices newly inside the bones, for each frame of
+    ``idx`` with any: ``frames[i] (n, 3)`` (an array or a mapping), ``skull`` the callable
+    ``frame_index -> [(vertices, faces)]`` of :func:`check_animation` (``-1``: at rest), vertices
+    inside at rest (``inside_at_rest (n,)`` bool, or computed once from ``skull(-1)``) and those
+    less than ``tolerance`` (skin units) below the bone surface not counted."""
+    base, out = inside_at_rest, {}
+    for i in idx:
+        bodies = skull(i)
+        if base is None:
+            base = inside_bones(rest, skull(-1))
+        now = np.zeros(len(rest), dtype=bool)
+        for v, f in bodies:
+            inside = points_inside(frames[i], v, f)
+            if inside.any() and tolerance > 0:
+                inside[inside] = _depth_below(frames[i][inside], v, f) > tolerance
+            now |= inside
+        count = int(np.count_nonzero(now & ~base))
+        if count:
+            out[str(int(i))] = count
+    return out
 
 
 def _where(finite: np.ndarray, inverted: np.ndarray, folded: np.ndarray, start: int = 0) -> dict:
