@@ -173,3 +173,33 @@ def test_the_direction_check_sees_an_upward_import(tmp_path, monkeypatch):
     monkeypatch.setattr(sys.modules[__name__], "PKG", tmp_path / "faceforge")
     with pytest.raises(AssertionError, match=r"faceforge\.geometry\.up -> faceforge\.pipeline"):
         test_packages_import_only_downwards()
+
+
+#: folders whose modules the layout describes as a whole (one constraint kind or stage a module)
+WHOLE_FOLDERS = {("pbd", "constraints"), ("pipeline", "stages")}
+
+
+def unnamed_modules(tree: str, modules) -> list[str]:
+    """The modules (paths relative to the package, ``skin/cheek.py``) whose name the layout text
+    ``tree`` never mentions as a word; private modules and :data:`WHOLE_FOLDERS` are exempt."""
+    import re
+
+    out = []
+    for rel in modules:
+        parts = Path(rel).with_suffix("").parts
+        if parts[-1].startswith("_") or tuple(parts[:-1]) in WHOLE_FOLDERS:
+            continue
+        if not re.search(rf"\b{re.escape(parts[-1])}\b", tree):
+            out.append(rel)
+    return out
+
+
+def test_the_architecture_page_names_every_module():
+    """docs/ARCHITECTURE.md's layout tree is the map a newcomer reads first: a module it does not
+    name is a module nobody will find."""
+    text = (PKG.parent / "docs" / "ARCHITECTURE.md").read_text(encoding="utf-8")
+    tree = text[text.index("```\nfaceforge/"):text.index("Dependency direction")]
+    modules = [p.relative_to(PKG).as_posix() for p in PKG.rglob("*.py")]
+    assert unnamed_modules(tree, modules) == []
+    assert unnamed_modules("skin/ layer, binding", ["skin/layer.py", "skin/cheek.py", "pbd/constraints/x.py",
+                                                    "pbd/_kernels.py"]) == ["skin/cheek.py"]
