@@ -10,6 +10,8 @@ memory does not grow with its length.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from faceforge.animation.check_stream import StreamChecker
@@ -18,7 +20,7 @@ from faceforge.animation.playback import play, warm_up
 
 
 def play_take(head, source, writer, *, weights=None, lids=None, timings=None, offline=None,
-              bar=None, log=print) -> StreamChecker:
+              bar=None, log=print, overlay=None) -> StreamChecker:
     """Simulate every block of ``source`` on ``head`` and write its frames.
 
     head
@@ -38,6 +40,9 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
         or None for real time (``solver.iterations`` a frame, timed into ``timings``).
     bar
         a progress bar (``update(1)`` per frame) or None.
+    overlay
+        ``overlay(frames (k, n, 3), first) -> frames``, kinematic pieces moved over the skin after
+        the lids (``first``: the index of the first frame in the take), or None.
 
     Returns the :class:`StreamChecker` that saw every frame (in the skull's frame, lids
     included, before the head turn). A diverging simulation raises ``FloatingPointError``.
@@ -56,6 +61,8 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
             stop = start + len(frames)
             if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
                 frames = lids.apply(frames, block.faps[start:stop])
+            if overlay is not None:
+                frames = overlay(frames, block.start + start)
             checker.add(frames)
             if weights is not None:
                 frames = turn_head(frames, block.angles[start:stop], head.skull.jaw.yaw_point, weights)
@@ -66,7 +73,11 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
         if offline is not None:
             from faceforge.animation.statics import play_converged
 
+            t0 = time.perf_counter()
             play_converged(head.rig, block.c, block.jaw, source.fps, sink, offline, previous=previous)
+            if timings is not None:   # all layers: the held frames are not split
+                timings.skin += time.perf_counter() - t0
+                timings.frames += len(block.c)
             previous = (block.c[-1], block.jaw[-1])
         else:                 # real time: solver.iterations a frame
             play(head.rig, block.c, block.jaw, source.fps, progress=per_frame, timings=timings, sink=sink)

@@ -28,15 +28,14 @@ from faceforge.pipeline import Stage, register_stage
 
 def run_arkit(ctx):
     """Play the take in ``ctx.params['arkit_take']`` through the baked shapes' controls."""
-    import time
-
     import numpy as np
 
-    from faceforge.animation.check_stream import StreamChecker
-    from faceforge.animation.playback import Timings, play, warm_up
+    from faceforge.animation.playback import Timings
     from faceforge.animation.rig import BoundHead
-    from faceforge.animation.statics import SettleSettings, play_converged
+    from faceforge.animation.statics import SettleSettings
     from faceforge.blendshapes.curves import read_weights
+    from faceforge.blendshapes.weights_take import play_weights
+    from faceforge.exceptions import StageError
     from faceforge.io.frame_stream import FrameNpzWriter, open_frames
     from faceforge.io.stagefiles import load_npz, save_json
     from faceforge.pipeline.mapping import stage_mapping
@@ -47,8 +46,6 @@ def run_arkit(ctx):
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, _ = stage_mapping(ctx)
     if [str(c) for c in baked["controls"]] != list(head.controls):
-        from faceforge.exceptions import StageError
-
         raise StageError("the bake's controls are not this head's; rerun `faceforge bake`", ctx.input("bake"))
     index = {str(n): i for i, n in enumerate(baked["names"])}
     made = np.asarray(baked["made"], dtype=bool)
@@ -56,82 +53,25 @@ def run_arkit(ctx):
     ignored = [n for j, n in enumerate(names) if j not in cols and np.any(weights[:, j] > 0)]
     if ignored:
         ctx.log(f"shapes not made on this head (their weights are ignored): {', '.join(ignored)}")
-    rows = [index[names[j]] for j in cols]
     ctx.log(f"{len(weights)} frames at {fps:g} fps, {len(cols)} shapes")
     timings = Timings()
-    lids = head.eyelids(ctx.config)
-    gaze = baked["gaze"][rows] if "gaze" in baked else None
-    eyes = None
-    if gaze is not None and np.any(gaze):
-        from faceforge.blendshapes.eyes import eye_pieces
-
-        eyes = eye_pieces(head.rest, head.faces, head.landmarks)
-    checker = StreamChecker(head.rest, head.faces, len(weights))
-    offline, previous = (SettleSettings.from_config(ctx.config) if ctx.config.get("animate.quality") == "offline"
-                         else None), None
+    offline = SettleSettings.from_config(ctx.config) if ctx.config.get("animate.quality") == "offline" else None
     bar = ctx.progress(None, total=len(weights), desc="frames")
-
-    def per_frame(frames, **_):   # one progress bar over the blocks
-        for i in frames:
-            yield i
-            bar.update(1)
-
     with FrameNpzWriter(ctx.out_dir / "animation.npz", len(weights), len(head.user_index)) as writer:
-        for start in range(0, len(weights), BLOCK):   # the frames a block at a time (issue 28)
-            w = weights[start:start + BLOCK, cols]
-            c, jaw = _arkit_controls(w, baked, rows, mapping, head)
-            lid_faps = w @ baked["lids"][rows]
-            gazes = None if eyes is None else w @ gaze
-
-            def sink(at, frames, lid_faps=lid_faps, gazes=gazes):
-                if lids is not None:
-                    frames = lids.apply(frames, lid_faps[at:at + len(frames)])
-                if gazes is not None:
-                    from faceforge.blendshapes.bake import apply_gaze
-
-                    frames = apply_gaze(frames, gazes[at:at + len(frames)], eyes)
-                checker.add(frames)
-                writer.write(head.to_user(frames))
-
-            if not start:
-                warm_up(head.rig, c, jaw, fps, ctx.log)
-            if offline is not None:   # animate.quality: offline, each frame converged as the bake's poses
-                t0 = time.perf_counter()
-                play_converged(head.rig, c, jaw, fps, sink, offline, previous=previous)
-                timings.skin += time.perf_counter() - t0   # all layers: the held frames are not split
-                timings.frames += len(c)
-                previous = (c[-1], jaw[-1])
-            else:
-                play(head.rig, c, jaw, fps, progress=per_frame, timings=timings, sink=sink)
-            writer.spool("contractions", c)
-            writer.spool("jaw", jaw)
+        try:
+            checker = play_weights(head, weights[:, cols], fps, baked, [index[names[j]] for j in cols], mapping,
+                                   writer, lids=head.eyelids(ctx.config), timings=timings, offline=offline,
+                                   bar=bar, log=ctx.log)
+        finally:
+            bar.close()
         writer.close(fps=np.float64(fps), contractions=writer.SPOOLED, controls=np.asarray(head.controls, dtype=str),
                      jaw=writer.SPOOLED, weights=weights, names=np.asarray(names))
-    bar.close()
     jaws = open_frames(ctx.out_dir / "animation.npz", "jaw")   # a map: the few frames the skull test reads
     checks = checker.report(skull=lambda i: head.skull_at(np.asarray(jaws[i]) if i >= 0 else np.zeros(3)))
     save_json(ctx.out_dir / "report.json", {
         "take": str(take), "frames": len(weights), "fps": fps, "shapes": [names[j] for j in cols],
         "ignored": ignored, "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict()})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame; checks: {'ok' if checks.ok else checks.as_dict()}")
-
-
-#: frames simulated per block of an ARKit take
-BLOCK = 1024
-
-
-def _arkit_controls(w, baked, rows, mapping, head):
-    """Contractions (k, m) and jaw DOFs (k, 3) of the baked shapes ``rows`` mixed by the weights
-    ``w (k, len(rows))``, clipped to their ranges."""
-    import numpy as np
-
-    c = np.clip(w @ baked["contractions"][rows], 0.0, mapping.max_contraction)
-    jaw = w @ baked["jaw"][rows]
-    for k, dof in enumerate(("pitch", "yaw", "protrusion")):
-        lo, hi = mapping.jaw_limits.get(dof, (0.0, 0.0))
-        scale = head.levers.pitch if dof == "protrusion" else 1.0
-        jaw[:, k] = np.clip(jaw[:, k], lo * scale, hi * scale)
-    return c, jaw
 
 
 ARKIT = register_stage(Stage(
