@@ -79,7 +79,7 @@ ARKIT = register_stage(Stage(
     config_keys=("solver", "skin.stiffness", "skin.carry", "skin.join_insertions", "muscle", "animate", "template"),
     inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="2", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
+    version="3", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
 
 
 def write_curves(app, stage: str, curves: str | None, output: str | None) -> bool:
