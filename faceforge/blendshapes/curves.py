@@ -219,6 +219,25 @@ def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray) -
     return np.clip(out, 0.0, 1.0)
 
 
+def mix_shapes(neutral: np.ndarray, shapes: np.ndarray, weights: np.ndarray) -> np.ndarray:
+    """The blendshape mix ``neutral + sum_k w_k (shape_k - neutral)``: neutral (n, 3), shapes
+    (k, n, 3), weights (F, k) -> (F, n, 3)."""
+    neutral = np.asarray(neutral, float)
+    return neutral + np.einsum("fk,knd->fnd", np.asarray(weights, float), np.asarray(shapes, float) - neutral)
+
+
+def reproduction_error(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray,
+                       weights: np.ndarray) -> tuple[float, float]:
+    """How well the shapes mixed by ``weights (F, k)`` reproduce ``frames (F, n, 3)``: the RMS
+    error relative to the RMS motion from ``neutral`` (a fraction), and the largest vertex error
+    (skin units)."""
+    frames = np.asarray(frames, float)
+    diff = mix_shapes(neutral, shapes, weights) - frames
+    moved = frames - np.asarray(neutral, float)
+    rel = float(np.sqrt(np.mean(diff ** 2)) / max(np.sqrt(np.mean(moved ** 2)), 1e-30))
+    return rel, float(np.linalg.norm(diff, axis=-1).max())
+
+
 def write_weights(path, names, weights: np.ndarray, fps: float) -> Path:
     """Write ``weights (F, k)`` of ``names`` as a Live Link Face CSV (``.csv``: timecode at
     ``fps``, BlendShapeCount, one column per ARKit name, all 52 in ARKit's order, absent ones 0,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from faceforge.blendshapes.arkit import ARKIT_NAMES, load_arkit_mapping, default_mapping_path, mirror_name
-from faceforge.blendshapes.curves import LIVE_LINK_EXTRA, read_weights, solve_weights, write_weights
+from faceforge.blendshapes.curves import LIVE_LINK_EXTRA, mix_shapes, read_weights, reproduction_error, solve_weights, write_weights
 from faceforge.exceptions import FapError, TemplateError
 
 LIVE_LINK_HEADER = ("Timecode,BlendShapeCount," + ",".join(n[0].upper() + n[1:] for n in ARKIT_NAMES)
@@ -79,11 +79,14 @@ def test_solve_weights_recovers_mixes_within_bounds():
     shapes = neutral + rng.normal(size=(4, 50, 3))
     shapes[3] = neutral                                   # a shape not made: zero delta, weight 0
     truth = np.array([[0.0, 0.5, 1.0, 0.0], [0.2, 0.0, 0.7, 0.0]])
-    frames = neutral + np.einsum("fk,knd->fnd", truth, shapes - neutral)
+    frames = mix_shapes(neutral, shapes, truth)
     assert np.allclose(solve_weights(frames, neutral, shapes), truth, atol=1e-9)
     over = neutral + 3.0 * (shapes[0] - neutral)          # beyond full weight: clipped to 1
     w = solve_weights(over[None], neutral, shapes)
     assert w[0, 0] == pytest.approx(1.0) and np.all((w >= 0) & (w <= 1))
+    assert reproduction_error(frames, neutral, shapes, truth) == pytest.approx((0.0, 0.0), abs=1e-12)
+    rel, peak = reproduction_error(over[None], neutral, shapes, np.eye(4)[:1])   # 3x a shape, mixed at 1: 2/3 missing
+    assert rel == pytest.approx(2 / 3) and peak == pytest.approx(2 * np.linalg.norm(shapes[0] - neutral, axis=1).max())
 
 
 def test_the_template_covers_all_52_and_mirrors():

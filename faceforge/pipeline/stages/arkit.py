@@ -91,7 +91,7 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
 
     import numpy as np
 
-    from faceforge.blendshapes.curves import solve_weights, write_weights
+    from faceforge.blendshapes.curves import reproduction_error, solve_weights, write_weights
     from faceforge.io.stagefiles import load_npz
     from faceforge.pipeline.stages.bake import bake_params, export_shapes
 
@@ -103,10 +103,7 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
     shapes = baked["shapes"][made]
     frames, fps = anim["frames"], float(anim["fps"])
     w = solve_weights(frames, baked["neutral"], shapes)
-    mixed = baked["neutral"] + np.einsum("fk,knd->fnd", w, shapes - baked["neutral"])
-    moved = frames - baked["neutral"]
-    err = float(np.sqrt(np.mean((mixed - frames) ** 2)) / max(np.sqrt(np.mean(moved ** 2)), 1e-30))
-    peak = float(np.linalg.norm(mixed - frames, axis=2).max())
+    err, peak = reproduction_error(frames, baked["neutral"], shapes, w)
     app.log(f"animate: curves: {len(names)} shapes x {len(frames)} frames; the mixed shapes reproduce the "
             f"simulated frames to {err:.1%} RMS of the motion (largest vertex error {peak:.4g} units)")
     report = app.workspace.stage_dir(stage) / "report.json"
