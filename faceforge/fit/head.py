@@ -181,12 +181,7 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     without it the muscle map points are morphed only and there is no refit. ``mirror``
     (:class:`faceforge.fit.symmetry.Mirror`, for a mirror-symmetric skin): the rig is made
     symmetric about it before the bone is cleared off the skin.
-
-    Length (124 lines): the steps of §7 in the order of the module docstring, each a call; left
-    as it is (issue 24).
     """
-    from faceforge.fit import muscles as fit_muscles
-
     skin_lm = {f: np.asarray(p, dtype=np.float64) for f, p in zip(skin_ids, skin_points)}
     scale_mm = fit_tissue.units_per_mm(skin_lm)
     pairs = skull_targets(template.landmarks, skin, skin_ids, skin_points,
@@ -204,33 +199,14 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
             "enhancement_landmarks": int(len(sk.sources) - sk.n_landmarks - len(pairs.anchors)),
             "covered_landmarks": [],
             "refit": False}
-    mouth = None
-    if settings.mouth_follows_lips:
-        from faceforge.fit.mouth import mouth_field
-
-        names = list(template.landmarks)
-        placed = warp(np.array([template.landmarks[f] for f in names], dtype=np.float64).reshape(-1, 3))
-        mouth = mouth_field(dict(zip(names, placed)), skin_lm)
-        if mouth is not None:
-            info["mouth_shift_max_rel"] = float(np.linalg.norm(mouth.shifts, axis=1).max() / skin.diagonal)
-
+    mouth = _mouth_shift(template, warp, skin_lm, skin.diagonal, info) if settings.mouth_follows_lips else None
     if build_muscles is not None:
         muscles = build_muscles((skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf), warp, mouth)
         if settings.refit and muscles:
-            diag = float(np.linalg.norm(np.ptp(skull_fit, axis=0)))
-            fitted = warp(pairs.source)
-            rf = fit_muscles.refit_pairs(fitted, skin, fit_muscles.vertical_axis(skull_fit[:len(cv)]),
-                                         [(v, f) for _, v, f in muscles], settings.muscle_gap_mm * scale_mm,
-                                         skin.diagonal, 0.05 * diag)
-            g2 = fit_muscles.refit_rbf(rf, fitted, sk.reached[sk.n_landmarks:], sk.epsilon)
-            info["covered_landmarks"] = [f for f, c in zip(pairs.fdps, rf.covered) if c]
+            g2, refit_targets = _refit(skin, settings, pairs, sk, scale_mm, skull_fit, len(cv), muscles, info)
             if g2 is not None:
                 warp = Warp(warp.similarity, warp.rbfs + [g2])
-                skull_fit = g2(skull_fit)
-                muscles = [(n, g2(v), f) for n, v, f in muscles]
-                targets = rf.skull_targets
-                info["refit"] = True
-                info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
+                skull_fit, muscles, targets = g2(skull_fit), _moved(muscles, [g2]), refit_targets
     partners = None
     if mirror is not None:   # a symmetric skin gets a symmetric rig
         from faceforge.fit.symmetry import bone_partners, symmetrize_bones
@@ -240,19 +216,8 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     # 6a. a modelled eye socket is hollow (fit_orbits): bone inside it moves out along rays from
     # the socket's centre, by a one-to-one map that cannot fold the orbital walls
     if settings.skin_clearance_mm > 0 and settings.orbit_hollow:
-        from faceforge.fit.orbits import find_orbit_hollows, fit_hollow
-
-        hollows, shift = [], 0.0
-        for h in find_orbit_hollows(skin, skin_lm, settings.skin_clearance_mm * scale_mm, settings.orbit_blend):
-            h = fit_hollow(h, skull_fit, skull_f)
-            if h.lam >= 1.0:
-                continue
-            moved = h(skull_fit)
-            shift = max(shift, float(np.linalg.norm(moved - skull_fit, axis=1).max()))
-            skull_fit = moved
-            muscles = [(n, h(v), f) for n, v, f in muscles]
-            targets = h(targets)
-            hollows.append(h)
+        hollows, skull_fit, shift = _orbit_hollows(skin, skin_lm, settings, scale_mm, skull_fit, skull_f)
+        muscles, targets = _moved(muscles, hollows), _through(hollows, targets)
         warp = Warp(warp.similarity, warp.rbfs + hollows)
         info["orbit_hollows"] = len(hollows)
         info["orbit_clearance"] = [h.clearance for h in hollows]
@@ -268,26 +233,9 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     # 6b. bone that still swallows skin gives way locally (fit_clearance); the same fields move
     # the muscles, landmarks and axes, so everything lying on the bone stays on it
     if settings.skin_clearance_mm > 0 and settings.clearance_rounds > 0:
-        from faceforge.fit.clearance import clearance_fields
-
-        used = np.unique(skin.faces)
-        own = skin.vertices[used[used < skin.n_real]] if skin.n_real >= 0 else skin.vertices[used]
-        if partners is not None:
-            own = np.vstack([own, mirror(own)])
-        # a symmetric rig's fields carry their mirror images (the bone stays symmetric); skin
-        # they cannot clear (a midline point inside a bony septum whose walls face sideways:
-        # mirrored pushes cancel there: 1 MakeHuman nose vertex by 0.05 mm) gets plain fields
-        fields = []
-        for sym in ((True, False) if partners is not None else (False,)):
-            more = clearance_fields([(skull_fit[:len(cv)], cf), (skull_fit[len(cv):], mf)], own,
-                                    settings.skin_clearance_mm * scale_mm,
-                                    settings.clearance_radius * skin.diagonal, settings.clearance_rounds,
-                                    mirror=mirror if sym else None)
-            for g in more:
-                skull_fit = g(skull_fit)
-                muscles = [(n, g(v), f) for n, v, f in muscles]
-                targets = g(targets)
-            fields += more
+        fields, skull_fit = _clearance(skin, settings, scale_mm, skull_fit, len(cv), cf, mf,
+                                       mirror if partners is not None else None)
+        muscles, targets = _moved(muscles, fields), _through(fields, targets)
         warp = Warp(warp.similarity, warp.rbfs + fields)
         info["clearance_fields"] = len(fields)
         info["clearance_points"] = int(sum(len(g.centres) for g in fields))
@@ -298,17 +246,14 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
     fitted_lm = {f: warp(np.asarray(p, dtype=np.float64)[None])[0] for f, p in template.landmarks.items()}
     enhancement = sk.reached[sk.n_landmarks + len(pairs.anchors):]
     later = warp.rbfs[len(sk.warp.rbfs):]   # the refit, orbit and clearance maps carry them on
-    for g in later:
-        enhancement = g(enhancement)
+    enhancement = _through(later, enhancement)
     reached = np.array([fitted_lm[f] for f in pairs.fdps])
 
     def muscle_map(name, points):   # the skull's map, the mouth's shift (muscles only), the rest
         out = sk.warp(points)
         if mouth is not None:
             out = mouth(out, template.muscle_weights.get(name))
-        for g in later:
-            out = g(out)
-        return out
+        return _through(later, out)
 
     result = FitResult(skull_fit[:len(cv)], skull_fit[len(cv):], fitted_lm, pairs.fdps, targets, reached, jaw,
                        {n: muscle_map(n, p) for n, p in template.muscle_points.items()}, muscles, warp, info,
@@ -318,3 +263,93 @@ def fit_head(template: FitTemplate, skin: SkinSurface, skin_ids, skin_points,
 
         result = symmetrize_fit(result, mirror, point_partners(template.muscle_points))
     return result
+
+
+def _through(maps, points: np.ndarray) -> np.ndarray:
+    """``points (k, 3)`` carried through each map of ``maps`` in turn."""
+    for g in maps:
+        points = g(points)
+    return points
+
+
+def _moved(muscles: list, maps) -> list:
+    """Muscles ``[(name, vertices (v, 3), faces)]`` carried through ``maps`` in turn."""
+    return [(n, _through(maps, v), f) for n, v, f in muscles]
+
+
+def _mouth_shift(template: FitTemplate, warp, skin_lm: dict, diagonal: float, info: dict):
+    """The mouth's shift (:func:`faceforge.fit.mouth.mouth_field`): the template's lip landmarks,
+    placed by the skull's ``warp``, onto the skin's ``skin_lm``; None when there is nothing to
+    move. Records ``mouth_shift_max_rel`` (of the skin's ``diagonal``) in ``info``."""
+    from faceforge.fit.mouth import mouth_field
+
+    names = list(template.landmarks)
+    placed = warp(np.array([template.landmarks[f] for f in names], dtype=np.float64).reshape(-1, 3))
+    mouth = mouth_field(dict(zip(names, placed)), skin_lm)
+    if mouth is not None:
+        info["mouth_shift_max_rel"] = float(np.linalg.norm(mouth.shifts, axis=1).max() / diagonal)
+    return mouth
+
+
+def _refit(skin: SkinSurface, settings: FitSettings, pairs, sk, scale_mm: float, skull_fit: np.ndarray,
+           n_cranium: int, muscles: list, info: dict):
+    """Step 5, the refit: skull landmarks the muscles cover move to keep the muscles' gap under the
+    skin (:mod:`faceforge.fit.muscles`). Returns the refit's RBF (None when nothing moves) and the
+    skull targets it meets; records ``covered_landmarks``, ``refit`` and ``refit_moved`` in
+    ``info``."""
+    from faceforge.fit import muscles as fit_muscles
+
+    diag = float(np.linalg.norm(np.ptp(skull_fit, axis=0)))
+    fitted = sk.warp(pairs.source)
+    rf = fit_muscles.refit_pairs(fitted, skin, fit_muscles.vertical_axis(skull_fit[:n_cranium]),
+                                 [(v, f) for _, v, f in muscles], settings.muscle_gap_mm * scale_mm,
+                                 skin.diagonal, 0.05 * diag)
+    g2 = fit_muscles.refit_rbf(rf, fitted, sk.reached[sk.n_landmarks:], sk.epsilon)
+    info["covered_landmarks"] = [f for f, c in zip(pairs.fdps, rf.covered) if c]
+    if g2 is not None:
+        info["refit"] = True
+        info["refit_moved"] = [f for f, d in zip(pairs.fdps, rf.delta) if np.any(d)]
+    return g2, rf.skull_targets
+
+
+def _orbit_hollows(skin: SkinSurface, skin_lm: dict, settings: FitSettings, scale_mm: float,
+                   skull_fit: np.ndarray, skull_f: np.ndarray):
+    """Step 6a: the hollow of each modelled eye socket (:mod:`faceforge.fit.orbits`), fitted in
+    turn on the bone as the ones before left it. Returns (the hollows' maps, the moved bone
+    ``(v, 3)``, the largest shift in skin units)."""
+    from faceforge.fit.orbits import find_orbit_hollows, fit_hollow
+
+    hollows, shift = [], 0.0
+    for h in find_orbit_hollows(skin, skin_lm, settings.skin_clearance_mm * scale_mm, settings.orbit_blend):
+        h = fit_hollow(h, skull_fit, skull_f)
+        if h.lam >= 1.0:
+            continue
+        moved = h(skull_fit)
+        shift = max(shift, float(np.linalg.norm(moved - skull_fit, axis=1).max()))
+        skull_fit = moved
+        hollows.append(h)
+    return hollows, skull_fit, shift
+
+
+def _clearance(skin: SkinSurface, settings: FitSettings, scale_mm: float, skull_fit: np.ndarray,
+               n_cranium: int, cf: np.ndarray, mf: np.ndarray, mirror=None):
+    """Step 6b: bone that still swallows skin gives way locally (:mod:`faceforge.fit.clearance`).
+    With ``mirror`` (a symmetric rig) the fields carry their mirror images first (the bone stays
+    symmetric), then plain fields clear the skin those cannot (a midline point inside a bony
+    septum whose walls face sideways: mirrored pushes cancel there; 1 MakeHuman nose vertex by
+    0.05 mm). Returns (the fields, the moved bone ``(v, 3)``)."""
+    from faceforge.fit.clearance import clearance_fields
+
+    used = np.unique(skin.faces)
+    own = skin.vertices[used[used < skin.n_real]] if skin.n_real >= 0 else skin.vertices[used]
+    if mirror is not None:
+        own = np.vstack([own, mirror(own)])
+    fields = []
+    for sym in ((True, False) if mirror is not None else (False,)):
+        more = clearance_fields([(skull_fit[:n_cranium], cf), (skull_fit[n_cranium:], mf)], own,
+                                settings.skin_clearance_mm * scale_mm,
+                                settings.clearance_radius * skin.diagonal, settings.clearance_rounds,
+                                mirror=mirror if sym else None)
+        skull_fit = _through(more, skull_fit)
+        fields += more
+    return fields, skull_fit
