@@ -52,6 +52,10 @@ EXPRESSION_AUS = {
 }
 
 
+#: the expressions in MPEG-4's order
+EXPRESSIONS_ORDER = tuple(EXPRESSION_AUS)
+
+
 def au_scores(blendshapes: dict) -> dict:
     """{AU: mean of its ARKit scores} from ``blendshapes {name: score}``."""
     return {au: float(np.mean([blendshapes[n] for n in names])) for au, names in AU_BLENDSHAPES.items()}
