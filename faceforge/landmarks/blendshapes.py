@@ -1,0 +1,135 @@
+"""A face-reading check: MediaPipe's 52 ARKit-style blendshape scores of a grey render, and
+which of the six basic expressions they read as.
+
+The Face Landmarker model we already ship (:func:`faceforge.landmarks.detector.model_path`)
+holds a blendshape head (``face_blendshapes.tflite``): with ``output_face_blendshapes`` it
+scores the 52 ARKit names (``browInnerUp``, ``jawOpen``, ``mouthSmileLeft``, ...) in [0, 1]
+from the picture alone. The model has never seen this project's meshes, so it is an
+independent reader of what a render shows.
+
+Classification (:func:`expression_scores`, :func:`recognised`): each expression is its FACS
+prototype (EXPRESSION_AUS: joy 6+12, sadness 1+4+15, anger 4+5+7+23, fear 1+2+4+5+20+26,
+disgust 9+15+16, surprise 1+2+5+26); each action unit is the mean of its ARKit scores
+(AU_BLENDSHAPES; a pair's left and right); an expression's score is the mean over its AUs of
+(the render's AU score - the neutral render's AU score); the render reads as the expression
+whose score is highest of the six.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from faceforge.landmarks.raster import View, render
+
+#: FACS action unit -> ARKit blendshape names (MediaPipe spells a side ``...Left``/``...Right``,
+#: the subject's own side)
+AU_BLENDSHAPES = {
+    1: ("browInnerUp",),
+    2: ("browOuterUpLeft", "browOuterUpRight"),
+    4: ("browDownLeft", "browDownRight"),
+    5: ("eyeWideLeft", "eyeWideRight"),
+    6: ("cheekSquintLeft", "cheekSquintRight"),
+    7: ("eyeSquintLeft", "eyeSquintRight"),
+    9: ("noseSneerLeft", "noseSneerRight"),
+    12: ("mouthSmileLeft", "mouthSmileRight"),
+    15: ("mouthFrownLeft", "mouthFrownRight"),
+    16: ("mouthLowerDownLeft", "mouthLowerDownRight"),
+    20: ("mouthStretchLeft", "mouthStretchRight"),
+    23: ("mouthPressLeft", "mouthPressRight"),
+    26: ("jawOpen",),
+}
+
+#: the six basic expressions' FACS prototypes (issue 25), in MPEG-4's order
+EXPRESSION_AUS = {
+    "joy": (6, 12),
+    "sadness": (1, 4, 15),
+    "anger": (4, 5, 7, 23),
+    "fear": (1, 2, 4, 5, 20, 26),
+    "disgust": (9, 15, 16),
+    "surprise": (1, 2, 5, 26),
+}
+
+
+#: the expressions in MPEG-4's order
+EXPRESSIONS_ORDER = tuple(EXPRESSION_AUS)
+
+
+def au_scores(blendshapes: dict) -> dict:
+    """{AU: mean of its ARKit scores} from ``blendshapes {name: score}``."""
+    return {au: float(np.mean([blendshapes[n] for n in names])) for au, names in AU_BLENDSHAPES.items()}
+
+
+def expression_scores(blendshapes: dict, neutral: dict) -> dict:
+    """{expression: mean over its AUs of (AU score - neutral AU score)}, both dicts
+    ``{ARKit name: score in [0, 1]}``."""
+    au, au0 = au_scores(blendshapes), au_scores(neutral)
+    return {name: float(np.mean([au[a] - au0[a] for a in aus])) for name, aus in EXPRESSION_AUS.items()}
+
+
+def recognised(scores: dict) -> str:
+    """The expression with the highest score (:func:`expression_scores`)."""
+    return max(scores, key=scores.get)
+
+
+class BlendshapeScorer:
+    """MediaPipe's Face Landmarker in IMAGE mode with its blendshape head: ``score(rgb)`` ->
+    ``{ARKit name: score}`` (52 names, ``_neutral`` included) or None when no face is found."""
+
+    def __init__(self, min_confidence: float = 0.3):
+        from faceforge.landmarks.detector import mediapipe_modules, model_path, quiet_stderr
+
+        for key, value in (("GLOG_minloglevel", "2"), ("TF_CPP_MIN_LOG_LEVEL", "3")):
+            os.environ.setdefault(key, value)
+        landmarker, base, self._image, mode = mediapipe_modules()
+        opts = landmarker.FaceLandmarkerOptions(
+            base_options=base.BaseOptions(model_asset_path=str(model_path())),
+            running_mode=mode.VisionTaskRunningMode.IMAGE, num_faces=1,
+            min_face_detection_confidence=min_confidence, min_face_presence_confidence=min_confidence,
+            output_face_blendshapes=True)
+        self._quiet = quiet_stderr
+        with quiet_stderr():
+            self._landmarker = landmarker.FaceLandmarker.create_from_options(opts)
+
+    def score(self, rgb: np.ndarray) -> dict | None:
+        """Blendshape scores of the face in ``rgb (h, w, 3) uint8``, or None."""
+        image = self._image.Image(image_format=self._image.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
+        with self._quiet():
+            result = self._landmarker.detect(image)
+        if not result.face_blendshapes:
+            return None
+        return {c.category_name: float(c.score) for c in result.face_blendshapes[0]}
+
+    def close(self) -> None:
+        self._landmarker.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def face_view(region_vertices: np.ndarray, yaw_deg: float = 0.0, size: int = 512,
+              share: float = 0.72) -> View:
+    """An orthographic camera on a face in the project frame (+Y up, the face looking along +Z):
+    centred on ``region_vertices (k, 3)`` (the face's box), its height ``share`` of a ``size``
+    pixel picture, turned ``yaw_deg`` degrees about +Y (positive: the subject's left cheek
+    turns towards the camera)."""
+    v = np.asarray(region_vertices, dtype=np.float64)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    t = np.radians(yaw_deg)
+    direction = np.array([-np.sin(t), 0.0, -np.cos(t)])
+    extent = max(hi[1] - lo[1], hi[0] - lo[0])
+    return View(direction, np.array([0.0, 1.0, 0.0]), centre, share * size / extent, size)
+
+
+def grey_render(vertices: np.ndarray, faces: np.ndarray, view: View) -> np.ndarray:
+    """(size, size, 3) uint8: the mesh smooth-shaded grey on black (:func:`faceforge.landmarks.
+    raster.render`, vertex normals, light above the camera)."""
+    from faceforge.geometry.triangles import vertex_normals
+
+    faces = np.asarray(faces, dtype=np.int64)
+    return render(np.asarray(vertices, dtype=np.float64), faces, vertex_normals(vertices, faces), view).rgb()
