@@ -51,5 +51,4 @@ def test_a_raised_cheek_held_back_under_a_driven_lower_lid_is_not_sheared(head):
         r = np.linalg.norm((v - e.centre + 1.0 * e.gap * e.axes[1]) / e.half, axis=1)
         drag += 0.35 * e.gap * np.exp(-r * r)[:, None] * e.axes[1]
     worst, own = held_shear(v, f, lids, drag, faps([{21: 100, 22: 100}]))
-    print(name, worst, own)
     assert worst < 0.45, (worst, own)
