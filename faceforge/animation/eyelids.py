@@ -32,7 +32,7 @@ of the head is never in reach.
 **A driven lid holds its skin.** MPEG-4's lid FAPs give the lid FDP's displacement from the
 neutral face, so in a frame where an eye's lid FAPs move, the skin the lids own first gives back
 its simulated vertical drift (:func:`held_share`: all of it between the margins and at the
-corners, fading out above and below with the lids' fades): the frontalis of a surprised face
+corners, fading out above and below over more than the lids' fades): the frontalis of a surprised face
 dragged the upper margin up hardest under the brow's middle, and the lid's own raise laid over
 that peaked and skewed the opening.
 
@@ -77,7 +77,14 @@ EYEBALL_RADIUS = 0.8
 
 #: how far beyond each eye corner (fraction of half the corner distance) a driven lid's hold on
 #: the skin's drift fades out (:func:`held_share`)
-HOLD_BEYOND = 0.3
+HOLD_BEYOND = 0.6
+
+#: how far above the upper margin and below the lower one a driven lid's hold fades out, in the
+#: lid's reach (``reach x gap``): longer than the lids' own fades, so that the drift it takes back
+#: (2-3 mm where a cheek raiser or the frontalis lifts the skin round the eye) changes by less than
+#: half its height per reach; over one reach the held skin was sheared by most of its height and
+#: creased the lower lid and the canthi (joy's 6 folded edges on MakeHuman, fear's 2, anger's 2)
+HOLD_ABOVE, HOLD_BELOW = 1.5, 2.0
 
 
 @dataclass(frozen=True)
@@ -179,10 +186,10 @@ class LidField:
     vertices in reach; the shares are (k,) >= 0 at those vertices (1 at the lid FDPs);
     ``reach``: the fade's height above the upper margin, in rest openings (half of it below the
     lower margin). ``hold (k,)`` in [0, 1]: how much of the skin's simulated vertical drift the
-    driven lids take back (:func:`held_share`): 1 between the margins, the shares' fades above
-    and below them, without the taper along the lid, so the corners (the canthi, tied to the
-    bone) are held as well, fading out beyond them over :data:`HOLD_BEYOND` of ``half``; None:
-    the shares' sum."""
+    driven lids take back (:func:`held_share`): 1 between the margins, fading out :data:`HOLD_ABOVE`
+    and :data:`HOLD_BELOW` reaches above and below them, without the taper along the lid, so the
+    corners (the canthi, tied to the bone) are held as well, fading out beyond them over
+    :data:`HOLD_BEYOND` of ``half``; None: the shares' sum."""
 
     eye: Eye
     index: np.ndarray
@@ -215,12 +222,14 @@ def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5
     low = np.where(x[:, 1] <= hl, below, np.where(x[:, 1] >= hu, 0.0, 1.0 - t))
     s_up, s_low = eye.taper([eye.upper_u, eye.lower_u])
     across = np.clip(((1.0 + HOLD_BEYOND) * eye.half - np.abs(x[:, 0])) / (HOLD_BEYOND * eye.half), 0.0, 1.0)
-    # the hold fades over the upper lid's reach below the lower margin as well: a cheek raised under
-    # the eye (fear's zygomaticus) drifts the lower lid up as far as the half-reach fade is high,
-    # and taking that back within it sheared the skin there by its own height (folds at the canthi)
-    below_hold = np.clip(1.0 - (hl - x[:, 1]) / (reach * g), 0.0, 1.0)
+    # the hold fades farther than the lids' own moves (HOLD_ABOVE, HOLD_BELOW): a cheek raised under
+    # the eye (joy's, fear's) drifts the lower lid up 2-3 mm, and taking that back within the lid's
+    # own fade sheared the skin there by its own height (folds under the lower lid and at the canthi)
+    below_hold = np.clip(1.0 - (hl - x[:, 1]) / (HOLD_BELOW * reach * g), 0.0, 1.0)
+    above_hold = np.clip(1.0 - (x[:, 1] - hu) / (HOLD_ABOVE * reach * g), 0.0, 1.0)
+    up_hold = np.where(x[:, 1] >= hu, above_hold, np.where(x[:, 1] <= hl, 0.0, t))
     low_hold = np.where(x[:, 1] <= hl, below_hold, np.where(x[:, 1] >= hu, 0.0, 1.0 - t))
-    hold = np.clip(up + low_hold, 0.0, 1.0) * across * behind
+    hold = np.clip(up_hold + low_hold, 0.0, 1.0) * across * behind
     up, low = up * s * behind / s_up, low * s * behind / s_low
     index = np.flatnonzero((up > 0.0) | (low > 0.0) | (hold > 0.0))
     return LidField(eye, index, up[index], low[index], float(reach), hold[index])
