@@ -39,11 +39,11 @@ def _project(x, w, blocks, iterations, xpbd,
 
     ``d_runs`` / ``b_runs`` / ``a_runs`` (runs of independent distance / bending / area
     constraints, empty unless colouring in a PBD mode) select the vectorised sweeps
-    (``d_coef_t (4, m)``: ``d_coef`` transposed; ``d_wt (m, 3)``: the XPBD sweep's weights,
+    (``d_coef_t (3, m)``: ``d_coef`` transposed; ``d_wt (m, 3)``: the XPBD sweep's weights,
     ``distance.move_weights``); ``buf`` is their scratch, ``b_w (4, m)`` /
     ``a_w (3, m)`` their per-constraint inverse masses and ``b_rest_t (2, m)`` the rest
-    cosines and sines. ``d_coef (m, 4)``: the PBD distance data (see
-    ``distance.pbd_coefficients``); ``q_stretch (8, m_bending)``: the stretches fused into
+    cosines and sines. ``d_coef (m, 3)``: the PBD distance data (see
+    ``distance.pbd_coefficients``); ``q_stretch (6, m_bending)``: the stretches fused into
     the quads of ``QUAD`` blocks (transposed ``quad.stretch_table``); ``q_area
     (3, m_bending)``: the area constraints fused into the quads of ``QUAD_AREA`` blocks
     (transposed ``quad.area_table``); ``q_area_stop (runs - 1,)``: per bending run, the end

@@ -104,13 +104,8 @@ class ModelBuilder:
             self._blocks.append([kind, start, start + m])
 
     # -- constraints -----------------------------------------------------------------
-    def add_distance(self, pairs, stiffness, rest_length=None, weight=None, compression=1.0) -> None:
+    def add_distance(self, pairs, stiffness, rest_length=None, weight=None) -> None:
         """Distance constraints on ``pairs (m, 2)``; ``rest_length (m,)`` defaults to current.
-
-        ``compression`` (scalar or ``(m,)`` in [0, 1]): the fraction of the correction applied
-        while a constraint is shorter than its rest length (1: compression resisted as
-        much as tension; below 1: a softer compression, as of a sheet that buckles rather
-        than carries a compressive load). PBD modes; the XPBD sweep ignores it.
 
         ``weight (m, 2) | (2,)`` (optional, >= 0, not both 0): the inverse masses by which a
         constraint shares its correction between its ends, instead of the particles' own. A
@@ -131,10 +126,7 @@ class ModelBuilder:
                 raise ValueError(f"weight must have shape (2,) or ({len(idx)}, 2), got {np.shape(weight)}")
             if not np.all(np.isfinite(wt)) or np.any(wt < 0) or np.any(wt.sum(axis=1) <= 0):
                 raise ValueError("weight must be finite, >= 0 and not 0 at both ends")
-        comp = self._per("compression", compression, len(idx))
-        if np.any((comp < 0) | (comp > 1)):
-            raise ValueError("compression must lie in [0, 1] (a fraction of the correction)")
-        self._append(DISTANCE, len(idx), (idx, rest, self._stiffness(stiffness, len(idx)), wt, comp))
+        self._append(DISTANCE, len(idx), (idx, rest, self._stiffness(stiffness, len(idx)), wt))
 
     def add_bending(self, quads, stiffness, rest_angle=None) -> None:
         """Dihedral constraints on ``quads (m, 4)``: ``(p0, p1)`` shared edge, ``p2``/``p3`` opposite.
@@ -213,7 +205,6 @@ class ModelBuilder:
             distance_rest_length=self._cat(DISTANCE, 1, 0),
             distance_stiffness=self._cat(DISTANCE, 2, 0),
             distance_weight=self._cat(DISTANCE, 3, (0, 2)),
-            distance_compression=self._cat(DISTANCE, 4, 0),
             bending_indices=self._cat(BENDING, 0, (0, 4)).astype(i64),
             bending_rest_angle=self._cat(BENDING, 1, 0),
             bending_stiffness=self._cat(BENDING, 2, 0),

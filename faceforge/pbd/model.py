@@ -63,9 +63,7 @@ class Model:
       correction between its two ends (default: the particles' ``inv_mass``). An end of
       inverse mass 0 in the model never moves; given a weight here, it still takes its share
       of the denominator: a particle the caller moves itself, e.g. to a target, before each
-      iteration (the end of a tether: ``ModelBuilder.add_distance``); ``distance_compression
-      (m,) float64`` in [0, 1]: the fraction of the correction applied while a constraint is
-      compressed (default 1: as stiff in compression as in tension)
+      iteration (the end of a tether: ``ModelBuilder.add_distance``)
     * ``bending_indices (m, 4) int64`` (shared edge first), ``bending_rest_angle (m,)`` rad,
       ``bending_stiffness (m,)``
     * ``area_indices (m, 3) int64``, ``area_rest_area (m,)``, ``area_stiffness (m,)``
@@ -112,13 +110,10 @@ class Model:
     attachment_stiffness: np.ndarray
     blocks: np.ndarray
     distance_weight: np.ndarray | None = None
-    distance_compression: np.ndarray | None = None
 
     def __post_init__(self):
         if self.distance_weight is None:
             object.__setattr__(self, "distance_weight", self.inv_mass[self.distance_indices].reshape(-1, 2))
-        if self.distance_compression is None:
-            object.__setattr__(self, "distance_compression", np.ones(len(self.distance_indices)))
         for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, np.ndarray):

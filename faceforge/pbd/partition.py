@@ -268,7 +268,7 @@ def partitioned(model: Model, parts: int, mirror: np.ndarray | None = None):
     perm, rows, segment = split_blocks(model.blocks, groups, parts)
     m = model
     changes = {"blocks": rows}
-    for kind, names in ((DISTANCE, ("indices", "rest_length", "stiffness", "weight", "compression")),
+    for kind, names in ((DISTANCE, ("indices", "rest_length", "stiffness", "weight")),
                         (BENDING, ("indices", "rest_angle", "stiffness")),
                         (AREA, ("indices", "rest_area", "stiffness")),
                         (POSITION, ("indices", "rest_target", "stiffness")),

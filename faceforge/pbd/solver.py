@@ -232,7 +232,6 @@ class Solver:
         }
         self._runs = {kind: np.zeros(0, dtype=np.int64) for kind in ("distance", "bending", "area")}
         d_weight = m.distance_weight
-        self._d_comp = _own(m.distance_compression)
         for code, kind in ((DISTANCE, "distance"), (BENDING, "bending"), (AREA, "area")):
             idx, rest = self._arrays[kind]
             kk, c = self._k[kind]
@@ -243,7 +242,6 @@ class Solver:
                 idx, rest, kk, c = (np.ascontiguousarray(a[order]) for a in (idx, rest, kk, c))
                 if kind == "distance":
                     d_weight = d_weight[order]
-                    self._d_comp = np.ascontiguousarray(self._d_comp[order])
                 if kind in self._runs and s.stiffness_mode != "xpbd":
                     self._runs[kind] = runs
             self._arrays[kind] = (idx, rest, kk, c)
@@ -254,9 +252,9 @@ class Solver:
         XPBD sweep's weights, the fused quad tables (colouring in the PBD modes), the scratch
         buffers (one per part) and the part boundaries ``_seg`` ((partitions + 2,) int64)."""
         d_idx, d_rest, d_k, _ = self._arrays["distance"]
-        self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass, d_weight, self._d_comp)
+        self._d_coef = pbd_coefficients(d_idx, d_rest, d_k, m.inv_mass, d_weight)
         self._d_wt = move_weights(d_idx, m.inv_mass, d_weight)
-        self._q_stretch = np.zeros((8, m.bending_count))  # transposed: rows are vectors
+        self._q_stretch = np.zeros((6, m.bending_count))  # transposed: rows are vectors
         self._q_area = np.zeros((3, m.bending_count))
         # per bending run, the end of its quads with a fused area (all of them by default)
         self._q_area_stop = np.ascontiguousarray(self._runs["bending"][1:])

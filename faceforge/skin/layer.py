@@ -127,16 +127,12 @@ class SkinStiffness:
     #: position constraint holding each anchor particle q on its surface point
     #: (the paper binds q "through a position constraint" without a value)
     position: float = 1.0
-    #: beyond §8: the fraction of the stretch correction applied while an edge is shorter
-    #: than at rest (1: the paper's symmetric stretch constraint; real skin buckles rather
-    #: than carries a compressive load)
-    compression: float = 1.0
 
     @classmethod
     def from_config(cls, config) -> "SkinStiffness":
         """Read ``skin.stiffness.*`` from a validated config (``config.get(dotted)``)."""
         kw = {}
-        for key in ("stretching", "bending", "area", "anchor", "volume", "position", "compression"):
+        for key in ("stretching", "bending", "area", "anchor", "volume", "position"):
             value = config.get(f"skin.stiffness.{key}")
             if value is not None:  # position is optional (older configs)
                 kw[key] = float(value)
@@ -241,10 +237,9 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
         q = np.zeros(0, INT)
         slots = np.zeros(0, INT)
     if len(topo.edges):
-        builder.add_distance(first + topo.edges, stiffness.stretching, compression=stiffness.compression)
+        builder.add_distance(first + topo.edges, stiffness.stretching)
     if len(topo.cross_pairs):
-        builder.add_distance(first + topo.cross_pairs, stiffness.stretching,
-                             compression=stiffness.compression)
+        builder.add_distance(first + topo.cross_pairs, stiffness.stretching)
         builder.add_bending(first + topo.bending_quads, stiffness.bending)
     if len(topo.triangles):
         builder.add_area(first + topo.triangles, stiffness.area)

@@ -93,34 +93,6 @@ def test_batched_distance_sweep_matches_twin_and_the_sequential_sweep():
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
 
 
-def test_softer_compression_matches_twin_in_both_pbd_sweeps():
-    """``compression`` scales the correction of the pairs closer than their rest length only,
-    in the sequential and the vectorised sweep alike."""
-    from faceforge.pbd.colouring import colour_order
-    from faceforge.pbd.constraints._common import BATCH, BATCH_ROWS
-    v, f = sphere(2)
-    rng = np.random.default_rng(11)
-    x = v + rng.normal(scale=0.03, size=v.shape)
-    w = rng.uniform(0.2, 2.0, len(v))
-    e = edges(f)
-    order, runs = colour_order(e, len(v), np.array([[0, len(e)]]))
-    e = e[order]
-    r = init_distance(v, e)   # about half the pairs compressed by the noise
-    k = rng.uniform(0.1, 1.0, len(e))
-    comp = rng.uniform(0.0, 1.0, len(e))
-    coef = pbd_coefficients(e, r, k, w, None, comp)
-    want, _ = twins.distance(x, w, e, r, k, compression=comp)
-    got = x.copy()
-    _project_distance_pbd(got, e, coef, 0, len(e))
-    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-13)
-    batched = x.copy()
-    _project_distance_batched(batched, e, np.ascontiguousarray(coef.T), runs,
-                              np.zeros(BATCH * BATCH_ROWS), 0, len(e))
-    np.testing.assert_allclose(batched, want, rtol=1e-12, atol=1e-13)
-    stiff, _ = twins.distance(x, w, e, r, k)
-    assert np.abs(stiff - want).max() > 1e-3   # the option changes the sweep
-
-
 @pytest.mark.parametrize("xpbd", [False, True])
 def test_bending_matches_twin(mesh, xpbd):
     rest, x, w, f = mesh

@@ -28,17 +28,13 @@ def test_match_finds_each_stretch_once_in_either_orientation():
                      [5.0, 0.9, 1.0], [6.0, 0.0, 0.0]])
     table = stretch_table(pairs, quads, match, coef)
     # shares follow the quad's particle order: pair (1, 0) -> share of p0 is its 2nd share
-    np.testing.assert_array_equal(table[0], [1.0, 0.2, 0.1, 2.0, 0.3, 0.4, 1.0, 1.0])
-    np.testing.assert_array_equal(table[1], [3.0, 0.6, 0.5, 1.0, 0.0, 0.0, 1.0, 1.0])
-    np.testing.assert_array_equal(table[2], [1.0, 0.0, 0.0, 5.0, 1.0, 0.9, 1.0, 1.0])
-    # a fourth column (the compression fraction) follows each matched stretch
-    soft = stretch_table(pairs, quads, match, np.c_[coef, np.arange(6) / 10.0])
-    np.testing.assert_array_equal(soft[:, 6:], [[0.0, 0.1], [0.2, 1.0], [1.0, 0.4]])
+    np.testing.assert_array_equal(table[0], [1.0, 0.2, 0.1, 2.0, 0.3, 0.4])
+    np.testing.assert_array_equal(table[1], [3.0, 0.6, 0.5, 1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(table[2], [1.0, 0.0, 0.0, 5.0, 1.0, 0.9])
 
 
-@pytest.mark.parametrize("soft", [False, True])  # a softer compression of the stretches
 @pytest.mark.parametrize("scale", [0.002, 0.2])  # small: Padé branch; large: atan2 fix-up
-def test_fused_sweep_is_stretch_stretch_bending_per_quad(scale, soft):
+def test_fused_sweep_is_stretch_stretch_bending_per_quad(scale):
     v, f = sphere(3)
     q = adjacent_quads(f)
     order, runs = colour_order(q, len(v), np.array([[0, 100], [100, len(q)]]))
@@ -51,8 +47,7 @@ def test_fused_sweep_is_stretch_stretch_bending_per_quad(scale, soft):
     pairs[::2] = pairs[::2, ::-1]
     rest_d = init_distance(v, pairs) * 1.05
     k_d = rng.uniform(0.1, 1.0, len(pairs))
-    comp = rng.uniform(0.0, 1.0, len(pairs)) if soft else None
-    coef = pbd_coefficients(pairs, rest_d, k_d, w, None, comp)
+    coef = pbd_coefficients(pairs, rest_d, k_d, w)
     match = match_quad_stretches(pairs, q)
     assert (match >= 0).all()
     match[::7, 1] = -1  # some quads without a cross stretch
@@ -69,8 +64,7 @@ def test_fused_sweep_is_stretch_stretch_bending_per_quad(scale, soft):
         for hit in match[j]:
             if hit >= 0:
                 want, _ = twins.distance(want, w, pairs[hit:hit + 1], rest_d[hit:hit + 1],
-                                         k_d[hit:hit + 1],
-                                         compression=None if comp is None else comp[hit:hit + 1])
+                                         k_d[hit:hit + 1])
         want, _ = twins.bending(want, w, q[j:j + 1], rest_b[j:j + 1], k_b[j:j + 1])
     assert np.abs(got - x0).max() > 1e-4
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)

@@ -24,10 +24,9 @@ def _apply(x, w, ids, grads, value, k, c, lam):
     return s
 
 
-def distance(x, w, pairs, rest, k, c=None, lam=None, weight=None, compression=None):
+def distance(x, w, pairs, rest, k, c=None, lam=None, weight=None):
     """``weight (m, 2)``: the inverse masses each constraint shares its correction by (default
-    ``w``); an end with ``w`` 0 does not move. ``compression (m,)``: PBD only, the fraction of
-    the correction applied to a pair closer than its rest length."""
+    ``w``); an end with ``w`` 0 does not move."""
     x = x.copy()
     m = len(pairs)
     c = np.zeros(m) if c is None else c
@@ -38,8 +37,7 @@ def distance(x, w, pairs, rest, k, c=None, lam=None, weight=None, compression=No
         wa, wb = (w[a], w[b]) if weight is None else weight[j]
         if n == 0.0 or wa + wb == 0.0:
             continue
-        kj = k[j] * (compression[j] if compression is not None and n < rest[j] else 1.0)
-        s = (-kj * (n - rest[j]) - c[j] * (wa + wb) * lam[j]) / ((wa + wb) * (1.0 + c[j]))
+        s = (-k[j] * (n - rest[j]) - c[j] * (wa + wb) * lam[j]) / ((wa + wb) * (1.0 + c[j]))
         lam[j] += s
         x[a] = x[a] + s * (wa if w[a] > 0 else 0.0) * d / n
         x[b] = x[b] - s * (wb if w[b] > 0 else 0.0) * d / n

@@ -85,36 +85,31 @@ def move_weights(indices, inv_mass, weight=None) -> np.ndarray:
     return np.ascontiguousarray(np.c_[np.where(w > 0.0, wt, 0.0), wt.sum(axis=1)])
 
 
-def pbd_coefficients(indices, rest_length, stiffness, inv_mass, weight=None,
-                     compression=None) -> np.ndarray:
-    """Per-constraint data of the PBD sweep ``_project_distance_pbd``, ``(m, 4) float64``.
+def pbd_coefficients(indices, rest_length, stiffness, inv_mass, weight=None) -> np.ndarray:
+    """Per-constraint data of the PBD sweep ``_project_distance_pbd``, ``(m, 3) float64``.
 
-    Rows ``(l0, k m0 / (w0 + w1), k m1 / (w0 + w1), s)``: the rest length and each end's share
+    Rows ``(l0, k m0 / (w0 + w1), k m1 / (w0 + w1))``: the rest length and each end's share
     of the correction, with ``w`` the constraint's weights (``weight (m, 2)``, default the
     particles' ``inv_mass``) and ``m`` the moving ones (:func:`move_weights`); 0 for both
-    when both weights are 0; ``s`` the fraction of the correction applied while the pair is
-    closer than ``l0`` (``compression (m,)`` in [0, 1], default 1). The inverse masses of a
-    frozen Model never change, so the division is done once here.
+    when both weights are 0. The inverse masses of a frozen Model never change, so the
+    division is done once here.
     """
     wt = move_weights(indices, inv_mass, weight)
     k = np.asarray(stiffness, dtype=np.float64).reshape(-1)
     total = wt[:, 2]
     share = np.where(total[:, None] > 0.0,
                      k[:, None] * wt[:, :2] / np.where(total > 0.0, total, 1.0)[:, None], 0.0)
-    comp = np.broadcast_to(np.asarray(1.0 if compression is None else compression,
-                                      dtype=np.float64), total.shape)
-    return np.ascontiguousarray(np.c_[np.asarray(rest_length, dtype=np.float64), share, comp])
+    return np.ascontiguousarray(np.c_[np.asarray(rest_length, dtype=np.float64), share])
 
 
 @numba.njit(**PBD_NUMBA)
 def _project_distance_pbd(x, idx, coef, start, stop):
     """PBD Gauss-Seidel sweep over constraints ``start:stop`` in order.
 
-    coef : (m, 4) float from :func:`pbd_coefficients`. The update of ``_solve_distance``
+    coef : (m, 3) float from :func:`pbd_coefficients`. The update of ``_solve_distance``
     in the PBD modes, ``dp0 = -k w0 / (w0 + w1) (d - l0) / d (p0 - p1)`` (and the opposite
     share for p1), with the weight shares precomputed: one division per projection
-    and no inverse-mass loads (~20 % faster than ``_project_distance``); times ``coef[:, 3]``
-    while compressed (``d < l0``).
+    and no inverse-mass loads (~20 % faster than ``_project_distance``).
     """
     for jj in range(start, stop):
         j = np.uint64(jj)  # unsigned ids (non-negative): no numba wraparound selects
@@ -135,8 +130,6 @@ def _project_distance_pbd(x, idx, coef, start, stop):
             continue  # coincident particles: no direction to push along
         d = math.sqrt(d2)
         g = (d - rest) / d
-        if g < 0.0:
-            g *= coef[j, 3]
         a = g * coef[j, 1]
         b = g * coef[j, 2]
         x[i0, 0] = p0x - a * dx
@@ -156,7 +149,7 @@ _Q0X, _Q0Y, _Q0Z, _Q1X, _Q1Y, _Q1Z = (r * BATCH for r in range(6, 12))
 def _project_distance_batched(x, idx, coef_t, runs, buf, start, stop):
     """PBD sweep over ``start:stop`` in vectorised batches of independent constraints.
 
-    idx : (m, 2) int; coef_t : (4, m) float, the transpose of :func:`pbd_coefficients`
+    idx : (m, 2) int; coef_t : (3, m) float, the transpose of :func:`pbd_coefficients`
     (rows read as vectors); runs : (r,) int sorted boundaries of runs of constraints
     sharing no particle; buf : (BATCH_ROWS * BATCH,) float scratch. Gather, branch-free
     math of ``_project_distance_pbd``, scatter; equal to the sequential sweep in the same
@@ -193,7 +186,6 @@ def _project_distance_batched(x, idx, coef_t, runs, buf, start, stop):
                 ok = (d2 > DEGENERATE * rest * rest) & (d2 > 0.0)
                 d = math.sqrt(d2 if ok else 1.0)
                 g = (d - rest) / d if ok else 0.0
-                g = g * coef_t[3, j] if g < 0.0 else g  # a softer compression
                 a = g * coef_t[1, j]
                 b = g * coef_t[2, j]
                 buf[_Q0X + t] = p0x - a * dx
@@ -214,17 +206,13 @@ def _project_distance_batched(x, idx, coef_t, runs, buf, start, stop):
                 x[i1, 2] = buf[_Q1Z + t]
 
 
-def solve_distance(positions, inv_mass, indices, rest_length, stiffness, compression=1.0) -> np.ndarray:
-    """One PBD Gauss-Seidel sweep over all distance constraints; returns new ``(n, 3)`` positions.
-
-    ``compression`` (scalar or ``(m,)``): the fraction of the correction applied to a pair
-    closer than its rest length (see :func:`pbd_coefficients`)."""
+def solve_distance(positions, inv_mass, indices, rest_length, stiffness) -> np.ndarray:
+    """One PBD Gauss-Seidel sweep over all distance constraints; returns new ``(n, 3)`` positions."""
     x = np.array(positions, dtype=np.float64, order="C")
     idx = np.ascontiguousarray(indices, dtype=np.int64).reshape(-1, 2)
     if idx.size and (idx.min() < 0 or idx.max() >= len(x)):  # the kernel reads ids unsigned
         raise ValueError(f"particle ids outside [0, {len(x)})")
     m = len(idx)
     k = np.broadcast_to(np.asarray(stiffness, dtype=np.float64), (m,))
-    comp = np.broadcast_to(np.asarray(compression, dtype=np.float64), (m,))
-    _project_distance_pbd(x, idx, pbd_coefficients(idx, rest_length, k, inv_mass, None, comp), 0, m)
+    _project_distance_pbd(x, idx, pbd_coefficients(idx, rest_length, k, inv_mass), 0, m)
     return x

@@ -69,17 +69,16 @@ def match_quad_stretches(pairs: np.ndarray, quads: np.ndarray) -> np.ndarray:
 
 def stretch_table(pairs: np.ndarray, quads: np.ndarray, match: np.ndarray,
                   coef: np.ndarray) -> np.ndarray:
-    """``(m, 8) float64`` per quad: ``(l0, share_p0, share_p1)`` of its edge stretch and
-    ``(l0, share_p2, share_p3)`` of its cross stretch, then the compression fraction of each
-    (``coef[:, 3]``; 1 where unmatched).
+    """``(m, 6) float64`` per quad: ``(l0, share_p0, share_p1)`` of its edge stretch and
+    ``(l0, share_p2, share_p3)`` of its cross stretch.
 
-    pairs : (d, 2) int and coef : (d, 4) (or (d, 3): compression 1) float, the distance constraints and their PBD
+    pairs : (d, 2) int and coef : (d, 3) float, the distance constraints and their PBD
     data (``distance.pbd_coefficients``); quads : (m, 4) int; match : (m, 2) int from
     :func:`match_quad_stretches`. Shares are swapped where a pair is stored the other
     way round. Unmatched: rest 1, shares 0 (the projection moves nothing).
     """
-    out = np.zeros((len(match), 8))
-    out[:, 0] = out[:, 3] = out[:, 6] = out[:, 7] = 1.0
+    out = np.zeros((len(match), 6))
+    out[:, 0] = out[:, 3] = 1.0
     for col, first in ((0, 0), (1, 2)):
         hit = np.flatnonzero(match[:, col] >= 0)
         c = coef[match[hit, col]]
@@ -87,7 +86,6 @@ def stretch_table(pairs: np.ndarray, quads: np.ndarray, match: np.ndarray,
         out[hit, 3 * col] = c[:, 0]
         out[hit, 3 * col + 1] = np.where(same, c[:, 1], c[:, 2])
         out[hit, 3 * col + 2] = np.where(same, c[:, 2], c[:, 1])
-        out[hit, 6 + col] = c[:, 3] if c.shape[1] > 3 else 1.0
     return out
 
 
@@ -208,7 +206,6 @@ def _quad_stretches(buf, t, j, stretch):
     dy = p0y - p1y
     dz = p0z - p1z
     g = _stretch_factor(dx * dx + dy * dy + dz * dz, stretch[0, j])
-    g = g * stretch[6, j] if g < 0.0 else g  # a softer compression (stretch_table)
     a = g * stretch[1, j]
     b = g * stretch[2, j]
     p0x = p0x - a * dx
@@ -222,7 +219,6 @@ def _quad_stretches(buf, t, j, stretch):
     dy = p2y - p3y
     dz = p2z - p3z
     g = _stretch_factor(dx * dx + dy * dy + dz * dz, stretch[3, j])
-    g = g * stretch[7, j] if g < 0.0 else g
     a = g * stretch[4, j]
     b = g * stretch[5, j]
     p2x = p2x - a * dx
@@ -387,7 +383,7 @@ def _project_quads_batched(x, idx, inv_mass, rest_cs, k, stretch, area, with_are
     module docstring).
 
     idx : (m, 4) int quads; inv_mass : (4, m) float; rest_cs : (2, m) float rest cosines
-    and sines; k : (m,) bending stiffness; stretch : (8, m) float, the transpose of
+    and sines; k : (m,) bending stiffness; stretch : (6, m) float, the transpose of
     :func:`stretch_table` (rows read as vectors); area : (3, m) float, the transpose of
     :func:`area_table` (read only when ``with_area``); seg : (s,) int sorted boundaries
     of runs of quads sharing no particle; area_stop : (s - 1,) int, per run, the end of
