@@ -68,6 +68,8 @@ def main(argv=None) -> dict:
                     help="magnitude steps after the passes (solve_activations' rescale; 0: none)")
     ap.add_argument("--fields", type=Path, default=None,
                     help="also write the Jacobian, the control names and each unit's solved field (.npz)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="config override over the workdir's (e.g. skin.stiffness.compression=0.2)")
     ap.add_argument("--brows", action="store_true",
                     help="the brow units only, solved with the brow muscles only (frontalis, corrugator, "
                          "depressor supercilii, orbicularis oculi; no jaw): results units_brows.json")
@@ -83,7 +85,7 @@ def main(argv=None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         work = args.workdir or fitted_workdir(Path(tmp))
         # the workdir's remembered overrides (``--config`` given to its stages), as its stages ran
-        cfg = load_config(remembered=work / "config.yaml")
+        cfg = load_config(remembered=work / "config.yaml", sets=args.set)
         head = BoundHead(work / "fit", work / "bind", cfg)
         mapping = load_fap_mapping(mapping_template_path(cfg))
         # held poses settle until the skin stops moving (animate.statics), as the sheets and the
@@ -133,7 +135,7 @@ def main(argv=None) -> dict:
                           **(simulate.stats.as_dict() if simulate.stats else {})},
                "jacobian_seconds": round(t_jac, 2), "units": rows, "worst_unit": worst,
                "passing": sum(r["ok"] for r in rows.values()), "of": len(rows),
-               "mirror_rel_diff": mirror}
+               "mirror_rel_diff": mirror, "config_sets": list(args.set)}
         print(f"worst {worst}; {out['passing']}/{len(rows)} pass; jacobian {t_jac:.1f} s; mirror {mirror}")
         if args.fields:
             np.savez_compressed(args.fields, J=J, controls=np.array(space.names), names=np.array(list(fields)),

@@ -319,6 +319,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         from faceforge.skin.brow import outer_shared_anchors   # the outer brow: frontalis and orbicularis
 
         anchors = outer_shared_anchors(v, bodies, anchors, np.asarray(brow[0], bool), brow[3])
+        if len(brow) > 4:   # and the frontalis, which raises it (bind.brow_raisers)
+            from faceforge.skin.brow import raiser_anchors
+
+            anchors = raiser_anchors(v, bodies, anchors, np.asarray(brow[0], bool), list(brow[4]), brow[3])
     ids, a_body, a_face, a_pts, a_dist, a_out, a_closest = anchors
     bary = np.zeros((len(ids), 3), FLOAT)
     for b in np.unique(a_body):

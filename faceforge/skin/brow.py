@@ -228,3 +228,56 @@ def outer_shared_anchors(v, bodies, anchors: tuple, mask, reach: float) -> tuple
     if len(ids) < 2:
         return anchors
     return shared_anchors(v, bodies, anchors, mask, ids, ids, reach)
+
+
+def raiser_anchors(v, bodies, anchors: tuple, mask, raisers, reach: float) -> tuple:
+    """One more anchor for the brow on its raiser (``bind.brow_raisers``, beyond §8): each vertex
+    of ``mask`` (n,) bool with an anchor on a brow muscle other than ``raisers`` (indices: the
+    frontalis parts) and none on a raiser takes one at the closest point of the nearest raiser
+    when that point lies within ``reach`` (skin units) of its first anchor.
+
+    The frontalis inserts into the brow's dermis with the corrugator and the depressor
+    supercilii, but by its ray the brow binds to whichever of them it meets first: on the
+    MakeHuman sample the brow's rows (FDP 4.1 to 4.3 and 1 cm above) were on the corrugator and
+    the depressor only, the frontalis carried the forehead above them, and a brow raise peaked
+    1-3 cm above the brow while the brow itself followed only through the skin's stretch
+    (MakeHuman's eyebrows-*-up units at a cosine of 0.36, ``benchmarks/bench_units.py``). With
+    ``skin.join_insertions`` the vertex goes where its most moving muscle goes. ``anchors`` as
+    :func:`shared_anchors`; returns them."""
+    ids, a_body = anchors[0], anchors[1]
+    raisers = [int(i) for i in raisers]
+    if not raisers:
+        return anchors
+    on_raiser = np.zeros(len(v), bool)
+    on_raiser[ids[np.isin(a_body, raisers)]] = True
+    first = np.r_[True, ids[1:] != ids[:-1]]   # each vertex's first row (sorted by vertex)
+    cand = np.flatnonzero(first & np.asarray(mask, bool)[ids] & ~on_raiser[ids]
+                          & np.array([getattr(bodies[b], "kind", "") == "muscle" for b in a_body], bool))
+    return _extra_anchors(v, bodies, anchors, cand, raisers, reach)
+
+
+def _extra_anchors(v, bodies, anchors: tuple, cand, muscles, reach: float) -> tuple:
+    """``anchors`` with one more row for each row ``cand`` (k,) int: at the closest point of the
+    nearest of ``muscles`` (body indices) other than the row's own body, within ``reach`` of
+    the row's point; rows sorted by vertex, each new one after its vertex's rows."""
+    from faceforge.geometry.surface_points import closest_points
+
+    ids, a_body, _, a_pts = anchors[:4]
+    if not len(cand):
+        return anchors
+    best = np.full(len(cand), np.inf)
+    hit = [np.zeros(len(cand), np.int64), np.zeros(len(cand), np.int64), np.zeros((len(cand), 3)),
+           np.zeros(len(cand))]
+    for i in muscles:
+        p, d, tri = closest_points(v[ids[cand]], bodies[i].vertices, bodies[i].faces)
+        gap = np.linalg.norm(p - a_pts[cand], axis=1)
+        take = (a_body[cand] != i) & (gap <= reach) & (gap < best)
+        best[take] = gap[take]
+        hit[0][take], hit[1][take], hit[2][take], hit[3][take] = i, tri[take], p[take], d[take]
+    ok = np.isfinite(best)
+    rows = cand[ok]
+    extra = (ids[rows], hit[0][ok], hit[1][ok], hit[2][ok], hit[3][ok], np.zeros(len(rows), bool),
+             np.zeros(len(rows), bool))
+    order = np.argsort(np.concatenate([ids, ids[rows]]), kind="stable")   # each after its vertex's rows
+    return tuple(np.concatenate([a, np.asarray(b, dtype=np.asarray(a).dtype)])[order]
+                 for a, b in zip(anchors, extra))

@@ -75,7 +75,7 @@ def _nearest_vertex(vertices: np.ndarray, points: np.ndarray) -> np.ndarray:
 def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
-              brow_muscles=(), brow_shared_mm: float = 0.0, cheek_mm: float = 0.0,
+              brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
               cheek_muscles=()) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
@@ -112,6 +112,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.brow_shared_mm``: brow skin on one brow muscle also anchors to the nearest other
         insertion within this many mm (scaled by ES0) of its anchor
         (:func:`faceforge.skin.brow.shared_anchors`; 0: off).
+    brow_raisers : sequence of str
+        ``bind.brow_raisers`` (names or pair names): brow skin on another muscle also anchors
+        to the nearest of these within ``brow_shared_mm`` (:func:`faceforge.skin.brow.raiser_anchors`).
     cheek_mm, cheek_muscles : float, sequence of str
         ``bind.cheek_mm``, ``bind.cheek_muscles``: cheek skin within this many mm of FDP 5.3 /
         5.4 that its rays bound to the bone binds to the closest cheek muscle
@@ -174,6 +177,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     from faceforge.anatomy.tissue import units_per_mm
 
     shared = brow_shared_mm * units_per_mm(pts) if brow.any() and brow_shared_mm > 0 else 0.0
+    raiser_ids, _ = match_insertions(brow_raisers, [b.name if b.kind == "muscle" else None for b in bodies])
     body_sides = [muscle_lip_side(b.vertices[np.unique(b.faces)], cut, up=up) if b.kind == "muscle" else 0
                   for b in bodies]
     face_sides = [ring_face_sides(b.vertices, b.faces, cut, up=up) if s == AROUND_MOUTH else None
@@ -182,7 +186,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
                         modiolus=corner,
-                        brow=(brow, brow_ids, ((eye, eye_ids),), shared))
+                        brow=(brow, brow_ids, ((eye, eye_ids),), shared, raiser_ids))
     cheek_ids, _ = match_insertions(cheek_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     if cheek_ids and cheek_mm > 0:   # the cheek's insertion: cheek skin on the bone moves to the cheek raiser
         from faceforge.skin.cheek import cheek_binding, cheek_mask

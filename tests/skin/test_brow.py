@@ -139,3 +139,28 @@ def test_outer_brow_on_the_orbicularis_also_anchors_to_the_frontalis_outer():
     np.testing.assert_allclose(out[3][1], [40.0, 20.0, -7.0])
     # without the pair (a map of one's own): unchanged
     assert outer_shared_anchors(v, bodies[2:], anchors, np.ones(3, bool), 4.0) is anchors
+
+
+def test_brow_skin_on_a_depressor_also_anchors_to_the_frontalis_that_raises_it():
+    from faceforge.skin.brow import raiser_anchors
+
+    bodies = [Body("corrugator_supercilii_L", "muscle", *_plane(-5.0, 0.0, 30.0)),
+              Body("depressor_supercilii_L", "muscle", *_plane(-6.0, 0.0, 20.0)),
+              Body("frontalis_inner_L", "muscle", *_plane(-4.0, 0.0, 60.0)),
+              Body("cranium", "cranium", *_plane(-30.0, -100.0, 100.0))]
+    v = np.array([[10.0, 20.0, 0.0], [15.0, 20.0, 0.0], [12.0, 20.0, 0.0], [40.0, 20.0, 0.0],
+                  [70.0, 20.0, 0.0]])
+    ids = np.array([0, 0, 1, 2, 3, 4])
+    body = np.array([0, 1, 2, 0, 3, 0])
+    pts = v[ids] * [1.0, 1.0, 0.0] + np.array([[0, 0, -5.0], [0, 0, -6.0], [0, 0, -4.0], [0, 0, -5.0],
+                                                 [0, 0, -30.0], [0, 0, -5.0]])
+    anchors = (ids, body, np.zeros(6, int), pts, np.abs(pts[:, 2]), np.zeros(6, bool), np.zeros(6, bool))
+    mask = np.array([True, True, False, True, True])
+    out = raiser_anchors(v, bodies, anchors, mask, [2], 4.0)
+    # 0 (corrugator + depressor) gains the frontalis above them, after its two rows; 1 is on the
+    # frontalis already; 2 is outside the brow; 3 is on the bone; 4 lies 10 mm beyond the
+    # frontalis' edge
+    assert out[0].tolist() == [0, 0, 0, 1, 2, 3, 4]
+    assert out[1].tolist() == [0, 1, 2, 2, 0, 3, 0]
+    np.testing.assert_allclose(out[3][2], [10.0, 20.0, -4.0])
+    assert raiser_anchors(v, bodies, anchors, mask, [], 4.0) is anchors
