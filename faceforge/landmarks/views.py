@@ -50,6 +50,10 @@ SEARCH_LIFT = 0.06
 #: MediaPipe point indices used for the face frame: (left, right) mirror pairs, chin, brows
 _PAIRS = ((263, 33), (362, 133), (291, 61), (334, 105), (358, 129))
 _CHIN = 152
+#: points below the mouth on the midline, in order, standing in for the chin 152 where it falls off
+#: the mesh (a face mask cut just under the chin: MakeHuman's young female cut to a mask's extent,
+#: whose chin point fell off its edge, gave a NaN frame and nine black views)
+_BELOW_MOUTH = (152, 175, 199, 200, 18, 17)
 
 
 @dataclass
@@ -147,12 +151,14 @@ def _unrotate(points: np.ndarray, quarter: int, size: int) -> np.ndarray:
 
 def face_frame(points3d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(left, up, forward) unit (3,) of the face from its back-projected points ``(478, 3)``
-    (NaN where unseen): left from the mirror pairs, up from the chin to the eyes and brows."""
+    (NaN where unseen): left from the mirror pairs, up from the chin to the eyes and brows (from
+    the first of :data:`_BELOW_MOUTH` on the mesh where the chin is not)."""
     diffs = [points3d[a] - points3d[b] for a, b in _PAIRS]
     left = np.nanmean(np.array(diffs), axis=0)
     left /= np.linalg.norm(left)
     high = np.nanmean(points3d[[263, 33, 334, 105]], axis=0)
-    up = high - points3d[_CHIN]
+    low = next((points3d[i] for i in _BELOW_MOUTH if np.isfinite(points3d[i]).all()), points3d[_CHIN])
+    up = high - low
     up -= left * (up @ left)
     up /= np.linalg.norm(up)
     forward = np.cross(left, up)
