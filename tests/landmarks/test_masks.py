@@ -3,15 +3,14 @@ off the mesh, and a whole head cut to a mask's extent, detected against its hand
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
 IDENTITY = ROOT / "tests/data/makehuman-identities/mh_head_caucasian_female_young.obj"
-#: how far MediaPipe's canonical mask reaches behind its outer eye corner 263, in eye spans
-#: (|263 - 33|): its lowest-reaching edge point of 234, 454, 10 and 152
-MASK_REACH = 0.631
 
 
 def test_the_face_frame_stands_without_the_chin_point():
@@ -28,23 +27,10 @@ def test_the_face_frame_stands_without_the_chin_point():
     assert whole[1] @ cut[1] > np.cos(np.radians(3.0))
 
 
-def cut_to_mask(v, f, hand):
-    """``(v, f)`` of the whole head cut to a face mask's extent: in front of the plane
-    :data:`MASK_REACH` eye spans behind the outer eye corner, from just under the chin 2.1 to
-    0.75 eye spans over the eyes (the frame from the hand points)."""
-    es = np.linalg.norm(hand["3.7"] - hand["3.12"])
-    left = (hand["3.7"] - hand["3.12"]) / es
-    up = (hand["3.7"] + hand["3.12"]) / 2 - hand["2.1"]
-    up -= left * (up @ left)
-    up /= np.linalg.norm(up)
-    fwd = np.cross(left, up)
-    keep = (((v - hand["3.7"]) @ fwd > -MASK_REACH * es) & ((v - hand["2.1"]) @ up > -0.05 * es)
-            & ((v - hand["3.7"]) @ up < 0.75 * es))
-    faces = f[keep[f].all(axis=1)]
-    used = np.unique(faces)
-    remap = np.full(len(v), -1)
-    remap[used] = np.arange(len(used))
-    return v[used], remap[faces]
+def test_the_mask_reach_is_the_canonical_faces():
+    from bench_landmark_masks import MASK_REACH, mask_reach
+
+    assert abs(mask_reach() - MASK_REACH) < 0.001
 
 
 def test_a_head_cut_to_a_face_mask_is_found_and_its_points_agree_with_the_hand_file():
@@ -54,6 +40,7 @@ def test_a_head_cut_to_a_face_mask_is_found_and_its_points_agree_with_the_hand_f
     from faceforge.io.landmarks import read_landmarks
     from faceforge.io.mesh import load_mesh
     from faceforge.landmarks.detect import detect_landmarks
+    from bench_landmark_masks import cut_to_mask
 
     v, f, _ = load_mesh(IDENTITY)
     raw = read_landmarks(IDENTITY.with_name(IDENTITY.stem + ".fdp.yaml"))
