@@ -147,16 +147,36 @@ def _unrotate(points: np.ndarray, quarter: int, size: int) -> np.ndarray:
 
 def face_frame(points3d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(left, up, forward) unit (3,) of the face from its back-projected points ``(478, 3)``
-    (NaN where unseen): left from the mirror pairs, up from the chin to the eyes and brows."""
+    (NaN where unseen): left from the mirror pairs, up from the chin to the eyes and brows. A chin
+    point off the mesh (a face mask cut just under the chin: MakeHuman's young female cut to a
+    mask's extent gave a NaN frame, nine black views and "no face found") is taken from
+    MediaPipe's canonical face fitted to the other points (:func:`canonical_point`)."""
     diffs = [points3d[a] - points3d[b] for a, b in _PAIRS]
     left = np.nanmean(np.array(diffs), axis=0)
     left /= np.linalg.norm(left)
     high = np.nanmean(points3d[[263, 33, 334, 105]], axis=0)
-    up = high - points3d[_CHIN]
+    up = high - (points3d[_CHIN] if np.isfinite(points3d[_CHIN]).all() else canonical_point(points3d, _CHIN))
     up -= left * (up @ left)
     up /= np.linalg.norm(up)
     forward = np.cross(left, up)
     return left, up, forward
+
+
+def canonical_point(points3d: np.ndarray, index: int) -> np.ndarray:
+    """(3,) where MediaPipe's canonical face puts point ``index`` once fitted (similarity,
+    Umeyama) to the lifted points ``(478, 3)`` that are on the mesh (NaN rows left out)."""
+    from faceforge.landmarks.brows import canonical_model
+
+    model = canonical_model()
+    ok = np.isfinite(points3d).all(axis=1)
+    a, b = points3d[ok], model[ok]
+    a0, b0 = a - a.mean(axis=0), b - b.mean(axis=0)
+    u, s, vt = np.linalg.svd(b0.T @ a0)
+    d = np.ones(3)
+    d[-1] = np.sign(np.linalg.det(u @ vt))
+    rot = (u * d) @ vt                            # b0 @ rot ~ a0 / scale
+    scale = (s * d).sum() / (b0 ** 2).sum()
+    return scale * (model[index] - b.mean(axis=0)) @ rot + a.mean(axis=0)
 
 
 def _turn(vec, axis, deg):
