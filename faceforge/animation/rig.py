@@ -172,9 +172,13 @@ class BoundHead:
         partner = None if mirror is None else mirror.exact_partners(self.rest)
         #: True on a rig symmetric by construction whose skin has an exact mirror partner per vertex
         self.symmetric = partner is not None
+        from faceforge.skin.cheek import cheek_tether
+
         return SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
                               settings, carried=carried_anchors(binding, config.get("skin.carry")),
-                              mirror=partner, join=bool(config.get("skin.join_insertions")))
+                              mirror=partner, join=bool(config.get("skin.join_insertions")),
+                              tether=cheek_tether(binding, config.get("bind.cheek_muscles"),
+                                                  config.get("skin.cheek_tether")))
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""

@@ -89,3 +89,25 @@ def cheek_binding(binding, vertices, bodies, muscles, mask, max_distance: float)
         a_bary[r[sel]] = barycentric(pts[moved][sel], bodies[b].vertices, bodies[b].faces, face[moved][sel])
     return replace(binding, body=a_body, face_ids=a_face, points=a_pts, distance=a_dist, bary=a_bary,
                    outward=a_out, closest=a_closest, status=status), len(moved)
+
+
+def cheek_tether(binding, muscles, stiffness: float):
+    """(k,) float per anchor of ``binding``: ``stiffness`` on the anchors on the cheek
+    muscles ``muscles`` (``bind.cheek_muscles``: names, or left/right pairs' names without
+    ``_L`` / ``_R``), 0 elsewhere; None when ``stiffness`` is 0 or no anchor is on them
+    (``skin.cheek_tether``, :func:`faceforge.skin.layer.add_skin`).
+
+    The cheek raiser's fibres end in the dermis of the cheek. Tied like any anchor, by a §8
+    stretch of ``skin.stiffness.anchor`` (0.2) that the skin vertex shares with its anchor
+    particle, the cheek skin, squeezed between the rising muscle and the lower lid, followed its
+    muscle a third of the way or less: at c = 1 the raiser's surface under FDP 5.3 rose 322 ENS
+    on the MakeHuman sample, the skin 94; 290 and 46 on MediaPipe's mask; the Xface files ask 150.
+    """
+    from faceforge.skin.rules import match_insertions
+
+    if not stiffness or float(stiffness) <= 0:
+        return None
+    ids, _ = match_insertions(tuple(muscles or ()), [str(n) for n in binding.body_names])
+    on = np.isin(np.asarray(binding.body), ids)
+    return np.where(on, float(stiffness), 0.0) if on.any() else None
+

@@ -176,8 +176,18 @@ class SkinLayer:
         return np.asarray(state_positions)[self.first : self.first + self.n_vertices]
 
 
+def _anchor_stiffness(anchor: float, tether, k: int):
+    """(per-anchor stiffness (k,), tethered (k,) bool) from ``stiffness.anchor`` and ``tether``
+    (see :func:`add_skin`)."""
+    t = np.zeros(k, FLOAT) if tether is None else np.asarray(tether, FLOAT).reshape(-1)
+    if t.shape != (k,) or np.any((t < 0) | (t > 1)):
+        raise ValueError(f"tether must be ({k},) stiffnesses in [0, 1], got shape {t.shape}")
+    tied = t > 0
+    return np.where(tied, t, float(anchor)), tied
+
+
 def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices=None,
-             anchor_points=None, inv_mass: float = 1.0) -> SkinLayer:
+             anchor_points=None, inv_mass: float = 1.0, tether=None) -> SkinLayer:
     """Add the skin particles, §8 constraints and anchors to a PBD builder.
 
     Constraints are added in the order: anchors (q position, then p-q stretch),
@@ -201,6 +211,10 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
         Rest position of each anchor's surface point (the ray hit).
     inv_mass : float
         Inverse mass of every skin and anchor particle.
+    tether : (k,) float, optional
+        Per anchor, 0: the p-q stretch of ``stiffness.anchor`` (§8); > 0: a *tether* of that
+        stiffness whose whole correction goes to the skin vertex (its ``q`` does not yield;
+        ``skin.cheek_tether``, :func:`faceforge.skin.cheek.cheek_tether`).
 
     Returns
     -------
@@ -219,6 +233,7 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
 
     first = builder.add_particles(v, np.full(len(v), inv_mass, FLOAT))
     held = stiffness.position == 1.0
+    k_anchor, tied = _anchor_stiffness(stiffness.anchor, tether, len(av))
     if len(av) and held:
         # every iteration q is exactly on its surface point (its position projection) when
         # the p-q stretch reads it: a kinematic q, with the stretch a tether weighing it as the
@@ -227,12 +242,15 @@ def add_skin(builder, vertices, faces, stiffness: SkinStiffness, anchor_vertices
         q_first = builder.add_particles(ap, np.zeros(len(ap)))
         q = q_first + np.arange(len(ap), dtype=INT)
         slots = builder.kinematic_rows(q)
-        builder.add_distance(np.stack([first + av, q], axis=1), stiffness.anchor, weight=(inv_mass, inv_mass))
+        builder.add_distance(np.stack([first + av, q], axis=1), k_anchor,
+                             weight=np.stack([np.full(len(av), inv_mass), np.where(tied, 0.0, inv_mass)], 1))
     elif len(av):
         q_first = builder.add_particles(ap, np.full(len(ap), inv_mass, FLOAT))
         q = q_first + np.arange(len(ap), dtype=INT)
         slots = np.asarray(builder.add_position(q, stiffness.position), INT)
-        builder.add_distance(np.stack([first + av, q], axis=1), stiffness.anchor)
+        builder.add_distance(np.stack([first + av, q], axis=1), k_anchor,
+                             weight=None if not tied.any() else np.stack(
+                                 [np.full(len(av), inv_mass), np.where(tied, 0.0, inv_mass)], 1))
     else:
         q = np.zeros(0, INT)
         slots = np.zeros(0, INT)
@@ -305,10 +323,12 @@ class SkinSimulation:
     mirror : (n,) int, optional
         Each skin vertex's mirror partner on a symmetric rig: the solver then colours mirror
         twins alike (:func:`faceforge.pbd.colouring.mirror_colouring`).
+    tether : (k,) float, optional
+        Per anchor, a tether's stiffness (0: none): see :func:`add_skin`.
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None, mirror=None, join=False):
+                 carried=None, mirror=None, join=False, tether=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -325,7 +345,7 @@ class SkinSimulation:
         q_rest = binding.points.copy()
         q_rest[self.carried] = self.rest[binding.vertex_ids[self.carried]]
         builder = ModelBuilder()
-        self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest)
+        self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest, tether=tether)
         self.model = builder.finalize()
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()

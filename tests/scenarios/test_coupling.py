@@ -115,11 +115,12 @@ def test_lifting_the_cheek_leaves_the_nose_wing_and_the_upper_lip(head):
     they rose 438 and 378 MNS (the cheek 44 ENS), and calibrated Xface files, which
     all lift the cheeks, crumpled the upper lip under the nose; the zygomaticus alone raised
     them 85 and 118 MNS (the cheek 27 ENS, the mouth corner with it). The cheek raiser
-    (orbicularis_oculi_lower) lifts the cheek 100 ENS and leaves the mouth corner (8.3) and
-    the lips (MakeHuman, 2026-11-28)."""
+    (orbicularis_oculi_lower) lifts the cheek and leaves the mouth corner (8.3) and the lips
+    (MakeHuman, 2026-11-28). The cheek's skin tethered to it (``skin.cheek_tether``) rises
+    199 ENS, past the 150 the Xface files ask; held by the §8 stretch alone it rose 94."""
     h, _ = head
     d = posed(h, dict.fromkeys(template_entry(41).positive, 1.0))
-    assert d[h.fdp_vertex["5.3"], 1] / h.fapu.unit("ENS") > 60.0
+    assert d[h.fdp_vertex["5.3"], 1] / h.fapu.unit("ENS") > 160.0
     assert np.linalg.norm(d[h.fdp_vertex["8.3"]]) / h.fapu.unit("MNS") < 30.0
     assert d[h.fdp_vertex["9.1"], 1] / h.fapu.unit("MNS") < 150.0
     assert d[h.fdp_vertex["8.1"], 1] / h.fapu.unit("MNS") < 200.0

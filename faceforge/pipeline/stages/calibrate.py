@@ -79,7 +79,8 @@ CALIBRATE = register_stage(Stage(
     # cost a recalibration
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry",
-        "skin.join_insertions", "muscle", "animate.fap_mapping", "animate.fps",
+        "skin.join_insertions", "skin.cheek_tether",
+        "bind.cheek_muscles", "muscle", "animate.fap_mapping", "animate.fps",
         "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",
         "animate.jaw_glide_slope", "animate.statics", "template"),
     inputs=("animate.fap_mapping", "animate.calibrate.magnitudes", "template.skull", "template.muscle_map"),

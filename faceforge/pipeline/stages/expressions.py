@@ -154,7 +154,8 @@ def _face_region(head):
 
 _SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),
                     config_keys=("solver", "skin.stiffness", "skin.carry",
-                                 "skin.join_insertions", "muscle", "animate", "template"),
+                                 "skin.join_insertions", "skin.cheek_tether",
+                                 "bind.cheek_muscles", "muscle", "animate", "template"),
                     inputs=("animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"))
 
 EXPRESSIONS_STAGE = register_stage(Stage(
