@@ -136,7 +136,7 @@ def _arkit_controls(w, baked, rows, mapping, head):
 
 ARKIT = register_stage(Stage(
     name="arkit", deps=("fit", "bind", "calibrate", "bake"),
-    config_keys=("solver", "skin.stiffness", "skin.carry", "skin.join_insertions", "muscle", "animate", "template"),
+    config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm", "skin.join_insertions", "muscle", "animate", "template"),
     inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
     version="2", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
