@@ -331,7 +331,7 @@ class SkinSimulation:
             from faceforge.skin.carry_smooth import smoothing_rows
 
             p0 = self.rest[binding.vertex_ids[self.carried]]
-            self._smooth = smoothing_rows(p0, carry_radius) + (np.empty((len(p0), 3), FLOAT),)
+            self._smooth = smoothing_rows(p0, carry_radius, binding.body[self.carried]) + (np.empty((len(p0), 3), FLOAT),)
         q_rest = binding.points.copy()
         q_rest[self.carried] = self.rest[binding.vertex_ids[self.carried]]
         builder = ModelBuilder()
