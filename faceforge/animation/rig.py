@@ -178,7 +178,8 @@ class BoundHead:
                               settings, carried=carried_anchors(binding, config.get("skin.carry")),
                               mirror=partner, join=bool(config.get("skin.join_insertions")),
                               tether=cheek_tether(binding, config.get("bind.cheek_muscles"),
-                                                  config.get("skin.cheek_tether")))
+                                                  config.get("skin.cheek_tether")),
+                              carry_radius=carry_radius(config, self.landmarks))
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""
@@ -254,6 +255,18 @@ def jaw_sweep(skull, mandible_vertices, reach: float) -> np.ndarray:
     poses = [(p, 0.0) for p in np.linspace(0.0, JAW_SWEEP_PITCH, min(n, 64))[1:]]
     poses += [(0.5 * JAW_SWEEP_PITCH, s * JAW_SWEEP_YAW) for s in (-1.0, 1.0)]
     return np.stack([skull.jaw_transform(p, y, 0.0) for p, y in poses])
+
+
+def carry_radius(config, landmarks) -> float:
+    """``skin.carry_radius_mm`` in skin units (scaled by ES0, ``anatomy.tissue.units_per_mm``);
+    0 without the eye FDPs that give ES0 (:mod:`faceforge.skin.carry_smooth`)."""
+    from faceforge.anatomy.tissue import units_per_mm
+
+    mm = float(config.get("skin.carry_radius_mm"))
+    try:
+        return mm * units_per_mm(landmarks) if mm > 0 else 0.0
+    except KeyError:
+        return 0.0
 
 
 def carried_anchors(binding, carry: str):

@@ -189,6 +189,7 @@ _DEFAULT_CACHE: dict[str, tuple[dict, dict[str, int], str]] = {}
 RULES: list[tuple[str, Rule]] = [
     ("fit.orientation", AxesPair()),
     ("skin.carry", Choice(("muscles", "all", "none"))),
+    ("skin.carry_radius_mm", Number(0.0, 50.0)),
     ("muscle.damping", Number(0.0, 0.99)),
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
     ("animate.orientation_guard.min_area", Number(0.0, 0.95)),

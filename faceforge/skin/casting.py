@@ -164,6 +164,7 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
     place; returns the ``(n,) bool`` mask of the vertices bound this way.
     """
     from faceforge.geometry.surface_points import closest_points
+    from faceforge.skin.arc_points import arc_closest
 
     done = np.zeros(len(v), bool)
     lip = (MUSCLE,) if side_of is not None else ()
@@ -190,7 +191,8 @@ def _closest_fallback(v, bodies, kinds, sides, max_distance, body, face, pts, di
                 sub = _own_arc(bodies[i], side, face_sides, i, side_of) if half else np.arange(len(bf))
                 if len(sub) == 0:
                     continue
-                p, d, tri = closest_points(v[todo], bv, bf[sub])
+                # the own arc at the vertex's place along the lip (skin.arc_points)
+                p, d, tri = (arc_closest if half else closest_points)(v[todo], bv, bf[sub])
                 tri = sub[tri]
                 take = (d < best) & (d <= max_distance)
                 if allowed is not None:

@@ -28,6 +28,7 @@ import numpy as np
 
 from faceforge.anatomy.muscles.targets import bary_points
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
+from faceforge.skin.carry_smooth import carry_smoothed
 
 __all__ = [
     "SkinTopology",
@@ -320,6 +321,9 @@ class SkinSimulation:
         moved (:meth:`carry_targets`): the skin goes where the tissue under it goes, as where
         mimetic muscles insert into the skin. Bone anchors are best left uncarried (skin
         slides over bone).
+    carry_radius : float, optional
+        Skin units: each carried vertex moves by the mean motion of the carried anchors within
+        this radius of it (:mod:`faceforge.skin.carry_smooth`, ``skin.carry_radius_mm``); 0 off.
     mirror : (n,) int, optional
         Each skin vertex's mirror partner on a symmetric rig: the solver then colours mirror
         twins alike (:func:`faceforge.pbd.colouring.mirror_colouring`).
@@ -328,7 +332,7 @@ class SkinSimulation:
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None, mirror=None, join=False, tether=None):
+                 carried=None, mirror=None, join=False, tether=None, carry_radius=0.0):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -342,6 +346,12 @@ class SkinSimulation:
         from faceforge.skin.joined import join_args   # skin.join_insertions
 
         self._joined = join_args(vertices, binding.vertex_ids, self.carried) if join else None
+        self._smooth = None
+        if carry_radius > 0 and self._any_carried:   # skin.carry_smooth: the tissue spreads the motion
+            from faceforge.skin.carry_smooth import smoothing_rows
+
+            p0 = self.rest[binding.vertex_ids[self.carried]]
+            self._smooth = smoothing_rows(p0, carry_radius, binding.body[self.carried]) + (np.empty((len(p0), 3), FLOAT),)
         q_rest = binding.points.copy()
         q_rest[self.carried] = self.rest[binding.vertex_ids[self.carried]]
         builder = ModelBuilder()
@@ -411,7 +421,10 @@ class SkinSimulation:
             t = self.anchor_targets(system, targets if self._direct else None)
             if self._any_carried:   # t[carried] = carry_targets(system, t), compiled, in place
                 s0, p0 = self._carry_rest(system)
-                _carry(t, self._carried_rows, s0, p0)
+                if self._smooth is None:
+                    _carry(t, self._carried_rows, s0, p0)
+                else:
+                    carry_smoothed(t, self._carried_rows, s0, p0, *self._smooth)
                 if self._joined is not None:   # a vertex on several muscles follows the one that pulls
                     from faceforge.skin.joined import join
 

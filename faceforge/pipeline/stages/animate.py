@@ -109,7 +109,7 @@ def run_animate(ctx):
 ANIMATE = register_stage(Stage(
     # the bound head rebuilds the muscles from the template's muscle map on its skull
     # (faceforge.animation.rig.muscle_system): both template files are inputs
-    name="animate", deps=("fit", "bind", "calibrate"), config_keys=("solver", "skin.stiffness", "skin.carry",
+    name="animate", deps=("fit", "bind", "calibrate"), config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
                                                                     "skin.join_insertions", "skin.cheek_tether",
                                                                     "bind.cheek_muscles", "muscle",
                                                 "animate", "template"),

@@ -95,7 +95,7 @@ BAKE = register_stage(Stage(
     name="bake", deps=("fit", "bind", "calibrate"),
     # the bound head rebuilds the muscles from the template (faceforge.animation.rig.muscle_system)
     # not the playback-only keys (head rotation, previews, presets' timing): they cost no rebake
-    config_keys=("bake", "solver", "skin.stiffness", "skin.carry",
+    config_keys=("bake", "solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
                  "skin.join_insertions", "skin.cheek_tether",
                  "bind.cheek_muscles", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.statics",

@@ -78,7 +78,7 @@ CALIBRATE = register_stage(Stage(
     # playback-only keys (head rotation, previews, expression presets): changing those does not
     # cost a recalibration
     name="calibrate", deps=("fit", "bind"), config_keys=(
-        "solver", "skin.stiffness", "skin.carry",
+        "solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
         "skin.join_insertions", "skin.cheek_tether",
         "bind.cheek_muscles", "muscle", "animate.fap_mapping", "animate.fps",
         "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",

@@ -153,7 +153,7 @@ def _face_region(head):
 
 
 _SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),
-                    config_keys=("solver", "skin.stiffness", "skin.carry",
+                    config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
                                  "skin.join_insertions", "skin.cheek_tether",
                                  "bind.cheek_muscles", "muscle", "animate", "template"),
                     inputs=("animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"))
