@@ -180,30 +180,13 @@ def shared_anchors(v, bodies, anchors: tuple, mask, brow, muscles, reach: float)
     4.1, bound to the corrugator, 1.9 mm). ``anchors``: ``(vertex ids, body, face, point,
     distance, outward, closest)`` rows (k,), sorted by vertex; new rows follow their vertex's
     first. Returns the anchors."""
-    from faceforge.geometry.surface_points import closest_points
-
-    ids, a_body, _, a_pts = anchors[:4]
+    ids, a_body = anchors[:2]
     muscles = [int(i) for i in muscles]
     count = np.bincount(ids, minlength=len(v))
     cand = np.flatnonzero(np.asarray(mask, bool)[ids] & np.isin(a_body, list(brow)) & (count[ids] == 1))
-    if not len(cand) or not muscles:
+    if not muscles:
         return anchors
-    best = np.full(len(cand), np.inf)
-    hit = [np.zeros(len(cand), np.int64), np.zeros(len(cand), np.int64), np.zeros((len(cand), 3)),
-           np.zeros(len(cand))]
-    for i in muscles:
-        p, d, tri = closest_points(v[ids[cand]], bodies[i].vertices, bodies[i].faces)
-        gap = np.linalg.norm(p - a_pts[cand], axis=1)
-        take = (a_body[cand] != i) & (gap <= reach) & (gap < best)
-        best[take] = gap[take]
-        hit[0][take], hit[1][take], hit[2][take], hit[3][take] = i, tri[take], p[take], d[take]
-    ok = np.isfinite(best)
-    rows = cand[ok]
-    extra = (ids[rows], hit[0][ok], hit[1][ok], hit[2][ok], hit[3][ok], np.zeros(len(rows), bool),
-             np.zeros(len(rows), bool))
-    order = np.argsort(np.concatenate([ids, ids[rows]]), kind="stable")   # each right after its first
-    return tuple(np.concatenate([a, np.asarray(b, dtype=np.asarray(a).dtype)])[order]
-                 for a, b in zip(anchors, extra))
+    return _extra_anchors(v, bodies, anchors, cand, muscles, reach)
 
 
 #: the outer brow's dermis receives these two together (their pair names): the frontalis' outer
