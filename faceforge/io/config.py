@@ -190,6 +190,7 @@ RULES: list[tuple[str, Rule]] = [
     ("fit.orientation", AxesPair()),
     ("skin.carry", Choice(("muscles", "all", "none"))),
     ("skin.carry_radius_mm", Number(0.0, 50.0)),
+    ("skin.cheek_tether", Number(0.0, 1.0)),          # a stiffness: past 1 a projection overshoots
     ("muscle.damping", Number(0.0, 0.99)),
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
     ("animate.orientation_guard.min_area", Number(0.0, 0.95)),
