@@ -95,10 +95,11 @@ def run(ctx):
     head = load_fit(ctx.input("fit"))
     insertions = tuple(str(n) for n in ctx.config.get("bind.insertions"))
     names = [str(m[0]) for m in head["muscles"]]
-    _, unknown = match_insertions(insertions, names)
-    if unknown:   # a map of one's own may lack the template's brow depressors: say so, go on
-        ctx.log(f"warning: bind.insertions: no muscle {', '.join(unknown)} in the fitted map; "
-                f"ignored (muscles: {', '.join(sorted(names))})")
+    for key in ("bind.insertions", "bind.brow_muscles", "bind.brow_raisers", "bind.cheek_muscles"):
+        _, unknown = match_insertions(tuple(str(n) for n in (ctx.config.get(key) or ())), names)
+        if unknown:   # a map of one's own may lack the template's brow depressors (or a typo): say so, go on
+            ctx.log(f"warning: {key}: no muscle {', '.join(unknown)} in the fitted map; "
+                    f"ignored (muscles: {', '.join(sorted(names))})")
     ctx.log(f"binding {len(head['vertices'])} skin vertices to {len(head['muscles'])} muscles and the skull")
     bound = bind_head(head["vertices"], head["faces"], head["landmarks"], head["cranium"],
                       head["mandible"], head["muscles"],
