@@ -17,10 +17,9 @@ whose score is highest of the six.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
+from faceforge.landmarks.detector import Detector
 from faceforge.landmarks.raster import View, render
 
 #: FACS action unit -> ARKit blendshape names (MediaPipe spells a side ``...Left``/``...Right``,
@@ -73,42 +72,19 @@ def recognised(scores: dict) -> str:
     return max(scores, key=scores.get)
 
 
-class BlendshapeScorer:
+class BlendshapeScorer(Detector):
     """MediaPipe's Face Landmarker in IMAGE mode with its blendshape head: ``score(rgb)`` ->
     ``{ARKit name: score}`` (52 names, ``_neutral`` included) or None when no face is found."""
 
     def __init__(self, min_confidence: float = 0.3):
-        from faceforge.landmarks.detector import mediapipe_modules, model_path, quiet_stderr
-
-        for key, value in (("GLOG_minloglevel", "2"), ("TF_CPP_MIN_LOG_LEVEL", "3")):
-            os.environ.setdefault(key, value)
-        landmarker, base, self._image, mode = mediapipe_modules()
-        opts = landmarker.FaceLandmarkerOptions(
-            base_options=base.BaseOptions(model_asset_path=str(model_path())),
-            running_mode=mode.VisionTaskRunningMode.IMAGE, num_faces=1,
-            min_face_detection_confidence=min_confidence, min_face_presence_confidence=min_confidence,
-            output_face_blendshapes=True)
-        self._quiet = quiet_stderr
-        with quiet_stderr():
-            self._landmarker = landmarker.FaceLandmarker.create_from_options(opts)
+        super().__init__(min_confidence, blendshapes=True)
 
     def score(self, rgb: np.ndarray) -> dict | None:
         """Blendshape scores of the face in ``rgb (h, w, 3) uint8``, or None."""
-        image = self._image.Image(image_format=self._image.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
-        with self._quiet():
-            result = self._landmarker.detect(image)
+        result = self._result(rgb)
         if not result.face_blendshapes:
             return None
         return {c.category_name: float(c.score) for c in result.face_blendshapes[0]}
-
-    def close(self) -> None:
-        self._landmarker.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def face_view(region_vertices: np.ndarray, yaw_deg: float = 0.0, size: int = 512,

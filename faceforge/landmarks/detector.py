@@ -135,9 +135,10 @@ class Face:
 
 
 class Detector:
-    """A Face Landmarker in IMAGE mode, one face, thresholds low (renders are not photos)."""
+    """A Face Landmarker in IMAGE mode, one face, thresholds low (renders are not photos);
+    ``blendshapes``: also its blendshape head (:class:`faceforge.landmarks.blendshapes.BlendshapeScorer`)."""
 
-    def __init__(self, min_confidence: float = 0.3):
+    def __init__(self, min_confidence: float = 0.3, blendshapes: bool = False):
         for key, value in (("GLOG_minloglevel", "2"), ("TF_CPP_MIN_LOG_LEVEL", "3")):
             os.environ.setdefault(key, value)   # MediaPipe's C++ start-up chatter off stderr
         landmarker, base, self._image, mode = mediapipe_modules()
@@ -145,16 +146,20 @@ class Detector:
             base_options=base.BaseOptions(model_asset_path=str(model_path())),
             running_mode=mode.VisionTaskRunningMode.IMAGE, num_faces=1,
             min_face_detection_confidence=min_confidence, min_face_presence_confidence=min_confidence,
-            output_face_blendshapes=False, output_facial_transformation_matrixes=True)
+            output_face_blendshapes=blendshapes, output_facial_transformation_matrixes=True)
         with quiet_stderr():
             self._landmarker = landmarker.FaceLandmarker.create_from_options(opts)
+
+    def _result(self, rgb: np.ndarray):
+        """The landmarker's raw result on ``rgb (h, w, 3) uint8``."""
+        image = self._image.Image(image_format=self._image.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
+        with quiet_stderr():
+            return self._landmarker.detect(image)
 
     def detect(self, rgb: np.ndarray) -> Face | None:
         """The face in ``rgb (h, w, 3) uint8``, or None."""
         h, w = rgb.shape[:2]
-        image = self._image.Image(image_format=self._image.ImageFormat.SRGB, data=np.ascontiguousarray(rgb))
-        with quiet_stderr():
-            result = self._landmarker.detect(image)
+        result = self._result(rgb)
         if not result.face_landmarks:
             return None
         lms = result.face_landmarks[0]
