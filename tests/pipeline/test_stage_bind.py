@@ -120,3 +120,20 @@ def test_insertions_naming_no_muscle_of_the_map_are_reported_and_ignored(ctx):
     assert len(np.unique(d["anchor_vertex_ids"])) == len(d["anchor_vertex_ids"])   # no second anchors
     warned = [m for m in said if m.startswith("warning: bind.insertions")]
     assert len(warned) == 1 and "corrugator_supercilii" in warned[0] and "frontalis" in warned[0]
+
+
+@pytest.mark.parametrize("key", ["bind.brow_muscles", "bind.brow_raisers", "bind.cheek_muscles"])
+def test_a_misspelt_muscle_in_the_other_name_lists_is_reported(ctx, key):
+    """A typo in bind.brow_muscles, brow_raisers or cheek_muscles binds nothing to it; the log
+    names the key and the unknown name (it was silently ignored before)."""
+    from faceforge.io.config import load_config
+    from faceforge.pipeline.stages.bind import run
+
+    said = []
+    ctx.log = said.append
+    ctx.config = load_config(sets=[f"{key}=[frontalis, frontalsi]"])
+    _fake_fit(ctx.workdir / "fit")
+    run(ctx)
+    warned = [m for m in said if m.startswith(f"warning: {key}:")]
+    assert len(warned) == 1 and "frontalsi" in warned[0]
+    assert "no muscle frontalis," not in warned[0]   # the known name is not reported
