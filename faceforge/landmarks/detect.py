@@ -37,6 +37,12 @@ PUPILS = {"3.5": ("3.1", "3.3"), "3.6": ("3.2", "3.4")}
 #: vertex cost accuracy (median error on MakeHuman / ICT 0.540 / 0.496 % with 0.0025,
 #: 0.524 / 0.460 % with 0.001, 0.507 / 0.460 % with none)
 VERTEX_SNAP = 0.001
+#: the rules' lengths (thresholds, search bands, the subnasale's resolution guard) are fractions of
+#: a face scale: the larger of the bounding-box diagonal and this many detected eye spans (|3.7 -
+#: 3.12|). A whole head's diagonal is 4.4-5.3 eye spans (the young female MakeHuman 4.40, MakeHuman
+#: 4.49, ICT 5.33), so its rules are unchanged; a head cut to a face mask (2.75-3.0 eye spans) or the
+#: MediaPipe mask (2.87) keeps a whole head's rule lengths instead of 0.6 of them
+RULE_SCALE_EYE_SPANS = 4.4
 
 
 @lru_cache(maxsize=1)
@@ -157,7 +163,8 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
                      "frame": {"left": left.tolist(), "up": up.tolist(), "forward": forward.tolist()},
                      "timings": {"search_s": t_search}})
     plane = _mirror(det, v, diagonal)
-    _apply_rules(det, v, f, plane, diagonal, front, normals)
+    det.info["rule_scale"] = {"length": rule_scale(det, diagonal), "diagonal": diagonal}
+    _apply_rules(det, v, f, plane, det.info["rule_scale"]["length"], front, normals)
     det = _drop(det, [k for k in RULE_ONLY if det.info["rules"].get(k) is None])
     if symmetrise and det.info["symmetry"]["symmetric"]:
         _symmetrise(det, v, f, plane)
@@ -201,10 +208,21 @@ def _mirror(det: Detection, v, diagonal):
     return plane
 
 
+def rule_scale(det: Detection, diagonal: float) -> float:
+    """The length the rules measure in (mesh units): ``max(diagonal, RULE_SCALE_EYE_SPANS x the
+    detected outer eye corners' distance)``; the diagonal alone where a corner is missing."""
+    at = {k: i for i, k in enumerate(det.ids)}
+    if "3.7" not in at or "3.12" not in at:
+        return diagonal
+    span = float(np.linalg.norm(det.positions[at["3.7"]] - det.positions[at["3.12"]]))
+    return max(diagonal, RULE_SCALE_EYE_SPANS * span)
+
+
 def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None) -> None:
     """Move the points the geometric rules of :mod:`faceforge.landmarks.rules` place
     (``front``: the frontal view's render, which serves as the cheeks' ray cast; ``normals``:
-    the mesh's vertex normals (n, 3), computed if not given)."""
+    the mesh's vertex normals (n, 3), computed if not given; ``diagonal``: the face scale of
+    :func:`rule_scale` the rules' lengths are fractions of)."""
     from faceforge.geometry.rays import RayCaster
     from faceforge.landmarks import rules
 

@@ -19,8 +19,9 @@ SAMPLES = {
 }
 #: (median, p90, max) error bounds, fraction of the diagonal: the measured values (benchmarks/
 #: results/landmarks.json) plus a margin; the MediaPipe mask is a face without a head, whose
-#: diagonal is a third of the others'
-BOUNDS = {"makehuman": (0.0055, 0.0115, 0.02), "ict": (0.004, 0.012, 0.015), "mediapipe": (0.014, 0.028, 0.033)}
+#: diagonal is a third of the others'; its max is the cheek 5.1 (4.04 %), whose hand vertex 427 is
+#: the vertex nearest its file's construction point but 2.2 % of the diagonal from it (notes/land10)
+BOUNDS = {"makehuman": (0.0055, 0.0115, 0.02), "ict": (0.004, 0.012, 0.015), "mediapipe": (0.014, 0.028, 0.042)}
 
 
 def _mesh(name):
@@ -290,7 +291,11 @@ def test_brows_and_inner_lips_are_placed_by_the_rules_where_the_mesh_allows(dete
     at = {k: i for i, k in enumerate(det.ids)}
     assert det.vertex[at["2.2"]] != det.vertex[at["2.3"]]
     v, f, det = detected["mediapipe"]
-    assert not any(m.startswith(("rule: eyebrow", "rule: inner lip edge", "rule: midline profile (subnasale")) for m in det.method)
+    assert not any(m.startswith(("rule: eyebrow", "rule: inner lip edge")) for m in det.method)
+    # the mask's profile is as fine as a whole head's in eye spans (the rules measure in them): its
+    # subnasale is the rule's, 1.03 % of the diagonal from the hand point (the detector's: 2.19 %)
+    det, hand, at, off = _against_hand(detected, "mediapipe")
+    assert det.method[at["9.15"]].startswith("rule: midline profile (subnasale") and off("9.15") < 0.015
 
 
 def test_subnasale_and_jaw_angles_come_from_the_mesh_and_set_the_fap_units(detected):

@@ -27,7 +27,8 @@ import click
 from faceforge.pipeline import Stage, register_command, register_stage
 from faceforge.pipeline.workdir_guard import check_outside_workdir
 
-VERSION = "1"
+#: 2: the rules measure in eye spans on a face smaller than a whole head (the MediaPipe mask, cut heads)
+VERSION = "2"
 
 
 def run(ctx) -> None:
