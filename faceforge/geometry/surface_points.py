@@ -102,6 +102,7 @@ class SurfaceProjector:
         self.vertices, self.faces = v, f
         self._caster = None
         self._tree = None
+        self._derived = {}
 
     @property
     def caster(self):
@@ -120,6 +121,17 @@ class SurfaceProjector:
 
             self._tree = TriangleGrid(self.vertices[self.faces])
         return self._tree
+
+    def derived(self, name: str, compute):
+        """``compute(vertices, faces)`` of this mesh, computed once per ``name`` and kept (the
+        vertex and face normals, the centre, the mean edge length: every action line of a muscle
+        projected onto one layer mesh asks for them again). Read-only arrays come back."""
+        if name not in self._derived:
+            value = compute(self.vertices, self.faces)
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            self._derived[name] = value
+        return self._derived[name]
 
     def closest(self, points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(closest (k, 3), distance (k,), face_ids (k,))`` for ``points (k, 3)``."""

@@ -68,3 +68,30 @@ def test_projector_cache_follows_content():
     q = np.array([[0.0, 0.0, 5.0]])
     np.testing.assert_allclose(b.closest(q)[0], SurfaceProjector(v2, f).closest(q)[0])
     np.testing.assert_allclose(np.linalg.norm(project_to_surface(q, v2, f).positions(v2, f)), 2.0, atol=0.05)
+
+
+def test_projector_keeps_what_every_line_on_a_mesh_asks_again():
+    """The action lines of one layer ask the projector's mesh for its vertex normals, face
+    normals, centre and mean edge length: computed once (the muscles' build did it per line,
+    66 times on MakeHuman) and the same values as computed afresh."""
+    from faceforge.anatomy.muscles.action_line import ActionLine, mean_edge_length, project_outermost
+    from faceforge.geometry.surface_points import projector
+    from faceforge.geometry.triangles import vertex_normals
+
+    m = trimesh.creation.icosphere(2)
+    v, f = np.asarray(m.vertices).copy(), np.asarray(m.faces, np.int64)
+    calls = []
+    p = projector(v, f)
+    for _ in range(3):
+        got = p.derived("count", lambda v, f: calls.append(1) or vertex_normals(v, f))
+    assert len(calls) == 1
+    np.testing.assert_array_equal(got, vertex_normals(v, f))
+    assert not got.flags.writeable                      # shared: nobody edits it in place
+    pts = np.array([[0.2, 0.3, 1.2], [0.5, 0.1, 1.1], [0.8, -0.1, 0.9]])
+    first = project_outermost(pts, v, f)
+    again = project_outermost(pts, v.copy(), f.copy())  # the kept values, by content
+    np.testing.assert_array_equal(first.face_ids, again.face_ids)
+    np.testing.assert_array_equal(first.bary, again.bary)
+    assert "vertex_normals" in p._derived and "face_normals" in p._derived and "centre" in p._derived
+    ActionLine.from_points(pts, v, f)
+    assert p._derived["mean_edge_length"] == mean_edge_length(v, f)

@@ -179,12 +179,12 @@ def project_outermost(points, vertices, faces, reach: float = 0.05, closed: bool
 
     v, f = check_mesh(vertices, faces)
     p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
-    proj = projector(v, f)
+    proj = projector(v, f)   # shared by every line on this mesh, with its normals and centre
     near = proj.project(p)
-    n = near.normals(v, f)
+    n = near.normals(v, f, proj.derived("vertex_normals", vertex_normals))
     # "outside" is away from the layer's centre: a deeper muscle's bottom sheet
     # touches the skull with the opposite normal, so orient n radially outward
-    centre = v[np.unique(f)].mean(axis=0)
+    centre = proj.derived("centre", lambda v, f: v[np.unique(f)].mean(axis=0))
     flip = np.einsum("ij,ij->i", n, near.positions(v, f) - centre) < 0
     n[flip] *= -1.0
     # the points of one line are seen from one side: a point whose normal still
@@ -201,7 +201,7 @@ def project_outermost(points, vertices, faces, reach: float = 0.05, closed: bool
     # keep the first hit on a face turned toward the ray's origin: when the origin is
     # still inside a thin bone (the zygomatic arch), its back side is not a surface to lie on;
     # a hit more than ``reach`` beyond the point is another part of the head, not this point
-    fn = face_normals(v, f)[tri]
+    fn = proj.derived("face_normals", face_normals)[tri]
     front = (np.einsum("ij,ij->i", fn, n[ray]) > 0) & (dist >= 0) & (dist <= 2.0 * r)
     ray, tri, loc = ray[front], tri[front], loc[front]
     first = np.r_[True, ray[1:] != ray[:-1]] if len(ray) else np.zeros(0, bool)
@@ -266,7 +266,9 @@ class ActionLine:
         if len(p) < 2:
             raise ValueError(f"an action line needs at least two points, got {len(p)}")
         if spacing is None:
-            spacing = mean_edge_length(v, f)
+            from faceforge.geometry.surface_points import projector
+
+            spacing = projector(v, f).derived("mean_edge_length", mean_edge_length)
         ends = np.vstack([p, p[:1]]) if closed else p
         dense = [ends[0]]
         for a, b in zip(ends[:-1], ends[1:]):
