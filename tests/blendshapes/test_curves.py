@@ -64,13 +64,29 @@ def test_plain_csv_and_json_frames(tmp_path):
     ("frame,JawOpen\n0,0.5\n1\n", 3, "1 fields, the header has 2"),
     ("frame,JawOpen\n0,abc\n", 2, "not a number"),
     ("frame,JawOpen\n0,-0.2\n", 2, "outside [0, 1]"),
+    ("frame,JawOpen\n0,0.5\n1,NaN\n", 3, "jawOpen = nan is outside [0, 1]"),
+    ("frame,JawOpen\n0,0.5\n1,\n", 3, "not a number"),
+    ("frame,JawOpen\n0,0.5,0.1\n", 2, "3 fields, the header has 2"),
+    ("", 1, "empty file"),
+    ("frame,JawOpen\n", 2, "no frames"),
+    # a header of no shape at all: was read as a take of no weights and played (the stages ran)
+    ("Timecode,BlendShapeCount\n00:00:00:00.000,0\n", 1, "no blendshape column"),
+    ('{"frames": [{}, {}]}', 0, "no blendshape column"),
+    # a quote left open on the last row: was read as if closed
+    ('frame,JawOpen\n0,0.5\n1,"0.3\n', 3, "not a CSV file"),
+    # not UTF-8 (a UTF-16 export): was named without a line
+    (b"frame,JawOpen\n0,0.5\n1,0.\xff\n", 3, "not UTF-8 text"),
 ])
 def test_bad_csv_names_the_line(tmp_path, body, line, words):
-    p = tmp_path / "bad.csv"
-    p.write_text(body)
+    p = tmp_path / ("bad.json" if body.startswith("{") else "bad.csv") if isinstance(body, str) else tmp_path / "bad.csv"
+    if isinstance(body, bytes):
+        p.write_bytes(body)
+    else:
+        p.write_text(body)
     with pytest.raises(FapError) as exc:
         read_weights(p)
-    assert f"bad.csv:{line}" in str(exc.value) and words in str(exc.value)
+    where = f"{p.name}:{line}" if line else p.name
+    assert where in str(exc.value) and words in str(exc.value)
 
 
 def test_solve_weights_recovers_mixes_within_bounds():
