@@ -243,8 +243,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdirs", type=Path, nargs="*", default=None)
     ap.add_argument("--round-trip-only", action="store_true", help="keep the heads of the last results.json")
-    ap.add_argument("--heads", nargs="*", default=None, help="rebake only these heads (the others and the "
-                    "round trips kept from the last results.json)")
+    ap.add_argument("--heads", nargs="*", default=None, help="rebake only these heads (the others, and the "
+                    "round trips unless makehuman is one, kept from the last results.json)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as t:
         tmp = Path(t)
@@ -268,7 +268,7 @@ def main(argv=None) -> dict:
             out["reference_makehuman"] = reference_check(works["makehuman"])
         elif last.get("reference_makehuman"):
             out["reference_makehuman"] = last["reference_makehuman"]
-        if args.heads:
+        if args.heads and "makehuman" not in args.heads:
             out["round_trip_makehuman"] = last.get("round_trip_makehuman")
         elif "makehuman" in works:
             out["round_trip_makehuman"] = round_trips(works["makehuman"], tmp)
