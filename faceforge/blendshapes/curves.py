@@ -209,11 +209,14 @@ def _json_weights(path, data, default_fps):
     return names, np.clip(w, 0.0, 1.0), fps
 
 
-def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray) -> np.ndarray:
+def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray, ridge: float = 0.0) -> np.ndarray:
     """Per frame the weights ``w`` in [0, 1] minimising ``|neutral + sum_k w_k (shape_k - neutral)
-    - frame|`` (bounded least squares, scipy ``lsq_linear``).
+    - frame|^2 + ridge * s^2 |w|^2`` (bounded least squares, scipy ``lsq_linear``; ``s`` the mean
+    norm of the shapes' displacement fields, so ``ridge`` is unitless).
 
-    frames : (F, n, 3); neutral : (n, 3); shapes : (k, n, 3) -> (F, k) float.
+    frames : (F, n, 3); neutral : (n, 3); shapes : (k, n, 3); ridge >= 0 (``curves.ridge``:
+    with nearly collinear shapes, e.g. mouthRollLower / mouthShrugLower, it keeps a small change
+    of the motion from trading one's weight for the other's) -> (F, k) float.
     """
     from scipy.optimize import lsq_linear
 
@@ -223,10 +226,15 @@ def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray) -
     out = np.zeros((len(Y), len(shapes)))
     if not live.any():
         return out
-    # the normal equations' QR once, then per frame a small bounded solve: (3n, k) -> (k, k)
-    q, r = np.linalg.qr(D[:, live])
+    A = D[:, live]
+    k = A.shape[1]
+    if ridge > 0:
+        A = np.vstack([A, np.sqrt(ridge) * np.linalg.norm(A, axis=0).mean() * np.eye(k)])
+    # the normal equations' QR once, then per frame a small bounded solve: (3n [+ k], k) -> (k, k)
+    q, r = np.linalg.qr(A)
+    qd = q[: D.shape[0]]                         # the ridge rows' targets are 0
     for i, y in enumerate(Y):
-        out[i, live] = lsq_linear(r, q.T @ y, bounds=(0.0, 1.0), method="bvls").x
+        out[i, live] = lsq_linear(r, qd.T @ y, bounds=(0.0, 1.0), method="bvls").x
     return np.clip(out, 0.0, 1.0)
 
 

@@ -136,3 +136,24 @@ def test_a_30_hz_timecode_is_told_from_a_60_hz_one(tmp_path):
     rows = [f"00:00:{k // 30:02d}:{k % 30:02d}.000,61," + ",".join(["0"] * 61) for k in range(0, 90, 1)]
     p.write_text(LIVE_LINK_HEADER + "\n" + "\n".join(rows) + "\n")
     assert read_weights(p)[2] == pytest.approx(30.0)
+
+
+def test_a_ridge_keeps_two_nearly_collinear_shapes_from_trading_weight():
+    """Two shapes 0.999 alike (MakeHuman's mouthPressLeft / Right are): a frame half of each, moved
+    by 1 % of a shape along their difference, swings the plain solve's weights by most of [0, 1];
+    with ``ridge`` (curves.ridge) they move a little and the mix still fits the frame."""
+    rng = np.random.default_rng(3)
+    neutral = rng.normal(size=(200, 3))
+    a = rng.normal(size=(200, 3))
+    b = a + 0.045 * rng.normal(size=(200, 3))                # cosine with a ~0.999
+    shapes = neutral + np.stack([a, b])
+    base = neutral + 0.5 * a + 0.5 * b
+    nudge = 0.01 * np.linalg.norm(a) * (b - a) / np.linalg.norm(b - a)
+    frames = np.stack([base, base + nudge])
+    plain = solve_weights(frames, neutral, shapes)
+    ridged = solve_weights(frames, neutral, shapes, ridge=1e-2)
+    assert np.abs(plain[1] - plain[0]).max() > 0.15
+    assert np.abs(ridged[1] - ridged[0]).max() < 0.25 * np.abs(plain[1] - plain[0]).max()
+    err, _ = reproduction_error(frames, neutral, shapes, ridged)
+    assert err < 0.02
+    assert np.allclose(solve_weights(frames, neutral, shapes, ridge=0.0), plain)
