@@ -208,20 +208,34 @@ def round_trips(work: Path, tmp: Path) -> dict:
 
 
 def bad_takes(work: Path, tmp: Path) -> dict:
-    """``animate --arkit`` on three bad Live Link takes (an unknown name, a weight of 1.5, a ragged
-    row): {case: {"exit": code, "message": its stderr}} (expected: exit 2, one line naming file:line)."""
+    """``animate --arkit`` on bad Live Link takes (issue 27's list and more): {case: {"exit": code,
+    "message": its stderr, "written": whether -o was written}} (expected: exit 2, one line naming
+    file:line, nothing written)."""
     hdr = "Timecode,BlendShapeCount,EyeBlinkLeft,JawOpen,MouthSmileLeft"
     row = "00:00:00:00.000,3,0.1,0.2,0.3"
+    later = "00:00:00:01.000,3,0.1,{},0.3"
     cases = {"unknown_name": hdr.replace("JawOpen", "JawOpn") + "\n" + row + "\n",
-             "weight_out_of_range": hdr + "\n" + row + "\n00:00:00:01.000,3,0.1,1.5,0.3\n",
-             "ragged_row": hdr + "\n" + row + "\n00:00:00:01.000,3,0.1,0.2\n"}
+             "weight_out_of_range": hdr + "\n" + row + "\n" + later.format("1.5") + "\n",
+             "weight_negative": hdr + "\n" + row + "\n" + later.format("-0.2") + "\n",
+             "ragged_row": hdr + "\n" + row + "\n00:00:00:01.000,3,0.1,0.2\n",
+             "empty_file": "",
+             "header_only": hdr + "\n",
+             "no_shape_column": "Timecode,BlendShapeCount\n" + row[:17] + "0\n",
+             "non_numeric": hdr + "\n" + row + "\n" + later.format("abc") + "\n",
+             "empty_cell": hdr + "\n" + row + "\n" + later.format("") + "\n",
+             "nan": hdr + "\n" + row + "\n" + later.format("NaN") + "\n",
+             "inf": hdr + "\n" + row + "\n" + later.format("inf") + "\n",
+             "quote_open": hdr + "\n" + row + "\n" + later.format('"0.2') + "\n",
+             "utf16": (hdr + "\n" + row + "\n").encode("utf-16")}
     out = {}
     for case, text in cases.items():
         f = tmp / f"bad_{case}.csv"
-        f.write_text(text)
-        p = subprocess.run(CLI + ["--workdir", str(work), "animate", "--arkit", str(f), "-o", str(tmp / "bad.pc2")],
+        f.write_bytes(text if isinstance(text, bytes) else text.encode())
+        target = tmp / f"bad_{case}.pc2"
+        p = subprocess.run(CLI + ["--workdir", str(work), "animate", "--arkit", str(f), "-o", str(target)],
                            capture_output=True, text=True)
-        out[case] = {"exit": p.returncode, "message": p.stderr.strip().replace(str(tmp) + "/", "")}
+        out[case] = {"exit": p.returncode, "message": p.stderr.strip().replace(str(tmp) + "/", ""),
+                     "written": target.exists()}
     return out
 
 
@@ -229,8 +243,8 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--workdirs", type=Path, nargs="*", default=None)
     ap.add_argument("--round-trip-only", action="store_true", help="keep the heads of the last results.json")
-    ap.add_argument("--heads", nargs="*", default=None, help="rebake only these heads (the others and the "
-                    "round trips kept from the last results.json)")
+    ap.add_argument("--heads", nargs="*", default=None, help="rebake only these heads (the others, and the "
+                    "round trips unless makehuman is one, kept from the last results.json)")
     args = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as t:
         tmp = Path(t)
@@ -254,7 +268,7 @@ def main(argv=None) -> dict:
             out["reference_makehuman"] = reference_check(works["makehuman"])
         elif last.get("reference_makehuman"):
             out["reference_makehuman"] = last["reference_makehuman"]
-        if args.heads:
+        if args.heads and "makehuman" not in args.heads:
             out["round_trip_makehuman"] = last.get("round_trip_makehuman")
         elif "makehuman" in works:
             out["round_trip_makehuman"] = round_trips(works["makehuman"], tmp)

@@ -202,3 +202,61 @@ def test_an_obj_in_several_objects_needs_split_by_object_off(tmp_path):
     assert done.returncode == 2 and "made 2 mesh objects" in done.stderr and "--no-split" in done.stderr
     status, result = run_check(mesh, [cache], reference, tmp_path, "--no-split", "--frames", "0,2")
     assert status == 0 and len(result["results"]) == 2, json.dumps(result, indent=1)
+
+
+SHAPES_TOOL = ROOT / "tools" / "blender_shapes_check.py"
+
+
+def _shapes_check(*args: str):
+    """tools/blender_shapes_check.py in Blender; (exit status, its JSON line)."""
+    python = os.environ.get("FACEFORGE_BLENDER_PYTHON")
+    if not python:
+        pytest.skip("tools/blender_shapes_check.py runs in a Python with bpy (FACEFORGE_BLENDER_PYTHON)")
+    cmd = [python, str(SHAPES_TOOL), *args]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    line = [x for x in done.stdout.splitlines() if x.startswith("{")]
+    assert line, f"no result (exit {done.returncode}):\n{done.stderr[-2000:]}"
+    return done.returncode, json.loads(line[-1])
+
+
+@pytest.mark.parametrize("n_frames", [None, 9])
+def test_a_shapes_glb_opens_with_the_52_arkit_keys_basis_and_its_weights_animation(tmp_path, n_frames):
+    """The layout of ``bake -o x.glb`` (no animation) and of ``animate --curves ... -o x.glb`` (the
+    52 targets plus a weights animation of the take's frames): 53 shape keys, Basis first then
+    ARKit's names in order, each key's vertices the shape's, ``n_frames`` keyed frames."""
+    from faceforge.blendshapes.arkit import ARKIT_NAMES
+    from faceforge.io.export_shapes import write_shapes_glb
+
+    vertices, triangles, info = load_mesh(HEADS["makehuman"])
+    frames = synthetic_animation(vertices, n_frames=len(ARKIT_NAMES) + 1)
+    shapes = frames[1:]                         # 52 different, vertex-dependent displacements
+    rng = np.random.default_rng(27)
+    weights = None if n_frames is None else rng.uniform(0.0, 1.0, (n_frames, len(ARKIT_NAMES)))
+    glb = write_shapes_glb(tmp_path / "shapes.glb", vertices, shapes, list(ARKIT_NAMES),
+                           polygons_from_fan(triangles, info.face_source), weights=weights, fps=FPS)
+    npz = tmp_path / "shapes.npz"
+    np.savez(npz, names=np.array(ARKIT_NAMES), shapes=shapes, neutral=vertices.astype(np.float32))
+    args = [str(glb), "--shapes", str(npz)] + ([] if n_frames is None else ["--expect-frames", str(n_frames)])
+    status, out = _shapes_check(*args)
+    assert status == 0 and out["ok"], out
+    assert out["shape_keys"] == ["Basis", *ARKIT_NAMES] and out["objects"] == 1
+    assert out["vertices"] == len(vertices)
+    size = float(np.ptp(vertices, axis=0).max())
+    assert out["basis_error"] < 1e-6 * size and out["max_vertex_error"] < 1e-5 * size
+    if n_frames is None:
+        assert "animated_keys" not in out
+    else:
+        assert out["animated_keys"] == len(ARKIT_NAMES) and out["keyed_frames"] == n_frames
+        assert out["frame_range"][0] == pytest.approx(1.0) or out["frame_range"][0] == pytest.approx(0.0)
+
+
+def test_the_shapes_check_fails_on_a_wrong_frame_count(tmp_path):
+    from faceforge.blendshapes.arkit import ARKIT_NAMES
+    from faceforge.io.export_shapes import write_shapes_glb
+
+    vertices, triangles, info = load_mesh(HEADS["mediapipe"])
+    shapes = synthetic_animation(vertices, n_frames=len(ARKIT_NAMES) + 1)[1:]
+    glb = write_shapes_glb(tmp_path / "s.glb", vertices, shapes, list(ARKIT_NAMES), triangles,
+                           weights=np.full((5, len(ARKIT_NAMES)), 0.5), fps=FPS)
+    status, out = _shapes_check(str(glb), "--expect-frames", "6")
+    assert status == 1 and not out["ok"] and out["keyed_frames"] == 5

@@ -10,8 +10,8 @@ In: :func:`read_weights` reads
 * JSON: ``{"fps": 60, "frames": [{"jawOpen": 0.3, ...}, ...]}`` or a list of such objects, or
   ``{"names": [...], "weights": [[...], ...]}``.
 
-Every weight must lie in [0, 1], every name be one of ARKit's 52, every row have the header's
-length: otherwise a :class:`faceforge.exceptions.FapError` naming ``file:line``.
+Every weight must lie in [0, 1], every name be one of ARKit's 52, at least one shape be named,
+every row have the header's length, the text be UTF-8 and quotes closed: otherwise a :class:`faceforge.exceptions.FapError` naming ``file:line``.
 
 Out: :func:`solve_weights` finds per frame the weights in [0, 1] of baked shapes whose sum best
 matches a frame's displacement (bounded least squares); :func:`write_weights` writes them as a
@@ -70,16 +70,21 @@ def read_weights(path, default_fps: float = 60.0) -> tuple[list, np.ndarray, flo
     rate from :func:`timecode_rate`), else ``default_fps``."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
+        raw = path.read_bytes()
+    except OSError as exc:
         raise _error(path, 0, f"cannot read the weights: {exc.__class__.__name__}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:   # e.g. a UTF-16 export: name the line of the first bad byte
+        line = raw[:exc.start].count(b"\n") + 1
+        raise _error(path, line, f"not UTF-8 text (byte 0x{raw[exc.start]:02x})") from None
     if path.suffix.lower() == ".json":
         names, weights, fps = _read_json(path, text, default_fps)
     else:
-        try:
-            names, weights, fps = _read_csv(path, text, default_fps)
-        except csv.Error as exc:     # a NUL byte, a quote left open
-            raise _error(path, 0, f"not a CSV file: {exc}") from None
+        names, weights, fps = _read_csv(path, text, default_fps)
+    if not names:
+        raise _error(path, 1 if path.suffix.lower() != ".json" else 0,
+                     "no blendshape column: the take names none of ARKit's 52 shapes")
     from faceforge.mpeg4.fap import FPS_RANGE
 
     if not (np.isfinite(fps) and FPS_RANGE[0] <= fps <= FPS_RANGE[1]):
@@ -98,7 +103,13 @@ def _name(path, line, raw: str) -> str | None:
 
 
 def _read_csv(path, text, default_fps):
-    rows = list(csv.reader(text.splitlines()))
+    reader = csv.reader(text.splitlines(), strict=True)
+    rows = []
+    try:
+        for row in reader:
+            rows.append(row)
+    except csv.Error as exc:     # a NUL byte, a quote left open
+        raise _error(path, reader.line_num, f"not a CSV file: {exc}") from None
     if not rows or not rows[0]:
         raise _error(path, 1, "empty file: expected a header of blendshape names")
     header = [h.strip() for h in rows[0]]
@@ -198,11 +209,14 @@ def _json_weights(path, data, default_fps):
     return names, np.clip(w, 0.0, 1.0), fps
 
 
-def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray) -> np.ndarray:
+def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray, ridge: float = 0.0) -> np.ndarray:
     """Per frame the weights ``w`` in [0, 1] minimising ``|neutral + sum_k w_k (shape_k - neutral)
-    - frame|`` (bounded least squares, scipy ``lsq_linear``).
+    - frame|^2 + ridge * s^2 |w|^2`` (bounded least squares, scipy ``lsq_linear``; ``s`` the mean
+    norm of the shapes' displacement fields, so ``ridge`` is unitless).
 
-    frames : (F, n, 3); neutral : (n, 3); shapes : (k, n, 3) -> (F, k) float.
+    frames : (F, n, 3); neutral : (n, 3); shapes : (k, n, 3); ridge >= 0 (``curves.ridge``:
+    with nearly collinear shapes, e.g. mouthRollLower / mouthShrugLower, it keeps a small change
+    of the motion from trading one's weight for the other's) -> (F, k) float.
     """
     from scipy.optimize import lsq_linear
 
@@ -212,10 +226,15 @@ def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray) -
     out = np.zeros((len(Y), len(shapes)))
     if not live.any():
         return out
-    # the normal equations' QR once, then per frame a small bounded solve: (3n, k) -> (k, k)
-    q, r = np.linalg.qr(D[:, live])
+    A = D[:, live]
+    k = A.shape[1]
+    if ridge > 0:
+        A = np.vstack([A, np.sqrt(ridge) * np.linalg.norm(A, axis=0).mean() * np.eye(k)])
+    # the normal equations' QR once, then per frame a small bounded solve: (3n [+ k], k) -> (k, k)
+    q, r = np.linalg.qr(A)
+    qd = q[: D.shape[0]]                         # the ridge rows' targets are 0
     for i, y in enumerate(Y):
-        out[i, live] = lsq_linear(r, q.T @ y, bounds=(0.0, 1.0), method="bvls").x
+        out[i, live] = lsq_linear(r, qd.T @ y, bounds=(0.0, 1.0), method="bvls").x
     return np.clip(out, 0.0, 1.0)
 
 

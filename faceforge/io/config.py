@@ -191,6 +191,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.carry", Choice(("muscles", "all", "none"))),
     ("skin.carry_radius_mm", Number(0.0, 50.0)),
     ("skin.cheek_tether", Number(0.0, 1.0)),          # a stiffness: past 1 a projection overshoots
+    ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
     ("muscle.damping", Number(0.0, 0.99)),
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
     ("animate.orientation_guard.min_area", Number(0.0, 0.95)),

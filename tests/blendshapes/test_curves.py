@@ -64,13 +64,29 @@ def test_plain_csv_and_json_frames(tmp_path):
     ("frame,JawOpen\n0,0.5\n1\n", 3, "1 fields, the header has 2"),
     ("frame,JawOpen\n0,abc\n", 2, "not a number"),
     ("frame,JawOpen\n0,-0.2\n", 2, "outside [0, 1]"),
+    ("frame,JawOpen\n0,0.5\n1,NaN\n", 3, "jawOpen = nan is outside [0, 1]"),
+    ("frame,JawOpen\n0,0.5\n1,\n", 3, "not a number"),
+    ("frame,JawOpen\n0,0.5,0.1\n", 2, "3 fields, the header has 2"),
+    ("", 1, "empty file"),
+    ("frame,JawOpen\n", 2, "no frames"),
+    # a header of no shape at all: was read as a take of no weights and played (the stages ran)
+    ("Timecode,BlendShapeCount\n00:00:00:00.000,0\n", 1, "no blendshape column"),
+    ('{"frames": [{}, {}]}', 0, "no blendshape column"),
+    # a quote left open on the last row: was read as if closed
+    ('frame,JawOpen\n0,0.5\n1,"0.3\n', 3, "not a CSV file"),
+    # not UTF-8 (a UTF-16 export): was named without a line
+    (b"frame,JawOpen\n0,0.5\n1,0.\xff\n", 3, "not UTF-8 text"),
 ])
 def test_bad_csv_names_the_line(tmp_path, body, line, words):
-    p = tmp_path / "bad.csv"
-    p.write_text(body)
+    p = tmp_path / ("bad.json" if body.startswith("{") else "bad.csv") if isinstance(body, str) else tmp_path / "bad.csv"
+    if isinstance(body, bytes):
+        p.write_bytes(body)
+    else:
+        p.write_text(body)
     with pytest.raises(FapError) as exc:
         read_weights(p)
-    assert f"bad.csv:{line}" in str(exc.value) and words in str(exc.value)
+    where = f"{p.name}:{line}" if line else p.name
+    assert where in str(exc.value) and words in str(exc.value)
 
 
 def test_solve_weights_recovers_mixes_within_bounds():
@@ -120,3 +136,24 @@ def test_a_30_hz_timecode_is_told_from_a_60_hz_one(tmp_path):
     rows = [f"00:00:{k // 30:02d}:{k % 30:02d}.000,61," + ",".join(["0"] * 61) for k in range(0, 90, 1)]
     p.write_text(LIVE_LINK_HEADER + "\n" + "\n".join(rows) + "\n")
     assert read_weights(p)[2] == pytest.approx(30.0)
+
+
+def test_a_ridge_keeps_two_nearly_collinear_shapes_from_trading_weight():
+    """Two shapes 0.999 alike (MakeHuman's mouthPressLeft / Right are): a frame half of each, moved
+    by 1 % of a shape along their difference, swings the plain solve's weights by most of [0, 1];
+    with ``ridge`` (curves.ridge) they move a little and the mix still fits the frame."""
+    rng = np.random.default_rng(3)
+    neutral = rng.normal(size=(200, 3))
+    a = rng.normal(size=(200, 3))
+    b = a + 0.045 * rng.normal(size=(200, 3))                # cosine with a ~0.999
+    shapes = neutral + np.stack([a, b])
+    base = neutral + 0.5 * a + 0.5 * b
+    nudge = 0.01 * np.linalg.norm(a) * (b - a) / np.linalg.norm(b - a)
+    frames = np.stack([base, base + nudge])
+    plain = solve_weights(frames, neutral, shapes)
+    ridged = solve_weights(frames, neutral, shapes, ridge=1e-2)
+    assert np.abs(plain[1] - plain[0]).max() > 0.15
+    assert np.abs(ridged[1] - ridged[0]).max() < 0.25 * np.abs(plain[1] - plain[0]).max()
+    err, _ = reproduction_error(frames, neutral, shapes, ridged)
+    assert err < 0.02
+    assert np.allclose(solve_weights(frames, neutral, shapes, ridge=0.0), plain)

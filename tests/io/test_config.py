@@ -82,6 +82,7 @@ def test_unknown_top_level_key_without_near_match(tmp_path):
     ("skin: 3\n", "skin: expected a mapping, got 3"),
     # a stiffness of 5 was accepted and played
     ("skin:\n  cheek_tether: 5\n", "skin.cheek_tether: expected a number in [0, 1], got 5"),
+    ("curves:\n  ridge: -0.1\n", "curves.ridge: expected a number in [0, 1], got -0.1"),
     ("skin:\n  stiffness:\n    bending: [1]\n", "skin.stiffness.bending: expected a number in [0, 1], got [1]"),
     # no fraction, no probe: the calibration wrote an empty mapping and said nothing
     ("animate:\n  calibrate:\n    fractions: []\n",

@@ -115,6 +115,14 @@ CASES = {
                            ["t.csv:2", "not a number"]),
     "arkit csv weight nan": ({"t.csv": "jawOpen\nnan\n"}, ["animate", "--arkit", "{tmp}/t.csv"],
                              ["t.csv:2", "outside [0, 1]"]),
+    # a header of no shape (was played as a take of no weights: the stages ran), a quote left open
+    # (was read as closed), a UTF-16 export (was named without its line)
+    "arkit csv no shape column": ({"t.csv": "Timecode,BlendShapeCount\n00:00:00:00.000,0\n"},
+                                  ["animate", "--arkit", "{tmp}/t.csv"], ["t.csv:1", "no blendshape column"]),
+    "arkit csv quote open": ({"t.csv": 'jawOpen\n0.1\n"0.2\n'}, ["animate", "--arkit", "{tmp}/t.csv"],
+                             ["t.csv:3", "not a CSV file"]),
+    "arkit csv utf-16": ({"t.csv": "jawOpen\n0.1\n".encode("utf-16")}, ["animate", "--arkit", "{tmp}/t.csv"],
+                         ["t.csv:1", "not UTF-8"]),
     "arkit csv timecodes at 24000 fps": ({"t.csv": "Timecode,jawOpen\n" + "".join(
         f"00:00:00:00.{k:03d},0.1\n" for k in range(4))}, ["animate", "--arkit", "{tmp}/t.csv"],
         ["t.csv", "frame rate"]),
@@ -182,7 +190,10 @@ def run_case(name: str, tmp: Path, work: Path):
     """Run case ``name`` on ``work``; returns (result, expected words)."""
     files, args, words = CASES[name]
     for fname, text in files.items():
-        (tmp / fname).write_text(text, encoding="utf-8")
+        if isinstance(text, bytes):
+            (tmp / fname).write_bytes(text)
+        else:
+            (tmp / fname).write_text(text, encoding="utf-8")
     args = [_fill(a, tmp, work) for a in args]
     if args[0] != "-w":
         args = ["-w", str(work)] + args

@@ -103,7 +103,7 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
     names = [str(n) for n, m in zip(baked["names"], made) if m]
     shapes = baked["shapes"][made]
     frames, fps = anim["frames"], float(anim["fps"])
-    w = solve_weights(frames, baked["neutral"], shapes)
+    w = solve_weights(frames, baked["neutral"], shapes, ridge=float(app.config.get("curves.ridge")))
     err, peak = reproduction_error(frames, baked["neutral"], shapes, w)
     app.log(f"animate: curves: {len(names)} shapes x {len(frames)} frames; the mixed shapes reproduce the "
             f"simulated frames to {err:.1%} RMS of the motion (largest vertex error {peak:.4g} units)")
