@@ -13,7 +13,7 @@ from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, bin
 from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
 from faceforge.skin.brow import BROW_BAND_MM, brow_mask, eye_mask
-from faceforge.skin.rules import (MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
+from faceforge.skin.rules import (COMMISSURE_RADIUS, MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
                                   modiolus_mask, commissure_mask)
 
 
@@ -76,7 +76,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
-              cheek_muscles=(), commissure_radius: float = 0.0) -> BoundSkin:
+              cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
