@@ -3,7 +3,8 @@
 :func:`bind_rules` fixes what each skin vertex may bind to (:class:`Rules`); :func:`ray_passes`
 casts the paper's rays (outward onto the muscles, inward onto the muscles, inward onto the
 skull); :func:`fallbacks` binds the vertices whose rays missed to the closest point and moves
-the modiolus skin to the muscles around the mouth; :func:`second_anchors` adds the anchors on
+the modiolus skin to the muscles around the mouth; :func:`commissure_anchors` binds the lip skin
+at the inner lip corners to the whole ring; :func:`second_anchors` adds the anchors on
 the muscles that insert into the skin through those above them. See the module docstring of
 :mod:`faceforge.skin.binding`.
 """
@@ -158,3 +159,28 @@ def second_anchors(v, nrm, rules: Rules, anchors: tuple, insertions, outward, co
     order = np.argsort(np.concatenate([ids, extra]), kind="stable")   # each right after its first
     second = (extra,) + tuple(r[hit] for r in res) + (outward[extra], np.zeros(len(extra), bool))
     return tuple(np.concatenate([a, b])[order] for a, b in zip(anchors, second))
+
+
+def commissure_anchors(v, rules: Rules, hits: tuple, mask) -> np.ndarray:
+    """The commissure: lip skin at the inner lip corners (``mask`` (n,) bool) that the passes
+    before bound to the muscles around the mouth binds to the closest point of those muscles,
+    either arc (``casting._modiolus_anchors`` with every vertex of it on side 0).
+
+    There the upper lip's skin and the lower lip's meet in triangles a fraction of a millimetre
+    across, each lip on its own arc of the ring; the two arcs' points under vertices 0.3-0.8 mm
+    apart move 0.5-0.8 mm differently (a smile carries the lower lip's corner down and forward
+    of the upper's, a frown up through it), and the triangles spanning the lip line turn over
+    (MakeHuman's mouthSmile, mouthLeft, jawLeft; ICT's sadness). On the whole ring the
+    vertices of both lips take points where its arcs meet, a few tenths of a mm apart. Updates
+    ``hits`` (the arrays of :func:`ray_passes`) in place; returns the (n,) bool mask moved.
+    """
+    body, face, pts, dist, outward = hits
+    if rules.around is None:
+        return np.zeros(len(v), bool)
+    b = np.maximum(body, 0)
+    todo = np.asarray(mask, bool) & (body >= 0) & (rules.kinds[b] == MUSCLE) & rules.around[b]
+    moved = _modiolus_anchors(v, rules.bodies, rules.around, np.zeros(len(v), INT), todo,
+                              rules.max_distance, rules.allowed, body, face, pts, dist,
+                              rules.side_of, rules.face_sides)
+    outward[moved] = False
+    return moved

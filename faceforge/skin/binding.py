@@ -199,7 +199,7 @@ class Binding:
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
               insertions=None, face_sides=None, lips_to_ring=False, modiolus=None,
-              brow=None) -> Binding:
+              brow=None, commissure=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -256,6 +256,11 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         to the closest point of the muscles around the mouth within ``max_distance``, a lip
         vertex to its own arc (:func:`_modiolus_anchors`; module docstring), and gets no
         second anchor. Skin on the bone stays there.
+    commissure : (n,) bool, optional
+        The lip skin at the inner lip corners (with ``side_of`` and ``body_sides``): a vertex of
+        it bound to the muscles around the mouth (by its rays, the fallback or the modiolus)
+        binds to their closest point on either lip's arc, not only its own
+        (:func:`faceforge.skin.bind_passes.commissure_anchors`).
     brow : ((n,) bool, sequence of int), optional
         The brow's skin (:func:`faceforge.skin.brow.brow_mask`) and the brow muscles (indices
         into ``bodies``): a vertex of it on the bone after the rays and the fallback binds to
@@ -275,7 +280,7 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     closest-point fallback and the modiolus (``fallbacks``), the second anchors
     (``second_anchors``).
     """
-    from faceforge.skin.bind_passes import bind_rules, fallbacks, ray_passes, second_anchors
+    from faceforge.skin.bind_passes import bind_rules, commissure_anchors, fallbacks, ray_passes, second_anchors
 
     v, f = check_mesh(vertices, faces)
     bodies = list(bodies)
@@ -293,6 +298,11 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     hits = ray_passes(v, nrm, rules)
     closest = fallbacks(v, rules, hits, np.broadcast_to(np.asarray(fallback, bool), (n,)),
                          lips_to_ring, corner)
+    if commissure is not None:   # the inner lip corners: both lips on the whole ring
+        comm = np.asarray(commissure, bool).reshape(-1)
+        if len(comm) != n:
+            raise ValueError(f"commissure {comm.shape} must have one entry per vertex ({n})")
+        closest[commissure_anchors(v, rules, hits, comm)] = False
     body, face, pts, dist, outward = hits
     if brow is not None:   # the brow's insertion: brow skin on the bone moves to the brow muscles
         from faceforge.skin.brow import brow_anchors

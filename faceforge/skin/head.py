@@ -13,8 +13,8 @@ from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, bin
 from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
 from faceforge.skin.brow import BROW_BAND_MM, brow_mask, eye_mask
-from faceforge.skin.rules import (MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
-                                  modiolus_mask)
+from faceforge.skin.rules import (COMMISSURE_RADIUS, MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
+                                  modiolus_mask, commissure_mask)
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
-              cheek_muscles=()) -> BoundSkin:
+              cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -104,6 +104,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     modiolus_radius : float
         ``bind.modiolus_radius``: the skin within this fraction of MW0 of a mouth corner
         binds to the orbicularis oris (:func:`modiolus_mask`; 0: by its rays, as the paper).
+    commissure_radius : float
+        ``bind.commissure_radius``: the lip skin within this fraction of MW0 of an inner lip
+        corner on the orbicularis oris binds to either lip's arc of it (:func:`commissure_mask`,
+        :func:`faceforge.skin.bind_passes.commissure_anchors`; 0: its own lip's arc only).
     brow_band_mm, brow_muscles : float, sequence of str
         ``bind.brow_band_mm``, ``bind.brow_muscles`` (names or pair names as ``insertions``):
         brow skin that its rays bound to the bone binds to the closest brow muscle
@@ -169,6 +173,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     lips = lip_band(cut, band_width)
     ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
     corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
+    commissure = commissure_mask(cut.vertices, pts, commissure_radius)
     brow_ids, _ = match_insertions(brow_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     brow = brow_mask(cut.vertices, pts, brow_band_mm, up=up) if brow_ids else np.zeros(len(cut.vertices), bool)
     eye_ids, _ = match_insertions(tuple(brow_muscles) + ("orbicularis_oculi",) if brow_ids else (),
@@ -185,7 +190,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
-                        modiolus=corner,
+                        modiolus=corner, commissure=commissure,
                         brow=(brow, brow_ids, ((eye, eye_ids),), shared, raiser_ids))
     cheek_ids, _ = match_insertions(cheek_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     if cheek_ids and cheek_mm > 0:   # the cheek's insertion: cheek skin on the bone moves to the cheek raiser

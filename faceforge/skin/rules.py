@@ -73,13 +73,33 @@ CORNER_FDPS = ("8.3", "8.4", "2.4", "2.5")
 MODIOLUS_RADIUS = 0.12
 
 
+#: FDPs of the inner lip corners, where the two lips meet (the commissure)
+COMMISSURE_FDPS = ("2.4", "2.5")
+
+#: ``bind.commissure_radius``: the lip skin within this fraction of MW0 of an inner lip corner
+#: binds to the whole ring, not its own lip's arc (:func:`faceforge.skin.bind_passes.commissure_anchors`)
+COMMISSURE_RADIUS = 0.05
+
+
+def commissure_mask(vertices, landmarks: dict, radius: float = COMMISSURE_RADIUS) -> np.ndarray:
+    """(n,) bool: the vertices within ``radius`` x MW0 (|FDP 8.3 - FDP 8.4|) of an inner lip
+    corner (:data:`COMMISSURE_FDPS`, those given). No vertex without 8.3 and 8.4 or with
+    ``radius`` 0."""
+    return _near_fdps(vertices, landmarks, radius, COMMISSURE_FDPS)
+
+
 def modiolus_mask(vertices, landmarks: dict, radius: float = MODIOLUS_RADIUS) -> np.ndarray:
     """(n,) bool: the vertices within ``radius`` x MW0 of one of the mouth corners'
     FDPs (:data:`CORNER_FDPS`, those given); MW0 = |FDP 8.3 - FDP 8.4|. No vertex
     without 8.3 and 8.4 or with ``radius`` 0."""
+    return _near_fdps(vertices, landmarks, radius, CORNER_FDPS)
+
+
+def _near_fdps(vertices, landmarks: dict, radius: float, fdps) -> np.ndarray:
+    """(n,) bool: the vertices within ``radius`` x MW0 of one of ``fdps`` (those given)."""
     v = np.asarray(vertices, FLOAT)
-    if radius <= 0.0 or "8.3" not in landmarks or "8.4" not in landmarks:
+    corners = [landmarks[k] for k in fdps if k in landmarks]
+    if radius <= 0.0 or "8.3" not in landmarks or "8.4" not in landmarks or not corners:
         return np.zeros(len(v), bool)
     reach = radius * float(np.linalg.norm(np.subtract(landmarks["8.3"], landmarks["8.4"])))
-    corners = np.array([landmarks[k] for k in CORNER_FDPS if k in landmarks], FLOAT)
-    return (np.linalg.norm(v[:, None, :] - corners[None], axis=2) <= reach).any(axis=1)
+    return (np.linalg.norm(v[:, None, :] - np.asarray(corners, FLOAT)[None], axis=2) <= reach).any(axis=1)

@@ -386,3 +386,57 @@ def test_modiolus_mask_is_the_skin_near_the_corner_fdps():
                                   [True, False, False, True, True, False, False])
     assert not modiolus_mask(pts, lm, 0.0).any()
     assert not modiolus_mask(pts, {k: lm[k] for k in ("8.3", "2.4")}, 0.12).any()   # no MW0
+
+
+def test_commissure_binds_both_lips_at_the_corner_to_either_arc_of_the_ring(skin):
+    """Lip skin in the ``commissure`` mask bound to the ring binds to the closest point of the
+    whole ring, either lip's arc (the two arcs meet under the corner: vertices a fraction of a
+    mm apart, bound each to its own arc, moved apart and folded); out of the mask, and without
+    it, a lip vertex keeps its own arc; skin on the bone stays."""
+    from faceforge.skin.mouth import AROUND_MOUTH
+    from faceforge.geometry.surface_points import closest_points
+
+    v, f = skin
+    ring = Body("ring", "muscle", *_cap(0.85, 0.9, 4))
+    skull = Body("cranium", "cranium", *sphere(0.8, 3))
+    # the ring's rows part 0.15 above the skin's lip line (a fitted ring is not the lips)
+    labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0.15, 1, -1).astype(np.int8)
+    sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] >= 0.0, 1, -1), 0)
+
+    def side_of(points):
+        return np.where(points[:, 1] >= 0, 1, -1)
+
+    comm = (v[:, 2] > 0.9) & (np.abs(v[:, 1]) < 0.2)
+    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
+    own = bind_skin(v, f, [ring, skull], max_distance=0.5, **kw)
+    both = bind_skin(v, f, [ring, skull], max_distance=0.5, commissure=comm, **kw)
+    on_ring = (both.body == 0) & np.isin(both.vertex_ids, np.flatnonzero(comm & (sides != 0)))
+    assert on_ring.sum() >= 4
+    _, d, _ = closest_points(v[both.vertex_ids[on_ring]], ring.vertices, ring.faces)
+    np.testing.assert_allclose(both.distance[on_ring], d, atol=1e-12)   # the whole ring
+    crossed = labels[both.face_ids[on_ring]] != sides[both.vertex_ids[on_ring]]
+    assert crossed.any()                                          # some on the other lip's arc
+    ring_own = (own.body == 0) & (sides[own.vertex_ids] != 0)      # without: each on its own arc
+    assert np.all(labels[own.face_ids[ring_own]] == sides[own.vertex_ids[ring_own]])
+    out = ~np.isin(both.vertex_ids, np.flatnonzero(comm))          # out of the mask: as before
+    keep = ~np.isin(own.vertex_ids, np.flatnonzero(comm))
+    np.testing.assert_array_equal(own.body[keep], both.body[out])
+    np.testing.assert_array_equal(own.points[keep], both.points[out])
+    bone = np.isin(own.vertex_ids, np.flatnonzero(comm)) & (own.body == 1)
+    assert np.all(both.body[np.isin(both.vertex_ids, own.vertex_ids[bone])] == 1)
+    with pytest.raises(ValueError, match="commissure"):
+        bind_skin(v, f, [ring, skull], max_distance=0.5, commissure=comm[:-1], **kw)
+
+
+def test_commissure_mask_is_the_skin_near_the_inner_lip_corners():
+    from faceforge.skin.rules import commissure_mask
+
+    lm = {"8.3": np.array([1.0, 0.0, 0.0]), "8.4": np.array([-1.0, 0.0, 0.0]),
+          "2.4": np.array([0.9, 0.0, 0.0]), "2.5": np.array([-0.9, 0.0, 0.0])}
+    pts = np.array([[0.95, 0.0, 0.0], [1.05, 0.0, 0.0], [-0.9, 0.09, 0.0], [-0.9, 0.11, 0.0],
+                    [0.0, 0.0, 0.0]])
+    np.testing.assert_array_equal(commissure_mask(pts, lm, 0.05),   # reach 0.1 (MW0 = 2)
+                                  [True, False, True, False, False])
+    assert not commissure_mask(pts, lm, 0.0).any()
+    assert not commissure_mask(pts, {k: lm[k] for k in ("8.3", "2.4", "2.5")}, 0.05).any()
+    assert not commissure_mask(pts, {k: lm[k] for k in ("8.3", "8.4")}, 0.05).any()

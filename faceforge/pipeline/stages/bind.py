@@ -106,6 +106,7 @@ def run(ctx):
                       float(ctx.config.get("bind.max_ray_distance")), insertions=insertions,
                       lips_to_ring=bool(ctx.config.get("bind.lips_to_ring")),
                       modiolus_radius=float(ctx.config.get("bind.modiolus_radius")), mirror=head["mirror"],
+                      commissure_radius=float(ctx.config.get("bind.commissure_radius")),
                       brow_band_mm=float(ctx.config.get("bind.brow_band_mm")),
                       brow_muscles=tuple(str(n) for n in ctx.config.get("bind.brow_muscles")),
                       brow_shared_mm=float(ctx.config.get("bind.brow_shared_mm")),
@@ -122,7 +123,7 @@ def run(ctx):
 
 STAGE = register_stage(Stage(
     name="bind", deps=("fit",), config_keys=("bind",),
-    outputs=("bind.npz", "report.json", "influence.png"), version="7", run=run,
+    outputs=("bind.npz", "report.json", "influence.png"), version="8", run=run,
     description="bind the skin to muscles and bone, influence map (§8)", background=compile_solver_ahead))
 
 
