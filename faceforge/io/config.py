@@ -208,7 +208,6 @@ RULES: list[tuple[str, Rule]] = [
     ("fit.rbf_kernel", Choice(("multiquadric", "inverse_multiquadric", "thin_plate_spline", "gaussian"))),
     ("bind.max_ray_distance", Number(0.0, 1.0)),
     ("bind.modiolus_radius", Number(0.0, 0.5)),
-    ("bind.ala_mm", Number(0.0, 40.0)),
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
     ("animate.calibrate.magnitudes", PathValue()),

@@ -48,13 +48,11 @@ def cheek_mask(vertices, landmarks: dict, reach_mm: float = CHEEK_MM, up=(0.0, 1
     return mask & ~eye_mask(v, landmarks, up=up)
 
 
-def cheek_binding(binding, vertices, bodies, muscles, mask, max_distance: float, also_from=()):
+def cheek_binding(binding, vertices, bodies, muscles, mask, max_distance: float):
     """``binding`` (:class:`faceforge.skin.binding.Binding`) with the vertices of ``mask``
     (n,) bool whose only anchor is on the bone rebound to the closest point of the bodies
     ``muscles`` (indices into ``bodies``) within ``max_distance`` (skin units); a vertex with
-    none in reach keeps its anchor. ``also_from``: indices into ``bodies`` of muscles whose
-    single anchors in ``mask`` move too (:mod:`faceforge.skin.ala`: the ala's skin that its rays
-    bound to the lips' sphincter). Returns ``(binding, count rebound)``."""
+    none in reach keeps its anchor. Returns ``(binding, count rebound)``."""
     from dataclasses import replace
 
     from faceforge.geometry.triangles import barycentric
@@ -67,11 +65,6 @@ def cheek_binding(binding, vertices, bodies, muscles, mask, max_distance: float,
     row = np.full(n, -1, INT)
     row[ids] = np.arange(len(ids))        # with one anchor per vertex, that anchor's row
     on_bone = (binding.status != MUSCLE) & (binding.status != 0) & (counts == 1)
-    if len(also_from):
-        first = np.zeros(n, INT) - 1
-        first[ids] = np.asarray(binding.body, INT)
-        on_bone |= (binding.status == MUSCLE) & (counts == 1) & np.isin(first, np.asarray(also_from, INT)) \
-            & ~np.isin(first, np.asarray(muscles, INT))
     todo = np.flatnonzero(np.asarray(mask, bool) & on_bone)
     if not len(todo) or not len(muscles):
         return binding, 0

@@ -76,7 +76,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
-              cheek_muscles=(), ala_mm: float = 0.0, ala_muscles=()) -> BoundSkin:
+              cheek_muscles=()) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -119,10 +119,6 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.cheek_mm``, ``bind.cheek_muscles``: cheek skin within this many mm of FDP 5.3 /
         5.4 that its rays bound to the bone binds to the closest cheek muscle
         (:mod:`faceforge.skin.cheek`; 0 or none: by its rays, as the paper).
-    ala_mm, ala_muscles : float, sequence of str
-        ``bind.ala_mm``, ``bind.ala_muscles``: the ala's skin within this many mm of FDP 9.1 /
-        9.2 that its rays bound to the bone or to the lips' sphincter binds to the closest ala
-        muscle (:mod:`faceforge.skin.ala`; 0 or none: by its rays, as the paper).
     mirror : faceforge.geometry.mirror.Mirror or None
         A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
         image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
@@ -197,14 +193,6 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
 
         binding, _ = cheek_binding(binding, cut.vertices, bodies, cheek_ids, cheek_mask(cut.vertices, pts, cheek_mm, up),
                                    max_ray_fraction * diagonal)
-    ala_ids, _ = match_insertions(ala_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
-    if ala_ids and ala_mm > 0:   # the ala's insertion: the nose's wing moves with its levator
-        from faceforge.skin.ala import ala_mask
-        from faceforge.skin.cheek import cheek_binding
-
-        ring = [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH]     # the lips' sphincter
-        binding, _ = cheek_binding(binding, cut.vertices, bodies, ala_ids, ala_mask(cut.vertices, pts, ala_mm, up),
-                                   max_ray_fraction * diagonal, also_from=ring)
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
