@@ -25,16 +25,19 @@ opening wider is held at half its fade's height (below).
 margins' moves at its height: the cover of a closed eye (a mask's triangles, a socket's
 lining, the rim of an eye hole) is gathered to where the lids meet. Above the upper margin the
 move fades linearly to 0 at ``reach * gap`` above it (the lid's skin up to its crease), below
-the lower margin at ``reach / 2 * gap`` below it. Skin behind the margins fades out from
+the lower margin at :data:`LOWER_FADE` ``* reach * gap`` below it. Skin behind the margins fades out from
 ``depth * gap`` behind them to twice that: the inside of a closed socket stays, and the back
 of the head is never in reach.
 
 **A driven lid holds its skin.** MPEG-4's lid FAPs give the lid FDP's displacement from the
 neutral face, so in a frame where an eye's lid FAPs move, the skin the lids own first gives back
-its simulated vertical drift (:func:`held_share`: all of it between the margins and at the
-corners, fading out above and below over more than the lids' fades): the frontalis of a surprised face
+its simulated drift (:func:`held_share`: all of it between the margins and at the corners,
+fading out above and below over more than the lids' fades): the frontalis of a surprised face
 dragged the upper margin up hardest under the brow's middle, and the lid's own raise laid over
-that peaked and skewed the opening.
+that peaked and skewed the opening. The whole drift, not only its vertical part: the skin that
+was dragged up was also drawn 1-2 mm forward, unevenly (ICT's upper lid in surprise), and a
+margin put back on its curve in height but left at its dragged depths folded along its inner
+half (all 12 of surprise's lid folds on ICT that the simulation did not have).
 
 **Over the eyeball.** A lid closing over the eye rides forward over the eyeball: a vertex in
 front of the eyeball's horizontal axis (along ``u``) keeps its distance from the axis as it
@@ -69,6 +72,12 @@ EYES = (("3.1", "3.3", "3.7", "3.11", 19, 21),    # the subject's left eye
 #: fraction of an eye's rest opening left between the margins when its lids meet
 MIN_OPENING = 0.02
 
+#: how far below the lower margin its move fades out, in the lid's reach (``reach x gap``; the
+#: upper lid's skin fades over one reach): a lower lid raised a third of the opening (anger's
+#: 350 IRISD, ICT 3.5 mm) over half a reach (2.5 mm on ICT) stretched the skin under it to twice
+#: its height and turned the margin's rim over (ICT: anger's 4 lid folds -> 2, disgust's 3 -> 0)
+LOWER_FADE = 1.0
+
 #: exponent of the margins' taper ``s(u)`` (module docstring)
 TAPER = 3.0
 
@@ -83,8 +92,12 @@ HOLD_BEYOND = 0.6
 #: lid's reach (``reach x gap``): longer than the lids' own fades, so that the drift it takes back
 #: (2-3 mm where a cheek raiser or the frontalis lifts the skin round the eye) changes by less than
 #: half its height per reach; over one reach the held skin was sheared by most of its height and
-#: creased the lower lid and the canthi (joy's 6 folded edges on MakeHuman, fear's 2, anger's 2)
-HOLD_ABOVE, HOLD_BELOW = 1.5, 2.0
+#: creased the lower lid and the canthi (joy's 6 folded edges on MakeHuman, fear's 2, anger's 2);
+#: below, three reaches: the tethered cheek raiser (``skin.cheek_tether``) lifts the skin under the
+#: lower lid 5-6 mm at cheekSquint's full weight, and taking that back over two reaches still
+#: creased MakeHuman's lower lid (3 folded edges per eye, 1 over three; FDP 5.3's lift stays out
+#: of the hold's reach on the three samples)
+HOLD_ABOVE, HOLD_BELOW = 1.5, 3.0
 
 
 @dataclass(frozen=True)
@@ -184,8 +197,8 @@ class LidField:
     eye's v) by ``-up_share[i] * drop + low_share[i] * rise`` for an upper-lid drop and a
     lower-lid rise at the lid FDPs (skin units), see :func:`lid_field`. ``index (k,)``: the
     vertices in reach; the shares are (k,) >= 0 at those vertices (1 at the lid FDPs);
-    ``reach``: the fade's height above the upper margin, in rest openings (half of it below the
-    lower margin). ``hold (k,)`` in [0, 1]: how much of the skin's simulated vertical drift the
+    ``reach``: the fade's height above the upper margin, in rest openings (:data:`LOWER_FADE` of it
+    below the lower margin). ``hold (k,)`` in [0, 1]: how much of the skin's simulated drift the
     driven lids take back (:func:`held_share`): 1 between the margins, fading out :data:`HOLD_ABOVE`
     and :data:`HOLD_BELOW` reaches above and below them, without the taper along the lid, so the
     corners (the canthi, tied to the bone) are held as well, fading out beyond them over
@@ -202,8 +215,8 @@ class LidField:
 def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5) -> LidField:
     """The share of each lid's move that each rest vertex ``rest (n, 3)`` takes.
 
-    reach : how far above the upper margin the move fades to 0, in rest openings (half of it
-    below the lower margin); depth : how far behind the margins skin starts to fade out, in
+    reach : how far above the upper margin the move fades to 0, in rest openings (:data:`LOWER_FADE`
+    of it below the lower margin); depth : how far behind the margins skin starts to fade out, in
     rest openings (gone at twice that).
     """
     if not (reach > 0.0 and depth > 0.0):
@@ -216,7 +229,7 @@ def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5
     hu, hl = top * s, bottom * s
     behind = np.clip(2.0 - (eye.lid_depth * s - x[:, 2]) / (depth * g), 0.0, 1.0)
     above = np.clip(1.0 - (x[:, 1] - hu) / (reach * g), 0.0, 1.0)
-    below = np.clip(1.0 - (hl - x[:, 1]) / (0.5 * reach * g), 0.0, 1.0)
+    below = np.clip(1.0 - (hl - x[:, 1]) / (LOWER_FADE * reach * g), 0.0, 1.0)
     t = np.clip((x[:, 1] - hl) / np.maximum(hu - hl, 1e-300), 0.0, 1.0)   # 0 lower margin, 1 upper
     up = np.where(x[:, 1] >= hu, above, np.where(x[:, 1] <= hl, 0.0, t))
     low = np.where(x[:, 1] <= hl, below, np.where(x[:, 1] >= hu, 0.0, 1.0 - t))
@@ -242,13 +255,13 @@ def lid_moves(field: LidField, faps: np.ndarray, irisd: float) -> np.ndarray:
     Where the two would close more than the opening less :data:`MIN_OPENING`, both are scaled
     back to meet there (the margins' opening ``(top - bottom) s(u)`` is left that fraction
     everywhere along them). A lid that opens wider is held at half its fade's height
-    (``reach / 2`` openings up for the upper lid, ``reach / 4`` down for the lower one), where
+    (``reach / 2`` openings up for the upper lid, ``LOWER_FADE x reach / 2`` down for the lower one), where
     the skin it pushes into has been squeezed to half its height."""
     faps = np.nan_to_num(np.atleast_2d(np.asarray(faps, dtype=np.float64)))
     eye = field.eye
     g = eye.gap
     move = faps[:, [eye.upper_fap - 1, eye.lower_fap - 1]] * irisd
-    move = np.maximum(move, [-0.5 * field.reach * g, -0.25 * field.reach * g])
+    move = np.maximum(move, [-0.5 * field.reach * g, -0.5 * LOWER_FADE * field.reach * g])
     top, bottom = eye.margins
     per_s = move / eye.taper([eye.upper_u, eye.lower_u])      # the moves at the margins' peak
     closing = per_s.sum(axis=1)
@@ -259,8 +272,8 @@ def lid_moves(field: LidField, faps: np.ndarray, irisd: float) -> np.ndarray:
 
 
 def held_share(field: LidField, moves: np.ndarray) -> np.ndarray:
-    """``(F, k)`` in [0, 1]: how much of the simulated skin's vertical drift (along the eye's v)
-    the lid field takes back at each vertex of ``field.index`` in frames whose lid moves are
+    """``(F, k)`` in [0, 1]: how much of the simulated skin's drift (its whole displacement
+    from rest) the lid field takes back at each vertex of ``field.index`` in frames whose lid moves are
     ``moves (F, 2)`` (:func:`lid_moves`). MPEG-4's lid FAPs give the lid FDP's displacement from
     the neutral face, so a driven lid's margin (share 1) goes where its FAP says whatever the
     muscles did to the skin around it (a brow raised by the frontalis dragged the upper margin up
@@ -279,8 +292,9 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
     fields : one :class:`LidField` per eye (of the same ``rest (n, 3)``); irisd : one IRISD
     unit (skin units). Each vertex in a field's reach is displaced by its vertical move, turned
     over the eyeball (module docstring), computed on its rest position and added to the frame.
-    A driven lid first takes back the vertical drift of the skin it holds (:func:`held_share`),
-    so its FDP ends exactly ``FAP x IRISD`` from its rest place.
+    A driven lid first takes back the drift of the skin it holds (:func:`held_share`; the whole
+    displacement from rest, module docstring), so its FDP ends exactly ``FAP x IRISD`` from its
+    rest place.
     A new array; frames without lid FAPs are copied bit for bit. No guard (:class:`Eyelids`).
     """
     out = np.array(frames, copy=True)
@@ -293,8 +307,8 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
             continue
         hold = held_share(field, moves[live])                      # (L, k)
         if hold.any():   # a driven lid's margin goes where its FAP says, not where the skin dragged it
-            drift = (out[np.ix_(live, idx)] - rest[idx]) @ eye.axes[1]
-            out[np.ix_(live, idx)] -= ((hold * drift)[..., None] * eye.axes[1]).astype(out.dtype)
+            drift = out[np.ix_(live, idx)] - rest[idx]                 # (L, k, 3): all of it
+            out[np.ix_(live, idx)] -= (hold[..., None] * drift).astype(out.dtype)
         x = (rest[idx] - eye.eyeball_centre) @ eye.axes.T       # (k, 3) about the eyeball
         dv = -np.outer(moves[live, 0], field.up_share) + np.outer(moves[live, 1], field.low_share)
         y0, z0 = x[:, 1], x[:, 2]
