@@ -19,6 +19,10 @@ from faceforge.constants import NUMBA_OPTIONS
 
 __all__ = ["TriangleGrid"]
 
+#: triangles whose distances to a point differ by less than TIE x the grid's cell are equally
+#: near (the lowest index wins): rounding must not choose between mirror-image triangles
+TIE = 1e-10
+
 #: grid cells per axis at most (a skull: ~40 at two triangle diameters a cell)
 MAX_CELLS = 96
 
@@ -59,8 +63,8 @@ class TriangleGrid:
 
     def closest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(q (k, 3), face (k,) int)``: the closest points of the soup to ``points (k, 3)``
-        (finite) and the triangles holding them (of equally near triangles, the lowest
-        index). Compiled: :func:`_closest_in`; the tests compare q with trimesh's."""
+        (finite) and the triangles holding them (of equally near triangles, within
+        ``TIE`` x cell, the lowest index). Compiled: :func:`_closest_in`; the tests compare q with trimesh's."""
         points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
         if not np.isfinite(points).all():
             raise ValueError("TriangleGrid.closest: points must be finite")
@@ -101,6 +105,7 @@ def _closest_in(points, tri, origin, cell, dims, start, items, face):  # pragma:
     around the point's (clamped) cell; ``face[k]`` is set to the triangle holding it (the
     lowest index of equally near ones)."""
     out = np.empty_like(points)
+    tie = TIE * cell
     seen = np.full(tri.shape[0], -1, dtype=np.int64)  # the last point that measured each
     c = np.empty(3, dtype=np.int64)
     gap2 = np.empty(3)
@@ -113,7 +118,7 @@ def _closest_in(points, tri, origin, cell, dims, start, items, face):  # pragma:
             # least that far along it (a far point's search then stops after a few shells)
             g = max(origin[a] - points[k, a], points[k, a] - (origin[a] + dims[a] * cell), 0.0)
             gap2[a] = g * g
-        best = np.inf
+        best = np.inf     # the best triangle's distance (not squared)
         r = 0
         while True:
             for i in range(max(c[0] - r, 0), min(c[0] + r, dims[0] - 1) + 1):
@@ -132,8 +137,11 @@ def _closest_in(points, tri, origin, cell, dims, start, items, face):  # pragma:
                                 p0, p1, p2, tri[t, 0, 0], tri[t, 0, 1], tri[t, 0, 2],
                                 tri[t, 1, 0], tri[t, 1, 1], tri[t, 1, 2],
                                 tri[t, 2, 0], tri[t, 2, 1], tri[t, 2, 2])
-                            d = (p0 - qx) ** 2 + (p1 - qy) ** 2 + (p2 - qz) ** 2
-                            if d < best or (d == best and t < face[k]):
+                            d = np.sqrt((p0 - qx) ** 2 + (p1 - qy) ** 2 + (p2 - qz) ** 2)
+                            # within tie of the best: equally near, the lower index wins (a
+                            # point on a symmetric mesh's mirror plane must not pick its side
+                            # by the last bits of its coordinates)
+                            if d < best - tie or (d <= best + tie and t < face[k]):
                                 best = d
                                 out[k, 0], out[k, 1], out[k, 2] = qx, qy, qz
                                 face[k] = t
@@ -149,7 +157,7 @@ def _closest_in(points, tri, origin, cell, dims, start, items, face):  # pragma:
                     d = max(origin[a] + (c[a] + r + 1) * cell - points[k, a], 0.0)
                     bound = min(bound, d * d + rest)
             # strictly nearer: an equally near triangle beyond may have a lower index
-            if bound == np.inf or best < bound:
+            if bound == np.inf or (best + tie) * (best + tie) < bound:
                 break
             r += 1
     return out
