@@ -78,11 +78,9 @@ def test_plain_csv_and_json_frames(tmp_path):
     (b"frame,JawOpen\n0,0.5\n1,0.\xff\n", 3, "not UTF-8 text"),
 ])
 def test_bad_csv_names_the_line(tmp_path, body, line, words):
-    p = tmp_path / ("bad.json" if body.startswith("{") else "bad.csv") if isinstance(body, str) else tmp_path / "bad.csv"
-    if isinstance(body, bytes):
-        p.write_bytes(body)
-    else:
-        p.write_text(body)
+    text = isinstance(body, str)
+    p = tmp_path / ("bad.json" if text and body.startswith("{") else "bad.csv")
+    p.write_bytes(body.encode() if text else body)
     with pytest.raises(FapError) as exc:
         read_weights(p)
     where = f"{p.name}:{line}" if line else p.name

@@ -204,9 +204,8 @@ def plane_section_closest(p: np.ndarray, vertices: np.ndarray, faces: np.ndarray
             if s[k, a] * s[k, b] < 0.0:
                 t = s[k, a] / (s[k, a] - s[k, b])
                 pts.append((1.0 - t) * eye[a] + t * eye[b])
-        if len(pts) == 1:
-            pts.append(pts[0])
-        ends.append((pts[0], pts[-1]) if len(pts) <= 3 else (pts[0], pts[1]))
+        # at most three points (a face lying in the plane: one of its edges stands for it)
+        ends.append((pts[0], pts[-1]))
     ba = np.array([e[0] for e in ends])
     bb = np.array([e[1] for e in ends])
     tri = v[f[cross]]
