@@ -77,7 +77,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
               cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS,
-              vermilion: bool = False) -> BoundSkin:
+              vermilion: float = 0.0) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -109,10 +109,11 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.commissure_radius``: the lip skin within this fraction of MW0 of an inner lip
         corner on the orbicularis oris binds to either lip's arc of it (:func:`commissure_mask`,
         :func:`faceforge.skin.bind_passes.commissure_anchors`; 0: its own lip's arc only).
-    vermilion : bool
-        ``bind.vermilion_to_ring``: the red of the lips (:func:`vermilion_mask`) that its rays bound
-        to the skull binds to its own lip's arc of the orbicularis oris
-        (:func:`faceforge.skin.bind_passes.vermilion_anchors`; False: by its rays).
+    vermilion : float
+        ``bind.vermilion_reach``: the lip skin within this many midline heights of its inner lip
+        contour (:func:`vermilion_mask`; 1: the red of the lips) that its rays bound to the skull
+        binds to its own lip's arc of the orbicularis oris
+        (:func:`faceforge.skin.bind_passes.vermilion_anchors`; 0: by its rays).
     brow_band_mm, brow_muscles : float, sequence of str
         ``bind.brow_band_mm``, ``bind.brow_muscles`` (names or pair names as ``insertions``):
         brow skin that its rays bound to the bone binds to the closest brow muscle
@@ -179,7 +180,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
     corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
     commissure = commissure_mask(cut.vertices, pts, commissure_radius)
-    verm = vermilion_mask(cut, sides, pts) if vermilion else None
+    verm = vermilion_mask(cut, sides, pts, vermilion) if vermilion > 0 else None
     brow_ids, _ = match_insertions(brow_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     brow = brow_mask(cut.vertices, pts, brow_band_mm, up=up) if brow_ids else np.zeros(len(cut.vertices), bool)
     eye_ids, _ = match_insertions(tuple(brow_muscles) + ("orbicularis_oculi",) if brow_ids else (),

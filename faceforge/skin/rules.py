@@ -109,12 +109,12 @@ def _near_fdps(vertices, landmarks: dict, radius: float, fdps) -> np.ndarray:
 VERMILION_FDPS = {1: ("2.2", "8.1"), -1: ("2.3", "8.2")}
 
 
-def vermilion_mask(cut, sides, landmarks: dict) -> np.ndarray:
+def vermilion_mask(cut, sides, landmarks: dict, scale: float = 1.0) -> np.ndarray:
     """(n,) bool: the vermilion -- each lip's vertices (``sides`` +1 upper, -1 lower; (n,) int)
-    within that lip's midline height (|FDP 2.2 - 8.1| upper, |2.3 - 8.2| lower, skin units) of
-    its inner lip contour (``cut.upper`` / ``cut.lower``), by shortest edge path over the skin:
+    within ``scale`` x that lip's midline height (|FDP 2.2 - 8.1| upper, |2.3 - 8.2| lower, skin
+    units) of its inner lip contour (``cut.upper`` / ``cut.lower``), by shortest edge path over the skin:
     the red of the lips between the inner and outer lip contours. A lip without its two FDPs
-    or its contour: no vertex."""
+    or its contour, or ``scale`` 0: no vertex."""
     from scipy.sparse.csgraph import dijkstra
 
     from faceforge.skin.mouth import _graph
@@ -124,9 +124,9 @@ def vermilion_mask(cut, sides, landmarks: dict) -> np.ndarray:
     out = np.zeros(len(v), bool)
     for side, seeds in ((1, cut.upper), (-1, cut.lower)):
         inner, outer = VERMILION_FDPS[side]
-        if inner not in landmarks or outer not in landmarks or len(seeds) < 2:
+        if inner not in landmarks or outer not in landmarks or len(seeds) < 2 or scale <= 0.0:
             continue
-        reach = float(np.linalg.norm(np.subtract(landmarks[inner], landmarks[outer])))
+        reach = scale * float(np.linalg.norm(np.subtract(landmarks[inner], landmarks[outer])))
         d = dijkstra(_graph(v, f), indices=np.unique(np.asarray(seeds, INT)), min_only=True,
                      limit=reach * (1.0 + 1e-9))
         out |= (sides == side) & (d <= reach)

@@ -494,3 +494,6 @@ def test_vermilion_mask_is_each_lip_within_its_midline_height_of_its_inner_conto
     # upper lip: reach 1.1 -> rows y 0.5, 1.5; lower: reach 2.1 -> rows -0.5, -1.5, -2.5
     np.testing.assert_array_equal(got, np.isin(np.round(v[:, 1], 6), [0.5, 1.5, -0.5, -1.5, -2.5]))
     assert not vermilion_mask(cut, sides, {k: lm[k] for k in ("2.2", "8.1")})[sides < 0].any()
+    assert not vermilion_mask(cut, sides, lm, 0.0).any()
+    wide = vermilion_mask(cut, sides, lm, 2.0)     # reach 2.2 upper, 4.2 lower
+    np.testing.assert_array_equal(wide, np.isin(np.round(v[:, 1], 6), [0.5, 1.5, 2.5, -0.5, -1.5, -2.5, -3.5]))
