@@ -111,8 +111,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         :func:`faceforge.skin.bind_passes.commissure_anchors`; 0: its own lip's arc only).
     vermilion : float
         ``bind.vermilion_reach``: the lip skin within this many midline heights of its inner lip
-        contour (:func:`vermilion_mask`; 1: the red of the lips) that its rays bound to the skull
-        binds to its own lip's arc of the orbicularis oris
+        contour (:func:`vermilion_mask`; 1: the red of the lips), out of the modiolus mask (the
+        corners keep their rule), that its rays bound to the skull binds to its own lip's arc of
+        the orbicularis oris
         (:func:`faceforge.skin.bind_passes.vermilion_anchors`; 0: by its rays).
     brow_band_mm, brow_muscles : float, sequence of str
         ``bind.brow_band_mm``, ``bind.brow_muscles`` (names or pair names as ``insertions``):
@@ -180,7 +181,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
     corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
     commissure = commissure_mask(cut.vertices, pts, commissure_radius)
-    verm = vermilion_mask(cut, sides, pts, vermilion) if vermilion > 0 else None
+    verm = vermilion_mask(cut, sides, pts, vermilion) & ~corner if vermilion > 0 else None   # the corners: the modiolus'
     brow_ids, _ = match_insertions(brow_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     brow = brow_mask(cut.vertices, pts, brow_band_mm, up=up) if brow_ids else np.zeros(len(cut.vertices), bool)
     eye_ids, _ = match_insertions(tuple(brow_muscles) + ("orbicularis_oculi",) if brow_ids else (),
