@@ -210,6 +210,7 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.max_ray_distance", Number(0.0, 1.0)),
     ("bind.modiolus_radius", Number(0.0, 0.5)),
     ("bind.commissure_radius", Number(0.0, 0.5)),
+    ("bind.vermilion_reach", Number(0.0, 5.0)),
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
     ("animate.calibrate.magnitudes", PathValue()),

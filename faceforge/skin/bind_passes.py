@@ -184,3 +184,24 @@ def commissure_anchors(v, rules: Rules, hits: tuple, mask) -> np.ndarray:
                               rules.side_of, rules.face_sides)
     outward[moved] = False
     return moved
+
+
+def vermilion_anchors(v, rules: Rules, hits: tuple, mask) -> np.ndarray:
+    """The vermilion (``mask`` (n,) bool, :func:`faceforge.skin.rules.vermilion_mask`): a lip
+    vertex of it that the passes before bound to the skull binds to the closest point of its own
+    lip's arc of the muscles around the mouth (``casting._modiolus_anchors``).
+
+    On ICT the inward rays of the upper lip's midline meet the upper teeth (the cranium) while the
+    lip round them rides the orbicularis oris; when the ring rounds and pushes the lips forward
+    (visemes u, a) the skull-bound vermilion stays and its triangles turn over. Updates ``hits``
+    (the arrays of :func:`ray_passes`) in place; returns the (n,) bool mask moved.
+    """
+    body, face, pts, dist, outward = hits
+    if rules.around is None:
+        return np.zeros(len(v), bool)
+    b = np.maximum(body, 0)
+    todo = np.asarray(mask, bool) & (body >= 0) & (rules.kinds[b] != MUSCLE) & (rules.sides != 0)
+    moved = _modiolus_anchors(v, rules.bodies, rules.around, rules.sides, todo, rules.max_distance,
+                              rules.allowed, body, face, pts, dist, rules.side_of, rules.face_sides)
+    outward[moved] = False
+    return moved

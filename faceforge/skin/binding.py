@@ -199,7 +199,7 @@ class Binding:
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
               insertions=None, face_sides=None, lips_to_ring=False, modiolus=None,
-              brow=None, commissure=None) -> Binding:
+              brow=None, commissure=None, vermilion=None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -261,6 +261,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         it bound to the muscles around the mouth (by its rays, the fallback or the modiolus)
         binds to their closest point on either lip's arc, not only its own
         (:func:`faceforge.skin.bind_passes.commissure_anchors`).
+    vermilion : (n,) bool, optional
+        The red of the lips (:func:`faceforge.skin.rules.vermilion_mask`; with ``side_of`` and
+        ``body_sides``): a lip vertex of it the passes bound to the skull binds instead to its own
+        arc of the muscles around the mouth (:func:`faceforge.skin.bind_passes.vermilion_anchors`).
     brow : ((n,) bool, sequence of int), optional
         The brow's skin (:func:`faceforge.skin.brow.brow_mask`) and the brow muscles (indices
         into ``bodies``): a vertex of it on the bone after the rays and the fallback binds to
@@ -303,6 +307,13 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         if len(comm) != n:
             raise ValueError(f"commissure {comm.shape} must have one entry per vertex ({n})")
         closest[commissure_anchors(v, rules, hits, comm)] = False
+    if vermilion is not None:   # the red of the lips: off the teeth, onto its own lip's arc
+        from faceforge.skin.bind_passes import vermilion_anchors
+
+        verm = np.asarray(vermilion, bool).reshape(-1)
+        if len(verm) != n:
+            raise ValueError(f"vermilion {verm.shape} must have one entry per vertex ({n})")
+        closest[vermilion_anchors(v, rules, hits, verm)] = False
     body, face, pts, dist, outward = hits
     if brow is not None:   # the brow's insertion: brow skin on the bone moves to the brow muscles
         from faceforge.skin.brow import brow_anchors

@@ -14,7 +14,7 @@ from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
 from faceforge.skin.brow import BROW_BAND_MM, brow_mask, eye_mask
 from faceforge.skin.rules import (COMMISSURE_RADIUS, MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
-                                  modiolus_mask, commissure_mask)
+                                  modiolus_mask, commissure_mask, vermilion_mask)
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
-              cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS) -> BoundSkin:
+              cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS,
+              vermilion: float = 0.0) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -108,6 +109,12 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.commissure_radius``: the lip skin within this fraction of MW0 of an inner lip
         corner on the orbicularis oris binds to either lip's arc of it (:func:`commissure_mask`,
         :func:`faceforge.skin.bind_passes.commissure_anchors`; 0: its own lip's arc only).
+    vermilion : float
+        ``bind.vermilion_reach``: the lip skin within this many midline heights of its inner lip
+        contour (:func:`vermilion_mask`; 1: the red of the lips), out of the modiolus mask (the
+        corners keep their rule), that its rays bound to the skull binds to its own lip's arc of
+        the orbicularis oris
+        (:func:`faceforge.skin.bind_passes.vermilion_anchors`; 0: by its rays).
     brow_band_mm, brow_muscles : float, sequence of str
         ``bind.brow_band_mm``, ``bind.brow_muscles`` (names or pair names as ``insertions``):
         brow skin that its rays bound to the bone binds to the closest brow muscle
@@ -174,6 +181,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     ins, _ = match_insertions(insertions, [b.name if b.kind == "muscle" else None for b in bodies])
     corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
     commissure = commissure_mask(cut.vertices, pts, commissure_radius)
+    verm = vermilion_mask(cut, sides, pts, vermilion) & ~corner if vermilion > 0 else None   # the corners: the modiolus'
     brow_ids, _ = match_insertions(brow_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     brow = brow_mask(cut.vertices, pts, brow_band_mm, up=up) if brow_ids else np.zeros(len(cut.vertices), bool)
     eye_ids, _ = match_insertions(tuple(brow_muscles) + ("orbicularis_oculi",) if brow_ids else (),
@@ -190,7 +198,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
-                        modiolus=corner, commissure=commissure,
+                        modiolus=corner, commissure=commissure, vermilion=verm,
                         brow=(brow, brow_ids, ((eye, eye_ids),), shared, raiser_ids))
     cheek_ids, _ = match_insertions(cheek_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     if cheek_ids and cheek_mm > 0:   # the cheek's insertion: cheek skin on the bone moves to the cheek raiser

@@ -103,3 +103,31 @@ def _near_fdps(vertices, landmarks: dict, radius: float, fdps) -> np.ndarray:
         return np.zeros(len(v), bool)
     reach = radius * float(np.linalg.norm(np.subtract(landmarks["8.3"], landmarks["8.4"])))
     return (np.linalg.norm(v[:, None, :] - np.asarray(corners, FLOAT)[None], axis=2) <= reach).any(axis=1)
+
+
+#: FDP pairs (inner, outer) at each lip's midline: upper 2.2 / 8.1, lower 2.3 / 8.2
+VERMILION_FDPS = {1: ("2.2", "8.1"), -1: ("2.3", "8.2")}
+
+
+def vermilion_mask(cut, sides, landmarks: dict, scale: float = 1.0) -> np.ndarray:
+    """(n,) bool: the vermilion -- each lip's vertices (``sides`` +1 upper, -1 lower; (n,) int)
+    within ``scale`` x that lip's midline height (|FDP 2.2 - 8.1| upper, |2.3 - 8.2| lower, skin
+    units) of its inner lip contour (``cut.upper`` / ``cut.lower``), by shortest edge path over the skin:
+    the red of the lips between the inner and outer lip contours. A lip without its two FDPs
+    or its contour, or ``scale`` 0: no vertex."""
+    from scipy.sparse.csgraph import dijkstra
+
+    from faceforge.skin.mouth import _graph
+
+    v, f = np.asarray(cut.vertices, FLOAT), np.asarray(cut.faces, INT)
+    sides = np.asarray(sides).reshape(-1)
+    out = np.zeros(len(v), bool)
+    for side, seeds in ((1, cut.upper), (-1, cut.lower)):
+        inner, outer = VERMILION_FDPS[side]
+        if inner not in landmarks or outer not in landmarks or len(seeds) < 2 or scale <= 0.0:
+            continue
+        reach = scale * float(np.linalg.norm(np.subtract(landmarks[inner], landmarks[outer])))
+        d = dijkstra(_graph(v, f), indices=np.unique(np.asarray(seeds, INT)), min_only=True,
+                     limit=reach * (1.0 + 1e-9))
+        out |= (sides == side) & (d <= reach)
+    return out

@@ -440,3 +440,60 @@ def test_commissure_mask_is_the_skin_near_the_inner_lip_corners():
     assert not commissure_mask(pts, lm, 0.0).any()
     assert not commissure_mask(pts, {k: lm[k] for k in ("8.3", "2.4", "2.5")}, 0.05).any()
     assert not commissure_mask(pts, {k: lm[k] for k in ("8.3", "8.4")}, 0.05).any()
+
+
+def test_vermilion_on_the_skull_binds_to_its_own_arc_of_the_ring(skin):
+    """Lip skin in the ``vermilion`` mask whose rays met the skull (here through a gap of the ring at
+    the midline, as ICT's upper lip meets the teeth) binds to its own lip's arc of the ring; without
+    the mask it stays on the skull; skin out of the mask, or already on the ring, keeps its anchor."""
+    from faceforge.skin.mouth import AROUND_MOUTH
+
+    v, f = skin
+    rv, rf = _cap(0.85, 0.9, 4)
+    ring = Body("ring", "muscle", rv, rf[~(np.abs(rv[rf][:, :, 0]) < 0.2).all(axis=1)])   # a gap in front
+    skull = Body("cranium", "cranium", *sphere(0.8, 3))
+    labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0.0, 1, -1).astype(np.int8)
+    sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] >= 0.0, 1, -1), 0)
+
+    def side_of(points):
+        return np.where(points[:, 1] >= 0, 1, -1)
+
+    verm = (sides != 0) & (v[:, 2] > 0.9)
+    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
+    before = bind_skin(v, f, [ring, skull], max_distance=0.5, **kw)
+    after = bind_skin(v, f, [ring, skull], max_distance=0.5, vermilion=verm, **kw)
+    in_mask = np.isin(before.vertex_ids, np.flatnonzero(verm))
+    on_bone = in_mask & (before.body == 1)
+    assert on_bone.sum() >= 1                                  # the gap: some vermilion on the skull
+    moved = np.isin(after.vertex_ids, before.vertex_ids[on_bone])
+    assert np.all(after.body[moved] == 0) and not after.closest[moved].any()
+    assert np.all(labels[after.face_ids[moved]] == sides[after.vertex_ids[moved]])   # its own arc
+    stay, same = ~on_bone, ~moved
+    np.testing.assert_array_equal(before.body[stay], after.body[same])
+    np.testing.assert_array_equal(before.points[stay], after.points[same])
+    with pytest.raises(ValueError, match="vermilion"):
+        bind_skin(v, f, [ring, skull], max_distance=0.5, vermilion=verm[:-1], **kw)
+
+
+def test_vermilion_mask_is_each_lip_within_its_midline_height_of_its_inner_contour():
+    from types import SimpleNamespace
+
+    from faceforge.skin.rules import vermilion_mask
+
+    # a strip of vertices up the face at x = 0 and 1 (rows y = -3.5..3.5, 1 apart); inner contours at y = +-0.5
+    ys = np.arange(-3.5, 4.0, 1.0)
+    v = np.array([[x, y, 0.0] for y in ys for x in (0.0, 1.0)])
+    faces = []
+    for r in range(len(ys) - 1):
+        a, b, c, d = 2 * r, 2 * r + 1, 2 * r + 2, 2 * r + 3
+        faces += [[a, b, d], [a, d, c]]
+    cut = SimpleNamespace(vertices=v, faces=np.array(faces), upper=np.array([8, 9]), lower=np.array([6, 7]))
+    sides = np.where(v[:, 1] > 0, 1, -1)
+    lm = {"2.2": [0.0, 0.5, 0.0], "8.1": [0.0, 1.6, 0.0], "2.3": [0.0, -0.5, 0.0], "8.2": [0.0, -2.6, 0.0]}
+    got = vermilion_mask(cut, sides, lm)
+    # upper lip: reach 1.1 -> rows y 0.5, 1.5; lower: reach 2.1 -> rows -0.5, -1.5, -2.5
+    np.testing.assert_array_equal(got, np.isin(np.round(v[:, 1], 6), [0.5, 1.5, -0.5, -1.5, -2.5]))
+    assert not vermilion_mask(cut, sides, {k: lm[k] for k in ("2.2", "8.1")})[sides < 0].any()
+    assert not vermilion_mask(cut, sides, lm, 0.0).any()
+    wide = vermilion_mask(cut, sides, lm, 2.0)     # reach 2.2 upper, 4.2 lower
+    np.testing.assert_array_equal(wide, np.isin(np.round(v[:, 1], 6), [0.5, 1.5, 2.5, -0.5, -1.5, -2.5, -3.5]))

@@ -107,6 +107,7 @@ def run(ctx):
                       lips_to_ring=bool(ctx.config.get("bind.lips_to_ring")),
                       modiolus_radius=float(ctx.config.get("bind.modiolus_radius")), mirror=head["mirror"],
                       commissure_radius=float(ctx.config.get("bind.commissure_radius")),
+                      vermilion=float(ctx.config.get("bind.vermilion_reach")),
                       brow_band_mm=float(ctx.config.get("bind.brow_band_mm")),
                       brow_muscles=tuple(str(n) for n in ctx.config.get("bind.brow_muscles")),
                       brow_shared_mm=float(ctx.config.get("bind.brow_shared_mm")),
