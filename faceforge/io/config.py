@@ -204,6 +204,7 @@ RULES: list[tuple[str, Rule]] = [
     ("muscle.sphincter.carry_inner", Number(0.0, 1.0)),
     ("muscle.sphincter.protrusion", Number(0.0)),
     ("muscle.sphincter.inner_on_bone", Boolean()),
+    ("muscle.sphincter.closure_centre", Number(0.0, 1.0)),
     ("solver.stiffness_mode", Choice(("paper", "iteration_independent", "xpbd"))),
     ("solver.gravity", Number()),
     ("fit.rbf_kernel", Choice(("multiquadric", "inverse_multiquadric", "thin_plate_spline", "gaussian"))),

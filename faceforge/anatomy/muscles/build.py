@@ -17,7 +17,7 @@ def eq5_thickness(fraction: float, skull_diagonal: float) -> float:
 
 def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
                      carry_inner: float = 0.0, protrusion: float = 0.0, mirror=None,
-                     inner_on_bone: bool = False) -> list:
+                     inner_on_bone: bool = False, closure_centre: float = 0.0) -> list:
     """Build every muscle of ``specs`` on the given skull, deepest layer first.
 
     Each muscle's action lines are projected (outermost surface) onto the concatenation of
@@ -30,7 +30,8 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     (:class:`faceforge.geometry.mirror.Mirror`, a symmetric head): a muscle that is
     ``mirror_of`` a muscle built before it is built as that muscle's mirror image;
     ``inner_on_bone`` (``muscle.sphincter.inner_on_bone``): a sphincter's inner loop (A1, the
-    lips' contact line) lies on the bones it lies on only (:func:`_inner_on_bone`)
+    lips' contact line) lies on the bones it lies on only (:func:`_inner_on_bone`);
+    ``closure_centre``: the sphincter's ``closure_centre`` (``muscle.sphincter.closure_centre``)
     (:func:`faceforge.anatomy.muscles.mirror.mirror_muscle`). Returns ``[Muscle]`` in build order.
     Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
     """
@@ -92,7 +93,8 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                     loops = [symmetric_loop(x, named, mirror, exact) for x in loops]
                 m = build_sphincter_muscle(spec.name, loops[0], loops[1], v, f, spec.h,
                                            spec.w, t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
-                                           carry_faces=bone, protrusion=protrusion, **kw)
+                                           carry_faces=bone, protrusion=protrusion,
+                                           closure_centre=closure_centre, **kw)
                 if mirror is not None:   # its cells split as mirror images too
                     from dataclasses import replace
 

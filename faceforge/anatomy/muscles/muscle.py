@@ -149,6 +149,10 @@ class Muscle:
         Sphincter: how far a full protrusion drive moves the loops out of their plane, forward
         (away from what they lie on), as a fraction of the ellipse's semi-minor axis times
         ``max_contraction``; 0: never (the paper). See :func:`build_sphincter_muscle`.
+    closure_centre : float
+        Sphincter: where its closure pulls the inner loop, from the paper's centre (0, the
+        ellipse's centre: the mean of both loops) to the inner loop's own mean (1, the mouth
+        opening). See :func:`build_sphincter_muscle`.
     interior : (h-2, w-2, 3) float64 or None
         Linear: the rest offset of each interior bottom particle (rows ``i = 1..h-2``,
         columns ``j = 1..w-2``) from the blend of its row's side samples, in the row's
@@ -174,6 +178,7 @@ class Muscle:
     interior: object = None
     carry_inner: object = None
     protrusion: float = 0.0
+    closure_centre: float = 0.0
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -284,7 +289,8 @@ class Muscle:
             r1, r3, carry = self._loop_rest
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
-                            c * self.max_contraction, grid, r1, r3, carry, lift, self.forward, low)
+                            c * self.max_contraction, grid, r1, r3, carry, lift, self.forward, low,
+                            self.closure_centre)
         else:
             grid = self._grid_targets(c, points, lift, low)
         return grid[g[:, 0], g[:, 1]]
@@ -374,7 +380,8 @@ class Muscle:
             if len(carry):
                 s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
             if c > 0 or lift > 0 or low > 0:
-                d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward, low)
+                d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward, low,
+                                           self.closure_centre)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3
@@ -430,6 +437,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
     material = kw.pop("material_sampling", False)
     carry = kw.pop("carry_inner", None)
     protrusion = float(kw.pop("protrusion", 0.0))
+    centre = float(kw.pop("closure_centre", 0.0))
     proto = Muscle(name, kind, topo, np.zeros((topo.n_particles, 3)), topo.faces, lines,
                    tuple(kw.pop("lies_on", ())), stiffness, **kw)   # carry_inner 0: the true rest samples
     kw["material_sampling"] = material
@@ -459,7 +467,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
         pos[: h * w].reshape(h, w, 3)[1:-1, 1:-1] = interior_targets(a0, a2, interior)  # round-off
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
                   proto.layer, proto.active, float(thickness), proto.max_contraction, params,
-                  interior, carry, protrusion)
+                  interior, carry, protrusion, centre)
 
 
 def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:
@@ -510,7 +518,8 @@ def build_linear_muscle(name, origin, insertion, fibre_a, fibre_b, vertices, fac
 def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness, stiffness, *,
                            lies_on=(), layer=0, active=True,
                            max_contraction=SPHINCTER_MAX_CONTRACTION, material_sampling=True,
-                           carry_inner=0.0, carry_faces=None, protrusion=0.0) -> Muscle:
+                           carry_inner=0.0, carry_faces=None, protrusion=0.0,
+                           closure_centre=0.0) -> Muscle:
     """A sphincter (§5.2.2) from its closed inner (A1) and outer (A3) loops.
 
     ``material_sampling`` (default True, a deliberate departure from a literal
@@ -546,6 +555,14 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
     semi-minor axis. One drive for both, scaled, pushed the lower lip down as it went
     forward and cost the lower-lip raises it assists (calibrated MakeHuman, ICT).
 
+    ``closure_centre`` (default 0, the paper; ``muscle.sphincter.closure_centre``, a departure):
+    the paper closes the inner loop toward the ellipse's centre, the mean of both loops; on a face
+    whose outer loop reaches down to the chin that centre lies below the mouth, so the closure
+    (the pursing half of a pucker) pulls the upper lip down and back (MakeHuman 4.9 mm down, ICT
+    7.1) where a real pucker moves it up and forward. The fibres of the pars marginalis run
+    round the mouth opening; their purse-string pulls toward it: the closure's centre is moved
+    ``closure_centre`` of the way from the ellipse's centre to the inner loop's own mean.
+
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
     :func:`faceforge.anatomy.muscles.sphincter.align_loops` arranges that for raw points.
@@ -560,7 +577,10 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
         raise ValueError(f"sphincter {name}: carry_inner must lie in [0, 1], got {carry_inner}")
     if not (np.isfinite(protrusion) and protrusion >= 0.0):
         raise ValueError(f"sphincter {name}: protrusion must be a finite number >= 0, got {protrusion}")
+    if not 0.0 <= closure_centre <= 1.0:
+        raise ValueError(f"sphincter {name}: closure_centre must lie in [0, 1], got {closure_centre}")
     return _build(name, "sphincter", topo, lines, vertices, faces, thickness, stiffness,
                   lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
                   material_sampling=material_sampling, protrusion=float(protrusion),
+                  closure_centre=float(closure_centre),
                   carry_inner=(float(carry_inner), np.ones(len(faces), bool) if carry_faces is None else carry_faces))

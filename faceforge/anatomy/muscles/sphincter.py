@@ -110,7 +110,7 @@ def _conic_lstsq(x, y):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd, low=0.0):  # pragma: no cover - numba
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd, low=0.0, centre=0.0):  # pragma: no cover - numba
     """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
@@ -118,8 +118,9 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
     (``fwd (3,)``: :attr:`Muscle.forward`) when either is > 0; before that, with ``carry
     (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
     r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples; ``low``: the lower part's raise
-    (:func:`lower_raise`, already times the maximal closure). Same values as the numpy code to
-    round-off (LAPACK's, summation order).
+    (:func:`lower_raise`, already times the maximal closure); ``centre``: where the closure pulls
+    (:attr:`Muscle.closure_centre`). Same values as the numpy code to round-off (LAPACK's,
+    summation order).
 
     Length: one compiled kernel (ellipse fit and the per-sample displacement in one pass); kept
     whole for speed.
@@ -198,6 +199,9 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         low = 0.0
         ru = 1.0
     low = low * ru
+    cen = np.empty(3)      # the closure's centre: o moved `centre` of the way to the inner loop's mean
+    for j in range(3):
+        cen[j] = o[j] + centre * np.mean(d[:h, j])
     for i in range(h):
         xo = 0.0
         yo = 0.0
@@ -206,8 +210,8 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         for j in range(3):
             xo += (grid[i, w1, j] - o[j]) * da[j]
             yo += (grid[i, w1, j] - o[j]) * db[j]
-            ta += (o[j] - grid[i, 0, j]) * da[j]
-            tb += (o[j] - grid[i, 0, j]) * db[j]
+            ta += (cen[j] - grid[i, 0, j]) * da[j]
+            tb += (cen[j] - grid[i, 0, j]) * db[j]
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
         wl = low * min(max(-(xo * ua + yo * ub) / ru, 0.0), 1.0) if low > 0.0 else 0.0   # lower_weights
@@ -290,7 +294,7 @@ EVERSION = 1.0
 SPHINCTER_MAX_CONTRACTION = 0.5
 #: fraction of the fibre length that c = 1 removes from a linear muscle
 def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None,
-                           low: float = 0.0) -> np.ndarray:
+                           low: float = 0.0, centre: float = 0.0) -> np.ndarray:
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
@@ -301,7 +305,8 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     ``lift`` is not 0). ``lift``: the protrusion drive times :attr:`Muscle.protrusion` and the
     maximal closure. ``low``: the lower part's raise (:func:`lower_raise`): ``low r w_i`` up
     along the plane (:func:`lower_weights`) and :data:`LOWER_INWARD` times that inward
-    (``forward`` needed).
+    (``forward`` needed). ``centre`` in [0, 1] (:attr:`Muscle.closure_centre`): the closure pulls
+    toward ``o + centre (mean(inner) - o)`` instead of the ellipse's centre ``o`` (0, the paper).
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -310,7 +315,7 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     y = (s3 - o) @ db
     r = np.sqrt(x * x * b * b + y * y * a * a) / (a * b)
     fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
-    to = o - s1
+    to = o + float(centre) * (s1.mean(axis=0) - o) - s1
     d = float(c) * (np.outer(to @ da, da) + np.outer(to @ db, db))      # in the ellipse's plane
     if lift or low:                                # the plane's normal on the side of forward
         n = np.cross(da, db)
