@@ -174,6 +174,31 @@ def condylar_glide(protrusion_dir, pitch_dir, lever: float, ratio: float, slope_
     return float(ratio) * float(lever) * (np.cos(t) * f + np.sin(t) * down)
 
 
+def chin_path_ratio(chin, pitch_point, pitch_dir, protrusion_dir, slope_deg: float, back_per_down: float,
+                    opening_deg: float = 10.0) -> float:
+    """The glide fraction (``ratio`` of :func:`condylar_glide`) at which ``chin`` (3,), carried by
+    the mandible, goes back ``back_per_down`` times as far as it drops at ``opening_deg`` of opening.
+
+    Head frame: +Y up, +Z forward. The chin's displacement is affine in the glide fraction
+    (``d0 + ratio * d1``: the turn about the pitch axis plus the condyles' slide), so the
+    fraction is solved in closed form; clipped to [0, 2] (``animate.jaw_glide``'s range). The
+    same fraction makes different paths on heads whose chin sits differently below the condyles
+    (a longer chin swings back more): this gives every head the same path.
+    """
+    c = np.asarray(chin, dtype=np.float64)
+    lever = float(np.linalg.norm(np.cross(c - pitch_point, np.asarray(pitch_dir) / np.linalg.norm(pitch_dir))))
+    theta = np.radians(float(opening_deg))
+    d0 = apply_transform(rotation_about_axis(np.asarray(pitch_point, float), np.asarray(pitch_dir, float), theta),
+                         c[None])[0] - c
+    d1 = theta * condylar_glide(protrusion_dir, pitch_dir, lever, 1.0, slope_deg)
+    k = float(back_per_down)
+    # back - k * down = -(d0 + r d1)_z + k (d0 + r d1)_y = 0
+    den = d1[2] - k * d1[1]
+    if abs(den) < 1e-12 * max(lever, 1e-12):
+        return 0.0
+    return float(np.clip((k * d0[1] - d0[2]) / den, 0.0, 2.0))
+
+
 def apply_transform(transform: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Points (n, 3) mapped by a (4, 4) affine transform."""
     p = np.asarray(points, dtype=np.float64)

@@ -86,14 +86,15 @@ class BoundHead:
         fit = load_npz(Path(fit_dir) / "fit.npz")
         bind = load_npz(Path(bind_dir) / "bind.npz")
         self._load_head(fit, bind, Path(fit_dir))
-        if float(config.get("animate.jaw_glide")) > 0:   # the condyles slide as the mouth opens
+        self.jaw_glide = self._glide_ratio(config)
+        if self.jaw_glide > 0:   # the condyles slide as the mouth opens
             from dataclasses import replace
 
             from faceforge.anatomy.skull import condylar_glide
 
             jaw = self.skull.jaw
             glide = condylar_glide(jaw.protrusion_dir, jaw.pitch_dir, self.levers.pitch,
-                                   config.get("animate.jaw_glide"), config.get("animate.jaw_glide_slope"))
+                                   self.jaw_glide, config.get("animate.jaw_glide_slope"))
             self.skull = replace(self.skull, jaw=replace(jaw, glide=glide))
         settings = SolverSettings.from_config(config.get("solver"))
         self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log)
@@ -111,6 +112,18 @@ class BoundHead:
         self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
                        finish=None if self.orientation is None else self.orientation.apply)
+
+    def _glide_ratio(self, config) -> float:
+        """``animate.jaw_glide``, or with ``animate.chin_path`` > 0 the fraction at which this
+        head's chin (FDP 2.1) follows that path (:func:`faceforge.anatomy.skull.chin_path_ratio`)."""
+        back_per_down = float(config.get("animate.chin_path"))
+        if back_per_down <= 0 or "2.1" not in self.landmarks:
+            return float(config.get("animate.jaw_glide"))
+        from faceforge.anatomy.skull import chin_path_ratio
+
+        jaw = self.skull.jaw
+        return chin_path_ratio(self.landmarks["2.1"], jaw.pitch_point, jaw.pitch_dir, jaw.protrusion_dir,
+                               config.get("animate.jaw_glide_slope"), back_per_down)
 
     def _load_head(self, fit: dict, bind: dict, fit_dir: Path) -> None:
         """The skin, bones, jaw axes, landmarks, FAPU and jaw levers of fit.npz and bind.npz."""

@@ -199,6 +199,7 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.skull_guard.collision_keep", Number(0.0, 0.95)),
     ("animate.jaw_glide", Number(0.0, 2.0)),                       # 0: the jaw only turns
     ("animate.jaw_glide_slope", Number(-30.0, 80.0)),
+    ("animate.chin_path", Number(0.0, 1.5)),                       # 0: jaw_glide as given
     ("*.stiffness.*", Number(0.0, 1.0)),
     ("solver.damping", Number(0.0, 1.0)),
     ("muscle.sphincter.carry_inner", Number(0.0, 1.0)),

@@ -240,3 +240,33 @@ def test_condylar_glide_moves_the_chin_down_rather_than_back(skull):
     # closing past rest and the zero pose: no glide
     assert np.array_equal(jaw_transform(glided, 0.0, 0.0, 0.0), np.eye(4))
     assert np.allclose(jaw_transform(glided, -0.02, 0.0, 0.0), jaw_transform(skull, -0.02, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("drop", [0.8, 1.0, 1.3])
+@pytest.mark.parametrize("back_per_down", [0.2, 0.33])
+def test_chin_path_ratio_gives_every_chin_the_same_path(skull, drop, back_per_down):
+    """The glide fraction solved for a chin lower or higher below the condyles puts that chin on
+    the asked path at the solve's opening (10 degrees), where one fixed fraction does not."""
+    from dataclasses import replace
+
+    from faceforge.anatomy.skull import chin_path_ratio, condylar_glide
+
+    j = skull.jaw
+    chin = skull.landmarks["2.1"].copy()
+    chin[1] = j.pitch_point[1] + drop * (chin[1] - j.pitch_point[1])     # a longer or shorter chin
+    ratio = chin_path_ratio(chin, j.pitch_point, j.pitch_dir, j.protrusion_dir, 35.0, back_per_down)
+    assert 0.0 < ratio < 2.0
+    lever = float(np.linalg.norm(np.cross(chin - j.pitch_point, j.pitch_dir)))
+    glided = replace(skull, jaw=replace(j, glide=condylar_glide(j.protrusion_dir, j.pitch_dir, lever, ratio, 35.0)))
+    d = apply_transform(jaw_transform(glided, np.radians(10.0), 0.0, 0.0), chin[None])[0] - chin
+    assert -d[1] > 0 and np.isclose(-d[2] / -d[1], back_per_down, atol=1e-9)
+
+
+def test_chin_path_ratio_is_clipped_to_the_glide_range(skull):
+    """A path no glide in [0, 2] reaches (the chin going forward as it drops) takes the bound."""
+    from faceforge.anatomy.skull import chin_path_ratio
+
+    j = skull.jaw
+    chin = skull.landmarks["2.1"]
+    assert chin_path_ratio(chin, j.pitch_point, j.pitch_dir, j.protrusion_dir, 35.0, 1.5) == 0.0
+    assert chin_path_ratio(chin, j.pitch_point, j.pitch_dir, j.protrusion_dir, 35.0, -1.0) == 2.0

@@ -573,3 +573,20 @@ def test_visemes_needs_a_table(workdir, patched):
 
     with pytest.raises(StageError, match="no visemes table"):
         run_stage("visemes", workdir, {"animate_mapping": str(workdir / "mapping.yaml")})
+
+
+@pytest.mark.parametrize("back_per_down", [0.2, 0.33])
+def test_the_chin_path_sets_the_glide_per_head(workdir, patched, back_per_down):
+    """``animate.chin_path`` solves this head's glide: its chin (FDP 2.1, on the mandible) goes
+    back that fraction of its drop at a 10 degree opening; 0 keeps ``animate.jaw_glide``."""
+    from faceforge.anatomy.skull import apply_transform, jaw_transform
+    from faceforge.animation.rig import BoundHead
+    from faceforge.io.config import load_config
+
+    fixed = BoundHead(workdir / "fit", workdir / "bind",
+                      load_config(None, (*SETS, "animate.chin_path=0", "animate.jaw_glide=0.45")))
+    assert fixed.jaw_glide == 0.45
+    head = BoundHead(workdir / "fit", workdir / "bind", load_config(None, (*SETS, f"animate.chin_path={back_per_down}")))
+    chin = np.asarray(head.landmarks["2.1"], dtype=float)
+    d = apply_transform(jaw_transform(head.skull, np.radians(10.0), 0.0, 0.0), chin[None])[0] - chin
+    assert -d[1] > 0 and np.isclose(-d[2] / -d[1], back_per_down, atol=1e-9)

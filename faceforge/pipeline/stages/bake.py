@@ -100,7 +100,7 @@ BAKE = register_stage(Stage(
                  "bind.cheek_muscles", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.statics",
                  "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.jaw_glide",
-                 "animate.jaw_glide_slope"),
+                 "animate.jaw_glide_slope", "animate.chin_path"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
     outputs=("shapes.npz", "report.json", "shapes.png"), version="7", run=run_bake,

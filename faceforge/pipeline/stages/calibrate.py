@@ -82,7 +82,7 @@ CALIBRATE = register_stage(Stage(
         "skin.join_insertions", "skin.cheek_tether",
         "bind.cheek_muscles", "muscle", "animate.fap_mapping", "animate.fps",
         "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",
-        "animate.jaw_glide_slope", "animate.statics", "template"),
+        "animate.jaw_glide_slope", "animate.chin_path", "animate.statics", "template"),
     inputs=("animate.fap_mapping", "animate.calibrate.magnitudes", "template.skull", "template.muscle_map"),
     digests={"animate.fap_mapping": mapping_digest_without_presets},
     outputs=("fap_mapping.yaml", "report.json", "report.txt"),
