@@ -42,8 +42,9 @@ half (all 12 of surprise's lid folds on ICT that the simulation did not have).
 **Over the eyeball.** A lid closing over the eye rides forward over the eyeball: a vertex in
 front of the eyeball's horizontal axis (along ``u``) keeps its distance from the axis as it
 moves vertically, when that brings it forward; it never moves back (a lid opening wider
-retracts straight up or down). The eyeball's radius is taken as :data:`EYEBALL_RADIUS` times
-``half`` (a 12 mm eye in a 30 mm fissure), its centre behind the corners' midpoint, one
+retracts straight up or down). Skin behind the margins' surface (the lid's lining) takes the
+forward move of the surface in front of it (:func:`over_eyeball`). The eyeball's radius is taken
+as :data:`EYEBALL_RADIUS` times ``half`` (a 12 mm eye in a 30 mm fissure), its centre behind the corners' midpoint, one
 radius from the upper lid FDP.
 
 **Gathered skin stays upright.** Where the lids meet, the skin between them is squeezed to
@@ -285,6 +286,34 @@ def held_share(field: LidField, moves: np.ndarray) -> np.ndarray:
     return np.any(moves != 0.0, axis=1)[:, None] * hold
 
 
+def lid_surface(eye: Eye, points: np.ndarray) -> np.ndarray:
+    """``(k,)`` depth (along w, from :attr:`Eye.eyeball_centre`) of the margins' surface at the
+    places along u of ``points (k, 3)``: ``lid_depth * s(u)``, the depth the lid FDPs and the
+    margin curves lie at (module docstring)."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    ahead = float((eye.centre - eye.eyeball_centre) @ eye.axes[2])
+    return ahead + eye.lid_depth * eye.taper((points - eye.centre) @ eye.axes[0])
+
+
+def over_eyeball(y0: np.ndarray, z0: np.ndarray, y1: np.ndarray, surface: np.ndarray) -> np.ndarray:
+    """``(L, k)`` forward moves (along w, >= 0) of vertices at heights ``y0 (k,)`` and depths
+    ``z0 (k,)`` about the eyeball's centre moved vertically to ``y1 (L, k)``, ``surface (k,)`` the
+    margins' depth at each (:func:`lid_surface`).
+
+    A vertex at or in front of the margins' surface keeps its distance from the eyeball's axis
+    (module docstring). A vertex behind it (the lining in the lid's thickness, a socket's rim) takes
+    the forward move of the surface point in front of it at the same heights: it rides forward with
+    the lid it is part of. Pushed only by its own height (as the surface's vertex was), the lining
+    stayed back while the margin rode forward over it, and the rim folded between them: ICT's blinks,
+    4 of eyeBlinkLeft's 18 folded edges and 2 of eyeBlinkRight's 17 on the lids over the rest face
+    (MakeHuman's 4 / 4 and MediaPipe's 1 / 1 are elsewhere and unchanged).
+    """
+    zf = np.maximum(z0, surface)
+    rho2 = y0 * y0 + zf * zf
+    push = np.sqrt(np.maximum(rho2 - y1 * y1, 0.0)) - zf
+    return np.where(zf > 0.0, np.maximum(push, 0.0), 0.0)
+
+
 def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, irisd: float,
               rest: np.ndarray) -> np.ndarray:
     """Frames ``(F, n, 3)`` with the lids moved by FAPs 19-22 of ``faps (F, 68)``.
@@ -313,8 +342,7 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
         dv = -np.outer(moves[live, 0], field.up_share) + np.outer(moves[live, 1], field.low_share)
         y0, z0 = x[:, 1], x[:, 2]
         y1 = y0 + dv                                               # (L, k)
-        rho2 = y0 * y0 + z0 * z0
-        z1 = np.where(z0 > 0.0, np.maximum(np.sqrt(np.maximum(rho2 - y1 * y1, 0.0)), z0), z0)
+        z1 = z0 + over_eyeball(y0, z0, y1, lid_surface(eye, rest[idx]))
         d = dv[..., None] * eye.axes[1] + (z1 - z0)[..., None] * eye.axes[2]
         out[np.ix_(live, idx)] += d.astype(out.dtype)
     return out

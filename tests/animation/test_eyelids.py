@@ -233,3 +233,28 @@ def test_a_driven_lid_takes_back_the_skins_drift_so_its_margin_stays_clean(head)
         assert vertical(e, drag[rim]).max() > 0.25 * e.gap          # the drag was there
         assert np.abs(got - want).max() < 0.1 * e.gap               # and is (mostly) gone
         assert np.all(held_share(field, np.zeros((1, 2))) == 0.0)
+
+
+def test_the_lining_behind_a_closing_margin_rides_forward_with_it():
+    """A vertex behind the margins' surface takes the forward move of the surface point in front of
+    it: before, it was pushed only by its own distance from the eyeball's axis (nothing at all behind
+    the axis), the margin rode forward over it and the lid's rim folded (ICT's blinks)."""
+    from faceforge.animation.eyelids import over_eyeball
+
+    r = 10.0
+    y0 = np.array([6.0, 6.0, 6.0, 6.0])
+    z_front = np.sqrt(r * r - 36.0)                      # on the eyeball: 8
+    z0 = np.array([z_front, z_front - 3.0, -1.0, z_front + 1.0])   # surface, lining, behind the axis, in front
+    surface = np.full(4, z_front)
+    y1 = (y0 - 6.0)[None, :]                              # closed down to the axis' height
+    push = over_eyeball(y0, z0, y1, surface)[0]
+    expected = r - z_front                               # the surface point's move, 2
+    assert push[0] == pytest.approx(expected)
+    assert push[1] == pytest.approx(expected)            # the lining: as much as the surface in front of it
+    assert push[2] == pytest.approx(expected)
+    far = np.hypot(6.0, z_front + 1.0) - (z_front + 1.0)
+    assert push[3] == pytest.approx(far)                 # in front of the surface: its own distance
+    up = over_eyeball(y0, z0, (y0 + 2.0)[None, :], surface)[0]
+    assert np.all(up == 0.0)                              # a lid opening wider never moves forward or back
+    behind_skin = over_eyeball(y0, np.array([-20.0] * 4), y1, np.array([-15.0] * 4))[0]
+    assert np.all(behind_skin == 0.0)                     # a surface behind the axis: no push
