@@ -185,13 +185,17 @@ class BoundHead:
         partner = None if mirror is None else mirror.exact_partners(self.rest)
         #: True on a rig symmetric by construction whose skin has an exact mirror partner per vertex
         self.symmetric = partner is not None
+        from faceforge.skin.brow import lid_hold
         from faceforge.skin.cheek import cheek_tether
 
+        tether = cheek_tether(binding, config.get("bind.cheek_muscles"), config.get("skin.cheek_tether"))
+        lids, held = lid_hold(binding, self.rest, self.landmarks, float(config.get("skin.lid_hold")))
+        if lids is not None:   # skin.lid_hold: the upper lids' skin stays where the lids put it
+            tether = lids if tether is None else np.where(held, lids, tether)
         return SkinSimulation(self.rest, self.faces, binding, SkinStiffness.from_config(config),
-                              settings, carried=carried_anchors(binding, config.get("skin.carry")),
+                              settings, carried=carried_anchors(binding, config.get("skin.carry")) | held,
                               mirror=partner, join=bool(config.get("skin.join_insertions")),
-                              tether=cheek_tether(binding, config.get("bind.cheek_muscles"),
-                                                  config.get("skin.cheek_tether")),
+                              tether=tether,
                               carry_radius=carry_radius(config, self.landmarks))
 
     def _guards(self, config) -> None:

@@ -190,6 +190,7 @@ RULES: list[tuple[str, Rule]] = [
     ("fit.orientation", AxesPair()),
     ("skin.carry", Choice(("muscles", "all", "none"))),
     ("skin.carry_radius_mm", Number(0.0, 50.0)),
+    ("skin.lid_hold", Number(0.0, 1.0)),              # a stiffness
     ("skin.cheek_tether", Number(0.0, 1.0)),          # a stiffness: past 1 a projection overshoots
     ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
     ("muscle.damping", Number(0.0, 0.99)),

@@ -264,3 +264,36 @@ def _extra_anchors(v, bodies, anchors: tuple, cand, muscles, reach: float) -> tu
     order = np.argsort(np.concatenate([ids, ids[rows]]), kind="stable")   # each after its vertex's rows
     return tuple(np.concatenate([a, np.asarray(b, dtype=np.asarray(a).dtype)])[order]
                  for a, b in zip(anchors, extra))
+
+
+def lid_hold(binding, vertices, landmarks: dict, stiffness: float, up=(0.0, 1.0, 0.0)):
+    """``skin.lid_hold`` (beyond §8): ``(tether (k,) float, held (k,) bool)`` per anchor of
+    ``binding``: the anchors on the bone (cranium, mandible) of the upper lids' skin
+    (:func:`eye_mask`, higher along ``up`` than its eye's canthi) are held (the caller carries
+    them: their ``q`` starts at the skin vertex and stays there, the bone being still) by a
+    tether of ``stiffness``; ``(None, none held)`` with ``stiffness`` 0 or without the eyes' FDPs.
+
+    The lids are not simulated (:mod:`faceforge.animation.eyelids` lays their motion over the
+    skin), and their skin, tied to the bone by the §8 stretch of ``skin.stiffness.anchor``
+    (0.2), followed the brow's skin above it: on the MakeHuman sample the frontalis_inner_L's
+    raise put 27 % of its field's energy below the brow, 1-2.5 cm under the brow line (the
+    upper lid and its fold), where the expression unit eyebrows-left-inner-up is 0, and 26-45
+    % of every brow unit's solved field (``benchmarks/bench_units.py --brows``). The upper
+    lid's skin is held by the lid's own structures (the levator's aponeurosis, the orbital
+    septum), not by the brow."""
+    k = len(binding.vertex_ids)
+    held = np.zeros(k, bool)
+    if not stiffness or float(stiffness) <= 0.0 or not all(c in landmarks for eye in EYES for c in eye[:2]):
+        return None, held
+    v = np.asarray(vertices, FLOAT)
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    eye = eye_mask(v, landmarks, up=u)
+    above = np.zeros(len(v), bool)
+    for inner, outer, _, _ in EYES:
+        mid = 0.5 * (np.asarray(landmarks[inner], FLOAT) + np.asarray(landmarks[outer], FLOAT))
+        width = float(np.linalg.norm(np.asarray(landmarks[outer], FLOAT) - np.asarray(landmarks[inner], FLOAT)))
+        near = _segment_distance(v, np.asarray(landmarks[inner], FLOAT), np.asarray(landmarks[outer], FLOAT))
+        above |= (near <= EYE_REACH * width) & ((v - mid) @ u > 0.0)
+    bone = np.isin(np.asarray(binding.body_names, dtype=object)[np.asarray(binding.body)], ("cranium", "mandible"))
+    held = (eye & above)[np.asarray(binding.vertex_ids)] & bone
+    return (np.where(held, float(stiffness), 0.0) if held.any() else None), held
