@@ -179,7 +179,19 @@ class BoundHead:
                               mirror=partner, join=bool(config.get("skin.join_insertions")),
                               tether=cheek_tether(binding, config.get("bind.cheek_muscles"),
                                                   config.get("skin.cheek_tether")),
-                              carry_radius=carry_radius(config, self.landmarks))
+                              carry_radius=carry_radius(config, self.landmarks),
+                              fold_limit=self._fold_limit(bind, config))
+
+    def _fold_limit(self, bind: dict, config):
+        """(commissure quads (m, 4), limit radians) of ``skin.commissure_fold_deg``; None when 0
+        (:func:`faceforge.skin.lip_contact.commissure_quads`)."""
+        deg = float(config.get("skin.commissure_fold_deg") or 0.0)
+        if deg <= 0:
+            return None
+        from faceforge.skin.lip_contact import commissure_quads
+
+        quads = commissure_quads(self.rest, self.faces, bind.get("lip_sides"), self.landmarks)
+        return (quads, np.radians(deg)) if len(quads) else None
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""

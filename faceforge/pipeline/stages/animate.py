@@ -110,7 +110,7 @@ ANIMATE = register_stage(Stage(
     # the bound head rebuilds the muscles from the template's muscle map on its skull
     # (faceforge.animation.rig.muscle_system): both template files are inputs
     name="animate", deps=("fit", "bind", "calibrate"), config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
-                                                                    "skin.join_insertions", "skin.cheek_tether",
+                                                                    "skin.join_insertions", "skin.cheek_tether", "skin.commissure_fold_deg",
                                                                     "bind.cheek_muscles", "muscle",
                                                 "animate", "template"),
     inputs=("fap", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
