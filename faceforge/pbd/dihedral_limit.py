@@ -26,12 +26,12 @@ import numpy as np
 
 from faceforge.constants import NUMBA_OPTIONS
 
-__all__ = ["limit_dihedrals"]
+__all__ = ["limit_dihedrals", "rest_limits"]
 
 
 @numba.njit(**NUMBA_OPTIONS)
 def _limit(p, quads, limit, sweeps):  # pragma: no cover - numba
-    """In place on ``p (n, 3)``: ``quads (m, 4)`` int64, ``limit`` radians in (0, pi),
+    """In place on ``p (n, 3)``: ``quads (m, 4)`` int64, ``limit (m,)`` radians in (0, pi),
     ``sweeps`` >= 1. Returns the number of projections made."""
     moved = 0
     for _ in range(sweeps):
@@ -60,7 +60,7 @@ def _limit(p, quads, limit, sweeps):  # pragma: no cover - numba
             c = u2x * u3x + u2y * u3y + u2z * u3z
             c = min(1.0, max(-1.0, c))
             phi = math.acos(c)
-            excess = (math.pi - limit) - phi
+            excess = (math.pi - limit[j]) - phi
             if excess <= 0.0:
                 continue
             half = 0.5 * excess
@@ -81,14 +81,16 @@ def _limit(p, quads, limit, sweeps):  # pragma: no cover - numba
     return moved
 
 
-def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit: float, sweeps: int = 2) -> int:
+def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2) -> int:
     """Keep the unsigned dihedral of every quad at most ``limit`` (see the module docstring).
 
     positions : (n, 3) float64, C-contiguous, changed in place; quads : (m, 4) int (particle
-    ids; (p0, p1) the shared edge); limit : radians in (0, pi); sweeps : Gauss-Seidel passes.
+    ids; (p0, p1) the shared edge); limit : radians in (0, pi), one for all or (m,) per quad
+    (:func:`rest_limits`: never below a quad's rest angle); sweeps : Gauss-Seidel passes.
     Returns the number of projections made (0: every quad was within the limit).
     """
-    if not 0.0 < float(limit) < math.pi:
+    lim = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(quads),)))
+    if not np.all((lim > 0.0) & (lim < math.pi)):
         raise ValueError(f"limit must be in (0, pi) radians, got {limit}")
     if positions.dtype != np.float64 or positions.ndim != 2 or positions.shape[1] != 3 \
             or not positions.flags.c_contiguous:
@@ -98,4 +100,13 @@ def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit: float, swee
         return 0
     if q.min() < 0 or q.max() >= len(positions):
         raise ValueError(f"quads index particles outside [0, {len(positions)})")
-    return int(_limit(positions, q, float(limit), int(sweeps)))
+    return int(_limit(positions, q, lim, int(sweeps)))
+
+
+def rest_limits(rest: np.ndarray, quads: np.ndarray, limit: float) -> np.ndarray:
+    """(m,) radians: ``limit`` for each quad, or its unsigned dihedral in ``rest (n, 3)`` where that
+    is larger (a quad bent past the limit at rest may stay as bent; rest stays a fixed point)."""
+    from faceforge.pbd.constraints.bending import dihedral_angle
+
+    q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    return np.minimum(np.maximum(float(limit), np.abs(dihedral_angle(rest, q))), math.pi - 1e-9)

@@ -330,8 +330,8 @@ class SkinSimulation:
     tether : (k,) float, optional
         Per anchor, a tether's stiffness (0: none): see :func:`add_skin`.
     fold_limit : ((m, 4) int, float), optional
-        Skin quads (skin vertex ids) and a dihedral limit in radians they may not bend past,
-        enforced after each solver step (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
+        Skin quads (skin vertex ids) and a dihedral limit in radians they may not bend past
+        (those bent more at rest: their rest angle), enforced after each solver step (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
         ``skin.commissure_fold_deg``, :func:`faceforge.skin.lip_contact.commissure_quads`).
     """
 
@@ -363,7 +363,10 @@ class SkinSimulation:
         self.model = builder.finalize()
         self._fold = None
         if fold_limit is not None and len(fold_limit[0]):
-            self._fold = (self.layer.first + np.asarray(fold_limit[0], INT).reshape(-1, 4), float(fold_limit[1]))
+            from faceforge.pbd.dihedral_limit import rest_limits
+
+            quads = np.asarray(fold_limit[0], INT).reshape(-1, 4)   # never below a quad's rest angle
+            self._fold = (self.layer.first + quads, rest_limits(self.rest, quads, float(fold_limit[1])))
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self.control = self.model.control()

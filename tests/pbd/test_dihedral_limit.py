@@ -83,3 +83,19 @@ def test_bad_arguments_are_refused():
         limit_dihedrals(p, q, 0.0)
     with pytest.raises(ValueError):
         limit_dihedrals(p, q + 5, 1.0)
+
+
+def test_a_quad_bent_past_the_limit_at_rest_keeps_its_rest_angle():
+    """rest_limits: a quad bent 120 deg at rest may stay so (the rest is a fixed point); bent
+    further it comes back to 120, not to the limit."""
+    from faceforge.pbd.dihedral_limit import rest_limits
+
+    p, q = folded_quad(np.radians(120))
+    lim = rest_limits(p, q, np.radians(75))
+    assert np.degrees(lim[0]) == pytest.approx(120)
+    x = p.copy()
+    assert limit_dihedrals(x, q, lim) == 0
+    np.testing.assert_array_equal(x, p)
+    y, _ = folded_quad(np.radians(150))
+    limit_dihedrals(y, q, lim)
+    assert np.degrees(abs(dihedral_angle(y, q)[0])) == pytest.approx(120)
