@@ -233,7 +233,8 @@ class BoundHead:
         if not config.get("animate.eyelids"):
             return None
         return Eyelids(self.rest, self.faces, self.landmarks, self.fapu.unit("IRISD"),
-                       config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"))
+                       config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"),
+                       float(config.get("animate.eyelid_fold_deg") or 0.0))
 
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
