@@ -333,6 +333,8 @@ class Eyelids:
     landmarks : {fdp: (3,)} the neutral skin's FDPs (eyes without their four FDPs are skipped)
     irisd : one IRISD unit (skin units)
     reach, depth : see :func:`lid_field`
+    fold_deg : ``animate.eyelid_fold_deg``: the skin the lids move, bent less than this (and
+        :data:`FOLD_FLAT_DEG`) at rest, is kept within this dihedral (degrees; 0: off)
     """
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
@@ -390,7 +392,7 @@ class Eyelids:
 
 
 #: rounds of (dihedral limit, orientation guard) over a frame the lids moved (``animate.eyelid_fold_deg``):
-#: each undoes a little of the other; ICT's blinks kept 9 / 3 folded edges after 4 rounds, 2 / 3 after 8
+#: each undoes a little of the other; ICT's blinks kept 9 / 3 folded edges after 4 rounds, 2-3 / 3 after 8
 FOLD_ROUNDS = 8
 
 #: the lids' fold limit holds the quads bent less than this at rest (deg): taking in the quads
