@@ -196,7 +196,19 @@ class BoundHead:
                               settings, carried=carried_anchors(binding, config.get("skin.carry")) | held,
                               mirror=partner, join=bool(config.get("skin.join_insertions")),
                               tether=tether,
-                              carry_radius=carry_radius(config, self.landmarks))
+                              carry_radius=carry_radius(config, self.landmarks),
+                              fold_limit=self._fold_limit(bind, config))
+
+    def _fold_limit(self, bind: dict, config):
+        """(commissure quads (m, 4), limit radians) of ``skin.commissure_fold_deg``; None when 0
+        (:func:`faceforge.skin.lip_contact.commissure_quads`)."""
+        deg = float(config.get("skin.commissure_fold_deg") or 0.0)
+        if deg <= 0:
+            return None
+        from faceforge.skin.lip_contact import commissure_quads
+
+        quads = commissure_quads(self.rest, self.faces, bind.get("lip_sides"), self.landmarks)
+        return (quads, np.radians(deg)) if len(quads) else None
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""
@@ -238,7 +250,8 @@ class BoundHead:
         if not config.get("animate.eyelids"):
             return None
         return Eyelids(self.rest, self.faces, self.landmarks, self.fapu.unit("IRISD"),
-                       config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"))
+                       config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"),
+                       float(config.get("animate.eyelid_fold_deg") or 0.0))
 
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""

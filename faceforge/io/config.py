@@ -192,6 +192,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.carry_radius_mm", Number(0.0, 50.0)),
     ("skin.lid_hold", Number(0.0, 1.0)),              # a stiffness
     ("skin.cheek_tether", Number(0.0, 1.0)),          # a stiffness: past 1 a projection overshoots
+    ("skin.commissure_fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the lips' corner contact off
     ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
     ("muscle.damping", Number(0.0, 0.99)),
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
@@ -228,6 +229,7 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.neck_fade", Number(0.0, 10.0)),
     ("animate.eyelid_reach", Number(0.1, 10.0)),
     ("animate.eyelid_depth", Number(0.1, 10.0)),
+    ("animate.eyelid_fold_deg", Number(0.0, 179.0)),       # degrees; 0 turns the lids' fold limit off
     # sane upper bounds: a value past them is a typo, and 1e9 iterations hang, 1e9 s of
     # expression tried to allocate 186 GiB (issue 28)
     ("solver.iterations", Integer(1, 1000)),

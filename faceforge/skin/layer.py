@@ -329,10 +329,14 @@ class SkinSimulation:
         twins alike (:func:`faceforge.pbd.colouring.mirror_colouring`).
     tether : (k,) float, optional
         Per anchor, a tether's stiffness (0: none): see :func:`add_skin`.
+    fold_limit : ((m, 4) int, float), optional
+        Skin quads (skin vertex ids) and a dihedral limit in radians they may not bend past
+        (those bent more at rest: their rest angle), enforced after each solver step (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
+        ``skin.commissure_fold_deg``, :func:`faceforge.skin.lip_contact.commissure_quads`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None, mirror=None, join=False, tether=None, carry_radius=0.0):
+                 carried=None, mirror=None, join=False, tether=None, carry_radius=0.0, fold_limit=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -357,6 +361,12 @@ class SkinSimulation:
         builder = ModelBuilder()
         self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest, tether=tether)
         self.model = builder.finalize()
+        self._fold = None
+        if fold_limit is not None and len(fold_limit[0]):
+            from faceforge.pbd.dihedral_limit import rest_limits
+
+            quads = np.asarray(fold_limit[0], INT).reshape(-1, 4)   # never below a quad's rest angle
+            self._fold = (self.layer.first + quads, rest_limits(self.rest, quads, float(fold_limit[1])))
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self.control = self.model.control()
@@ -432,6 +442,10 @@ class SkinSimulation:
             if not self._direct:
                 targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
+        if self._fold is not None:   # skin.commissure_fold_deg: the lips' corners may not turn over
+            from faceforge.pbd.dihedral_limit import limit_dihedrals
+
+            limit_dihedrals(self.state.positions, *self._fold)
 
     def simulated(self) -> np.ndarray:
         """Current simulated skin positions ``(n, 3)`` (a copy, no influence weighting)."""

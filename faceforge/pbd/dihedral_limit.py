@@ -1,0 +1,112 @@
+"""Unilateral dihedral limit: quads whose two triangles may bend up to a limit, not past it.
+
+A quad ``(p0, p1, p2, p3)`` as in :mod:`faceforge.pbd.constraints.bending` (``(p0, p1)`` the
+shared edge, ``p2`` and ``p3`` the opposite vertices; its unsigned dihedral ``|theta|``, 0 flat,
+pi folded flat onto itself). Seen along the edge, ``|theta| = pi - phi`` where ``phi`` is the
+angle between the two *wings* ``w2``, ``w3`` (the parts of ``p2 - p0`` and ``p3 - p0``
+perpendicular to the edge). When ``|theta|`` exceeds ``limit`` the projection turns both wings
+about the edge's axis, apart, each by half the excess: ``p2`` and ``p3`` move on circles round
+the edge, so the four edges of the two triangles keep their lengths and the edge itself does
+not move; ``|theta|`` becomes ``limit``. Below the limit nothing moves (an inequality
+constraint, C = |theta| - limit <= 0, projected at stiffness 1).
+
+It is applied after a solver step, as a contact would be, by :func:`limit_dihedrals`
+(Gauss-Seidel over the quads, ``sweeps`` times: a vertex shared by several quads is moved by
+each in turn). No velocities are touched (the caller steps quasi-statically). The numba kernel
+has a plain-numpy twin in ``tests/pbd/test_dihedral_limit.py``. Knows nothing of faces: the
+caller chooses the quads (:func:`faceforge.skin.lip_contact.commissure_quads`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from faceforge.constants import NUMBA_OPTIONS
+
+__all__ = ["limit_dihedrals", "rest_limits"]
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _limit(p, quads, limit, sweeps):  # pragma: no cover - numba
+    """In place on ``p (n, 3)``: ``quads (m, 4)`` int64, ``limit (m,)`` radians in (0, pi),
+    ``sweeps`` >= 1. Returns the number of projections made."""
+    moved = 0
+    for _ in range(sweeps):
+        for j in range(quads.shape[0]):
+            i0, i1, i2, i3 = quads[j, 0], quads[j, 1], quads[j, 2], quads[j, 3]
+            ex = p[i1, 0] - p[i0, 0]
+            ey = p[i1, 1] - p[i0, 1]
+            ez = p[i1, 2] - p[i0, 2]
+            el = math.sqrt(ex * ex + ey * ey + ez * ez)
+            if el <= 0.0:
+                continue
+            ax, ay, az = ex / el, ey / el, ez / el
+            # wings: perpendicular parts of p2 - p0 and p3 - p0
+            rx, ry, rz = p[i2, 0] - p[i0, 0], p[i2, 1] - p[i0, 1], p[i2, 2] - p[i0, 2]
+            s2 = rx * ax + ry * ay + rz * az
+            w2x, w2y, w2z = rx - s2 * ax, ry - s2 * ay, rz - s2 * az
+            rx, ry, rz = p[i3, 0] - p[i0, 0], p[i3, 1] - p[i0, 1], p[i3, 2] - p[i0, 2]
+            s3 = rx * ax + ry * ay + rz * az
+            w3x, w3y, w3z = rx - s3 * ax, ry - s3 * ay, rz - s3 * az
+            l2 = math.sqrt(w2x * w2x + w2y * w2y + w2z * w2z)
+            l3 = math.sqrt(w3x * w3x + w3y * w3y + w3z * w3z)
+            if l2 <= 1e-12 * el or l3 <= 1e-12 * el:
+                continue
+            u2x, u2y, u2z = w2x / l2, w2y / l2, w2z / l2
+            u3x, u3y, u3z = w3x / l3, w3y / l3, w3z / l3
+            c = u2x * u3x + u2y * u3y + u2z * u3z
+            c = min(1.0, max(-1.0, c))
+            phi = math.acos(c)
+            excess = (math.pi - limit[j]) - phi
+            if excess <= 0.0:
+                continue
+            half = 0.5 * excess
+            # b3 = a x u3: p3 turns towards -b3 when u2 lies on +b3's side (away from u2)
+            b3x, b3y, b3z = ay * u3z - az * u3y, az * u3x - ax * u3z, ax * u3y - ay * u3x
+            t3 = -half if (u2x * b3x + u2y * b3y + u2z * b3z) >= 0.0 else half
+            b2x, b2y, b2z = ay * u2z - az * u2y, az * u2x - ax * u2z, ax * u2y - ay * u2x
+            t2 = -half if (u3x * b2x + u3y * b2y + u3z * b2z) > 0.0 else half
+            c3, n3 = math.cos(t3), math.sin(t3)
+            c2, n2 = math.cos(t2), math.sin(t2)
+            p[i3, 0] = p[i0, 0] + s3 * ax + l3 * (c3 * u3x + n3 * b3x)
+            p[i3, 1] = p[i0, 1] + s3 * ay + l3 * (c3 * u3y + n3 * b3y)
+            p[i3, 2] = p[i0, 2] + s3 * az + l3 * (c3 * u3z + n3 * b3z)
+            p[i2, 0] = p[i0, 0] + s2 * ax + l2 * (c2 * u2x + n2 * b2x)
+            p[i2, 1] = p[i0, 1] + s2 * ay + l2 * (c2 * u2y + n2 * b2y)
+            p[i2, 2] = p[i0, 2] + s2 * az + l2 * (c2 * u2z + n2 * b2z)
+            moved += 1
+    return moved
+
+
+def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2) -> int:
+    """Keep the unsigned dihedral of every quad at most ``limit`` (see the module docstring).
+
+    positions : (n, 3) float64, C-contiguous, changed in place; quads : (m, 4) int (particle
+    ids; (p0, p1) the shared edge); limit : radians in (0, pi), one for all or (m,) per quad
+    (:func:`rest_limits`: never below a quad's rest angle); sweeps : Gauss-Seidel passes.
+    Returns the number of projections made (0: every quad was within the limit).
+    """
+    lim = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(quads),)))
+    if not np.all((lim > 0.0) & (lim < math.pi)):
+        raise ValueError(f"limit must be in (0, pi) radians, got {limit}")
+    if positions.dtype != np.float64 or positions.ndim != 2 or positions.shape[1] != 3 \
+            or not positions.flags.c_contiguous:
+        raise ValueError("positions must be a C-contiguous (n, 3) float64 array")
+    q = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
+    if len(q) == 0:
+        return 0
+    if q.min() < 0 or q.max() >= len(positions):
+        raise ValueError(f"quads index particles outside [0, {len(positions)})")
+    return int(_limit(positions, q, lim, int(sweeps)))
+
+
+def rest_limits(rest: np.ndarray, quads: np.ndarray, limit: float) -> np.ndarray:
+    """(m,) radians: ``limit`` for each quad, or its unsigned dihedral in ``rest (n, 3)`` where that
+    is larger (a quad bent past the limit at rest may stay as bent; rest stays a fixed point)."""
+    from faceforge.pbd.constraints.bending import dihedral_angle
+
+    q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
+    return np.minimum(np.maximum(float(limit), np.abs(dihedral_angle(rest, q))), math.pi - 1e-9)

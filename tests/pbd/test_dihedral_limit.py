@@ -1,0 +1,101 @@
+"""pbd.dihedral_limit: the unilateral dihedral limit and its plain-numpy twin."""
+
+import numpy as np
+import pytest
+
+from faceforge.pbd.constraints.bending import dihedral_angle
+from faceforge.pbd.dihedral_limit import limit_dihedrals
+
+
+def twin_limit(p, quads, limit, sweeps=2):
+    """Plain numpy: turn both wings of a quad about its edge, apart, by half the excess
+    (Rodrigues' rotation), quad after quad."""
+    p = np.array(p, dtype=float)
+    for _ in range(sweeps):
+        for i0, i1, i2, i3 in np.asarray(quads):
+            a = p[i1] - p[i0]
+            a = a / np.linalg.norm(a)
+            w2 = (p[i2] - p[i0]) - a * np.dot(a, p[i2] - p[i0])
+            w3 = (p[i3] - p[i0]) - a * np.dot(a, p[i3] - p[i0])
+            u2, u3 = w2 / np.linalg.norm(w2), w3 / np.linalg.norm(w3)
+            phi = np.arccos(np.clip(np.dot(u2, u3), -1, 1))
+            excess = (np.pi - limit) - phi
+            if excess <= 0:
+                continue
+            # the sign that turns each wing away from the other
+            s3 = -1.0 if np.dot(u2, np.cross(a, u3)) >= 0 else 1.0
+            s2 = -1.0 if np.dot(u3, np.cross(a, u2)) > 0 else 1.0
+            for i, s in ((i3, s3), (i2, s2)):
+                t = s * excess / 2
+                r = p[i] - p[i0]
+                p[i] = p[i0] + r * np.cos(t) + np.cross(a, r) * np.sin(t) + a * np.dot(a, r) * (1 - np.cos(t))
+    return p
+
+
+def folded_quad(theta):
+    """Edge (0, 1) on the x axis, wing 2 flat along -y, wing 3 turned by theta out of the plane."""
+    return np.array([[0.0, 0, 0], [1.0, 0, 0], [0.4, -1.0, 0.0],
+                     [0.6, np.cos(theta), np.sin(theta)]]), np.array([[0, 1, 2, 3]])
+
+
+@pytest.mark.parametrize("theta", [2.0, 2.6, 3.0, -2.8])
+def test_a_quad_folded_past_the_limit_comes_back_to_it_with_its_edges_kept(theta):
+    p, q = folded_quad(theta)
+    assert abs(dihedral_angle(p, q)[0]) > np.radians(90)
+    before = np.linalg.norm(p[:, None] - p[None], axis=2)
+    x = p.copy()
+    assert limit_dihedrals(x, q, np.radians(75)) >= 1
+    assert abs(dihedral_angle(x, q)[0]) == pytest.approx(np.radians(75), abs=1e-9)
+    after = np.linalg.norm(x[:, None] - x[None], axis=2)
+    # the four edges of the two triangles and the shared edge keep their lengths
+    for i, j in ((0, 1), (0, 2), (1, 2), (0, 3), (1, 3)):
+        assert after[i, j] == pytest.approx(before[i, j], abs=1e-12)
+    np.testing.assert_allclose(x[:2], p[:2])     # the edge does not move
+    np.testing.assert_allclose(x, twin_limit(p, q, np.radians(75)), atol=1e-12)
+
+
+def test_a_quad_within_the_limit_does_not_move():
+    p, q = folded_quad(1.0)      # 57 deg
+    x = p.copy()
+    assert limit_dihedrals(x, q, np.radians(75)) == 0
+    np.testing.assert_array_equal(x, p)
+
+
+def test_kernel_matches_the_twin_on_a_crumpled_strip():
+    rng = np.random.default_rng(3)
+    g = np.stack(np.meshgrid(np.arange(5.0), np.arange(3.0), indexing="ij"), -1).reshape(-1, 2)
+    p = np.c_[g, np.zeros(len(g))] + rng.normal(0, 0.6, (len(g), 3))
+    idx = np.arange(15).reshape(5, 3)
+    quads = []
+    for i in range(4):
+        for j in range(2):
+            a, b, c, d = idx[i, j], idx[i + 1, j], idx[i, j + 1], idx[i + 1, j + 1]
+            quads.append([b, c, a, d])       # the diagonal (b, c), opposite a and d
+    quads = np.array(quads)
+    x = p.copy()
+    limit_dihedrals(x, quads, np.radians(80), sweeps=3)
+    np.testing.assert_allclose(x, twin_limit(p, quads, np.radians(80), 3), atol=1e-10)
+
+
+def test_bad_arguments_are_refused():
+    p, q = folded_quad(2.0)
+    with pytest.raises(ValueError):
+        limit_dihedrals(p, q, 0.0)
+    with pytest.raises(ValueError):
+        limit_dihedrals(p, q + 5, 1.0)
+
+
+def test_a_quad_bent_past_the_limit_at_rest_keeps_its_rest_angle():
+    """rest_limits: a quad bent 120 deg at rest may stay so (the rest is a fixed point); bent
+    further it comes back to 120, not to the limit."""
+    from faceforge.pbd.dihedral_limit import rest_limits
+
+    p, q = folded_quad(np.radians(120))
+    lim = rest_limits(p, q, np.radians(75))
+    assert np.degrees(lim[0]) == pytest.approx(120)
+    x = p.copy()
+    assert limit_dihedrals(x, q, lim) == 0
+    np.testing.assert_array_equal(x, p)
+    y, _ = folded_quad(np.radians(150))
+    limit_dihedrals(y, q, lim)
+    assert np.degrees(abs(dihedral_angle(y, q)[0])) == pytest.approx(120)
