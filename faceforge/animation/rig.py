@@ -302,7 +302,7 @@ def carry_radius(config, landmarks) -> float:
 def carried_anchors(binding, carry: str):
     """(k,) bool: the anchors that carry their skin vertex (``skin.carry``: muscles | all | none;
     :class:`faceforge.skin.layer.SkinSimulation`)."""
-    bone = np.isin(np.asarray(binding.body_names, dtype=object)[binding.body], ("cranium", "mandible"))
+    bone = binding.on_bone()
     return {"muscles": ~bone, "all": np.ones(len(bone), bool), "none": np.zeros(len(bone), bool)}[carry]
 
 

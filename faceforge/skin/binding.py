@@ -154,6 +154,12 @@ class Binding:
         if self.closest is None:
             object.__setattr__(self, "closest", np.zeros(len(self.vertex_ids), bool))
 
+    def on_bone(self) -> np.ndarray:
+        """(k,) bool: the anchors on a bone (cranium, mandible), not on a muscle."""
+        from faceforge.anatomy.skull import BONES
+
+        return np.isin(np.asarray(self.body_names, dtype=object)[np.asarray(self.body)], BONES)
+
     def targets(self, surfaces) -> np.ndarray:
         """Anchor surface points ``(k, 3)`` on the current (deformed) bodies.
 

@@ -294,6 +294,5 @@ def lid_hold(binding, vertices, landmarks: dict, stiffness: float, up=(0.0, 1.0,
         width = float(np.linalg.norm(np.asarray(landmarks[outer], FLOAT) - np.asarray(landmarks[inner], FLOAT)))
         near = _segment_distance(v, np.asarray(landmarks[inner], FLOAT), np.asarray(landmarks[outer], FLOAT))
         above |= (near <= EYE_REACH * width) & ((v - mid) @ u > 0.0)
-    bone = np.isin(np.asarray(binding.body_names, dtype=object)[np.asarray(binding.body)], ("cranium", "mandible"))
-    held = (eye & above)[np.asarray(binding.vertex_ids)] & bone
+    held = (eye & above)[np.asarray(binding.vertex_ids)] & binding.on_bone()
     return (np.where(held, float(stiffness), 0.0) if held.any() else None), held

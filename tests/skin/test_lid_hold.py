@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from faceforge.pbd import SolverSettings
-from faceforge.skin.binding import Body, bind_skin
+from faceforge.skin.binding import Binding, Body, bind_skin
 from faceforge.skin.brow import lid_hold
 from faceforge.skin.layer import SkinSimulation, SkinStiffness
 from tests.skin.synthetic import sphere
@@ -17,12 +17,12 @@ from tests.skin.test_brow import EYE_LANDMARKS, LANDMARKS
 from tests.skin.test_carry import Bodies
 
 
-class _Binding:
-    body_names = ("frontalis_inner_L", "cranium", "mandible")
-    #  upper lid on the bone, upper lid on a muscle, lower lid on the bone, the brow on the bone,
-    #  the other eye's upper lid on the bone (two anchors: bone and muscle)
-    vertex_ids = np.array([0, 1, 2, 3, 4, 4])
-    body = np.array([1, 0, 1, 1, 1, 0])
+#  upper lid on the bone, upper lid on a muscle, lower lid on the bone, the brow on the bone,
+#  the other eye's upper lid on the bone (two anchors: bone and muscle)
+_Binding = Binding(body_names=("frontalis_inner_L", "cranium", "mandible"), status=np.zeros(5, np.int8),
+                   vertex_ids=np.array([0, 1, 2, 3, 4, 4]), body=np.array([1, 0, 1, 1, 1, 0]),
+                   face_ids=np.zeros(6, np.int64), bary=np.zeros((6, 3)), points=np.zeros((6, 3)),
+                   distance=np.zeros(6), outward=np.zeros(6, bool), normals=np.zeros((5, 3)))
 
 
 VERTICES = np.array([[31.5, 4.0, 1.0], [31.0, 3.0, 1.0], [31.5, -4.0, 1.0], [30.0, 24.0, 0.0], [-31.5, 4.0, 1.0]])
