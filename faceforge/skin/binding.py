@@ -107,6 +107,47 @@ class Body:
 
 
 @dataclass(frozen=True)
+class BrowRegion:
+    """The brow's insertion (:func:`bind_skin`'s ``regions.brow``).
+
+    mask : (n,) bool, the brow's skin (:func:`faceforge.skin.brow.brow_mask`); muscles : indices
+    into ``bodies`` of the brow muscles: a vertex of the mask on the bone after the rays and the
+    fallback binds to their closest point (:func:`faceforge.skin.brow.brow_anchors`).
+    eyes : pairs ((n,) bool, indices): the eyes' skin (:func:`faceforge.skin.brow.eye_mask`) and
+    the muscles it may not bind to; such vertices rebind to the closest bone
+    (:func:`faceforge.skin.brow.eye_anchors`).
+    shared_reach : skin units (0: off): the brow's vertices get a second anchor on the nearest
+    other insertion muscle (:func:`faceforge.skin.brow.shared_anchors`) and the outer brow on
+    the frontalis and orbicularis; raisers : indices of the muscles that raise the brow
+    (``bind.brow_raisers``), a further anchor within that reach, or None.
+    """
+
+    mask: np.ndarray
+    muscles: tuple = ()
+    eyes: tuple = ()
+    shared_reach: float = 0.0
+    raisers: tuple | None = None
+
+
+@dataclass(frozen=True)
+class InsertionRegions:
+    """The skin regions that bind by a rule of their own rather than by their rays alone
+    (:func:`bind_skin`; each mask ``(n,) bool`` over the skin vertices, None: no such rule).
+
+    modiolus : the skin at the mouth corners, onto the muscles around the mouth
+    (:func:`faceforge.skin.bind_passes` ``fallbacks``); commissure : the lip skin at the inner
+    lip corners, onto either lip's arc (:func:`faceforge.skin.bind_passes.commissure_anchors`);
+    vermilion : the red of the lips on the bone, onto its own lip's arc
+    (:func:`faceforge.skin.bind_passes.vermilion_anchors`); brow : :class:`BrowRegion`.
+    """
+
+    modiolus: np.ndarray | None = None
+    commissure: np.ndarray | None = None
+    vermilion: np.ndarray | None = None
+    brow: BrowRegion | None = None
+
+
+@dataclass(frozen=True)
 class Binding:
     """The anchors of the skin (one per bound skin vertex).
 
@@ -204,8 +245,8 @@ class Binding:
 
 def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
               normals=None, depth_rank=None, side_of=None, fallback=True, body_sides=None,
-              insertions=None, face_sides=None, lips_to_ring=False, modiolus=None,
-              brow=None, commissure=None, vermilion=None) -> Binding:
+              insertions=None, face_sides=None, lips_to_ring=False,
+              regions: InsertionRegions | None = None) -> Binding:
     """Bind every skin vertex to the first muscle or bone its normal ray meets (§8).
 
     Parameters
@@ -256,30 +297,15 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     lips_to_ring : bool
         A lip vertex whose rays miss binds to its own half of the muscles around the mouth
         when one is within ``max_distance``, before the bone (:func:`_closest_fallback`).
-    modiolus : (n,) bool, optional
-        The skin at the mouth corners (with ``side_of`` and ``body_sides``): a vertex of it
-        that its rays (or the fallback) bound to a muscle not around the mouth binds instead
-        to the closest point of the muscles around the mouth within ``max_distance``, a lip
-        vertex to its own arc (:func:`_modiolus_anchors`; module docstring), and gets no
-        second anchor. Skin on the bone stays there.
-    commissure : (n,) bool, optional
-        The lip skin at the inner lip corners (with ``side_of`` and ``body_sides``): a vertex of
-        it bound to the muscles around the mouth (by its rays, the fallback or the modiolus)
-        binds to their closest point on either lip's arc, not only its own
-        (:func:`faceforge.skin.bind_passes.commissure_anchors`).
-    vermilion : (n,) bool, optional
-        The red of the lips (:func:`faceforge.skin.rules.vermilion_mask`; with ``side_of`` and
-        ``body_sides``): a lip vertex of it the passes bound to the skull binds instead to its own
-        arc of the muscles around the mouth (:func:`faceforge.skin.bind_passes.vermilion_anchors`).
-    brow : ((n,) bool, sequence of int), optional
-        The brow's skin (:func:`faceforge.skin.brow.brow_mask`) and the brow muscles (indices
-        into ``bodies``): a vertex of it on the bone after the rays and the fallback binds to
-        the closest point of those muscles (:func:`faceforge.skin.brow.brow_anchors`). A third
-        item, pairs ((n,) bool, indices): the eyes' skin (:func:`faceforge.skin.brow.eye_mask`)
-        and muscles it may not bind to, rebinds such vertices to the closest bone
-        (:func:`faceforge.skin.brow.eye_anchors`); a fourth, a reach in skin units (0: off), gives
-        the brow's vertices a second anchor on the nearest other insertion muscle
-        (:func:`faceforge.skin.brow.shared_anchors`).
+    regions : InsertionRegions, optional
+        The skin regions with a binding rule of their own (with ``side_of`` and ``body_sides``
+        for the lips'): the modiolus, a vertex of which that its rays (or the fallback) bound to a
+        muscle not around the mouth binds instead to the closest point of the muscles around the
+        mouth within ``max_distance``, a lip vertex to its own arc, and gets no second anchor
+        (skin on the bone stays there; :func:`_modiolus_anchors`, module docstring); the
+        commissure, bound to the muscles around the mouth, onto their closest point on either
+        lip's arc; the vermilion, on the skull after the passes, onto its own arc; the brow
+        (:class:`BrowRegion`).
 
     Returns
     -------
@@ -302,34 +328,30 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     if len(sides) != n:
         raise ValueError(f"lip_sides {sides.shape} must have one entry per vertex ({n})")
     rules = bind_rules(bodies, sides, max_distance, depth_rank, side_of, body_sides, face_sides)
-    corner = np.zeros(n, bool) if modiolus is None else np.array(modiolus, bool).reshape(-1)  # a copy
-    if len(corner) != n:
-        raise ValueError(f"modiolus {corner.shape} must have one entry per vertex ({n})")
+    regions = InsertionRegions() if regions is None else regions
+    corner, comm, verm = (None if m is None else _vertex_mask(m, n, name) for m, name in
+                          ((regions.modiolus, "modiolus"), (regions.commissure, "commissure"),
+                           (regions.vermilion, "vermilion")))
+    corner = np.zeros(n, bool) if corner is None else corner
     hits = ray_passes(v, nrm, rules)
     closest = fallbacks(v, rules, hits, np.broadcast_to(np.asarray(fallback, bool), (n,)),
                          lips_to_ring, corner)
-    if commissure is not None:   # the inner lip corners: both lips on the whole ring
-        comm = np.asarray(commissure, bool).reshape(-1)
-        if len(comm) != n:
-            raise ValueError(f"commissure {comm.shape} must have one entry per vertex ({n})")
+    if comm is not None:   # the inner lip corners: both lips on the whole ring
         closest[commissure_anchors(v, rules, hits, comm)] = False
-    if vermilion is not None:   # the red of the lips: off the teeth, onto its own lip's arc
+    if verm is not None:   # the red of the lips: off the teeth, onto its own lip's arc
         from faceforge.skin.bind_passes import vermilion_anchors
 
-        verm = np.asarray(vermilion, bool).reshape(-1)
-        if len(verm) != n:
-            raise ValueError(f"vermilion {verm.shape} must have one entry per vertex ({n})")
         closest[vermilion_anchors(v, rules, hits, verm)] = False
     body, face, pts, dist, outward = hits
+    brow = regions.brow
     if brow is not None:   # the brow's insertion: brow skin on the bone moves to the brow muscles
-        from faceforge.skin.brow import brow_anchors
+        from faceforge.skin.brow import brow_anchors, eye_anchors
 
-        moved = brow_anchors(v, bodies, rules.kinds, list(brow[1]), np.asarray(brow[0], bool), max_distance,
+        brow_mask = np.asarray(brow.mask, bool)
+        moved = brow_anchors(v, bodies, rules.kinds, list(brow.muscles), brow_mask, max_distance,
                              body, face, pts, dist, rules.allowed)
         outward[moved] = closest[moved] = False
-        from faceforge.skin.brow import eye_anchors
-
-        for eye, eye_ids in (brow[2] if len(brow) > 2 else ()):   # the eye's skin stays off these muscles
+        for eye, eye_ids in brow.eyes:   # the eye's skin stays off these muscles
             moved = eye_anchors(v, bodies, rules.kinds, list(eye_ids), np.asarray(eye, bool), max_distance,
                                 body, face, pts, dist, rules.allowed)
             outward[moved], closest[moved] = False, True
@@ -338,18 +360,15 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
     status[ids] = rules.kinds[body[ids]]
     anchors = (ids, body[ids], face[ids], pts[ids], dist[ids], outward[ids], closest[ids])
     anchors = second_anchors(v, nrm, rules, anchors, insertions, outward, corner)
-    if brow is not None and len(brow) > 3 and brow[3] > 0:   # the brow's dermis takes two insertions
-        from faceforge.skin.brow import shared_anchors
+    if brow is not None and brow.shared_reach > 0:   # the brow's dermis takes two insertions
+        from faceforge.skin.brow import outer_shared_anchors, raiser_anchors, shared_anchors
 
-        anchors = shared_anchors(v, bodies, anchors, np.asarray(brow[0], bool), list(brow[1]),
-                                 list(insertions or ()), brow[3])
-        from faceforge.skin.brow import outer_shared_anchors   # the outer brow: frontalis and orbicularis
-
-        anchors = outer_shared_anchors(v, bodies, anchors, np.asarray(brow[0], bool), brow[3])
-        if len(brow) > 4:   # and the frontalis, which raises it (bind.brow_raisers)
-            from faceforge.skin.brow import raiser_anchors
-
-            anchors = raiser_anchors(v, bodies, anchors, np.asarray(brow[0], bool), list(brow[4]), brow[3])
+        anchors = shared_anchors(v, bodies, anchors, brow_mask, list(brow.muscles),
+                                 list(insertions or ()), brow.shared_reach)
+        # the outer brow: frontalis and orbicularis
+        anchors = outer_shared_anchors(v, bodies, anchors, brow_mask, brow.shared_reach)
+        if brow.raisers is not None:   # and the frontalis, which raises it (bind.brow_raisers)
+            anchors = raiser_anchors(v, bodies, anchors, brow_mask, list(brow.raisers), brow.shared_reach)
     ids, a_body, a_face, a_pts, a_dist, a_out, a_closest = anchors
     bary = np.zeros((len(ids), 3), FLOAT)
     for b in np.unique(a_body):
@@ -360,3 +379,11 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         body=a_body, face_ids=a_face, bary=bary, points=a_pts, distance=a_dist,
         outward=a_out, normals=nrm, closest=a_closest,
     )
+
+
+def _vertex_mask(mask, n: int, name: str) -> np.ndarray:
+    """``mask`` as a fresh ``(n,) bool`` array; ValueError naming it when its length is not ``n``."""
+    out = np.array(mask, bool).reshape(-1)
+    if len(out) != n:
+        raise ValueError(f"{name} {out.shape} must have one entry per vertex ({n})")
+    return out

@@ -9,7 +9,7 @@ import numpy as np
 
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh
-from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, bind_skin
+from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, BrowRegion, InsertionRegions, bind_skin
 from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
 from faceforge.skin.brow import BROW_BAND_MM, brow_mask, eye_mask
@@ -198,8 +198,9 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
-                        modiolus=corner, commissure=commissure, vermilion=verm,
-                        brow=(brow, brow_ids, ((eye, eye_ids),), shared, raiser_ids))
+                        regions=InsertionRegions(modiolus=corner, commissure=commissure, vermilion=verm,
+                                                 brow=BrowRegion(brow, tuple(brow_ids), ((eye, eye_ids),),
+                                                                 shared, tuple(raiser_ids))))
     cheek_ids, _ = match_insertions(cheek_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     if cheek_ids and cheek_mm > 0:   # the cheek's insertion: cheek skin on the bone moves to the cheek raiser
         from faceforge.skin.cheek import cheek_binding, cheek_mask

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, UNBOUND, Body, bind_skin
+from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, UNBOUND, Body, InsertionRegions, bind_skin
 from tests.skin.synthetic import sphere
 
 
@@ -341,7 +341,7 @@ def test_modiolus_moves_corner_skin_from_another_muscle_to_its_arc_of_the_ring(s
     kw = dict(lip_sides=sides, side_of=side_of, body_sides=[0, AROUND_MOUTH, 0],
               face_sides=[None, labels, None], insertions=[0])
     rays = bind_skin(v, f, [over, ring, skull], max_distance=0.5, **kw)
-    b = bind_skin(v, f, [over, ring, skull], max_distance=0.5, modiolus=corner, **kw)
+    b = bind_skin(v, f, [over, ring, skull], max_distance=0.5, regions=InsertionRegions(modiolus=corner), **kw)
 
     def first(bb, ids):   # the body of each vertex's (first) anchor
         return bb.body[np.searchsorted(bb.vertex_ids, ids)]
@@ -367,12 +367,12 @@ def test_modiolus_moves_corner_skin_from_another_muscle_to_its_arc_of_the_ring(s
     np.testing.assert_array_equal(rays.vertex_ids[rest], b.vertex_ids[keep])
     np.testing.assert_array_equal(rays.body[rest], b.body[keep])
     np.testing.assert_array_equal(rays.points[rest], b.points[keep])
-    far = bind_skin(v, f, [over, ring, skull], max_distance=0.06, modiolus=corner, **kw)
+    far = bind_skin(v, f, [over, ring, skull], max_distance=0.06, regions=InsertionRegions(modiolus=corner), **kw)
     near = bind_skin(v, f, [over, ring, skull], max_distance=0.06, **kw)
     assert np.any(far.body[np.isin(far.vertex_ids, ids)] == 0)   # the risorius, 0.05 away
     np.testing.assert_array_equal(far.body, near.body)        # no ring point within 0.06
     with pytest.raises(ValueError, match="modiolus"):
-        bind_skin(v, f, [over, ring, skull], max_distance=0.5, modiolus=corner[:-1], **kw)
+        bind_skin(v, f, [over, ring, skull], max_distance=0.5, regions=InsertionRegions(modiolus=corner[:-1]), **kw)
 
 
 def test_modiolus_mask_is_the_skin_near_the_corner_fdps():
@@ -409,7 +409,7 @@ def test_commissure_binds_both_lips_at_the_corner_to_either_arc_of_the_ring(skin
     comm = (v[:, 2] > 0.9) & (np.abs(v[:, 1]) < 0.2)
     kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
     own = bind_skin(v, f, [ring, skull], max_distance=0.5, **kw)
-    both = bind_skin(v, f, [ring, skull], max_distance=0.5, commissure=comm, **kw)
+    both = bind_skin(v, f, [ring, skull], max_distance=0.5, regions=InsertionRegions(commissure=comm), **kw)
     on_ring = (both.body == 0) & np.isin(both.vertex_ids, np.flatnonzero(comm & (sides != 0)))
     assert on_ring.sum() >= 4
     _, d, _ = closest_points(v[both.vertex_ids[on_ring]], ring.vertices, ring.faces)
@@ -425,7 +425,7 @@ def test_commissure_binds_both_lips_at_the_corner_to_either_arc_of_the_ring(skin
     bone = np.isin(own.vertex_ids, np.flatnonzero(comm)) & (own.body == 1)
     assert np.all(both.body[np.isin(both.vertex_ids, own.vertex_ids[bone])] == 1)
     with pytest.raises(ValueError, match="commissure"):
-        bind_skin(v, f, [ring, skull], max_distance=0.5, commissure=comm[:-1], **kw)
+        bind_skin(v, f, [ring, skull], max_distance=0.5, regions=InsertionRegions(commissure=comm[:-1]), **kw)
 
 
 def test_commissure_mask_is_the_skin_near_the_inner_lip_corners():
@@ -461,7 +461,7 @@ def test_vermilion_on_the_skull_binds_to_its_own_arc_of_the_ring(skin):
     verm = (sides != 0) & (v[:, 2] > 0.9)
     kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
     before = bind_skin(v, f, [ring, skull], max_distance=0.5, **kw)
-    after = bind_skin(v, f, [ring, skull], max_distance=0.5, vermilion=verm, **kw)
+    after = bind_skin(v, f, [ring, skull], max_distance=0.5, regions=InsertionRegions(vermilion=verm), **kw)
     in_mask = np.isin(before.vertex_ids, np.flatnonzero(verm))
     on_bone = in_mask & (before.body == 1)
     assert on_bone.sum() >= 1                                  # the gap: some vermilion on the skull
@@ -472,7 +472,7 @@ def test_vermilion_on_the_skull_binds_to_its_own_arc_of_the_ring(skin):
     np.testing.assert_array_equal(before.body[stay], after.body[same])
     np.testing.assert_array_equal(before.points[stay], after.points[same])
     with pytest.raises(ValueError, match="vermilion"):
-        bind_skin(v, f, [ring, skull], max_distance=0.5, vermilion=verm[:-1], **kw)
+        bind_skin(v, f, [ring, skull], max_distance=0.5, regions=InsertionRegions(vermilion=verm[:-1]), **kw)
 
 
 def test_vermilion_mask_is_each_lip_within_its_midline_height_of_its_inner_contour():
