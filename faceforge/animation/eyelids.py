@@ -52,10 +52,17 @@ radius from the upper lid FDP.
 fastest) can turn over. :class:`Eyelids` runs an
 :class:`~faceforge.animation.guards.orientation.OrientationGuard` over the triangles in the lids'
 reach, with a floor of half :data:`MIN_OPENING`, on each frame the lids moved. With
-``animate.eyelid_fold_deg`` (0: off) the quads the lids move, flat at rest, are also kept from
-bending past that dihedral (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`), alternating
-with the guard: the lining gathered onto the dipping line where the lids meet no longer folds
-at the canthi (the blinks).
+``animate.eyelid_fold_deg`` (80 by default; 0: off) the quads the lids move, flat at rest, are also
+kept from bending past that dihedral (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`),
+alternating with the guard (:data:`FOLD_ROUNDS`): the lining gathered onto the dipping line where
+the lids meet no longer folds at the canthi (the blinks).
+
+**The margins stay where the FAPs put them.** Both passes move particles with inverse masses
+(:func:`margin_inv_mass`): the lid margins (:func:`lid_margins`: the vertices on each margin
+curve) and the lid FDPs weigh 0, so the limit and the guard bend the skin around them and a full
+blink stays closed to :data:`MIN_OPENING` (with equal masses the limit turned the margins too: the
+synthetic head's full blink stayed 6 % open). Only near the corners (the taper below
+:data:`MARGIN_FREE_TAPER`), where the margins close onto each other, do they ease free.
 
 All lengths are in the skin's units; frames are in the head's frame (+X the subject's left,
 +Y up, +Z forward).
@@ -411,6 +418,9 @@ class Eyelids:
     reach, depth : see :func:`lid_field`
     fold_deg : ``animate.eyelid_fold_deg``: the skin the lids move, bent less than this (and
         :data:`FOLD_FLAT_DEG`) at rest, is kept within this dihedral (degrees; 0: off)
+
+    Attributes: ``inv_mass (n,)``: the inverse masses the fold limit and (with it) the guard move
+    the skin with, 0 on the margins and the lid FDPs (:func:`margin_inv_mass`).
     """
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,

@@ -2,7 +2,8 @@
 dipping line where the lids meet, and near the canthi its sub-mm triangles folded (the bake's
 eyeBlink shapes: MakeHuman 4 / 4, ICT 18 / 17, MediaPipe 1 / 1 folded edges). With the limit the
 skin the lids move, flat at rest, bends at most that far, alternating with the orientation guard
-(no triangle turned over either).
+(no triangle turned over either); both bend the skin around the lid margins, which stay where the
+FAPs put them.
 
 Real data: the sample heads and their FDPs (samples/), as tests/animation/test_eyelids.py loads them.
 """
