@@ -52,10 +52,17 @@ radius from the upper lid FDP.
 fastest) can turn over. :class:`Eyelids` runs an
 :class:`~faceforge.animation.guards.orientation.OrientationGuard` over the triangles in the lids'
 reach, with a floor of half :data:`MIN_OPENING`, on each frame the lids moved. With
-``animate.eyelid_fold_deg`` (0: off) the quads the lids move, flat at rest, are also kept from
-bending past that dihedral (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`), alternating
-with the guard: the lining gathered onto the dipping line where the lids meet no longer folds
-at the canthi (the blinks).
+``animate.eyelid_fold_deg`` (80 by default; 0: off) the quads the lids move, flat at rest, are also
+kept from bending past that dihedral (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`),
+alternating with the guard (:data:`FOLD_ROUNDS`): the lining gathered onto the dipping line where
+the lids meet no longer folds at the canthi (the blinks).
+
+**The margins stay where the FAPs put them.** Both passes move particles with inverse masses
+(:func:`margin_inv_mass`): the lid margins (:func:`lid_margins`: the vertices on each margin
+curve) and the lid FDPs weigh 0, so the limit and the guard bend the skin around them and a full
+blink stays closed to :data:`MIN_OPENING` (with equal masses the limit turned the margins too: the
+synthetic head's full blink stayed 6 % open). Only near the corners (the taper below
+:data:`MARGIN_FREE_TAPER`), where the margins close onto each other, do they ease free.
 
 All lengths are in the skin's units; frames are in the head's frame (+X the subject's left,
 +Y up, +Z forward).
@@ -318,6 +325,54 @@ def over_eyeball(y0: np.ndarray, z0: np.ndarray, y1: np.ndarray, surface: np.nda
     return np.where(zf > 0.0, np.maximum(push, 0.0), 0.0)
 
 
+def lid_margins(eye: Eye, rest: np.ndarray, faces: np.ndarray, depth: float = 0.5) -> np.ndarray:
+    """``(p,)`` sorted vertex ids of ``rest (n, 3)`` (triangles ``faces (m, 3)``) that lie on the
+    eye's two lid margins: for each margin curve (heights ``top * s(u)``, ``bottom * s(u)``, module
+    docstring), every mesh edge the curve crosses (its two ends on either side of it, in height
+    along v, within the corners) gives its end nearer the curve; only skin in front of the depth
+    fade (``depth`` rest openings behind the margins, :func:`lid_field`): the socket's lining behind
+    a closed eye is not a margin. These are the vertices whose closing the FAPs set: a full blink
+    brings the two rows together, :data:`MIN_OPENING` apart."""
+    rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
+    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    x = (rest - eye.centre) @ eye.axes.T
+    s = eye.taper(x[:, 0])
+    front = eye.lid_depth * s - x[:, 2] <= depth * eye.gap
+    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
+    a, b = edges[:, 0], edges[:, 1]
+    ok = front[a] & front[b] & ((s[a] > 0.0) | (s[b] > 0.0))
+    out = []
+    for height in eye.margins:
+        h = x[:, 1] - height * s
+        cross = ok & ((h[a] >= 0.0) != (h[b] >= 0.0))
+        out.append(np.where(np.abs(h[a]) <= np.abs(h[b]), a, b)[cross])
+    return np.unique(np.concatenate(out))
+
+
+def margin_inv_mass(field: LidField, rest: np.ndarray, faces: np.ndarray, depth: float = 0.5) -> np.ndarray:
+    """``(n,)`` inverse masses in [0, 1] for :class:`Eyelids`' fold limit and guard: 0 on the lid
+    margins (:func:`lid_margins`, those in the field) where the taper ``s(u)`` is at least
+    :data:`MARGIN_FREE_TAPER`, rising linearly to 1 at the corners (``s`` 0); 1 everywhere else.
+    Where the lids meet, the margins stay where the FAPs put them and the skin bends around them;
+    in the canthi the two margins close onto each other with no opening left to keep, and two
+    pinned margin vertices facing each other across a sliver of lining would leave the limit
+    nothing to turn (MakeHuman's outer canthus: one folded edge per blink)."""
+    w = np.ones(len(rest))
+    margin = lid_margins(field.eye, rest, faces, depth)
+    margin = margin[np.isin(margin, field.index)]
+    s = field.eye.taper((rest[margin] - field.eye.centre) @ field.eye.axes[0])
+    w[margin] = np.clip(1.0 - s / MARGIN_FREE_TAPER, 0.0, 1.0)
+    return w
+
+
+#: below this taper ``s(u)`` (near the corners) the lid margins ease out of their pin
+#: (:func:`margin_inv_mass`): with TAPER 3, the outer eighth of the way to each corner. Pinned all
+#: along, MakeHuman's blinks kept 1 / 1 folded edges and ICT's 4 / 0; eased below 1/3, 0 / 0 and
+#: 3 / 0, the margins moving at most 0.014 of the opening, and only there (eased below 1: 0 / 0
+#: and 1 / 1, but the margins moved up to 0.06 of the opening where the lids meet)
+MARGIN_FREE_TAPER = 1.0 / 3.0
+
+
 def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, irisd: float,
               rest: np.ndarray) -> np.ndarray:
     """Frames ``(F, n, 3)`` with the lids moved by FAPs 19-22 of ``faps (F, 68)``.
@@ -363,6 +418,9 @@ class Eyelids:
     reach, depth : see :func:`lid_field`
     fold_deg : ``animate.eyelid_fold_deg``: the skin the lids move, bent less than this (and
         :data:`FOLD_FLAT_DEG`) at rest, is kept within this dihedral (degrees; 0: off)
+
+    Attributes: ``inv_mass (n,)``: the inverse masses the fold limit and (with it) the guard move
+    the skin with, 0 on the margins and the lid FDPs (:func:`margin_inv_mass`).
     """
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
@@ -374,22 +432,30 @@ class Eyelids:
         self.irisd = float(irisd)
         faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         piece = vertex_components(len(self.rest), faces)
-        self.fields = []
+        self.fields, self._lid_vertices = [], []
         for eye in find_eyes(landmarks):
             field = lid_field(eye, self.rest, reach, depth)
             # only the skin the lids belong to: an eyeball or a lash in the same mesh stays put
             fdps = next(e[:2] for e in EYES if e[4] == eye.upper_fap)
             lids = [int(np.argmin(np.linalg.norm(self.rest - np.asarray(landmarks[f], dtype=np.float64),
                                                  axis=1))) for f in fdps]
+            self._lid_vertices.append(lids)
             keep = np.isin(piece[field.index], piece[lids])
             self.fields.append(replace(field, index=field.index[keep], up_share=field.up_share[keep],
                                        low_share=field.low_share[keep], hold=field.hold[keep]))
         moving = np.zeros(len(self.rest), dtype=bool)
-        for field in self.fields:
+        # the fold limit and the guard bend the skin around the margins, they do not move them
+        # (the inverse masses of :func:`margin_inv_mass`); the lid FDPs are pinned whatever the mesh
+        self.inv_mass = np.ones(len(self.rest))
+        for field, lids in zip(self.fields, self._lid_vertices):
             moving[field.index] = True
+            self.inv_mass = np.minimum(self.inv_mass, margin_inv_mass(field, self.rest, faces, depth))
+            self.inv_mass[lids] = 0.0
         near = faces[moving[faces].any(axis=1)]
-        self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING) if len(near) else None
         self._fold = _fold_quads(self.rest, faces, moving, fold_deg)
+        # animate.eyelid_fold_deg 0: the guard as it was (equal masses)
+        self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING,
+                                       inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None
 
     @property
     def faps(self) -> tuple[int, ...]:
@@ -413,15 +479,20 @@ class Eyelids:
                 from faceforge.pbd.dihedral_limit import limit_dihedrals
 
                 for _ in range(FOLD_ROUNDS):
-                    limit_dihedrals(frame, *self._fold, sweeps=4)
+                    limit_dihedrals(frame, *self._fold, sweeps=1, inv_mass=self.inv_mass)
                     self._guard.apply(frame)
             out[f] = frame
         return out
 
 
-#: rounds of (dihedral limit, orientation guard) over a frame the lids moved (``animate.eyelid_fold_deg``):
-#: each undoes a little of the other; ICT's blinks kept 9 / 3 folded edges after 4 rounds, 2-3 / 3 after 8
-FOLD_ROUNDS = 8
+#: rounds of (one sweep of the dihedral limit, orientation guard) over a frame the lids moved
+#: (``animate.eyelid_fold_deg``): each undoes a little of the other and the pair does not settle (every
+#: round projects something), so the count matters. With the margins pinned, 8 rounds of 4 sweeps left
+#: ICT's blinks 3 / 0 folded edges (and 19 of 29 on the raw ICT mesh's two blinks: the limit's whole-excess
+#: turns inverted triangles, the guard's repairs folded others); single sweeps, 16 rounds 1 / 2, 24 rounds
+#: 0 / 0 (raw mesh 3), 32 0 / 0 (4), 48 0 / 0 (7); MakeHuman and MediaPipe 0 / 0 from 16 on. 5-9 ms per
+#: frame on MakeHuman and ICT
+FOLD_ROUNDS = 24
 
 #: the lids' fold limit holds the quads bent less than this at rest (deg): taking in the quads
 #: bent 60-80 deg at rest (the socket's rim) folded MakeHuman's blink more (4 -> 13 edges), not less

@@ -10,6 +10,14 @@ the edge, so the four edges of the two triangles keep their lengths and the edge
 not move; ``|theta|`` becomes ``limit``. Below the limit nothing moves (an inequality
 constraint, C = |theta| - limit <= 0, projected at stiffness 1).
 
+**Inverse masses.** As in any PBD constraint, the particles may carry inverse masses ``w``
+(:func:`limit_dihedrals`' ``inv_mass``; all 1 by default): the excess is shared between the two
+wings in proportion to their opposite vertices' ``w`` (``w2 / (w2 + w3)`` of it turns ``p2``), so a
+pinned particle (``w`` 0) stays where it is and its partner's wing turns by the whole excess; a
+quad whose ``p2`` and ``p3`` are both pinned is left as it is (turning the edge instead keeps
+all six of the tetrahedron's lengths, hence the dihedral). Equal masses split it in halves,
+bit for bit the unweighted projection.
+
 It is applied after a solver step, as a contact would be, by :func:`limit_dihedrals`
 (Gauss-Seidel over the quads, ``sweeps`` times: a vertex shared by several quads is moved by
 each in turn). No velocities are touched (the caller steps quasi-statically). The numba kernel
@@ -30,13 +38,16 @@ __all__ = ["limit_dihedrals", "rest_limits"]
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _limit(p, quads, limit, sweeps):  # pragma: no cover - numba
+def _limit(p, quads, limit, sweeps, w):  # pragma: no cover - numba
     """In place on ``p (n, 3)``: ``quads (m, 4)`` int64, ``limit (m,)`` radians in (0, pi),
-    ``sweeps`` >= 1. Returns the number of projections made."""
+    ``sweeps`` >= 1, ``w (n,)`` inverse masses >= 0. Returns the number of projections made."""
     moved = 0
     for _ in range(sweeps):
         for j in range(quads.shape[0]):
             i0, i1, i2, i3 = quads[j, 0], quads[j, 1], quads[j, 2], quads[j, 3]
+            wsum = w[i2] + w[i3]
+            if wsum <= 0.0:
+                continue
             ex = p[i1, 0] - p[i0, 0]
             ey = p[i1, 1] - p[i0, 1]
             ez = p[i1, 2] - p[i0, 2]
@@ -63,31 +74,38 @@ def _limit(p, quads, limit, sweeps):  # pragma: no cover - numba
             excess = (math.pi - limit[j]) - phi
             if excess <= 0.0:
                 continue
-            half = 0.5 * excess
+            # each wing's share of the excess (equal masses: half each)
+            h3 = excess * (w[i3] / wsum)
+            h2 = excess * (w[i2] / wsum)
             # b3 = a x u3: p3 turns towards -b3 when u2 lies on +b3's side (away from u2)
             b3x, b3y, b3z = ay * u3z - az * u3y, az * u3x - ax * u3z, ax * u3y - ay * u3x
-            t3 = -half if (u2x * b3x + u2y * b3y + u2z * b3z) >= 0.0 else half
+            t3 = -h3 if (u2x * b3x + u2y * b3y + u2z * b3z) >= 0.0 else h3
             b2x, b2y, b2z = ay * u2z - az * u2y, az * u2x - ax * u2z, ax * u2y - ay * u2x
-            t2 = -half if (u3x * b2x + u3y * b2y + u3z * b2z) > 0.0 else half
+            t2 = -h2 if (u3x * b2x + u3y * b2y + u3z * b2z) > 0.0 else h2
             c3, n3 = math.cos(t3), math.sin(t3)
             c2, n2 = math.cos(t2), math.sin(t2)
-            p[i3, 0] = p[i0, 0] + s3 * ax + l3 * (c3 * u3x + n3 * b3x)
-            p[i3, 1] = p[i0, 1] + s3 * ay + l3 * (c3 * u3y + n3 * b3y)
-            p[i3, 2] = p[i0, 2] + s3 * az + l3 * (c3 * u3z + n3 * b3z)
-            p[i2, 0] = p[i0, 0] + s2 * ax + l2 * (c2 * u2x + n2 * b2x)
-            p[i2, 1] = p[i0, 1] + s2 * ay + l2 * (c2 * u2y + n2 * b2y)
-            p[i2, 2] = p[i0, 2] + s2 * az + l2 * (c2 * u2z + n2 * b2z)
+            if w[i3] > 0.0:   # a pinned particle keeps its bits
+                p[i3, 0] = p[i0, 0] + s3 * ax + l3 * (c3 * u3x + n3 * b3x)
+                p[i3, 1] = p[i0, 1] + s3 * ay + l3 * (c3 * u3y + n3 * b3y)
+                p[i3, 2] = p[i0, 2] + s3 * az + l3 * (c3 * u3z + n3 * b3z)
+            if w[i2] > 0.0:
+                p[i2, 0] = p[i0, 0] + s2 * ax + l2 * (c2 * u2x + n2 * b2x)
+                p[i2, 1] = p[i0, 1] + s2 * ay + l2 * (c2 * u2y + n2 * b2y)
+                p[i2, 2] = p[i0, 2] + s2 * az + l2 * (c2 * u2z + n2 * b2z)
             moved += 1
     return moved
 
 
-def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2) -> int:
+def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2,
+                    inv_mass: np.ndarray | None = None) -> int:
     """Keep the unsigned dihedral of every quad at most ``limit`` (see the module docstring).
 
     positions : (n, 3) float64, C-contiguous, changed in place; quads : (m, 4) int (particle
     ids; (p0, p1) the shared edge); limit : radians in (0, pi), one for all or (m,) per quad
-    (:func:`rest_limits`: never below a quad's rest angle); sweeps : Gauss-Seidel passes.
-    Returns the number of projections made (0: every quad was within the limit).
+    (:func:`rest_limits`: never below a quad's rest angle); sweeps : Gauss-Seidel passes;
+    inv_mass : (n,) float >= 0, the particles' inverse masses (0: pinned; module docstring),
+    None: all 1. Returns the number of projections made (0: every quad was within the limit
+    or could not move).
     """
     lim = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(quads),)))
     if not np.all((lim > 0.0) & (lim < math.pi)):
@@ -96,11 +114,17 @@ def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int
             or not positions.flags.c_contiguous:
         raise ValueError("positions must be a C-contiguous (n, 3) float64 array")
     q = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
+    if inv_mass is None:
+        w = np.ones(len(positions))
+    else:
+        w = np.ascontiguousarray(inv_mass, dtype=np.float64).reshape(-1)
+        if len(w) != len(positions) or not np.all(w >= 0.0):
+            raise ValueError(f"inv_mass must be ({len(positions)},) and >= 0")
     if len(q) == 0:
         return 0
     if q.min() < 0 or q.max() >= len(positions):
         raise ValueError(f"quads index particles outside [0, {len(positions)})")
-    return int(_limit(positions, q, lim, int(sweeps)))
+    return int(_limit(positions, q, lim, int(sweeps), w))
 
 
 def rest_limits(rest: np.ndarray, quads: np.ndarray, limit: float) -> np.ndarray:

@@ -10,8 +10,10 @@ from faceforge.animation.guards.orientation import OrientationGuard, _project_si
 from .test_playback import grid
 
 
-def _twin(x, tris, nref, floor, aim, iterations, hit):
-    """Plain-Python twin of the numba kernel (same order, same updates)."""
+def _twin(x, tris, nref, floor, aim, iterations, hit, w=None):
+    """Plain-Python twin of the numba kernel (same order, same updates); ``w (n,)`` the vertices'
+    inverse masses (None: all 1)."""
+    w = np.ones(len(x)) if w is None else w
     moved = 0
     for _ in range(iterations):
         changed = 0
@@ -21,12 +23,13 @@ def _twin(x, tris, nref, floor, aim, iterations, hit):
             if s - floor[t] >= 0.0:
                 continue
             g = [0.5 * np.cross(n, x[tris[t, (k + 2) % 3]] - x[tris[t, (k + 1) % 3]]) for k in range(3)]
-            denom = sum(gk @ gk for gk in g)
+            denom = sum(w[tris[t, k]] * (g[k] @ g[k]) for k in range(3))
             if denom <= 1e-300:
                 continue
             lam = -(s - floor[t] - aim * floor[t]) / denom
             for k in range(3):
-                x[tris[t, k]] += lam * g[k]
+                if w[tris[t, k]] > 0:
+                    x[tris[t, k]] += w[tris[t, k]] * lam * g[k]
             hit[t] = 1
             changed += 1
         moved += changed
@@ -44,7 +47,7 @@ def test_kernel_matches_its_python_twin():
     floor = rng.uniform(0.0, 0.3, 40)
     a, b = x.copy(), x.copy()
     ha, hb = np.zeros(40, np.uint8), np.zeros(40, np.uint8)
-    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha)
+    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha, np.ones(30))
     kb = _twin(b, tris, n, floor, 0.25, 7, hb)
     assert ka == kb > 0
     assert np.allclose(a, b, rtol=0, atol=1e-12)
@@ -52,6 +55,32 @@ def test_kernel_matches_its_python_twin():
     # the triangles not projected moved none of their vertices (unless they share one)
     free = np.setdiff1d(np.arange(30), tris[ha.astype(bool)])
     assert len(free) and np.array_equal(a[free], x[free])
+
+
+def test_weighted_kernel_matches_its_python_twin_and_keeps_pinned_vertices():
+    """Inverse masses: a pinned vertex (w 0) never moves, the others move w-weighted; equal
+    masses of 1 are the unweighted pass bit for bit."""
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(30, 3))
+    tris = np.array([rng.choice(30, 3, replace=False) for _ in range(40)], dtype=np.int64)
+    n = rng.normal(size=(40, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    floor = rng.uniform(0.0, 0.3, 40)
+    w = rng.uniform(0.2, 2.0, 30)
+    pinned = np.unique(tris[:6].ravel())
+    w[pinned] = 0.0
+    a, b = x.copy(), x.copy()
+    ha, hb = np.zeros(40, np.uint8), np.zeros(40, np.uint8)
+    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha, w)
+    kb = _twin(b, tris, n, floor, 0.25, 7, hb, w)
+    assert ka == kb > 0
+    assert np.allclose(a, b, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(a[pinned], x[pinned])
+    assert not np.array_equal(a, x)
+    c, d = x.copy(), x.copy()
+    _project_signed_areas(c, tris, n, floor, 0.25, 7, np.zeros(40, np.uint8), np.ones(30))
+    _twin(d, tris, n, floor, 0.25, 7, np.zeros(40, np.uint8))
+    assert np.allclose(c, d, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("watch_angle, min_area", [(60.0, 0.2), (30.0, 0.0), (120.0, 0.0), (90.0, 0.1)])

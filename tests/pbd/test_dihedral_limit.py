@@ -7,12 +7,16 @@ from faceforge.pbd.constraints.bending import dihedral_angle
 from faceforge.pbd.dihedral_limit import limit_dihedrals
 
 
-def twin_limit(p, quads, limit, sweeps=2):
+def twin_limit(p, quads, limit, sweeps=2, w=None):
     """Plain numpy: turn both wings of a quad about its edge, apart, by half the excess
-    (Rodrigues' rotation), quad after quad."""
+    (Rodrigues' rotation), quad after quad; with inverse masses ``w (n,)``, each wing by the
+    share of the excess its opposite vertex's ``w`` has of the two (none when both are 0)."""
     p = np.array(p, dtype=float)
+    w = np.ones(len(p)) if w is None else np.asarray(w, dtype=float)
     for _ in range(sweeps):
         for i0, i1, i2, i3 in np.asarray(quads):
+            if w[i2] + w[i3] <= 0:
+                continue
             a = p[i1] - p[i0]
             a = a / np.linalg.norm(a)
             w2 = (p[i2] - p[i0]) - a * np.dot(a, p[i2] - p[i0])
@@ -26,7 +30,9 @@ def twin_limit(p, quads, limit, sweeps=2):
             s3 = -1.0 if np.dot(u2, np.cross(a, u3)) >= 0 else 1.0
             s2 = -1.0 if np.dot(u3, np.cross(a, u2)) > 0 else 1.0
             for i, s in ((i3, s3), (i2, s2)):
-                t = s * excess / 2
+                if w[i] == 0:
+                    continue
+                t = s * excess * w[i] / (w[i2] + w[i3])
                 r = p[i] - p[i0]
                 p[i] = p[i0] + r * np.cos(t) + np.cross(a, r) * np.sin(t) + a * np.dot(a, r) * (1 - np.cos(t))
     return p
@@ -83,6 +89,52 @@ def test_bad_arguments_are_refused():
         limit_dihedrals(p, q, 0.0)
     with pytest.raises(ValueError):
         limit_dihedrals(p, q + 5, 1.0)
+    with pytest.raises(ValueError):
+        limit_dihedrals(p, q, 1.0, inv_mass=np.ones(3))
+    with pytest.raises(ValueError):
+        limit_dihedrals(p, q, 1.0, inv_mass=-np.ones(4))
+
+
+@pytest.mark.parametrize("pinned", [2, 3])
+def test_a_pinned_particle_stays_and_the_other_wing_turns_by_the_whole_excess(pinned):
+    """inv_mass 0 at one opposite vertex: it does not move, the quad still comes back to the limit
+    with its edges kept; with both opposite vertices pinned nothing moves."""
+    p, q = folded_quad(2.8)
+    w = np.ones(4)
+    w[pinned] = 0.0
+    x = p.copy()
+    assert limit_dihedrals(x, q, np.radians(75), inv_mass=w) == 1
+    np.testing.assert_array_equal(x[[0, 1, pinned]], p[[0, 1, pinned]])
+    assert abs(dihedral_angle(x, q)[0]) == pytest.approx(np.radians(75), abs=1e-9)
+    for i, j in ((0, 2), (1, 2), (0, 3), (1, 3)):
+        assert np.linalg.norm(x[i] - x[j]) == pytest.approx(np.linalg.norm(p[i] - p[j]), abs=1e-12)
+    np.testing.assert_allclose(x, twin_limit(p, q, np.radians(75), 1, w), atol=1e-12)
+    y = p.copy()
+    assert limit_dihedrals(y, q, np.radians(75), inv_mass=np.array([1.0, 1.0, 0.0, 0.0])) == 0
+    np.testing.assert_array_equal(y, p)
+
+
+def test_equal_masses_are_the_unweighted_projection_bit_for_bit():
+    p, q = folded_quad(2.6)
+    a, b = p.copy(), p.copy()
+    limit_dihedrals(a, q, np.radians(75))
+    limit_dihedrals(b, q, np.radians(75), inv_mass=np.full(4, 1.0))
+    np.testing.assert_array_equal(a, b)
+
+
+def test_weighted_kernel_matches_the_twin_on_a_crumpled_strip():
+    rng = np.random.default_rng(5)
+    g = np.stack(np.meshgrid(np.arange(5.0), np.arange(3.0), indexing="ij"), -1).reshape(-1, 2)
+    p = np.c_[g, np.zeros(len(g))] + rng.normal(0, 0.6, (len(g), 3))
+    idx = np.arange(15).reshape(5, 3)
+    quads = np.array([[idx[i + 1, j], idx[i, j + 1], idx[i, j], idx[i + 1, j + 1]]
+                      for i in range(4) for j in range(2)])
+    w = rng.uniform(0.0, 2.0, len(p))
+    w[[0, 7, 9]] = 0.0
+    x = p.copy()
+    assert limit_dihedrals(x, quads, np.radians(80), sweeps=3, inv_mass=w) > 0
+    np.testing.assert_allclose(x, twin_limit(p, quads, np.radians(80), 3, w), atol=1e-10)
+    np.testing.assert_array_equal(x[[0, 7, 9]], p[[0, 7, 9]])
 
 
 def test_a_quad_bent_past_the_limit_at_rest_keeps_its_rest_angle():

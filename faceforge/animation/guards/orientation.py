@@ -22,6 +22,9 @@ times its rest area ``A0``::
 projected Gauss-Seidel with stiffness 1 and equal masses (the skin's; a
 violated triangle is projected a quarter above its floor, :data:`AIM`), with the
 gradients ``0.5 n0 x (x2 - x1)``, ``0.5 n0 x (x0 - x2)``, ``0.5 n0 x (x1 - x0)``
+(or with per-vertex inverse masses ``w``, ``inv_mass``: each vertex moves ``w_k lambda g_k``
+with ``lambda = -C / sum w_k |g_k|^2``; a vertex of ``w`` 0 is pinned, a triangle whose three
+vertices are pinned is left as it is; equal masses of 1 are bit for bit the unweighted pass)
 (they lie in the plane normal to ``n0``: the pass moves vertices sideways, it
 does not lift them). Only triangles turned more than ``watch_angle`` from their
 rest normal or below the floor are examined, so the pass costs one cross
@@ -127,11 +130,12 @@ def _rewatched(x, faces, normal0, floor, cos_watch, active, rows, moved, vstart,
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit):  # pragma: no cover - numba
+def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit, w):  # pragma: no cover - numba
     """Gauss-Seidel over the triangles ``tris (k, 3)``: signed area along ``nref (k, 3)``
     (unit) at least ``floor (k,)``; a triangle below its floor is projected (linearised) to
     ``(1 + aim) floor``, so that the next small push of a neighbour does not bring it back
-    below. ``x (n, 3)`` in place; ``hit (k,)`` uint8 is set to 1 for each triangle projected
+    below. ``w (n,)``: the vertices' inverse masses (>= 0; 0 pinned).
+    ``x (n, 3)`` in place; ``hit (k,)`` uint8 is set to 1 for each triangle projected
     at least once (its three vertices may have moved; the others' did not, unless shared).
     Returns how many projections moved a vertex."""
     moved = 0
@@ -158,15 +162,17 @@ def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit):  # pragma
                 g[k, 2] = 0.5 * (n0 * dy - n1 * dx)
             denom = 0.0
             for k in range(3):
-                denom += g[k, 0] * g[k, 0] + g[k, 1] * g[k, 1] + g[k, 2] * g[k, 2]
+                denom += w[tris[t, k]] * (g[k, 0] * g[k, 0] + g[k, 1] * g[k, 1] + g[k, 2] * g[k, 2])
             if denom <= 1e-300:
                 continue
             lam = -(cval - aim * floor[t]) / denom
             for k in range(3):
                 v = tris[t, k]
-                x[v, 0] += lam * g[k, 0]
-                x[v, 1] += lam * g[k, 1]
-                x[v, 2] += lam * g[k, 2]
+                if w[v] > 0.0:
+                    wl = w[v] * lam
+                    x[v, 0] += wl * g[k, 0]
+                    x[v, 1] += wl * g[k, 1]
+                    x[v, 2] += wl * g[k, 2]
             hit[t] = 1
             changed += 1
         moved += changed
@@ -177,7 +183,7 @@ def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit):  # pragma
 
 @numba.njit(**NUMBA_OPTIONS)
 def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds, iterations, vstart,
-                  vtris, mark):  # pragma: no cover - numba
+                  vtris, mark, w):  # pragma: no cover - numba
     """The rounds of :meth:`OrientationGuard.apply` from ``rows``, the :func:`_watched` rows of
     ``x (n, 3)`` (in place): project them (:func:`_project_signed_areas`), test again around
     the projected triangles (:func:`_rewatched`), until a test finds nothing, a projection
@@ -200,7 +206,7 @@ def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds
                 nref[i, d] = normal0[t, d]
             fl[i] = floor[t]
         hit = np.zeros(k, np.uint8)
-        done = _project_signed_areas(x, tris, nref, fl, aim, iterations, hit)
+        done = _project_signed_areas(x, tris, nref, fl, aim, iterations, hit, w)
         moved += done
         if done == 0:
             break
@@ -240,16 +246,23 @@ class OrientationGuard:
         it was upright after 9.)
     iterations : int
         Gauss-Seidel sweeps per round.
+    inv_mass : (n,) float >= 0, optional
+        The vertices' inverse masses (0: pinned, the pass bends the skin around it; module
+        docstring); None: all 1.
 
     Triangles of zero rest area (numerically degenerate, area <= 1e-12 of the squared
     bounding-box diagonal) have no orientation and are left alone.
     """
 
     def __init__(self, rest, faces, min_area: float = 0.1, watch_angle: float = 60.0,
-                 rounds: int = 32, iterations: int = 50):
+                 rounds: int = 32, iterations: int = 50, inv_mass=None):
         if not 0.0 <= min_area < 1.0:
             raise ValueError(f"min_area must be in [0, 1), got {min_area}")
         self.rest = np.array(rest, dtype=FLOAT)
+        self.inv_mass = (np.ones(len(self.rest), dtype=FLOAT) if inv_mass is None
+                         else np.ascontiguousarray(inv_mass, dtype=FLOAT).reshape(-1))
+        if len(self.inv_mass) != len(self.rest) or not np.all(self.inv_mass >= 0.0):
+            raise ValueError(f"inv_mass must be ({len(self.rest)},) and >= 0")
         self.faces = np.asarray(faces, dtype=INT)
         r = self.rest[self.faces]
         n0 = np.cross(r[:, 1] - r[:, 0], r[:, 2] - r[:, 0])
@@ -307,7 +320,7 @@ class OrientationGuard:
             return 0
         done, rows, known, touched = _guard_rounds(
             positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows, AIM,
-            self.rounds, self.iterations, self._vstart, self._vtris, self._mark)
+            self.rounds, self.iterations, self._vstart, self._vtris, self._mark, self.inv_mass)
         if known:
             self._last = (positions, rows)
         self.touched = np.concatenate(touched)
@@ -323,7 +336,7 @@ class OrientationGuard:
         _rewatched(x, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows,
                    np.zeros(0, INT), self._vstart, self._vtris, self._mark)
         _guard_rounds(x, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows, AIM,
-                      1, 1, self._vstart, self._vtris, self._mark)
+                      1, 1, self._vstart, self._vtris, self._mark, self.inv_mass)
         self._mark[:] = 0
 
     def _rewatched(self, positions, rows, moved) -> np.ndarray:
