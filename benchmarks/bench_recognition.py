@@ -3,7 +3,7 @@ face-reading model? (issue 25 item 4)
 
 Usage::
 
-    python benchmarks/bench_recognition.py WORKDIR [WORKDIR ...] [--out NAME] [--pictures DIR] [--units]
+    python benchmarks/bench_recognition.py WORKDIR [WORKDIR ...] [--out NAME] [--pictures DIR] [--units] [--eyes]
 
 Each WORKDIR is fitted, bound and (as ``animate`` plays it) calibrated. For each head the
 neutral face and the six presets of the template mapping (``expressions:``) at full intensity
@@ -24,6 +24,13 @@ AU15 mouthFrown L/R, AU16 mouthLowerDown L/R, AU20 mouthStretch L/R, AU23 mouthP
 AU26 jawOpen). An expression's score on a render is the mean over its AUs of (the render's AU
 score - the neutral render's AU score), same head, same view. A preset is **recognised** when
 its own expression scores highest of the six.
+
+``--eyes``: each eye drawn with an eyeball behind its lids (:func:`faceforge.landmarks.
+blendshapes.eyeballs`: the sphere the kinematic lids slide over, ``animation.eyelids.Eye.
+eyeball_centre``, radius ``EYEBALL_RADIUS`` x half the eye's width, fixed at rest; sclera light,
+iris and pupil dark about the eye's forward axis). Without it the eye holes are empty and the
+model cannot see the lids' opening (AU5) nor, on MakeHuman, tell it from the brows (recog10,
+recog12). The figures of the two renders are not comparable.
 
 ``--units``: the scorer's sanity check (not a target): each MakeHuman expression unit
 (``tests/data/mh_head_expression_units_caucasian.npz``, the sample's own vertex order) laid on
@@ -69,15 +76,28 @@ def head_poses(workdir: Path):
     return head, ["neutral", *EXPRESSIONS], skins
 
 
-def score_poses(scorer, skins, faces, region, names, pictures=None, label=""):
+def head_eyes(head):
+    """The eyeballs of ``head`` at rest (:func:`faceforge.landmarks.blendshapes.eyeballs`), or
+    None when it has no eye the lids know."""
+    from faceforge.animation.eyelids import EYEBALL_RADIUS, find_eyes
+    from faceforge.landmarks.blendshapes import eyeballs
+
+    eyes = find_eyes(head.landmarks)
+    if not eyes:
+        return None
+    return eyeballs(np.array([e.eyeball_centre for e in eyes]), np.array([EYEBALL_RADIUS * e.half for e in eyes]),
+                    np.array([e.axes[2] for e in eyes]))
+
+
+def score_poses(scorer, skins, faces, region, names, pictures=None, label="", eyes=None):
     """{view: {name: {scores, recognised, ...}}} for poses ``skins (k, n, 3)``, the first the
-    neutral face."""
+    neutral face; ``eyes`` (:func:`head_eyes`) drawn in each render when given."""
     from faceforge.landmarks import blendshapes as bs
 
     out = {}
     for view_name, yaw in VIEWS.items():
         view = bs.face_view(skins[0][region], yaw)
-        images = [bs.grey_render(s, faces, view) for s in skins]
+        images = [bs.grey_render(s, faces, view, eyes) for s in skins]
         if pictures is not None:
             from PIL import Image
 
@@ -170,6 +190,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--out", default="recognition", help="results file stem (benchmarks/results/NAME.json)")
     ap.add_argument("--pictures", type=Path, default=None, help="write the renders the model saw here")
     ap.add_argument("--units", action="store_true", help="also score the MakeHuman units (first WORKDIR)")
+    ap.add_argument("--eyes", action="store_true", help="draw eyeballs behind the lids")
     args = ap.parse_args(argv)
     from faceforge.landmarks.blendshapes import BlendshapeScorer
     from faceforge.viz.contact_sheet import face_region
@@ -186,7 +207,9 @@ def main(argv=None) -> dict:
             head, names, skins = head_poses(w)
             region = face_region(head.rest, head.landmarks)
             region = np.ones(len(head.rest), bool) if region is None else region
-            results[w.name] = {"views": score_poses(scorer, skins, head.faces, region, names, args.pictures, w.name)}
+            eyes = head_eyes(head) if args.eyes else None
+            results[w.name] = {"views": score_poses(scorer, skins, head.faces, region, names, args.pictures, w.name,
+                                                    eyes)}
             results[w.name]["seconds"] = round(time.perf_counter() - t0, 1)
             print_head(w.name, results[w.name])
             if args.units and i == 0:
@@ -196,7 +219,7 @@ def main(argv=None) -> dict:
     print("recognised of 6:", summary)
     out = {"rule": "score(expr) = mean over its FACS AUs of (AU score - neutral AU score); AU score = mean "
                    "of its ARKit blendshapes; recognised when the intended expression scores highest of six",
-           "views_yaw_deg": VIEWS, "recognised_of_6": summary, "heads": results}
+           "views_yaw_deg": VIEWS, "eyes": args.eyes, "recognised_of_6": summary, "heads": results}
     if units is not None:
         out["units_sanity"] = units
         for name, r in units["front"].items():

@@ -102,10 +102,49 @@ def face_view(region_vertices: np.ndarray, yaw_deg: float = 0.0, size: int = 512
     return View(direction, np.array([0.0, 1.0, 0.0]), centre, share * size / extent, size)
 
 
-def grey_render(vertices: np.ndarray, faces: np.ndarray, view: View) -> np.ndarray:
+def eyeballs(centres: np.ndarray, radii: np.ndarray, forward: np.ndarray, subdivisions: int = 3):
+    """Eyeballs to draw with a head (:func:`grey_render`): a sphere per eye, ``centres (e, 3)``,
+    ``radii (e,)`` and looking along ``forward (e, 3)`` (unit), in the head's frame and units.
+    Returns ``(vertices (k, 3), faces (f, 3), facing (k,))``: the spheres' mesh and each vertex's
+    cosine to its eye's forward axis (1 at the pupil's centre)."""
+    import trimesh
+
+    ball = trimesh.creation.icosphere(subdivisions=subdivisions)
+    unit, tri = np.asarray(ball.vertices, dtype=np.float64), np.asarray(ball.faces, dtype=np.int64)
+    centres, forward = np.atleast_2d(centres).astype(np.float64), np.atleast_2d(forward).astype(np.float64)
+    radii = np.atleast_1d(radii).astype(np.float64)
+    vertices = np.concatenate([c + r * unit for c, r in zip(centres, radii)])
+    faces = np.concatenate([tri + k * len(unit) for k in range(len(centres))])
+    facing = np.concatenate([unit @ w for w in forward])
+    return vertices, faces, facing
+
+
+#: an eyeball's pupil and iris, half-angles about its forward axis (degrees; an 11-12 mm iris and a
+#: 4 mm pupil on a 24 mm eye), and their grey levels with the sclera's
+PUPIL_DEG, IRIS_DEG = 10.0, 30.0
+PUPIL_GREY, IRIS_GREY, SCLERA_GREY = 15, 70, 235
+
+
+def grey_render(vertices: np.ndarray, faces: np.ndarray, view: View, eyes=None) -> np.ndarray:
     """(size, size, 3) uint8: the mesh smooth-shaded grey on black (:func:`faceforge.landmarks.
-    raster.render`, vertex normals, light above the camera)."""
+    raster.render`, vertex normals, light above the camera). ``eyes``: :func:`eyeballs`' meshes,
+    drawn with the mesh (hidden where the skin is in front: behind the lids) and painted flat,
+    sclera light, iris grey, pupil black; None (the default): the eye holes stay empty."""
     from faceforge.geometry.triangles import vertex_normals
 
+    vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    return render(np.asarray(vertices, dtype=np.float64), faces, vertex_normals(vertices, faces), view).rgb()
+    if eyes is None:
+        return render(vertices, faces, vertex_normals(vertices, faces), view).rgb()
+    ev, ef, facing = eyes
+    n, m = len(vertices), len(faces)
+    allv = np.concatenate([vertices, np.asarray(ev, dtype=np.float64)])
+    allf = np.concatenate([faces, np.asarray(ef, dtype=np.int64) + n])
+    out = render(allv, allf, vertex_normals(allv, allf), view)
+    image = out.image.copy()
+    eye = out.face_id >= m
+    if eye.any():
+        cos = np.einsum("kj,kj->k", out.bary[eye], np.asarray(facing)[allf[out.face_id[eye]] - n])
+        image[eye] = np.where(cos > np.cos(np.radians(PUPIL_DEG)), PUPIL_GREY,
+                              np.where(cos > np.cos(np.radians(IRIS_DEG)), IRIS_GREY, SCLERA_GREY))
+    return np.ascontiguousarray(np.repeat(image[:, :, None], 3, axis=2))

@@ -50,6 +50,23 @@ def test_no_preset_lowers_the_middle_brow_with_the_inner_and_outer(mapping):
                 assert row[middle - 1] >= 0, (name, middle)
 
 
+
+def test_fear_differs_from_surprise_as_facs_says(mapping):
+    # fear (1+2+4+5+20+26) and surprise (1+2+5+26) share the raised brows, the raised upper lids
+    # and the dropped jaw; fear adds the brows drawn together (AU4, corrugator), the lips stretched
+    # sideways (AU20), and its lower lids are tense and drawn up where surprise's are let down
+    # (Ekman & Friesen); its upper lids and jaw open less. Without these the face-reading
+    # benchmark read fear as surprise on every head (docs/notes/recog12.md)
+    fear, surprise = mapping.expressions["fear"], mapping.expressions["surprise"]
+    for side in (0, 1):
+        inner, squeeze, upper, lower = 31 + side, 37 + side, 19 + side, 21 + side
+        assert fear[inner - 1] > 0 and fear[squeeze - 1] > 0 and surprise[squeeze - 1] <= 0
+        assert surprise[upper - 1] < fear[upper - 1] < 0            # lids raised, less than surprise
+        assert fear[lower - 1] > 0 > surprise[lower - 1]            # tensed up / let down
+    for stretch in (53, 54, 6, 7):
+        assert fear[stretch - 1] > 0 >= surprise[stretch - 1]
+    assert 0 < fear[3 - 1] < surprise[3 - 1]
+
 def test_every_preset_fap_drives_something(mapping):
     # a preset's FAP that no entry maps would be dropped without a word; the lids (19-22) are
     # played over the skin by animation.eyelids

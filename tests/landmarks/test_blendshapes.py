@@ -71,3 +71,30 @@ def test_the_model_reads_makehumans_corner_puller_as_a_smile_and_mouth_open_as_a
     assert au["open"][26] - au["rest"][26] > 0.15
     assert au["smile"][26] - au["rest"][26] < 0.1 and au["open"][12] - au["rest"][12] < 0.1
     assert bs.recognised(bs.expression_scores(smile, rest)) == "joy"
+
+
+def test_eyeballs_are_drawn_behind_a_hole_sclera_light_pupil_dark():
+    # a square wall at z = 0 with a square hole, an eyeball of radius 1 behind it looking at the
+    # camera (+Z): through the hole the pupil is black at the centre and the iris/sclera around it;
+    # without the eyeball the hole shows the background; where the wall is in front it hides the eye
+    g = np.linspace(-4.0, 4.0, 17)
+    xx, yy = np.meshgrid(g, g)
+    v = np.stack([xx.ravel(), yy.ravel(), np.zeros(xx.size)], axis=1)
+    f = []
+    for i in range(16):
+        for j in range(16):
+            if 6 <= i < 10 and 6 <= j < 10:
+                continue                               # the hole, |x|, |y| < 1
+            a = i * 17 + j
+            f += [[a, a + 1, a + 18], [a, a + 18, a + 17]]
+    f = np.array(f)
+    eyes = bs.eyeballs(np.array([[0.0, 0.0, -0.5]]), np.array([1.0]), np.array([[0.0, 0.0, 1.0]]))
+    assert eyes[0].shape[1] == 3 and eyes[2].max() == pytest.approx(1.0)
+    view = bs.face_view(v, 0.0, size=160, share=0.9)
+    centre = tuple(int(round(c)) for c in view.project(np.zeros((1, 3)))[0, [1, 0]])
+    wall = tuple(int(round(c)) for c in view.project(np.array([[2.5, 2.5, 0.0]]))[0, [1, 0]])
+    rim = tuple(int(round(c)) for c in view.project(np.array([[0.0, 0.85, 0.0]]))[0, [1, 0]])
+    plain, drawn = bs.grey_render(v, f, view), bs.grey_render(v, f, view, eyes)
+    assert plain[centre][0] == 0 and drawn[centre][0] == bs.PUPIL_GREY
+    assert drawn[rim][0] == bs.SCLERA_GREY
+    assert drawn[wall][0] == plain[wall][0] > 0
