@@ -12,7 +12,10 @@ and the residual's (each over the unit's total), the residual split into x / y /
 x the subject's left, y up, z forward). Then the linear what-if: the best non-negative fit of
 the Jacobian's muscle columns to the unit (the projection the solve starts from) with every
 column as bound, and with the columns zeroed on the lids and canthi (FDP group 3 below the
-lowest brow FDP): how much the lid skin that moves with the brow costs. Not a test.
+lowest brow FDP): how much the lid skin that moves with the brow costs. Also the outer lips (FDP 8)
+by thirds of the mouth's width (the gain ``F.Y / Y.Y`` there), and each control the solve used:
+its field ``J_j x_j``'s energy, the share of it where the unit hardly moves, and ``Y.(J_j x_j)``.
+Not a test.
 """
 
 from __future__ import annotations
@@ -76,6 +79,24 @@ def main(argv=None) -> None:
             parts = " ".join(f"{a} {np.sum(R[q, i] ** 2) / E:.3f}" for i, a in enumerate("xyz"))
             print(f"  FDP {g:>2s} ({q.sum():4d} v): unit {np.sum(Y[q] ** 2) / E:.3f} solved "
                   f"{np.sum(F[q] ** 2) / E:.3f} residual {np.sum(R[q] ** 2) / E:.3f} ({parts})")
+        lips = groups == "8"                              # the outer lips by thirds of the mouth's width
+        for lab, q in (("lips |x| < 1 cm", lips & (np.abs(P[:, 0]) < 0.1)),
+                       ("lips 1-2.5 cm", lips & (np.abs(P[:, 0]) >= 0.1) & (np.abs(P[:, 0]) < 0.25)),
+                       ("lips > 2.5 cm", lips & (np.abs(P[:, 0]) >= 0.25))):
+            yy = float(np.sum(Y[q] ** 2))
+            print(f"  {lab:15s} ({q.sum():4d} v): unit {yy / E:.3f} gain F.Y/Y.Y "
+                  f"{float(np.sum(F[q] * Y[q])) / max(yy, 1e-30):.2f}, mean unit {np.round(Y[q].mean(0) * 100, 2)} "
+                  f"solved {np.round(F[q].mean(0) * 100, 2)} mm (the frame is in dm)")
+        if "x" in f.files:                                # each used column's share: its field J_j x_j
+            x = f["x"][solved_names.index(name)]
+            small = np.linalg.norm(Y, axis=1) < 0.1 * np.linalg.norm(Y, axis=1).max()
+            for j in np.argsort(-np.abs(x)):
+                c = (J[:, j] * x[j]).reshape(-1, 3)
+                e = float(np.sum(c * c))
+                if e < 1e-3 * E:
+                    continue
+                print(f"    {controls[j]:30s} x {x[j]:6.3f} energy {e / E:.3f}, where the unit is < 10 % of "
+                      f"its peak {np.sum(c[small] ** 2) / e:.2f}, Y.c {float(np.sum(Y * c)) / E:+.3f}")
         y = Y.ravel()
         print(f"  linear: muscles {cosine_nnls(J[:, muscles], y):.3f}, lids held "
               f"{cosine_nnls(held[:, muscles], y):.3f}")
