@@ -38,13 +38,19 @@ def _twin(x, tris, nref, floor, aim, iterations, hit, w=None):
     return moved
 
 
-def test_kernel_matches_its_python_twin():
-    rng = np.random.default_rng(3)
+def _random_triangles(rng):
+    """30 random points, 40 random triangles on them with random unit normals and area floors."""
     x = rng.normal(size=(30, 3))
     tris = np.array([rng.choice(30, 3, replace=False) for _ in range(40)], dtype=np.int64)
     n = rng.normal(size=(40, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
     floor = rng.uniform(0.0, 0.3, 40)
+    return x, tris, n, floor
+
+
+def test_kernel_matches_its_python_twin():
+    rng = np.random.default_rng(3)
+    x, tris, n, floor = _random_triangles(rng)
     a, b = x.copy(), x.copy()
     ha, hb = np.zeros(40, np.uint8), np.zeros(40, np.uint8)
     ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha, np.ones(30))
@@ -61,11 +67,7 @@ def test_weighted_kernel_matches_its_python_twin_and_keeps_pinned_vertices():
     """Inverse masses: a pinned vertex (w 0) never moves, the others move w-weighted; equal
     masses of 1 are the unweighted pass bit for bit."""
     rng = np.random.default_rng(4)
-    x = rng.normal(size=(30, 3))
-    tris = np.array([rng.choice(30, 3, replace=False) for _ in range(40)], dtype=np.int64)
-    n = rng.normal(size=(40, 3))
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    floor = rng.uniform(0.0, 0.3, 40)
+    x, tris, n, floor = _random_triangles(rng)
     w = rng.uniform(0.2, 2.0, 30)
     pinned = np.unique(tris[:6].ravel())
     w[pinned] = 0.0

@@ -67,17 +67,19 @@ def test_a_quad_within_the_limit_does_not_move():
     np.testing.assert_array_equal(x, p)
 
 
-def test_kernel_matches_the_twin_on_a_crumpled_strip():
-    rng = np.random.default_rng(3)
+def crumpled_strip(rng):
+    """A 5 x 3 grid of points jittered out of its plane, and its eight quads ((i+1, j), (i, j+1)
+    the diagonal, opposite (i, j) and (i+1, j+1))."""
     g = np.stack(np.meshgrid(np.arange(5.0), np.arange(3.0), indexing="ij"), -1).reshape(-1, 2)
     p = np.c_[g, np.zeros(len(g))] + rng.normal(0, 0.6, (len(g), 3))
     idx = np.arange(15).reshape(5, 3)
-    quads = []
-    for i in range(4):
-        for j in range(2):
-            a, b, c, d = idx[i, j], idx[i + 1, j], idx[i, j + 1], idx[i + 1, j + 1]
-            quads.append([b, c, a, d])       # the diagonal (b, c), opposite a and d
-    quads = np.array(quads)
+    return p, np.array([[idx[i + 1, j], idx[i, j + 1], idx[i, j], idx[i + 1, j + 1]]
+                        for i in range(4) for j in range(2)])
+
+
+def test_kernel_matches_the_twin_on_a_crumpled_strip():
+    rng = np.random.default_rng(3)
+    p, quads = crumpled_strip(rng)
     x = p.copy()
     limit_dihedrals(x, quads, np.radians(80), sweeps=3)
     np.testing.assert_allclose(x, twin_limit(p, quads, np.radians(80), 3), atol=1e-10)
@@ -124,11 +126,7 @@ def test_equal_masses_are_the_unweighted_projection_bit_for_bit():
 
 def test_weighted_kernel_matches_the_twin_on_a_crumpled_strip():
     rng = np.random.default_rng(5)
-    g = np.stack(np.meshgrid(np.arange(5.0), np.arange(3.0), indexing="ij"), -1).reshape(-1, 2)
-    p = np.c_[g, np.zeros(len(g))] + rng.normal(0, 0.6, (len(g), 3))
-    idx = np.arange(15).reshape(5, 3)
-    quads = np.array([[idx[i + 1, j], idx[i, j + 1], idx[i, j], idx[i + 1, j + 1]]
-                      for i in range(4) for j in range(2)])
+    p, quads = crumpled_strip(rng)
     w = rng.uniform(0.0, 2.0, len(p))
     w[[0, 7, 9]] = 0.0
     x = p.copy()
