@@ -420,7 +420,8 @@ class Eyelids:
         :data:`FOLD_FLAT_DEG`) at rest, is kept within this dihedral (degrees; 0: off)
 
     Attributes: ``inv_mass (n,)``: the inverse masses the fold limit and (with it) the guard move
-    the skin with, 0 on the margins and the lid FDPs (:func:`margin_inv_mass`).
+    the skin with, 0 on the margins and the lid FDPs (:func:`margin_inv_mass`); all 1 with the
+    limit off (the margins are then not looked for).
     """
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
@@ -444,15 +445,16 @@ class Eyelids:
             self.fields.append(replace(field, index=field.index[keep], up_share=field.up_share[keep],
                                        low_share=field.low_share[keep], hold=field.hold[keep]))
         moving = np.zeros(len(self.rest), dtype=bool)
+        for field in self.fields:
+            moving[field.index] = True
+        near = faces[moving[faces].any(axis=1)]
+        self._fold = _fold_quads(self.rest, faces, moving, fold_deg)
         # the fold limit and the guard bend the skin around the margins, they do not move them
         # (the inverse masses of :func:`margin_inv_mass`); the lid FDPs are pinned whatever the mesh
         self.inv_mass = np.ones(len(self.rest))
-        for field, lids in zip(self.fields, self._lid_vertices):
-            moving[field.index] = True
+        for field, lids in zip(self.fields, self._lid_vertices) if self._fold is not None else ():
             self.inv_mass = np.minimum(self.inv_mass, margin_inv_mass(field, self.rest, faces, depth))
             self.inv_mass[lids] = 0.0
-        near = faces[moving[faces].any(axis=1)]
-        self._fold = _fold_quads(self.rest, faces, moving, fold_deg)
         # animate.eyelid_fold_deg 0: the guard as it was (equal masses)
         self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING,
                                        inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None

@@ -14,7 +14,7 @@ from faceforge.pbd.constraints import (
     init_area, init_bending, init_distance, init_volume)
 from faceforge.pbd.constraints.volume import localize
 from faceforge.pbd.model import (
-    AREA, ATTACHMENT, BENDING, DISTANCE, POSITION, VOLUME, Model)
+    AREA, ATTACHMENT, BENDING, DISTANCE, POSITION, VOLUME, Model, inverse_masses)
 
 
 class ModelBuilder:
@@ -39,12 +39,7 @@ class ModelBuilder:
             raise ValueError(f"positions must have shape (m, 3), got {p.shape}")
         if not np.all(np.isfinite(p)):
             raise ValueError("positions must be finite")
-        w = np.broadcast_to(np.asarray(inv_mass, dtype=np.float64), (len(p),)).copy() \
-            if np.ndim(inv_mass) == 0 else np.asarray(inv_mass, dtype=np.float64)
-        if w.shape != (len(p),):
-            raise ValueError(f"inv_mass must have shape ({len(p)},) or be a scalar, got {w.shape}")
-        if not np.all(np.isfinite(w)) or np.any(w < 0):
-            raise ValueError("inv_mass must be finite and >= 0")
+        w = inverse_masses(inv_mass, len(p))
         first = self._count
         self._positions.append(p.copy())
         self._inv_mass.append(w)

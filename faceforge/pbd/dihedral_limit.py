@@ -33,6 +33,7 @@ import numba
 import numpy as np
 
 from faceforge.constants import NUMBA_OPTIONS
+from faceforge.pbd.model import inverse_masses
 
 __all__ = ["limit_dihedrals", "rest_limits"]
 
@@ -114,12 +115,7 @@ def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int
             or not positions.flags.c_contiguous:
         raise ValueError("positions must be a C-contiguous (n, 3) float64 array")
     q = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
-    if inv_mass is None:
-        w = np.ones(len(positions))
-    else:
-        w = np.ascontiguousarray(inv_mass, dtype=np.float64).reshape(-1)
-        if len(w) != len(positions) or not np.all(w >= 0.0):
-            raise ValueError(f"inv_mass must be ({len(positions)},) and >= 0")
+    w = inverse_masses(inv_mass, len(positions))
     if len(q) == 0:
         return 0
     if q.min() < 0 or q.max() >= len(positions):

@@ -43,6 +43,23 @@ class Control:
     kinematic_positions: np.ndarray
 
 
+def inverse_masses(inv_mass, n: int) -> np.ndarray:
+    """``(n,)`` C-contiguous float64 inverse masses (0: kinematic / pinned) from ``inv_mass``:
+    None (all 1), a scalar (the same for all) or an ``(n,)`` array (not copied when it already is
+    one). ValueError unless every value is finite and >= 0."""
+    if inv_mass is None:
+        return np.ones(n)
+    if np.ndim(inv_mass) == 0:
+        w = np.full(n, float(inv_mass))
+    else:
+        w = np.ascontiguousarray(inv_mass, dtype=np.float64)
+        if w.shape != (n,):
+            raise ValueError(f"inv_mass must have shape ({n},) or be a scalar, got {w.shape}")
+    if not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise ValueError("inv_mass must be finite and >= 0")
+    return w
+
+
 def _ro(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     a.flags.writeable = False

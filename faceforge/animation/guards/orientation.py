@@ -46,6 +46,7 @@ import numba
 import numpy as np
 
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
+from faceforge.pbd.model import inverse_masses
 
 __all__ = ["OrientationGuard"]
 
@@ -259,10 +260,7 @@ class OrientationGuard:
         if not 0.0 <= min_area < 1.0:
             raise ValueError(f"min_area must be in [0, 1), got {min_area}")
         self.rest = np.array(rest, dtype=FLOAT)
-        self.inv_mass = (np.ones(len(self.rest), dtype=FLOAT) if inv_mass is None
-                         else np.ascontiguousarray(inv_mass, dtype=FLOAT).reshape(-1))
-        if len(self.inv_mass) != len(self.rest) or not np.all(self.inv_mass >= 0.0):
-            raise ValueError(f"inv_mass must be ({len(self.rest)},) and >= 0")
+        self.inv_mass = inverse_masses(inv_mass, len(self.rest))
         self.faces = np.asarray(faces, dtype=INT)
         r = self.rest[self.faces]
         n0 = np.cross(r[:, 1] - r[:, 0], r[:, 2] - r[:, 0])
