@@ -111,7 +111,7 @@ class BoundHead:
 
         self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
-                       finish=None if self.orientation is None else self.orientation.apply)
+                       finish=self._finish(int(config.get("animate.orientation_guard.rounds"))))
 
     def _glide_ratio(self, config) -> float:
         """``animate.jaw_glide``, or with ``animate.chin_path`` > 0 the fraction at which this
@@ -200,15 +200,26 @@ class BoundHead:
                               fold_limit=self._fold_limit(bind, config))
 
     def _fold_limit(self, bind: dict, config):
-        """(commissure quads (m, 4), limit radians) of ``skin.commissure_fold_deg``; None when 0
-        (:func:`faceforge.skin.lip_contact.commissure_quads`)."""
-        deg = float(config.get("skin.commissure_fold_deg") or 0.0)
-        if deg <= 0:
-            return None
+        """(quads (m, 4), limits (m,) radians) the skin may not bend past: ``skin.fold_deg`` on
+        the quads flat at rest, ``skin.commissure_fold_deg`` on the lips' corners
+        (:func:`faceforge.skin.fold_limit.fold_limits`); None when both are 0."""
+        from faceforge.skin.fold_limit import fold_limits
         from faceforge.skin.lip_contact import commissure_quads
 
-        quads = commissure_quads(self.rest, self.faces, bind.get("lip_sides"), self.landmarks)
-        return (quads, np.radians(deg)) if len(quads) else None
+        corner = float(config.get("skin.commissure_fold_deg") or 0.0)
+        quads = commissure_quads(self.rest, self.faces, bind.get("lip_sides"), self.landmarks) \
+            if corner > 0 else None
+        return fold_limits(self.rest, self.faces, float(config.get("skin.fold_deg") or 0.0), quads, corner)
+
+    def _finish(self, rounds: int):
+        """The rig's finish on each weighted frame: the orientation guard, with the skin's fold
+        limit when there is one (:class:`faceforge.animation.guards.alternate.FinishedFrame`)."""
+        from faceforge.animation.guards.alternate import FinishedFrame
+
+        folds = self.skin.fold_quads
+        if folds is None:
+            return None if self.orientation is None else self.orientation.apply
+        return FinishedFrame(self.orientation, folds, rounds)
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""

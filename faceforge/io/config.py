@@ -193,6 +193,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.lid_hold", Number(0.0, 1.0)),              # a stiffness
     ("skin.cheek_tether", Number(0.0, 1.0)),          # a stiffness: past 1 a projection overshoots
     ("skin.commissure_fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the lips' corner contact off
+    ("skin.fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the skin's fold limit off
     ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
     ("muscle.damping", Number(0.0, 0.99)),
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off

@@ -22,7 +22,7 @@ It is applied after a solver step, as a contact would be, by :func:`limit_dihedr
 (Gauss-Seidel over the quads, ``sweeps`` times: a vertex shared by several quads is moved by
 each in turn). No velocities are touched (the caller steps quasi-statically). The numba kernel
 has a plain-numpy twin in ``tests/pbd/test_dihedral_limit.py``. Knows nothing of faces: the
-caller chooses the quads (:func:`faceforge.skin.lip_contact.commissure_quads`).
+caller chooses the quads (:func:`faceforge.skin.fold_limit.fold_limits`).
 """
 
 from __future__ import annotations
@@ -39,9 +39,11 @@ __all__ = ["limit_dihedrals", "rest_limits"]
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _limit(p, quads, limit, sweeps, w):  # pragma: no cover - numba
+def _limit(p, quads, limit, sweeps, w, touched):  # pragma: no cover - numba
     """In place on ``p (n, 3)``: ``quads (m, 4)`` int64, ``limit (m,)`` radians in (0, pi),
-    ``sweeps`` >= 1, ``w (n,)`` inverse masses >= 0. Returns the number of projections made."""
+    ``sweeps`` >= 1, ``w (n,)`` inverse masses >= 0; ``touched (n,)`` bool, set where a particle
+    moved (or ``(0,)``: not recorded). Returns the number of projections made."""
+    mark = touched.shape[0] > 0
     moved = 0
     for _ in range(sweeps):
         for j in range(quads.shape[0]):
@@ -85,6 +87,9 @@ def _limit(p, quads, limit, sweeps, w):  # pragma: no cover - numba
             t2 = -h2 if (u3x * b2x + u3y * b2y + u3z * b2z) > 0.0 else h2
             c3, n3 = math.cos(t3), math.sin(t3)
             c2, n2 = math.cos(t2), math.sin(t2)
+            if mark:
+                touched[i2] = touched[i2] or w[i2] > 0.0
+                touched[i3] = touched[i3] or w[i3] > 0.0
             if w[i3] > 0.0:   # a pinned particle keeps its bits
                 p[i3, 0] = p[i0, 0] + s3 * ax + l3 * (c3 * u3x + n3 * b3x)
                 p[i3, 1] = p[i0, 1] + s3 * ay + l3 * (c3 * u3y + n3 * b3y)
@@ -98,15 +103,16 @@ def _limit(p, quads, limit, sweeps, w):  # pragma: no cover - numba
 
 
 def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2,
-                    inv_mass: np.ndarray | None = None) -> int:
+                    inv_mass: np.ndarray | None = None, touched: np.ndarray | None = None) -> int:
     """Keep the unsigned dihedral of every quad at most ``limit`` (see the module docstring).
 
     positions : (n, 3) float64, C-contiguous, changed in place; quads : (m, 4) int (particle
     ids; (p0, p1) the shared edge); limit : radians in (0, pi), one for all or (m,) per quad
     (:func:`rest_limits`: never below a quad's rest angle); sweeps : Gauss-Seidel passes;
     inv_mass : (n,) float >= 0, the particles' inverse masses (0: pinned; module docstring),
-    None: all 1. Returns the number of projections made (0: every quad was within the limit
-    or could not move).
+    None: all 1; touched : (n,) bool, optional, set True (never cleared) where a particle moved.
+    Returns the number of projections made (0: every quad was within the limit or could not
+    move).
     """
     lim = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(quads),)))
     if not np.all((lim > 0.0) & (lim < math.pi)):
@@ -120,13 +126,19 @@ def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int
         return 0
     if q.min() < 0 or q.max() >= len(positions):
         raise ValueError(f"quads index particles outside [0, {len(positions)})")
-    return int(_limit(positions, q, lim, int(sweeps), w))
+    if touched is None:
+        touched = np.zeros(0, dtype=np.bool_)
+    elif touched.dtype != np.bool_ or touched.shape != (len(positions),):
+        raise ValueError(f"touched must be a ({len(positions)},) bool array")
+    return int(_limit(positions, q, lim, int(sweeps), w, touched))
 
 
-def rest_limits(rest: np.ndarray, quads: np.ndarray, limit: float) -> np.ndarray:
-    """(m,) radians: ``limit`` for each quad, or its unsigned dihedral in ``rest (n, 3)`` where that
-    is larger (a quad bent past the limit at rest may stay as bent; rest stays a fixed point)."""
+def rest_limits(rest: np.ndarray, quads: np.ndarray, limit) -> np.ndarray:
+    """(m,) radians: ``limit`` (radians, one for all or (m,) per quad) for each quad, or its
+    unsigned dihedral in ``rest (n, 3)`` where that is larger (a quad bent past the limit at rest
+    may stay as bent; rest stays a fixed point)."""
     from faceforge.pbd.constraints.bending import dihedral_angle
 
     q = np.asarray(quads, dtype=np.int64).reshape(-1, 4)
-    return np.minimum(np.maximum(float(limit), np.abs(dihedral_angle(rest, q))), math.pi - 1e-9)
+    return np.minimum(np.maximum(np.asarray(limit, dtype=np.float64), np.abs(dihedral_angle(rest, q))),
+                      math.pi - 1e-9)

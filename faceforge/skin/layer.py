@@ -329,10 +329,11 @@ class SkinSimulation:
         twins alike (:func:`faceforge.pbd.colouring.mirror_colouring`).
     tether : (k,) float, optional
         Per anchor, a tether's stiffness (0: none): see :func:`add_skin`.
-    fold_limit : ((m, 4) int, float), optional
-        Skin quads (skin vertex ids) and a dihedral limit in radians they may not bend past
-        (those bent more at rest: their rest angle), enforced after each solver step (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
-        ``skin.commissure_fold_deg``, :func:`faceforge.skin.lip_contact.commissure_quads`).
+    fold_limit : ((m, 4) int, float or (m,) float), optional
+        Skin quads (skin vertex ids) and the dihedral limit in radians (one for all or one per
+        quad) they may not bend past (those bent more at rest: their rest angle), enforced after
+        each solver step (:meth:`limit_folds`, :func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
+        ``skin.fold_deg``, ``skin.commissure_fold_deg``: :func:`faceforge.skin.fold_limit.fold_limits`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
@@ -366,7 +367,7 @@ class SkinSimulation:
             from faceforge.pbd.dihedral_limit import rest_limits
 
             quads = np.asarray(fold_limit[0], INT).reshape(-1, 4)   # never below a quad's rest angle
-            self._fold = (self.layer.first + quads, rest_limits(self.rest, quads, float(fold_limit[1])))
+            self._fold = (self.layer.first + quads, rest_limits(self.rest, quads, fold_limit[1]))
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self.control = self.model.control()
@@ -442,10 +443,28 @@ class SkinSimulation:
             if not self._direct:
                 targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
-        if self._fold is not None:   # skin.commissure_fold_deg: the lips' corners may not turn over
-            from faceforge.pbd.dihedral_limit import limit_dihedrals
+        self.limit_folds()
 
-            limit_dihedrals(self.state.positions, *self._fold)
+    @property
+    def fold_quads(self):
+        """``(quads (m, 4) skin vertex ids, limits (m,) radians)`` of the fold limit (rest angles
+        taken in), or None without one."""
+        return None if self._fold is None else (self._fold[0] - self.layer.first, self._fold[1])
+
+    def limit_folds(self, touched: np.ndarray | None = None) -> int:
+        """Keep the fold limit's quads within their limits, in place on the skin's state (after each
+        step, and again by the guards after they move the skin); ``touched`` (n,) bool, optional:
+        set where a skin vertex moved. Returns the projections made (0: none needed, or no limit)."""
+        if self._fold is None:
+            return 0
+        from faceforge.pbd.dihedral_limit import limit_dihedrals
+
+        if touched is None:
+            return limit_dihedrals(self.state.positions, *self._fold)
+        mark = np.zeros(len(self.state.positions), dtype=bool)
+        done = limit_dihedrals(self.state.positions, *self._fold, touched=mark)
+        touched |= self.layer.skin_positions(mark)
+        return done
 
     def simulated(self) -> np.ndarray:
         """Current simulated skin positions ``(n, 3)`` (a copy, no influence weighting)."""

@@ -149,3 +149,27 @@ def test_a_quad_bent_past_the_limit_at_rest_keeps_its_rest_angle():
     y, _ = folded_quad(np.radians(150))
     limit_dihedrals(y, q, lim)
     assert np.degrees(abs(dihedral_angle(y, q)[0])) == pytest.approx(120)
+
+
+def test_touched_marks_the_particles_that_moved():
+    """``touched``: set where a particle moved, never cleared, and the positions are those of a
+    call without it; a quad within its limit marks nothing."""
+    rng = np.random.default_rng(7)
+    p, quads = crumpled_strip(rng)
+    w = np.ones(len(p))
+    w[4] = 0.0
+    x, y = p.copy(), p.copy()
+    touched = np.zeros(len(p), dtype=bool)
+    touched[0] = True
+    limit_dihedrals(x, quads, np.radians(80), sweeps=3, inv_mass=w, touched=touched)
+    limit_dihedrals(y, quads, np.radians(80), sweeps=3, inv_mass=w)
+    np.testing.assert_array_equal(x, y)
+    moved = np.any(x != p, axis=1)
+    assert moved.any()
+    np.testing.assert_array_equal(touched[1:], moved[1:])
+    assert touched[0] and not touched[4]
+    q, one = folded_quad(1.0)
+    none = np.zeros(4, dtype=bool)
+    assert limit_dihedrals(q, one, np.radians(75), touched=none) == 0 and not none.any()
+    with pytest.raises(ValueError):
+        limit_dihedrals(q, one, 1.0, touched=np.zeros(3, dtype=bool))

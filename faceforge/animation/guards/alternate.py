@@ -3,9 +3,10 @@
 :class:`GuardedSkinStep` is the rig's ``skin`` step (:class:`faceforge.animation.playback.Rig`):
 it steps the skin layer on the muscles and bones, then
 
-1. alternates the skull guard (:class:`faceforge.animation.guards.skull.SkullGuard`) and the
-   orientation guard (:class:`faceforge.animation.guards.orientation.OrientationGuard`) until
-   the orientation pass has nothing left to do (at most ``rounds`` rounds);
+1. alternates the skull guard (:class:`faceforge.animation.guards.skull.SkullGuard`), the
+   orientation guard (:class:`faceforge.animation.guards.orientation.OrientationGuard`) and the
+   skin's fold limit (``skin.fold_deg``, :mod:`faceforge.skin.fold_limit`) until neither of
+   the last two has anything left to do (at most ``rounds`` rounds);
 2. puts skin that slid into a bone back out (:class:`faceforge.animation.guards.bone_collision.
    BoneCollision`), again alternating with the orientation guard.
 """
@@ -48,17 +49,25 @@ class GuardedSkinStep:
 
     def _skull_and_orientation(self, x: np.ndarray) -> None:
         """The skull guard pushes vertices one by one along the bone's normals, which can turn
-        a sliver over; the orientation guard moves them sideways, which can sink one below its
-        floor: alternate until the orientation pass has nothing left to do. After the first
-        round each looks again only where the other moved something (and the skull guard at
-        what it pushed itself, which round-off may push again): a full pass's result."""
+        a sliver over or fold an edge; the orientation guard moves them sideways, which can sink
+        one below its floor, and so can the skin's fold limit (:meth:`SkinSimulation.limit_folds
+        <faceforge.skin.layer.SkinSimulation.limit_folds>`): alternate until neither the
+        orientation pass nor the fold limit has anything left to do. After the first round each
+        looks again only where the others moved something (and the skull guard at what it pushed
+        itself, which round-off may push again): a full pass's result."""
         guard, orientation, pushed = self.guard, self.orientation, self.pushed
         bones = self.system.world_view()[:self.bone_rows]
-        k = 0
+        k, bent = 0, np.zeros(len(x), dtype=bool)
+        folded = turned = np.zeros(0, dtype=np.int64)
         for r in range(max(self.rounds, 1)):
-            only = None if r == 0 else np.concatenate([pushed[:k], orientation.touched])
+            only = None if r == 0 else np.concatenate([pushed[:k], turned, folded])
             k = guard.apply_stacked(x, bones, pushed, only)
-            if orientation is None or not orientation.apply(x, None if r == 0 else pushed[:k]):
+            moved = None if r == 0 else np.concatenate([pushed[:k], folded])
+            turned = orientation.touched if orientation is not None and orientation.apply(x, moved) \
+                else np.zeros(0, dtype=np.int64)
+            bent[:] = False   # the skin's fold limit: a push or a turn may have folded an edge
+            folded = np.flatnonzero(bent) if self.skin.limit_folds(bent) else np.zeros(0, dtype=np.int64)
+            if not len(turned) and not len(folded):
                 break
 
     def _collision(self, x: np.ndarray) -> None:
@@ -77,3 +86,33 @@ class GuardedSkinStep:
             again = collision.moved
             if orientation is not None and orientation.apply(x, collision.moved):
                 again = np.concatenate([again, orientation.touched])
+
+
+class FinishedFrame:
+    """The rig's ``finish`` on each weighted frame (:class:`faceforge.animation.playback.Rig`)
+    with a skin fold limit: the orientation guard, then the fold limit (the influence map's blend
+    of rest and simulation, ``rest + w (skin - rest)``, can bend an edge the simulation kept
+    within it where ``w`` falls off), in turn until the limit has nothing left to do (at most
+    ``rounds`` rounds).
+
+    orientation : OrientationGuard or None; folds : (quads (m, 4) skin vertex ids, limits (m,)
+    radians), :attr:`faceforge.skin.layer.SkinSimulation.fold_quads`; rounds : int >= 1.
+    """
+
+    def __init__(self, orientation, folds, rounds: int):
+        self.orientation, (self.quads, self.limits), self.rounds = orientation, folds, max(int(rounds), 1)
+
+    def __call__(self, frame: np.ndarray) -> None:
+        """Finish ``frame`` ((n, 3) float64, C-contiguous) in place."""
+        from faceforge.pbd.dihedral_limit import limit_dihedrals
+
+        moved, bent = None, np.zeros(len(frame), dtype=bool)
+        for _ in range(self.rounds):
+            if self.orientation is not None:
+                self.orientation.apply(frame, moved)
+            bent[:] = False
+            if not limit_dihedrals(frame, self.quads, self.limits, touched=bent):
+                return
+            moved = np.flatnonzero(bent)
+        if self.orientation is not None:   # the limit's last turn may not leave a triangle over
+            self.orientation.apply(frame, moved)
