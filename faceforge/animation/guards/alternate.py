@@ -88,18 +88,24 @@ class GuardedSkinStep:
                 again = np.concatenate([again, orientation.touched])
 
 
+#: at most this many orientation / fold-limit rounds on a finished frame: at ICT's upper lid in the
+#: viseme a the two undo part of each other for a while (4 rounds left 7 edges folded, 16 left 2,
+#: 32 none and nothing turned over); a frame the limit has nothing to do on costs one round
+FINISH_ROUNDS = 32
+
+
 class FinishedFrame:
     """The rig's ``finish`` on each weighted frame (:class:`faceforge.animation.playback.Rig`)
     with a skin fold limit: the orientation guard, then the fold limit (the influence map's blend
     of rest and simulation, ``rest + w (skin - rest)``, can bend an edge the simulation kept
     within it where ``w`` falls off), in turn until the limit has nothing left to do (at most
-    ``rounds`` rounds).
+    ``rounds`` rounds, :data:`FINISH_ROUNDS`).
 
     orientation : OrientationGuard or None; folds : (quads (m, 4) skin vertex ids, limits (m,)
     radians), :attr:`faceforge.skin.layer.SkinSimulation.fold_quads`; rounds : int >= 1.
     """
 
-    def __init__(self, orientation, folds, rounds: int):
+    def __init__(self, orientation, folds, rounds: int = FINISH_ROUNDS):
         self.orientation, (self.quads, self.limits), self.rounds = orientation, folds, max(int(rounds), 1)
 
     def __call__(self, frame: np.ndarray) -> None:
