@@ -39,13 +39,15 @@ __all__ = ["limit_dihedrals", "rest_limits"]
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _limit(p, quads, limit, sweeps, w, touched):  # pragma: no cover - numba
+def _limit(p, quads, limit, below, sweeps, w, touched, tol):  # pragma: no cover - numba
     """In place on ``p (n, 3)``: ``quads (m, 4)`` int64, ``limit (m,)`` radians in (0, pi),
-    ``sweeps`` >= 1, ``w (n,)`` inverse masses >= 0; ``touched (n,)`` bool, set where a particle
-    moved (or ``(0,)``: not recorded). Returns the number of projections made."""
+    ``below (m,)`` = -cos(limit + tol), ``sweeps`` >= 1, ``w (n,)`` inverse masses >= 0;
+    ``touched (n,)`` bool, set where a particle moved (or ``(0,)``: not recorded); ``tol``
+    radians >= 0: an excess up to it is left. Returns the number of projections made."""
     mark = touched.shape[0] > 0
     moved = 0
     for _ in range(sweeps):
+        before = moved
         for j in range(quads.shape[0]):
             i0, i1, i2, i3 = quads[j, 0], quads[j, 1], quads[j, 2], quads[j, 3]
             wsum = w[i2] + w[i3]
@@ -54,9 +56,21 @@ def _limit(p, quads, limit, sweeps, w, touched):  # pragma: no cover - numba
             ex = p[i1, 0] - p[i0, 0]
             ey = p[i1, 1] - p[i0, 1]
             ez = p[i1, 2] - p[i0, 2]
-            el = math.sqrt(ex * ex + ey * ey + ez * ez)
-            if el <= 0.0:
+            ee = ex * ex + ey * ey + ez * ez
+            if ee <= 0.0:
                 continue
+            # most quads are well within their limit: the wings' cosine against -cos(limit + tol)
+            # without a square root per wing or an arc cosine
+            rx, ry, rz = p[i2, 0] - p[i0, 0], p[i2, 1] - p[i0, 1], p[i2, 2] - p[i0, 2]
+            s2 = (rx * ex + ry * ey + rz * ez) / ee
+            w2x, w2y, w2z = rx - s2 * ex, ry - s2 * ey, rz - s2 * ez
+            rx, ry, rz = p[i3, 0] - p[i0, 0], p[i3, 1] - p[i0, 1], p[i3, 2] - p[i0, 2]
+            s3 = (rx * ex + ry * ey + rz * ez) / ee
+            w3x, w3y, w3z = rx - s3 * ex, ry - s3 * ey, rz - s3 * ez
+            if w2x * w3x + w2y * w3y + w2z * w3z <= below[j] * math.sqrt(
+                    (w2x * w2x + w2y * w2y + w2z * w2z) * (w3x * w3x + w3y * w3y + w3z * w3z)):
+                continue
+            el = math.sqrt(ee)
             ax, ay, az = ex / el, ey / el, ez / el
             # wings: perpendicular parts of p2 - p0 and p3 - p0
             rx, ry, rz = p[i2, 0] - p[i0, 0], p[i2, 1] - p[i0, 1], p[i2, 2] - p[i0, 2]
@@ -75,7 +89,7 @@ def _limit(p, quads, limit, sweeps, w, touched):  # pragma: no cover - numba
             c = min(1.0, max(-1.0, c))
             phi = math.acos(c)
             excess = (math.pi - limit[j]) - phi
-            if excess <= 0.0:
+            if excess <= tol:
                 continue
             # each wing's share of the excess (equal masses: half each)
             h3 = excess * (w[i3] / wsum)
@@ -99,20 +113,26 @@ def _limit(p, quads, limit, sweeps, w, touched):  # pragma: no cover - numba
                 p[i2, 1] = p[i0, 1] + s2 * ay + l2 * (c2 * u2y + n2 * b2y)
                 p[i2, 2] = p[i0, 2] + s2 * az + l2 * (c2 * u2z + n2 * b2z)
             moved += 1
+        if moved == before:   # a sweep with nothing to do: the next would find nothing either
+            break
     return moved
 
 
 def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2,
-                    inv_mass: np.ndarray | None = None, touched: np.ndarray | None = None) -> int:
+                    inv_mass: np.ndarray | None = None, touched: np.ndarray | None = None,
+                    tol: float = 0.0) -> int:
     """Keep the unsigned dihedral of every quad at most ``limit`` (see the module docstring).
 
     positions : (n, 3) float64, C-contiguous, changed in place; quads : (m, 4) int (particle
     ids; (p0, p1) the shared edge); limit : radians in (0, pi), one for all or (m,) per quad
     (:func:`rest_limits`: never below a quad's rest angle); sweeps : Gauss-Seidel passes;
     inv_mass : (n,) float >= 0, the particles' inverse masses (0: pinned; module docstring),
-    None: all 1; touched : (n,) bool, optional, set True (never cleared) where a particle moved.
-    Returns the number of projections made (0: every quad was within the limit or could not
-    move).
+    None: all 1; touched : (n,) bool, optional, set True (never cleared) where a particle moved;
+    tol : radians >= 0, a quad past its limit by at most this is left as it is (neighbouring quads
+    projected in turn keep nudging each other a hair past; a caller that repeats the pass until
+    it has nothing to do needs a tolerance to stop). A sweep that projects nothing ends the
+    passes. Returns the number of projections made (0: every quad was within the limit (+ tol)
+    or could not move).
     """
     lim = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(quads),)))
     if not np.all((lim > 0.0) & (lim < math.pi)):
@@ -130,7 +150,10 @@ def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int
         touched = np.zeros(0, dtype=np.bool_)
     elif touched.dtype != np.bool_ or touched.shape != (len(positions),):
         raise ValueError(f"touched must be a ({len(positions)},) bool array")
-    return int(_limit(positions, q, lim, int(sweeps), w, touched))
+    if not tol >= 0.0:
+        raise ValueError(f"tol must be >= 0 radians, got {tol}")
+    below = -np.cos(np.minimum(lim + tol, math.pi))
+    return int(_limit(positions, q, lim, below, int(sweeps), w, touched, float(tol)))
 
 
 def rest_limits(rest: np.ndarray, quads: np.ndarray, limit) -> np.ndarray:

@@ -23,11 +23,18 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FLAT_DEG", "fold_limits"]
+__all__ = ["FLAT_DEG", "FOLD_TOL", "fold_limits"]
 
 #: quads bent less than this at rest (degrees) are the skin's flat sheet, the ones the fold limit
 #: holds (the lids' limit uses the same, :data:`faceforge.animation.eyelids.FOLD_FLAT_DEG`)
 FLAT_DEG = 60.0
+
+
+#: radians a quad may stay past its limit (the skin layer's and the guards' passes): quads
+#: projected one after another nudge their neighbours a hair past again, and a pass repeated
+#: until it has nothing to do needs a tolerance to end (0.06 deg, nothing next to the 10 deg
+#: between the limit and what the fold check counts)
+FOLD_TOL = 1e-3
 
 
 def fold_limits(rest, faces, fold_deg: float, commissure=None, commissure_deg: float = 0.0,

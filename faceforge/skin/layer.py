@@ -459,10 +459,12 @@ class SkinSimulation:
             return 0
         from faceforge.pbd.dihedral_limit import limit_dihedrals
 
+        from faceforge.skin.fold_limit import FOLD_TOL
+
         if touched is None:
-            return limit_dihedrals(self.state.positions, *self._fold)
+            return limit_dihedrals(self.state.positions, *self._fold, tol=FOLD_TOL)
         mark = np.zeros(len(self.state.positions), dtype=bool)
-        done = limit_dihedrals(self.state.positions, *self._fold, touched=mark)
+        done = limit_dihedrals(self.state.positions, *self._fold, touched=mark, tol=FOLD_TOL)
         touched |= self.layer.skin_positions(mark)
         return done
 

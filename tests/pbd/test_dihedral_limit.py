@@ -7,10 +7,11 @@ from faceforge.pbd.constraints.bending import dihedral_angle
 from faceforge.pbd.dihedral_limit import limit_dihedrals
 
 
-def twin_limit(p, quads, limit, sweeps=2, w=None):
+def twin_limit(p, quads, limit, sweeps=2, w=None, tol=0.0):
     """Plain numpy: turn both wings of a quad about its edge, apart, by half the excess
     (Rodrigues' rotation), quad after quad; with inverse masses ``w (n,)``, each wing by the
-    share of the excess its opposite vertex's ``w`` has of the two (none when both are 0)."""
+    share of the excess its opposite vertex's ``w`` has of the two (none when both are 0); an
+    excess up to ``tol`` is left."""
     p = np.array(p, dtype=float)
     w = np.ones(len(p)) if w is None else np.asarray(w, dtype=float)
     for _ in range(sweeps):
@@ -24,7 +25,7 @@ def twin_limit(p, quads, limit, sweeps=2, w=None):
             u2, u3 = w2 / np.linalg.norm(w2), w3 / np.linalg.norm(w3)
             phi = np.arccos(np.clip(np.dot(u2, u3), -1, 1))
             excess = (np.pi - limit) - phi
-            if excess <= 0:
+            if excess <= tol:
                 continue
             # the sign that turns each wing away from the other
             s3 = -1.0 if np.dot(u2, np.cross(a, u3)) >= 0 else 1.0
@@ -173,3 +174,20 @@ def test_touched_marks_the_particles_that_moved():
     assert limit_dihedrals(q, one, np.radians(75), touched=none) == 0 and not none.any()
     with pytest.raises(ValueError):
         limit_dihedrals(q, one, 1.0, touched=np.zeros(3, dtype=bool))
+
+
+def test_a_tolerance_leaves_small_excesses_and_matches_the_twin():
+    """tol: a quad past its limit by less than tol stays; the rest come back to the limit, as the
+    twin does."""
+    p, q = folded_quad(np.radians(75) + 0.002)    # 0.002 rad past 75 deg
+    x = p.copy()
+    assert limit_dihedrals(x, q, np.radians(75), tol=0.005) == 0
+    np.testing.assert_array_equal(x, p)
+    assert limit_dihedrals(x, q, np.radians(75), tol=0.001) == 1
+    rng = np.random.default_rng(11)
+    p, quads = crumpled_strip(rng)
+    x = p.copy()
+    limit_dihedrals(x, quads, np.radians(80), sweeps=3, tol=0.05)
+    np.testing.assert_allclose(x, twin_limit(p, quads, np.radians(80), 3, tol=0.05), atol=1e-10)
+    with pytest.raises(ValueError):
+        limit_dihedrals(p, quads, 1.0, tol=-1.0)

@@ -111,13 +111,14 @@ class FinishedFrame:
     def __call__(self, frame: np.ndarray) -> None:
         """Finish ``frame`` ((n, 3) float64, C-contiguous) in place."""
         from faceforge.pbd.dihedral_limit import limit_dihedrals
+        from faceforge.skin.fold_limit import FOLD_TOL
 
         moved, bent = None, np.zeros(len(frame), dtype=bool)
         for _ in range(self.rounds):
             if self.orientation is not None:
                 self.orientation.apply(frame, moved)
             bent[:] = False
-            if not limit_dihedrals(frame, self.quads, self.limits, touched=bent):
+            if not limit_dihedrals(frame, self.quads, self.limits, touched=bent, tol=FOLD_TOL):
                 return
             moved = np.flatnonzero(bent)
         if self.orientation is not None:   # the limit's last turn may not leave a triangle over
