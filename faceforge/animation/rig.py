@@ -111,7 +111,7 @@ class BoundHead:
 
         self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
-                       finish=self._finish())
+                       finish=None if self.orientation is None else self.orientation.apply)
 
     def _glide_ratio(self, config) -> float:
         """``animate.jaw_glide``, or with ``animate.chin_path`` > 0 the fraction at which this
@@ -210,16 +210,6 @@ class BoundHead:
         quads = commissure_quads(self.rest, self.faces, bind.get("lip_sides"), self.landmarks) \
             if corner > 0 else None
         return fold_limits(self.rest, self.faces, float(config.get("skin.fold_deg") or 0.0), quads, corner)
-
-    def _finish(self):
-        """The rig's finish on each weighted frame: the orientation guard, with the skin's fold
-        limit when there is one (:class:`faceforge.animation.guards.alternate.FinishedFrame`)."""
-        from faceforge.animation.guards.alternate import FinishedFrame
-
-        folds = self.skin.fold_quads
-        if folds is None:
-            return None if self.orientation is None else self.orientation.apply
-        return FinishedFrame(self.orientation, folds)
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""

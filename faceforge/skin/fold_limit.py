@@ -4,15 +4,17 @@ Skin is a sheet a few mm thick: it wrinkles and creases, but it does not fold fl
 The §8 layer's bending constraint only pulls each edge back toward its rest dihedral, with the
 rest of the solver (the anchors, the stretch) and the guards after it (the skull guard pushing
 vertices out along the bone's normals, the bone collision) free to bend an edge past 90 deg: the
-jaw's opening folded the lower lids and the jaw angle of the ICT sample, the pucker its upper lip,
-each guard's push a quad or two where it moved one vertex (docs/notes/foldlimit13.md).
+jaw's opening folded the upper lids of the ICT sample, the pucker its upper lip, each guard's
+push a quad or two where it moved one vertex (docs/notes/foldlimit13.md). The influence map's
+blend of rest and simulation (the weighted frame) is not limited: turned there, with no bone to
+push it back, skin ended inside the skull.
 
 :func:`fold_limits` picks the skin's bending quads that are flat at rest (bent less than
 :data:`FLAT_DEG`) and gives each the limit ``skin.fold_deg``, and the quads across the lip line
 at the lip corners (:func:`faceforge.skin.lip_contact.commissure_quads`) the tighter
-``skin.commissure_fold_deg``. The skin layer keeps them within it after each solver step, the
-guards' alternation after each of its passes, and the rig's finish on each weighted frame
-(:class:`faceforge.skin.layer.SkinSimulation`, :mod:`faceforge.animation.guards.alternate`;
+``skin.commissure_fold_deg``. The skin layer keeps them within it after each solver step and
+the guards' alternation after each of its passes (:class:`faceforge.skin.layer.SkinSimulation`,
+:mod:`faceforge.animation.guards.alternate`;
 the projection itself is :func:`faceforge.pbd.dihedral_limit.limit_dihedrals`, which turns the
 two wings about their shared edge and keeps every edge length). Quads already bent at rest
 (nostril rims, the lid creases, the lip line) are left to the bending constraint: they crease
@@ -23,18 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FLAT_DEG", "FOLD_TOL", "fold_limits"]
+__all__ = ["FLAT_DEG", "fold_limits"]
 
 #: quads bent less than this at rest (degrees) are the skin's flat sheet, the ones the fold limit
 #: holds (the lids' limit uses the same, :data:`faceforge.animation.eyelids.FOLD_FLAT_DEG`)
 FLAT_DEG = 60.0
-
-
-#: radians a quad may stay past its limit (the skin layer's and the guards' passes): quads
-#: projected one after another nudge their neighbours a hair past again, and a pass repeated
-#: until it has nothing to do needs a tolerance to end (0.06 deg, nothing next to the 10 deg
-#: between the limit and what the fold check counts)
-FOLD_TOL = 1e-3
 
 
 def fold_limits(rest, faces, fold_deg: float, commissure=None, commissure_deg: float = 0.0,

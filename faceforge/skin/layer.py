@@ -291,6 +291,13 @@ def _particle_mirror(layer: SkinLayer, partner, binding) -> np.ndarray | None:
     return out
 
 
+#: radians a quad may stay past its fold limit (:meth:`SkinSimulation.limit_folds`): quads projected
+#: one after another nudge their neighbours a hair past again, and the guards' alternation, which
+#: repeats the pass until it has nothing to do, needs a tolerance to end (0.06 deg, nothing next to
+#: the 10 deg between ``skin.fold_deg`` and what the fold check counts)
+FOLD_TOL = 1e-3
+
+
 class SkinSimulation:
     """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
 
@@ -445,12 +452,6 @@ class SkinSimulation:
         self.solver.step(self.state, self.state, self.control, dt)
         self.limit_folds()
 
-    @property
-    def fold_quads(self):
-        """``(quads (m, 4) skin vertex ids, limits (m,) radians)`` of the fold limit (rest angles
-        taken in), or None without one."""
-        return None if self._fold is None else (self._fold[0] - self.layer.first, self._fold[1])
-
     def limit_folds(self, touched: np.ndarray | None = None) -> int:
         """Keep the fold limit's quads within their limits, in place on the skin's state (after each
         step, and again by the guards after they move the skin); ``touched`` (n,) bool, optional:
@@ -458,8 +459,6 @@ class SkinSimulation:
         if self._fold is None:
             return 0
         from faceforge.pbd.dihedral_limit import limit_dihedrals
-
-        from faceforge.skin.fold_limit import FOLD_TOL
 
         if touched is None:
             return limit_dihedrals(self.state.positions, *self._fold, tol=FOLD_TOL)

@@ -1,10 +1,9 @@
 """The skin's fold limit (``skin.fold_deg``): the quads flat at rest are picked with their limits
-(skin.fold_limit), and the guards' passes and the rig's finish keep them within it
-(animation.guards.alternate)."""
+(skin.fold_limit), and the guards' alternation keeps them within it (animation.guards.alternate)."""
 
 import numpy as np
 
-from faceforge.animation.guards.alternate import FinishedFrame, GuardedSkinStep
+from faceforge.animation.guards.alternate import GuardedSkinStep
 from faceforge.animation.guards.orientation import OrientationGuard
 from faceforge.pbd import SolverSettings
 from faceforge.pbd.constraints.bending import dihedral_angle
@@ -98,26 +97,3 @@ def test_the_guards_alternation_undoes_the_fold_a_push_makes():
         assert np.degrees(np.abs(dihedral_angle(held, quads))).max() < 80.5   # Gauss-Seidel: within a hair
         # the pushed vertex keeps its push: the limit turns the quads' wings about their edges
         assert np.linalg.norm(held[12] - v[12]) > 0.3
-
-
-def test_the_finish_keeps_a_weighted_frame_within_the_limit():
-    """A frame the influence map blended into a fold (vertex 12 dragged over its neighbour):
-    the finish brings every flat quad back within the limit, turns no triangle over, and leaves
-    a frame within it bit for bit."""
-    v, f, sim = sheet(80.0)
-    quads = skin_topology(f).bending_quads
-    frame = v.copy()
-    frame[12] += [-0.45, -0.45, 0.05]
-    assert np.degrees(np.abs(dihedral_angle(frame, quads))).max() > 90
-    finish = FinishedFrame(OrientationGuard(v, f), sim.fold_quads, rounds=4)
-    finish(frame)
-    assert np.degrees(np.abs(dihedral_angle(frame, quads))).max() < 80.5
-    t0, t1 = v[f], frame[f]
-    n0 = np.cross(t0[:, 1] - t0[:, 0], t0[:, 2] - t0[:, 0])
-    n1 = np.cross(t1[:, 1] - t1[:, 0], t1[:, 2] - t1[:, 0])
-    assert (np.einsum("ij,ij->i", n0, n1) > 0).all()
-    calm = v.copy()
-    calm[12] += [0.0, 0.0, 0.02]
-    before = calm.copy()
-    finish(calm)
-    np.testing.assert_array_equal(calm, before)
