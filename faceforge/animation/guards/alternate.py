@@ -6,7 +6,8 @@ it steps the skin layer on the muscles and bones, then
 1. alternates the skull guard (:class:`faceforge.animation.guards.skull.SkullGuard`), the
    orientation guard (:class:`faceforge.animation.guards.orientation.OrientationGuard`) and the
    skin's fold limit (``skin.fold_deg``, :mod:`faceforge.skin.fold_limit`) until neither of
-   the last two has anything left to do (at most ``rounds`` rounds);
+   the last two has anything left to do (at most ``rounds`` rounds, then on while the fold limit
+   has work, up to :data:`FOLD_ROUNDS` times as many);
 2. puts skin that slid into a bone back out (:class:`faceforge.animation.guards.bone_collision.
    BoneCollision`), again alternating with the orientation guard.
 """
@@ -14,6 +15,13 @@ it steps the skin layer on the muscles and bones, then
 from __future__ import annotations
 
 import numpy as np
+
+
+#: the skin's fold limit may keep the guards' alternation going up to this many times its rounds
+#: (``animate.orientation_guard.rounds``): at ICT's upper lid in the viseme a the limit and the
+#: orientation guard undo part of each other for a while (4 rounds left 6 edges folded, 8 left 2,
+#: 16 none); a frame the limit has nothing to do on stops where it stopped without it
+FOLD_ROUNDS = 4
 
 
 class GuardedSkinStep:
@@ -59,7 +67,8 @@ class GuardedSkinStep:
         bones = self.system.world_view()[:self.bone_rows]
         k, bent = 0, np.zeros(len(x), dtype=bool)
         folded = turned = np.zeros(0, dtype=np.int64)
-        for r in range(max(self.rounds, 1)):
+        rounds = max(self.rounds, 1)
+        for r in range(FOLD_ROUNDS * rounds):
             only = None if r == 0 else np.concatenate([pushed[:k], turned, folded])
             k = guard.apply_stacked(x, bones, pushed, only)
             moved = None if r == 0 else np.concatenate([pushed[:k], folded])
@@ -67,8 +76,8 @@ class GuardedSkinStep:
                 else np.zeros(0, dtype=np.int64)
             bent[:] = False   # the skin's fold limit: a push or a turn may have folded an edge
             folded = np.flatnonzero(bent) if self.skin.limit_folds(bent) else np.zeros(0, dtype=np.int64)
-            if not len(turned) and not len(folded):
-                break
+            if not len(folded) and (not len(turned) or r + 1 >= rounds):
+                break   # past its own rounds the alternation goes on only while the fold limit has work
 
     def _collision(self, x: np.ndarray) -> None:
         """Skin that slid into a bone beyond the triangle the skull guard holds it above (the
