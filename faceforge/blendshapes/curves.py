@@ -36,6 +36,10 @@ _BY_LOWER = {n.lower(): n for n in ARKIT_NAMES}
 TIMECODE_RATE = 60.0
 #: the timecode rates a take's frame field is matched against (:func:`timecode_rate`)
 TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 120)
+#: block Gauss-Seidel passes of :func:`solve_weights`' smoothness term
+SWEEPS = 20
+#: the sweeps stop early when no weight moves more than this in a pass
+SWEEP_TOL = 1e-5
 _TOLERANCE = 1e-6   # weights written with 6 decimals may round a hair past 1
 
 
@@ -209,14 +213,19 @@ def _json_weights(path, data, default_fps):
     return names, np.clip(w, 0.0, 1.0), fps
 
 
-def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray, ridge: float = 0.0) -> np.ndarray:
+def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray, ridge: float = 0.0,
+                  smooth: float = 0.0, sweeps: int = SWEEPS) -> np.ndarray:
     """Per frame the weights ``w`` in [0, 1] minimising ``|neutral + sum_k w_k (shape_k - neutral)
-    - frame|^2 + ridge * s^2 |w|^2`` (bounded least squares, scipy ``lsq_linear``; ``s`` the mean
-    norm of the shapes' displacement fields, so ``ridge`` is unitless).
+    - frame|^2 + ridge * s^2 |w|^2``, plus over the take ``smooth * s^2 sum_f |w_f - w_(f-1)|^2``
+    (bounded least squares, scipy ``lsq_linear``; ``s`` the mean norm of the shapes' displacement
+    fields, so ``ridge`` and ``smooth`` are unitless).
 
-    frames : (F, n, 3); neutral : (n, 3); shapes : (k, n, 3); ridge >= 0 (``curves.ridge``:
-    with nearly collinear shapes, e.g. mouthRollLower / mouthShrugLower, it keeps a small change
-    of the motion from trading one's weight for the other's) -> (F, k) float.
+    frames : (F, n, 3) in take order; neutral : (n, 3); shapes : (k, n, 3); ridge >= 0
+    (``curves.ridge``), smooth >= 0 (``curves.smooth``): with nearly collinear shapes, e.g.
+    mouthRollLower / mouthShrugLower, either keeps a small change of the motion from trading one's
+    weight for the other's; ``smooth`` ties each frame to its neighbours, solved by ``sweeps``
+    block Gauss-Seidel passes over the frames (each a bounded solve per frame, warm from the
+    frame-by-frame solution) -> (F, k) float.
     """
     from scipy.optimize import lsq_linear
 
@@ -228,14 +237,56 @@ def solve_weights(frames: np.ndarray, neutral: np.ndarray, shapes: np.ndarray, r
         return out
     A = D[:, live]
     k = A.shape[1]
+    scale = np.linalg.norm(A, axis=0).mean()
     if ridge > 0:
-        A = np.vstack([A, np.sqrt(ridge) * np.linalg.norm(A, axis=0).mean() * np.eye(k)])
+        A = np.vstack([A, np.sqrt(ridge) * scale * np.eye(k)])
     # the normal equations' QR once, then per frame a small bounded solve: (3n [+ k], k) -> (k, k)
     q, r = np.linalg.qr(A)
-    qd = q[: D.shape[0]]                         # the ridge rows' targets are 0
-    for i, y in enumerate(Y):
-        out[i, live] = lsq_linear(r, qd.T @ y, bounds=(0.0, 1.0), method="bvls").x
+    B = Y @ q[: D.shape[0]]                      # (F, k); the ridge rows' targets are 0
+    w = np.array([lsq_linear(r, b, bounds=(0.0, 1.0), method="bvls").x for b in B]).reshape(len(Y), k)
+    if smooth > 0 and len(Y) > 1:
+        w = _smooth_sweeps(r, B, w, np.sqrt(smooth) * scale, sweeps)
+    out[:, live] = w
     return np.clip(out, 0.0, 1.0)
+
+
+def _smooth_sweeps(r: np.ndarray, B: np.ndarray, w: np.ndarray, s: float, sweeps: int) -> np.ndarray:
+    """Minimise ``sum_f |r w_f - B_f|^2 + s^2 sum_f |w_f - w_(f-1)|^2`` over ``0 <= w <= 1`` by
+    passes over the frames, each frame's bounded solve with its neighbours held (at most ``sweeps``,
+    fewer once no weight moves :data:`SWEEP_TOL`; MakeHuman's joy, 108 frames x 42 shapes: 20 passes
+    reach the optimum's objective to 1e-5 at smooth 0.1, 0.4 % at 1): r (k, k), B (F, k), w (F, k)
+    the start -> (F, k)."""
+    from scipy.optimize import lsq_linear
+
+    k = r.shape[1]
+    eye = np.eye(k)
+    w = w.copy()
+    for _ in range(sweeps):
+        moved = 0.0
+        for f in range(len(B)):
+            nb = [w[g] for g in (f - 1, f + 1) if 0 <= g < len(B)]
+            M = np.vstack([r] + [s * eye] * len(nb))
+            rhs = np.concatenate([B[f]] + [s * x for x in nb])
+            new = lsq_linear(M, rhs, bounds=(0.0, 1.0), method="bvls").x
+            moved = max(moved, float(np.abs(new - w[f]).max()))
+            w[f] = new
+        if moved < SWEEP_TOL:
+            break
+    return w
+
+
+def near_duplicates(neutral: np.ndarray, shapes: np.ndarray, names, cosine: float = 0.95) -> list:
+    """The pairs of shapes whose displacement fields are nearly parallel or opposite: ``(name_a,
+    name_b, cosine)`` with ``|cosine| >= cosine``, the most alike first. neutral (n, 3), shapes
+    (k, n, 3), names [k]. A solve cannot tell such a pair apart: a small change of the motion moves
+    weight from one to the other (or turns both on, cancelling, when opposite)."""
+    D = (np.asarray(shapes, float) - np.asarray(neutral, float)).reshape(len(shapes), -1)
+    norm = np.linalg.norm(D, axis=1)
+    live = np.flatnonzero(norm > 0)
+    G = (D[live] / norm[live, None]) @ (D[live] / norm[live, None]).T
+    pairs = [(names[live[i]], names[live[j]], float(G[i, j])) for i in range(len(live))
+             for j in range(i + 1, len(live)) if abs(G[i, j]) >= cosine]
+    return sorted(pairs, key=lambda p: -abs(p[2]))
 
 
 def mix_shapes(neutral: np.ndarray, shapes: np.ndarray, weights: np.ndarray) -> np.ndarray:

@@ -195,6 +195,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.commissure_fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the lips' corner contact off
     ("skin.fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the skin's fold limit off
     ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
+    ("curves.smooth", Number(0.0, 100.0)),            # --curves' smoothness over frames (unitless): 0 = off
     ("muscle.damping", Number(0.0, 0.99)),
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
     ("animate.orientation_guard.min_area", Number(0.0, 0.95)),

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from faceforge.blendshapes.arkit import ARKIT_NAMES, load_arkit_mapping, default_mapping_path, mirror_name
-from faceforge.blendshapes.curves import LIVE_LINK_EXTRA, mix_shapes, read_weights, reproduction_error, solve_weights, write_weights
+from faceforge.blendshapes.curves import (LIVE_LINK_EXTRA, mix_shapes, near_duplicates, read_weights, reproduction_error,
+                                         solve_weights, write_weights)
 from faceforge.exceptions import FapError, TemplateError
 
 LIVE_LINK_HEADER = ("Timecode,BlendShapeCount," + ",".join(n[0].upper() + n[1:] for n in ARKIT_NAMES)
@@ -155,3 +156,65 @@ def test_a_ridge_keeps_two_nearly_collinear_shapes_from_trading_weight():
     err, _ = reproduction_error(frames, neutral, shapes, ridged)
     assert err < 0.02
     assert np.allclose(solve_weights(frames, neutral, shapes, ridge=0.0), plain)
+
+
+def _collinear_pair(seed=3):
+    rng = np.random.default_rng(seed)
+    neutral = rng.normal(size=(200, 3))
+    a = rng.normal(size=(200, 3))
+    b = a + 0.045 * rng.normal(size=(200, 3))                # cosine with a ~0.999
+    return neutral, a, b
+
+
+def test_smoothness_keeps_a_collinear_pair_from_flipping_between_frames():
+    """A take of 12 frames half of each of two 0.999-alike shapes, every other frame nudged 1 % of a
+    shape along their difference: the plain solve flips weight from frame to frame; with
+    ``smooth`` (curves.smooth) consecutive frames stay close and the mix still fits."""
+    neutral, a, b = _collinear_pair()
+    shapes = neutral + np.stack([a, b])
+    base = neutral + 0.5 * a + 0.5 * b
+    nudge = 0.01 * np.linalg.norm(a) * (b - a) / np.linalg.norm(b - a)
+    frames = np.stack([base + (i % 2) * nudge for i in range(12)])
+    plain = solve_weights(frames, neutral, shapes)
+    smooth = solve_weights(frames, neutral, shapes, smooth=1.0)
+    assert np.abs(np.diff(plain, axis=0)).max() > 0.15
+    assert np.abs(np.diff(smooth, axis=0)).max() < 0.25 * np.abs(np.diff(plain, axis=0)).max()
+    assert reproduction_error(frames, neutral, shapes, smooth)[0] < 0.02
+    assert np.allclose(solve_weights(frames, neutral, shapes, smooth=0.0), plain)
+
+
+def test_smoothness_sweeps_reach_the_joint_bounded_optimum():
+    """Twin: the block Gauss-Seidel sweeps of ``solve_weights(..., smooth=s)`` against one bounded
+    least squares over all frames at once (scipy on the stacked system)."""
+    from scipy.optimize import lsq_linear
+
+    rng = np.random.default_rng(5)
+    neutral = rng.normal(size=(30, 3))
+    shapes = neutral + rng.normal(size=(3, 30, 3))
+    w_true = np.clip(rng.uniform(-0.3, 1.3, size=(6, 3)), 0, 1)
+    frames = mix_shapes(neutral, shapes, w_true) + 0.3 * rng.normal(size=(6, 30, 3))
+    s = 0.5
+    got = solve_weights(frames, neutral, shapes, smooth=s, sweeps=400)
+    D = (shapes - neutral).reshape(3, -1).T
+    scale = np.linalg.norm(D, axis=0).mean()
+    F, k = w_true.shape
+    M = np.kron(np.eye(F), D)
+    diff = np.kron(np.diff(np.eye(F), axis=0), np.eye(k))
+    A = np.vstack([M, np.sqrt(s) * scale * diff])
+    y = np.concatenate([(frames - neutral).reshape(F, -1).ravel(), np.zeros(len(diff))])
+    want = lsq_linear(A, y, bounds=(0, 1), method="bvls").x.reshape(F, k)
+    assert np.abs(got - want).max() < 1e-4
+    assert np.abs(np.diff(got, axis=0)).sum() < np.abs(np.diff(solve_weights(frames, neutral, shapes), axis=0)).sum()
+
+
+def test_near_duplicates_names_the_alike_and_opposite_pairs_only():
+    neutral, a, b = _collinear_pair()
+    c = np.random.default_rng(9).normal(size=(200, 3))
+    shapes = neutral + np.stack([a, b, -a, c, 0 * a])
+    pairs = near_duplicates(neutral, shapes, ["a", "b", "minus_a", "c", "flat"])
+    assert {(x, y) for x, y, _ in pairs} == {("a", "minus_a"), ("a", "b"), ("b", "minus_a")}
+    assert pairs[0][:2] == ("a", "minus_a")                  # the most alike first
+    cos = {(x, y): c for x, y, c in pairs}
+    assert cos[("a", "minus_a")] == pytest.approx(-1.0)
+    assert 0.99 < cos[("a", "b")] < 1.0
+    assert near_duplicates(neutral, shapes[[0, 3]], ["a", "c"]) == []

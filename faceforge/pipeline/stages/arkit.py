@@ -92,7 +92,7 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
 
     import numpy as np
 
-    from faceforge.blendshapes.curves import reproduction_error, solve_weights, write_weights
+    from faceforge.blendshapes.curves import near_duplicates, reproduction_error, solve_weights, write_weights
     from faceforge.io.stagefiles import load_npz
     from faceforge.pipeline.stages.bake import bake_params, export_shapes
 
@@ -103,10 +103,16 @@ def write_curves(app, stage: str, curves: str | None, output: str | None) -> boo
     names = [str(n) for n, m in zip(baked["names"], made) if m]
     shapes = baked["shapes"][made]
     frames, fps = anim["frames"], float(anim["fps"])
-    w = solve_weights(frames, baked["neutral"], shapes, ridge=float(app.config.get("curves.ridge")))
+    w = solve_weights(frames, baked["neutral"], shapes, ridge=float(app.config.get("curves.ridge")),
+                      smooth=float(app.config.get("curves.smooth")))
     err, peak = reproduction_error(frames, baked["neutral"], shapes, w)
     app.log(f"animate: curves: {len(names)} shapes x {len(frames)} frames; the mixed shapes reproduce the "
             f"simulated frames to {err:.1%} RMS of the motion (largest vertex error {peak:.4g} units)")
+    twins = near_duplicates(baked["neutral"], shapes, names)
+    if twins:
+        app.log("animate: curves: near-duplicate shapes (a small change of the motion can move weight from one to the "
+                "other; cosine of their displacements): "
+                + ", ".join(f"{x}/{y} {c:+.3f}" for x, y, c in twins))
     report = app.workspace.stage_dir(stage) / "report.json"
     turn = json.loads(report.read_text()).get("max_head_rotation_deg", [0, 0, 0]) if report.exists() else [0]
     if max(turn, default=0) > 0:
