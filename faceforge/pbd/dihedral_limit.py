@@ -35,7 +35,7 @@ import numpy as np
 from faceforge.constants import NUMBA_OPTIONS
 from faceforge.pbd.model import inverse_masses
 
-__all__ = ["limit_dihedrals", "rest_limits"]
+__all__ = ["DihedralLimit", "limit_dihedrals", "rest_limits"]
 
 
 @numba.njit(**NUMBA_OPTIONS)
@@ -118,42 +118,64 @@ def _limit(p, quads, limit, below, sweeps, w, touched, tol):  # pragma: no cover
     return moved
 
 
+class DihedralLimit:
+    """A dihedral limit over fixed quads, checked once and applied as often as needed (a solver
+    applies it after every step: :func:`limit_dihedrals` checks and converts its arguments on
+    each call, which cost as much as the pass itself over a whole skin).
+
+    quads : (m, 4) int (particle ids; (p0, p1) the shared edge); limit : radians in (0, pi), one
+    for all or (m,) per quad (:func:`rest_limits`: never below a quad's rest angle); n : the
+    number of particles of the positions it will be applied to; inv_mass : (n,) float >= 0, the
+    particles' inverse masses (0: pinned; module docstring), None: all 1; tol : radians >= 0, a
+    quad past its limit by at most this is left as it is (neighbouring quads projected in turn
+    keep nudging each other a hair past; a caller that repeats the pass until it has nothing to
+    do needs a tolerance to stop).
+    """
+
+    def __init__(self, quads: np.ndarray, limit, n: int, inv_mass: np.ndarray | None = None,
+                 tol: float = 0.0):
+        self.quads = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
+        self.limit = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64),
+                                                          (len(self.quads),)))
+        if not np.all((self.limit > 0.0) & (self.limit < math.pi)):
+            raise ValueError(f"limit must be in (0, pi) radians, got {limit}")
+        if len(self.quads) and (self.quads.min() < 0 or self.quads.max() >= n):
+            raise ValueError(f"quads index particles outside [0, {n})")
+        if not tol >= 0.0:
+            raise ValueError(f"tol must be >= 0 radians, got {tol}")
+        self.n, self.tol = int(n), float(tol)
+        self.inv_mass = inverse_masses(inv_mass, self.n)
+        self._below = -np.cos(np.minimum(self.limit + self.tol, math.pi))
+        self._untracked = np.zeros(0, dtype=np.bool_)
+
+    def __call__(self, positions: np.ndarray, sweeps: int = 2, touched: np.ndarray | None = None) -> int:
+        """Keep every quad's unsigned dihedral at most its limit (+ tol), in place on
+        ``positions`` ((n, 3) float64, C-contiguous), in at most ``sweeps`` Gauss-Seidel passes (a
+        pass that projects nothing ends them). ``touched`` (n,) bool, optional: set True (never
+        cleared) where a particle moved. Returns the number of projections made (0: every quad
+        was within its limit or could not move)."""
+        if positions.dtype != np.float64 or positions.shape != (self.n, 3) or not positions.flags.c_contiguous:
+            raise ValueError(f"positions must be a C-contiguous ({self.n}, 3) float64 array")
+        if touched is None:
+            touched = self._untracked
+        elif touched.dtype != np.bool_ or touched.shape != (self.n,):
+            raise ValueError(f"touched must be a ({self.n},) bool array")
+        if not len(self.quads):
+            return 0
+        return int(_limit(positions, self.quads, self.limit, self._below, int(sweeps), self.inv_mass,
+                          touched, self.tol))
+
+
 def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2,
                     inv_mass: np.ndarray | None = None, touched: np.ndarray | None = None,
                     tol: float = 0.0) -> int:
-    """Keep the unsigned dihedral of every quad at most ``limit`` (see the module docstring).
-
-    positions : (n, 3) float64, C-contiguous, changed in place; quads : (m, 4) int (particle
-    ids; (p0, p1) the shared edge); limit : radians in (0, pi), one for all or (m,) per quad
-    (:func:`rest_limits`: never below a quad's rest angle); sweeps : Gauss-Seidel passes;
-    inv_mass : (n,) float >= 0, the particles' inverse masses (0: pinned; module docstring),
-    None: all 1; touched : (n,) bool, optional, set True (never cleared) where a particle moved;
-    tol : radians >= 0, a quad past its limit by at most this is left as it is (neighbouring quads
-    projected in turn keep nudging each other a hair past; a caller that repeats the pass until
-    it has nothing to do needs a tolerance to stop). A sweep that projects nothing ends the
-    passes. Returns the number of projections made (0: every quad was within the limit (+ tol)
-    or could not move).
-    """
-    lim = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(quads),)))
-    if not np.all((lim > 0.0) & (lim < math.pi)):
-        raise ValueError(f"limit must be in (0, pi) radians, got {limit}")
+    """Keep the unsigned dihedral of every quad at most ``limit`` (see the module docstring and
+    :class:`DihedralLimit`, whose arguments these are; positions (n, 3) float64, C-contiguous,
+    changed in place). Returns the number of projections made."""
     if positions.dtype != np.float64 or positions.ndim != 2 or positions.shape[1] != 3 \
             or not positions.flags.c_contiguous:
         raise ValueError("positions must be a C-contiguous (n, 3) float64 array")
-    q = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
-    w = inverse_masses(inv_mass, len(positions))
-    if len(q) == 0:
-        return 0
-    if q.min() < 0 or q.max() >= len(positions):
-        raise ValueError(f"quads index particles outside [0, {len(positions)})")
-    if touched is None:
-        touched = np.zeros(0, dtype=np.bool_)
-    elif touched.dtype != np.bool_ or touched.shape != (len(positions),):
-        raise ValueError(f"touched must be a ({len(positions)},) bool array")
-    if not tol >= 0.0:
-        raise ValueError(f"tol must be >= 0 radians, got {tol}")
-    below = -np.cos(np.minimum(lim + tol, math.pi))
-    return int(_limit(positions, q, lim, below, int(sweeps), w, touched, float(tol)))
+    return DihedralLimit(quads, limit, len(positions), inv_mass, tol)(positions, sweeps, touched)
 
 
 def rest_limits(rest: np.ndarray, quads: np.ndarray, limit) -> np.ndarray:

@@ -371,12 +371,14 @@ class SkinSimulation:
         self.model = builder.finalize()
         self._fold = None
         if fold_limit is not None and len(fold_limit[0]):
-            from faceforge.pbd.dihedral_limit import rest_limits
+            from faceforge.pbd.dihedral_limit import DihedralLimit, rest_limits
 
             quads = np.asarray(fold_limit[0], INT).reshape(-1, 4)   # never below a quad's rest angle
-            self._fold = (self.layer.first + quads, rest_limits(self.rest, quads, fold_limit[1]))
+            self._fold = DihedralLimit(self.layer.first + quads, rest_limits(self.rest, quads, fold_limit[1]),
+                                       self.model.particle_count, tol=FOLD_TOL)
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
+        self._fold_mark = np.zeros(len(self.state.positions), dtype=bool)   # limit_folds' scratch
         self.control = self.model.control()
         self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)
         slots = self.layer.anchor_slots
@@ -458,12 +460,11 @@ class SkinSimulation:
         set where a skin vertex moved. Returns the projections made (0: none needed, or no limit)."""
         if self._fold is None:
             return 0
-        from faceforge.pbd.dihedral_limit import limit_dihedrals
-
         if touched is None:
-            return limit_dihedrals(self.state.positions, *self._fold, tol=FOLD_TOL)
-        mark = np.zeros(len(self.state.positions), dtype=bool)
-        done = limit_dihedrals(self.state.positions, *self._fold, touched=mark, tol=FOLD_TOL)
+            return self._fold(self.state.positions)
+        mark = self._fold_mark
+        mark[:] = False
+        done = self._fold(self.state.positions, touched=mark)
         touched |= self.layer.skin_positions(mark)
         return done
 
