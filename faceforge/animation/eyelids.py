@@ -455,6 +455,10 @@ class Eyelids:
         for field, lids in zip(self.fields, self._lid_vertices) if self._fold is not None else ():
             self.inv_mass = np.minimum(self.inv_mass, margin_inv_mass(field, self.rest, faces, depth))
             self.inv_mass[lids] = 0.0
+        if self._fold is not None:   # built once: applied up to FOLD_ROUNDS times per frame the lids move
+            from faceforge.pbd.dihedral_limit import DihedralLimit
+
+            self._fold = DihedralLimit(*self._fold, len(self.rest), inv_mass=self.inv_mass)
         # animate.eyelid_fold_deg 0: the guard as it was (equal masses)
         self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING,
                                        inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None
@@ -478,10 +482,8 @@ class Eyelids:
             if self._fold is None:
                 self._guard.apply(frame)
             else:   # animate.eyelid_fold_deg: gathered skin neither turns over nor folds
-                from faceforge.pbd.dihedral_limit import limit_dihedrals
-
                 for _ in range(FOLD_ROUNDS):
-                    limit_dihedrals(frame, *self._fold, sweeps=1, inv_mass=self.inv_mass)
+                    self._fold(frame, sweeps=1)
                     self._guard.apply(frame)
             out[f] = frame
         return out

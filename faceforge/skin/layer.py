@@ -379,6 +379,8 @@ class SkinSimulation:
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self._fold_mark = np.zeros(len(self.state.positions), dtype=bool)   # limit_folds' scratch
+        #: the skin vertices the last :meth:`limit_folds` moved
+        self.folded = np.zeros(0, dtype=np.int64)
         self.control = self.model.control()
         self._bary = np.ascontiguousarray(binding.bary, dtype=FLOAT)
         slots = self.layer.anchor_slots
@@ -454,18 +456,16 @@ class SkinSimulation:
         self.solver.step(self.state, self.state, self.control, dt)
         self.limit_folds()
 
-    def limit_folds(self, touched: np.ndarray | None = None) -> int:
+    def limit_folds(self) -> int:
         """Keep the fold limit's quads within their limits, in place on the skin's state (after each
-        step, and again by the guards after they move the skin); ``touched`` (n,) bool, optional:
-        set where a skin vertex moved. Returns the projections made (0: none needed, or no limit)."""
+        step, and again by the guards after they move the skin). Returns the projections made (0:
+        none needed, or no limit); :attr:`folded` then holds the skin vertices it moved ((p,) int)."""
         if self._fold is None:
             return 0
-        if touched is None:
-            return self._fold(self.state.positions)
         mark = self._fold_mark
         mark[:] = False
         done = self._fold(self.state.positions, touched=mark)
-        touched |= self.layer.skin_positions(mark)
+        self.folded = np.flatnonzero(self.layer.skin_positions(mark))
         return done
 
     def simulated(self) -> np.ndarray:

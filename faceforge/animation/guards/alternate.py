@@ -65,17 +65,16 @@ class GuardedSkinStep:
         itself, which round-off may push again): a full pass's result."""
         guard, orientation, pushed = self.guard, self.orientation, self.pushed
         bones = self.system.world_view()[:self.bone_rows]
-        k, bent = 0, np.zeros(len(x), dtype=bool)
-        folded = turned = np.zeros(0, dtype=np.int64)
+        k = 0
+        folded = turned = none = np.zeros(0, dtype=np.int64)
         rounds = max(self.rounds, 1)
         for r in range(FOLD_ROUNDS * rounds):
             only = None if r == 0 else np.concatenate([pushed[:k], turned, folded])
             k = guard.apply_stacked(x, bones, pushed, only)
             moved = None if r == 0 else np.concatenate([pushed[:k], folded])
-            turned = orientation.touched if orientation is not None and orientation.apply(x, moved) \
-                else np.zeros(0, dtype=np.int64)
-            bent[:] = False   # the skin's fold limit: a push or a turn may have folded an edge
-            folded = np.flatnonzero(bent) if self.skin.limit_folds(bent) else np.zeros(0, dtype=np.int64)
+            turned = orientation.touched if orientation is not None and orientation.apply(x, moved) else none
+            # the skin's fold limit: a push or a turn may have folded an edge
+            folded = self.skin.folded if self.skin.limit_folds() else none
             if not len(folded) and (not len(turned) or r + 1 >= rounds):
                 break   # past its own rounds the alternation goes on only while the fold limit has work
 
