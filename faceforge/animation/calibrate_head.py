@@ -131,7 +131,9 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
     # calibration's probes settle to their own tolerance (animate.calibrate.statics_tolerance):
     # a looser one than the sheets' costs 0.03 points of median error and a fifth of the frames
     sheets = SettleSettings.from_config(config)
-    settings = replace(sheets, tolerance=float(config.get("animate.calibrate.statics_tolerance")))
+    # and stop a probe flipping between two states (animate.calibrate.cycle) instead of waiting out the stall
+    settings = replace(sheets, tolerance=float(config.get("animate.calibrate.statics_tolerance")),
+                       cycle=int(config.get("animate.calibrate.cycle")))
     # the jaw coupling and the lip opening are measured once each, from rest: held to the sheets'
     # tolerance with no stall (a slowly settling lip cut short read 32 % low on the synthetic head)
     final = replace(sheets, stall=0)
@@ -144,14 +146,21 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
         held["now"] = (c[0], jaw[0])
         return skin
 
+    warm_final = bool(config.get("animate.calibrate.warm_jaw_poses"))
+
     def simulate(mapping, faps):
-        # poses from rest are deterministic in their controls: the coupling's open_jaw pose and
-        # the lip opening's (its lip entries are not driven) are one simulation
+        # poses are deterministic in their controls (and the pose they start from): the coupling's
+        # open_jaw pose and the lip opening's (its lip entries are not driven) are one simulation.
+        # The first starts from rest; with animate.calibrate.warm_jaw_poses the later ones (the jaw-
+        # assisted lips, fit_muscle_reach, all with the jaw open) continue from the one before
         c, jaw = controls(mapping, faps, head)
         key = (c.tobytes(), jaw.tobytes())
         held.pop("now", None)
         if key not in cold:
-            cold[key] = settle(head.rig, c, jaw, fps, final, stats=stats)
+            before = held.pop("final", None) if warm_final else None
+            cold[key] = settle(head.rig, c, jaw, fps, final, stats=stats, warm=before is not None,
+                               previous=before)
+            held["final"] = (c[-1], jaw[-1])     # what the rig now holds
         return cold[key]
 
     probes = calibration_probes(template, head)
