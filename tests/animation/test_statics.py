@@ -137,3 +137,37 @@ def test_the_cycle_stop_is_off_by_default_and_calibration_turns_it_on():
 
     assert SettleSettings().cycle == 0 and SettleSettings.from_config(load_config(None)).cycle == 0
     assert int(load_config(None).get("animate.calibrate.cycle")) > 0
+
+
+def test_the_calibration_one_off_poses_continue_from_the_pose_before_when_warm():
+    # OneOffPoses (calibrate_head): the same controls are settled once; warm, the second pose
+    # continues from the first (no reset, the 3-frame warm ramp) and lands on the same fixed point
+    # within the tolerance in fewer frames than from rest
+    from faceforge.animation.calibrate_head import OneOffPoses
+
+    def to_controls(mapping, faps):
+        faps = np.atleast_2d(faps)
+        return faps[:, :1].copy(), np.zeros((len(faps), 3))
+
+    s = SettleSettings(tolerance=1e-6)
+    diag = float(np.linalg.norm(np.ptp(relaxing_rig().rest, axis=0)))
+    out = {}
+    for warm in (False, True):
+        rig, stats = relaxing_rig(), SettleStats()
+        resets = {"n": 0}
+        inner = rig.reset
+
+        def reset(inner=inner, resets=resets):
+            resets["n"] += 1
+            inner()
+
+        rig = Rig(skull=rig.skull, muscles=rig.muscles, skin=rig.skin, rest=rig.rest, reset=reset)
+        poses = OneOffPoses(rig, to_controls, 25.0, s, stats, warm=warm)
+        a = poses(None, np.array([[1.0]]))
+        b = poses(None, np.array([[1.1]]))
+        assert poses(None, np.array([[1.0]])) is a and len(stats.frames) == 2     # settled once
+        out[warm] = (a, b, stats.frames, resets["n"])
+    assert out[False][3] == 2 and out[True][3] == 1                             # warm: the first from rest only
+    assert out[True][2][1] < out[False][2][1]                                    # fewer frames for the second
+    assert np.abs(out[True][1] - out[False][1]).max() < 10 * 1e-6 * diag         # the same pose
+    assert np.array_equal(out[True][0], out[False][0])
