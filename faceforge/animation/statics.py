@@ -169,7 +169,9 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
         if n >= ramp + s.min_hold and motion <= tol:
             break
         if s.cycle and flips >= s.cycle and n >= ramp + s.min_hold:
-            break                                # flipping between two states: unconverged, reported
+            # flipping between two states: unconverged, reported; the pose is the cycle's midpoint (the
+            # rig holds the last state)
+            return 0.5 * (last + before), n, motion
         if n > 1 and not motion <= BLOWN_UP * tol / s.tolerance:
             break                                # blown up (or non-finite): nothing to settle
         if n > ramp:

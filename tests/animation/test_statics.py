@@ -123,6 +123,7 @@ def test_a_pose_flipping_between_two_states_stops_once_the_rest_has_settled():
     assert cycled.converged == [False] and cycled.frames[0] + 10 < stalled.frames[0]
     settled = out[0, 1:] - (flipping_rig().rest[1:] + [1.0, 0.0, 0.0])
     assert np.abs(settled).max() < 2 * 1e-6 * diag                  # all but the flipping vertex are there
+    assert abs(out[0, 0, 2] - 0.005) < 2 * 1e-6 * diag              # the flipping one: the cycle's midpoint
     # the relaxation itself (no flip) never returns to where it was two frames before within the
     # tolerance before it has converged: the cycle stop leaves it alone
     plain, plain_cycle = SettleStats(), SettleStats()
