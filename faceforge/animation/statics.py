@@ -61,7 +61,7 @@ class SettleSettings:
         within ``tolerance`` of where it was two frames before while some vertex still moved more
         than that in the last frame: a vertex flipping between two states (a period-2 cycle of
         the fixed-point iteration), which ``stall`` waits out for its whole count of frames;
-        reported unconverged. 0: off (the sheets, the bake); calibration's probes use
+        reported unconverged, the pose returned is the cycle's midpoint. 0: off (the sheets, the bake); calibration's probes use
         ``animate.calibrate.cycle``
     """
 
@@ -83,10 +83,10 @@ class SettleSettings:
                 return default
             return default if value is None else value
 
+        # ``cycle`` is calibration's (animate.calibrate.cycle), set by its caller
         return cls(ramp=int(get("ramp", cls.ramp)), warm_ramp=int(get("warm_ramp", cls.warm_ramp)),
                    tolerance=float(get("tolerance", cls.tolerance)), min_hold=int(get("min_hold", cls.min_hold)),
                    max_frames=int(get("max_frames", cls.max_frames)), stall=int(get("stall", cls.stall)))
-        # ``cycle`` is calibration's (animate.calibrate.cycle), set by its caller
 
 
 def settle(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, settings: SettleSettings | None = None,
