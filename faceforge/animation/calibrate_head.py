@@ -96,6 +96,40 @@ def lip_opening(mapping, simulate, head, value):
     return {"requested": value, "achieved": float(opened), "relative_error": float(abs(opened - value) / value)}
 
 
+class OneOffPoses:
+    """The calibration's poses outside the sweep's chains (the coupling's open_jaw, the jaw-assisted
+    lips of :func:`~faceforge.animation.calibrate_jaw.fit_muscle_reach`, the lip opening), as a
+    ``simulate(mapping, faps (k, 68)) -> settled skins (k, n, 3)`` callable.
+
+    rig : Rig (with ``reset``); to_controls : (mapping, faps) -> (contractions (k, m), jaw (k, 3));
+    settings : SettleSettings; stats : SettleStats appended to
+    warm : the first pose starts from rest, each later one continues from the pose before
+        (``animate.calibrate.warm_jaw_poses``: they all have the jaw open, and a pose from rest
+        spends most of its frames opening it); False: every pose from rest
+    A pose is deterministic in its controls and the pose it starts from: the same controls are
+    settled once (the coupling's open_jaw pose and the lip opening's, whose lip entries are not
+    driven, are one simulation).
+    """
+
+    def __init__(self, rig, to_controls, fps: float, settings, stats, warm: bool = False):
+        self.rig, self.to_controls, self.fps, self.settings, self.stats = rig, to_controls, fps, settings, stats
+        self.warm = warm
+        self.done = {}
+        self.holding = None                      # (c (m,), jaw (3,)) the rig holds after the last pose
+
+    def __call__(self, mapping, faps):
+        from faceforge.animation.statics import settle
+
+        c, jaw = self.to_controls(mapping, faps)
+        key = (c.tobytes(), jaw.tobytes())
+        if key not in self.done:
+            before = self.holding if self.warm else None
+            self.done[key] = settle(self.rig, c, jaw, self.fps, self.settings, stats=self.stats,
+                                    warm=before is not None, previous=before)
+            self.holding = (c[-1], jaw[-1])
+        return self.done[key]
+
+
 @dataclass
 class CalibrationResult:
     """What :func:`calibrate_head` measured: the calibrated mapping, the rows
@@ -131,12 +165,15 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
     # calibration's probes settle to their own tolerance (animate.calibrate.statics_tolerance):
     # a looser one than the sheets' costs 0.03 points of median error and a fifth of the frames
     sheets = SettleSettings.from_config(config)
-    settings = replace(sheets, tolerance=float(config.get("animate.calibrate.statics_tolerance")))
-    # the jaw coupling and the lip opening are measured once each, from rest: held to the sheets'
-    # tolerance with no stall (a slowly settling lip cut short read 32 % low on the synthetic head)
+    # and stop a probe flipping between two states (animate.calibrate.cycle) instead of waiting out the stall
+    settings = replace(sheets, tolerance=float(config.get("animate.calibrate.statics_tolerance")),
+                       cycle=int(config.get("animate.calibrate.cycle")))
+    # the jaw coupling, the jaw-assisted lips and the lip opening (OneOffPoses: the first from rest) are
+    # held to the sheets' tolerance with no stall (a slowly settling lip cut short read 32 % low on the
+    # synthetic head)
     final = replace(sheets, stall=0)
     stats = SettleStats()
-    held, cold = {}, {}
+    held = {}
 
     def pose_for(mapping, faps, warm):
         c, jaw = controls(mapping, faps[None], head)
@@ -144,15 +181,12 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
         held["now"] = (c[0], jaw[0])
         return skin
 
+    once = OneOffPoses(head.rig, lambda mapping, faps: controls(mapping, faps, head), fps, final, stats,
+                       warm=bool(config.get("animate.calibrate.warm_jaw_poses")))
+
     def simulate(mapping, faps):
-        # poses from rest are deterministic in their controls: the coupling's open_jaw pose and
-        # the lip opening's (its lip entries are not driven) are one simulation
-        c, jaw = controls(mapping, faps, head)
-        key = (c.tobytes(), jaw.tobytes())
-        held.pop("now", None)
-        if key not in cold:
-            cold[key] = settle(head.rig, c, jaw, fps, final, stats=stats)
-        return cold[key]
+        held.pop("now", None)                    # the sweep's chains are over: the rig leaves their pose
+        return once(mapping, faps)
 
     probes = calibration_probes(template, head)
     requested = requested_values(template, config)

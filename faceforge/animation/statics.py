@@ -57,6 +57,12 @@ class SettleSettings:
     stall : stop a held pose whose residual has not fallen below ``STALL_DROP`` x its lowest
         so far for this many frames (it stopped changing: a vertex flipping between two states
         settles no further; reported unconverged); 0 holds such a pose to ``max_frames``
+    cycle : stop a held pose once, for this many frames in a row, every vertex came back to
+        within ``tolerance`` of where it was two frames before while some vertex still moved more
+        than that in the last frame: a vertex flipping between two states (a period-2 cycle of
+        the fixed-point iteration), which ``stall`` waits out for its whole count of frames;
+        reported unconverged, the pose returned is the cycle's midpoint. 0: off (the sheets, the bake); calibration's probes use
+        ``animate.calibrate.cycle``
     """
 
     ramp: int = 10
@@ -65,6 +71,7 @@ class SettleSettings:
     min_hold: int = 2
     max_frames: int = 150
     stall: int = 0
+    cycle: int = 0
 
     @classmethod
     def from_config(cls, config) -> "SettleSettings":
@@ -76,6 +83,7 @@ class SettleSettings:
                 return default
             return default if value is None else value
 
+        # ``cycle`` is calibration's (animate.calibrate.cycle), set by its caller
         return cls(ramp=int(get("ramp", cls.ramp)), warm_ramp=int(get("warm_ramp", cls.warm_ramp)),
                    tolerance=float(get("tolerance", cls.tolerance)), min_hold=int(get("min_hold", cls.min_hold)),
                    max_frames=int(get("max_frames", cls.max_frames)), stall=int(get("stall", cls.stall)))
@@ -140,10 +148,12 @@ BLOWN_UP = 0.2
 
 def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
     """Ease (c0, j0) -> (c1, j1) over ``ramp`` frames, then hold until a frame moves the skin
-    less than ``tol``, its residual stalls (``s.stall``) or ``s.max_frames``. Returns (raw skin
-    (n, 3), frames, last motion)."""
+    less than ``tol``, its residual stalls (``s.stall``), it flips between two states
+    (``s.cycle``, :func:`_two_cycle`) or ``s.max_frames``. Returns (raw skin (n, 3), frames, last
+    motion)."""
     last, motion, n = None, np.inf, 0
     best, since = np.inf, 0
+    before, flips = None, 0                      # the skin two frames back; frames in a row back on it
     while n < s.max_frames:
         t = min(1.0, (n + 1) / ramp)
         c, j = c0 + t * (c1 - c0), j0 + t * (j1 - j0)
@@ -152,9 +162,16 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
         n += 1
         if last is not None:
             motion = float(np.sqrt(((skin - last) ** 2).sum(axis=1).max()))
+        if s.cycle:
+            flips = flips + 1 if before is not None and motion > tol and _two_cycle(skin, before, tol) else 0
+            before = last
         last = skin.copy()
         if n >= ramp + s.min_hold and motion <= tol:
             break
+        if s.cycle and flips >= s.cycle and n >= ramp + s.min_hold:
+            # flipping between two states: unconverged, reported; the pose is the cycle's midpoint (the
+            # rig holds the last state)
+            return 0.5 * (last + before), n, motion
         if n > 1 and not motion <= BLOWN_UP * tol / s.tolerance:
             break                                # blown up (or non-finite): nothing to settle
         if n > ramp:
@@ -163,6 +180,12 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
             elif s.stall and n - since >= s.stall and n >= ramp + s.min_hold:
                 break                            # the residual stopped changing: unconverged, reported
     return last, n, motion
+
+
+def _two_cycle(skin: np.ndarray, before: np.ndarray, tol: float) -> bool:
+    """Whether no vertex of ``skin (n, 3)`` is farther than ``tol`` from where it was two frames
+    before (``before (n, 3)``)."""
+    return float(((skin - before) ** 2).sum(axis=1).max()) <= tol * tol
 
 
 def play_converged(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, sink,

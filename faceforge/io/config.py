@@ -228,6 +228,8 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.statics.tolerance", Number(0.0, 0.01)),
     ("animate.statics.stall", Integer(0, 2000)),                  # 0: hold a stalled pose to max_frames
     ("animate.calibrate.statics_tolerance", Number(0.0, 0.01)),
+    ("animate.calibrate.cycle", Integer(0, 2000)),                # 0: no period-2 stop (statics.SettleSettings.cycle)
+    ("animate.calibrate.warm_jaw_poses", Boolean()),
     ("animate.neck_fade", Number(0.0, 10.0)),
     ("animate.eyelid_reach", Number(0.1, 10.0)),
     ("animate.eyelid_depth", Number(0.1, 10.0)),

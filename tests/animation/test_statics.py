@@ -71,10 +71,10 @@ def test_offline_playback_converges_every_frame_where_real_time_lags():
     assert np.abs(lagging[:, 0, 0] - c[:, 0]).max() > 0.1              # one step a frame lags behind
 
 
-def flipping_rig(n=5, amplitude=0.01):
+def flipping_rig(n=5, amplitude=0.01, rate=0.3):
     """A stand-in rig that settles like :func:`relaxing_rig` but one vertex flips between two
     states every frame (a held PBD pose whose residual stops falling)."""
-    rig = relaxing_rig(n=n)
+    rig = relaxing_rig(rate=rate, n=n)
     inner, count = rig.skin, {"n": 0}
 
     def skin(bones, muscles, dt):
@@ -108,3 +108,67 @@ def test_a_pose_that_blows_up_stops_at_once():
                  SettleSettings(tolerance=1e-6, max_frames=150), stats=stats)
     assert stats.frames[0] < 15 and stats.converged == [False]
     assert np.abs(out[0, :, 0]).max() > 0.2 * 4.0     # what it reached is reported as it is
+
+
+def test_a_pose_flipping_between_two_states_stops_once_the_rest_has_settled():
+    # cycle: the skin back within the tolerance of where it was two frames before, 3 frames in a
+    # row, while one vertex still flips by 0.01 a frame: stopped there, unconverged, with every
+    # other vertex settled; the stall (40 frames without a 10 % fall, calibration's) waits longer
+    diag = float(np.linalg.norm(np.ptp(flipping_rig().rest, axis=0)))
+    stalled, cycled = SettleStats(), SettleStats()
+    s = SettleSettings(tolerance=1e-6, max_frames=150, stall=40)
+    settle(flipping_rig(rate=0.6), [[1.0]], np.zeros((1, 3)), 25.0, s, stats=stalled)
+    out = settle(flipping_rig(rate=0.6), [[1.0]], np.zeros((1, 3)), 25.0, SettleSettings(
+        tolerance=1e-6, max_frames=150, stall=40, cycle=3), stats=cycled)
+    assert cycled.converged == [False] and cycled.frames[0] + 10 < stalled.frames[0]
+    settled = out[0, 1:] - (flipping_rig().rest[1:] + [1.0, 0.0, 0.0])
+    assert np.abs(settled).max() < 2 * 1e-6 * diag                  # all but the flipping vertex are there
+    assert abs(out[0, 0, 2] - 0.005) < 2 * 1e-6 * diag              # the flipping one: the cycle's midpoint
+    # the relaxation itself (no flip) never returns to where it was two frames before within the
+    # tolerance before it has converged: the cycle stop leaves it alone
+    plain, plain_cycle = SettleStats(), SettleStats()
+    a = settle(relaxing_rig(), [[1.0]], np.zeros((1, 3)), 25.0, SettleSettings(tolerance=1e-6), stats=plain)
+    b = settle(relaxing_rig(), [[1.0]], np.zeros((1, 3)), 25.0, SettleSettings(tolerance=1e-6, cycle=3),
+               stats=plain_cycle)
+    assert plain_cycle.frames == plain.frames and plain_cycle.converged == [True] and np.array_equal(a, b)
+
+
+def test_the_cycle_stop_is_off_by_default_and_calibration_turns_it_on():
+    from faceforge.io.config import load_config
+
+    assert SettleSettings().cycle == 0 and SettleSettings.from_config(load_config(None)).cycle == 0
+    assert int(load_config(None).get("animate.calibrate.cycle")) > 0
+
+
+def test_the_calibration_one_off_poses_continue_from_the_pose_before_when_warm():
+    # OneOffPoses (calibrate_head): the same controls are settled once; warm, the second pose
+    # continues from the first (no reset, the 3-frame warm ramp) and lands on the same fixed point
+    # within the tolerance in fewer frames than from rest
+    from faceforge.animation.calibrate_head import OneOffPoses
+
+    def to_controls(mapping, faps):
+        faps = np.atleast_2d(faps)
+        return faps[:, :1].copy(), np.zeros((len(faps), 3))
+
+    s = SettleSettings(tolerance=1e-6)
+    diag = float(np.linalg.norm(np.ptp(relaxing_rig().rest, axis=0)))
+    out = {}
+    for warm in (False, True):
+        rig, stats = relaxing_rig(), SettleStats()
+        resets = {"n": 0}
+        inner = rig.reset
+
+        def reset(inner=inner, resets=resets):
+            resets["n"] += 1
+            inner()
+
+        rig = Rig(skull=rig.skull, muscles=rig.muscles, skin=rig.skin, rest=rig.rest, reset=reset)
+        poses = OneOffPoses(rig, to_controls, 25.0, s, stats, warm=warm)
+        a = poses(None, np.array([[1.0]]))
+        b = poses(None, np.array([[1.1]]))
+        assert poses(None, np.array([[1.0]])) is a and len(stats.frames) == 2     # settled once
+        out[warm] = (a, b, stats.frames, resets["n"])
+    assert out[False][3] == 2 and out[True][3] == 1                             # warm: the first from rest only
+    assert out[True][2][1] < out[False][2][1]                                    # fewer frames for the second
+    assert np.abs(out[True][1] - out[False][1]).max() < 10 * 1e-6 * diag         # the same pose
+    assert np.array_equal(out[True][0], out[False][0])
