@@ -39,6 +39,11 @@ was dragged up was also drawn 1-2 mm forward, unevenly (ICT's upper lid in surpr
 margin put back on its curve in height but left at its dragged depths folded along its inner
 half (all 12 of surprise's lid folds on ICT that the simulation did not have).
 
+**An open jaw does not drag the upper lid** (``animate.eyelid_jaw_hold``, :func:`jaw_held_share`). In a
+frame where the jaw moves and an eye's lids do not, its upper lid takes back the skin's drift with the
+upper part of the hold: the jaw's pull, carried up the cheek by the skin sheet, dragged ICT's free upper
+margin down 0.39 openings at full jawOpen (a notch in the margin); nothing asks the lid to move.
+
 **Over the eyeball.** A lid closing over the eye rides forward over the eyeball: a vertex in
 front of the eyeball's horizontal axis (along ``u``) keeps its distance from the axis as it
 moves vertically, when that brings it forward; it never moves back (a lid opening wider
