@@ -39,6 +39,11 @@ was dragged up was also drawn 1-2 mm forward, unevenly (ICT's upper lid in surpr
 margin put back on its curve in height but left at its dragged depths folded along its inner
 half (all 12 of surprise's lid folds on ICT that the simulation did not have).
 
+**An open jaw does not drag the upper lid** (``animate.eyelid_jaw_hold``, :func:`jaw_held_share`). In a
+frame where the jaw moves and an eye's lids do not, its upper lid takes back the skin's drift with the
+upper part of the hold: the jaw's pull, carried up the cheek by the skin sheet, dragged ICT's free upper
+margin down 0.39 openings at full jawOpen (a notch in the margin); nothing asks the lid to move.
+
 **Over the eyeball.** A lid closing over the eye rides forward over the eyeball: a vertex in
 front of the eyeball's horizontal axis (along ``u``) keeps its distance from the axis as it
 moves vertically, when that brings it forward; it never moves back (a lid opening wider
@@ -110,6 +115,10 @@ HOLD_BEYOND = 0.6
 #: creased MakeHuman's lower lid (3 folded edges per eye, 1 over three; FDP 5.3's lift stays out
 #: of the hold's reach on the three samples)
 HOLD_ABOVE, HOLD_BELOW = 1.5, 3.0
+
+#: the jaw's pitch or yaw (radians) from which a moving jaw's drift of the upper lid is taken back
+#: whole (``animate.eyelid_jaw_hold``, :func:`jaw_share`; jawOpen at full weight is ~0.4, jawLeft 0.1)
+JAW_RAMP = 0.05
 
 
 @dataclass(frozen=True)
@@ -214,7 +223,9 @@ class LidField:
     driven lids take back (:func:`held_share`): 1 between the margins, fading out :data:`HOLD_ABOVE`
     and :data:`HOLD_BELOW` reaches above and below them, without the taper along the lid, so the
     corners (the canthi, tied to the bone) are held as well, fading out beyond them over
-    :data:`HOLD_BEYOND` of ``half``; None: the shares' sum."""
+    :data:`HOLD_BEYOND` of ``half``; None: the shares' sum. ``up_hold (k,)``: the upper lid's part of
+    ``hold`` (above the upper margin and its share between the margins), what a moving jaw's drift is
+    taken back with (:func:`jaw_held_share`); None: none."""
 
     eye: Eye
     index: np.ndarray
@@ -222,6 +233,7 @@ class LidField:
     low_share: np.ndarray
     reach: float
     hold: np.ndarray | None = None
+    up_hold: np.ndarray | None = None
 
 
 def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5) -> LidField:
@@ -257,7 +269,8 @@ def lid_field(eye: Eye, rest: np.ndarray, reach: float = 0.5, depth: float = 0.5
     hold = np.clip(up_hold + low_hold, 0.0, 1.0) * across * behind
     up, low = up * s * behind / s_up, low * s * behind / s_low
     index = np.flatnonzero((up > 0.0) | (low > 0.0) | (hold > 0.0))
-    return LidField(eye, index, up[index], low[index], float(reach), hold[index])
+    up_hold = np.clip(up_hold, 0.0, 1.0) * across * behind
+    return LidField(eye, index, up[index], low[index], float(reach), hold[index], up_hold[index])
 
 
 def lid_moves(field: LidField, faps: np.ndarray, irisd: float) -> np.ndarray:
@@ -295,6 +308,33 @@ def held_share(field: LidField, moves: np.ndarray) -> np.ndarray:
     moves = np.atleast_2d(moves)
     hold = np.clip(field.up_share + field.low_share, 0.0, 1.0) if field.hold is None else field.hold
     return np.any(moves != 0.0, axis=1)[:, None] * hold
+
+
+def jaw_share(jaw) -> np.ndarray:
+    """``(F,)`` in [0, 1]: how far the jaw DOFs ``jaw (F, 3)`` (pitch, yaw radians; protrusion) are
+    from rest, 1 from :data:`JAW_RAMP` radians of pitch or yaw on (linear below it, so a take easing
+    the jaw open eases the hold in)."""
+    jaw = np.atleast_2d(np.asarray(jaw, dtype=np.float64))
+    return np.clip(np.abs(jaw[:, :2]).max(axis=1) / JAW_RAMP, 0.0, 1.0)
+
+
+def jaw_held_share(field: LidField, moves: np.ndarray, jaw, strength: float) -> np.ndarray:
+    """``(F, k)`` in [0, 1]: how much of the skin's drift the upper lid takes back in frames whose lids
+    do not move (``moves (F, 2)``, :func:`lid_moves`) while the jaw does (``jaw (F, 3)`` DOFs):
+    ``strength x`` :func:`jaw_share` ``x`` :attr:`LidField.up_hold`; 0 in frames whose lids move (they
+    hold the skin whole, :func:`held_share`) or with ``strength`` 0.
+
+    ``animate.eyelid_jaw_hold``: an opening jaw pulls the skin of the cheek down, and through the skin
+    between the cheek and the lid it drags the upper lid (ICT, whose lid margins are a free boundary:
+    the margin up to 0.37 openings, 3.7 mm, at full jawOpen, and a notch where the limit stopped its
+    fold). A real jaw leaves the upper lid where it is: nothing asks it to move. Frames without a jaw
+    (brows, cheeks) keep their drift as before.
+    """
+    moves = np.atleast_2d(moves)
+    if not strength or field.up_hold is None or jaw is None:
+        return np.zeros((len(moves), len(field.index)))
+    share = float(strength) * jaw_share(jaw) * ~np.any(moves != 0.0, axis=1)
+    return share[:, None] * field.up_hold[None, :]
 
 
 def lid_surface(eye: Eye, points: np.ndarray) -> np.ndarray:
@@ -374,7 +414,7 @@ MARGIN_FREE_TAPER = 1.0 / 3.0
 
 
 def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, irisd: float,
-              rest: np.ndarray) -> np.ndarray:
+              rest: np.ndarray, jaw=None, jaw_hold: float = 0.0) -> np.ndarray:
     """Frames ``(F, n, 3)`` with the lids moved by FAPs 19-22 of ``faps (F, 68)``.
 
     fields : one :class:`LidField` per eye (of the same ``rest (n, 3)``); irisd : one IRISD
@@ -382,14 +422,21 @@ def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, iris
     over the eyeball (module docstring), computed on its rest position and added to the frame.
     A driven lid first takes back the drift of the skin it holds (:func:`held_share`; the whole
     displacement from rest, module docstring), so its FDP ends exactly ``FAP x IRISD`` from its
-    rest place.
-    A new array; frames without lid FAPs are copied bit for bit. No guard (:class:`Eyelids`).
+    rest place. With ``jaw (F, 3)`` DOFs and ``jaw_hold`` > 0, the upper lid of an eye whose lids do
+    not move takes back that share of its drift where the jaw moves (:func:`jaw_held_share`).
+    A new array; frames without lid FAPs (nor, with ``jaw_hold``, a jaw) are copied bit for bit.
+    No guard (:class:`Eyelids`).
     """
     out = np.array(frames, copy=True)
     rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
     for field in fields:
         eye, idx = field.eye, field.index
         moves = lid_moves(field, faps, irisd)
+        jawed = jaw_held_share(field, moves, jaw, jaw_hold)            # (F, k): undriven lids only
+        if len(idx) and jawed.any():
+            f = np.flatnonzero(jawed.any(axis=1))
+            drift = out[np.ix_(f, idx)] - rest[idx]
+            out[np.ix_(f, idx)] -= (jawed[f][..., None] * drift).astype(out.dtype)
         live = np.flatnonzero(np.any(moves != 0.0, axis=1))
         if not len(idx) or not len(live):
             continue
@@ -425,12 +472,13 @@ class Eyelids:
     """
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
-                 depth: float = 0.5, fold_deg: float = 0.0):
+                 depth: float = 0.5, fold_deg: float = 0.0, jaw_hold: float = 0.0):
         from faceforge.animation.guards.orientation import OrientationGuard
         from faceforge.geometry.triangles import vertex_components
 
         self.rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
         self.irisd = float(irisd)
+        self.jaw_hold = float(jaw_hold)
         faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         piece = vertex_components(len(self.rest), faces)
         self.fields, self._lid_vertices = [], []
@@ -443,7 +491,8 @@ class Eyelids:
             self._lid_vertices.append(lids)
             keep = np.isin(piece[field.index], piece[lids])
             self.fields.append(replace(field, index=field.index[keep], up_share=field.up_share[keep],
-                                       low_share=field.low_share[keep], hold=field.hold[keep]))
+                                       low_share=field.low_share[keep], hold=field.hold[keep],
+                                       up_hold=field.up_hold[keep]))
         moving = np.zeros(len(self.rest), dtype=bool)
         for field in self.fields:
             moving[field.index] = True
@@ -468,15 +517,17 @@ class Eyelids:
         """The lid FAPs this head plays (those of the eyes it has)."""
         return tuple(sorted(f for field in self.fields for f in (field.eye.upper_fap, field.eye.lower_fap)))
 
-    def apply(self, frames: np.ndarray, faps: np.ndarray) -> np.ndarray:
+    def apply(self, frames: np.ndarray, faps: np.ndarray, jaw=None) -> np.ndarray:
         """Frames ``(F, n, 3)`` (head frame) with the lids moved by ``faps (F, 68)``: a new
-        array; frames where no lid moves are copied bit for bit."""
-        out = move_lids(frames, self.fields, faps, self.irisd, self.rest)
+        array; frames where no lid moves are copied bit for bit. ``jaw (F, 3)``: the frames' jaw
+        DOFs, for ``animate.eyelid_jaw_hold`` (:func:`jaw_held_share`; None: no jaw hold)."""
+        out = move_lids(frames, self.fields, faps, self.irisd, self.rest, jaw, self.jaw_hold)
         if self._guard is None:
             return out
         live = np.zeros(len(out), dtype=bool)
         for field in self.fields:
-            live |= np.any(lid_moves(field, faps, self.irisd) != 0.0, axis=1)
+            moves = lid_moves(field, faps, self.irisd)
+            live |= np.any(moves != 0.0, axis=1) | jaw_held_share(field, moves, jaw, self.jaw_hold).any(axis=1)
         for f in np.flatnonzero(live):
             frame = np.ascontiguousarray(out[f], dtype=np.float64)
             if self._fold is None:

@@ -244,7 +244,8 @@ class BoundHead:
 
     def eyelids(self, config):
         """The lids of this head's eyes (:class:`faceforge.animation.eyelids.Eyelids`) as the
-        config sets them (``animate.eyelids``, ``.eyelid_reach``, ``.eyelid_depth``); None when
+        config sets them (``animate.eyelids``, ``.eyelid_reach``, ``.eyelid_depth``, ``.eyelid_fold_deg``,
+        ``.eyelid_jaw_hold``); None when
         ``animate.eyelids`` is off."""
         from faceforge.animation.eyelids import Eyelids
 
@@ -252,7 +253,8 @@ class BoundHead:
             return None
         return Eyelids(self.rest, self.faces, self.landmarks, self.fapu.unit("IRISD"),
                        config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"),
-                       float(config.get("animate.eyelid_fold_deg") or 0.0))
+                       float(config.get("animate.eyelid_fold_deg") or 0.0),
+                       float(config.get("animate.eyelid_jaw_hold") or 0.0))
 
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""

@@ -60,7 +60,7 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
         def sink(start, frames, block=block):
             stop = start + len(frames)
             if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
-                frames = lids.apply(frames, block.faps[start:stop])
+                frames = lids.apply(frames, block.faps[start:stop], block.jaw[start:stop])
             if overlay is not None:
                 frames = overlay(frames, block.start + start)
             checker.add(frames)

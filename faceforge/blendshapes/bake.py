@@ -113,7 +113,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
                                  "mirror_of": spec.mirror_of or None}
             log(f"{spec.name}: not made: {why}")
             continue
-        frame, f68, gaze = _overlay(spec, frame, row, lids, eyes or {})
+        frame, f68, gaze = _overlay(spec, frame, row, lids, eyes or {}, jaw)
         row.update(made=True, approximation=spec.approximation or None, mirror_of=spec.mirror_of or None)
         report[spec.name] = row
         for k, v in zip(out, (spec.name, frame, c, jaw, f68, gaze)):
@@ -191,16 +191,19 @@ def _not_made(spec, space, probes, lids, eyes) -> str:
     return ""
 
 
-def _overlay(spec, frame, row, lids, eyes):
-    """The kinematic parts laid over a settled frame: the eyelid FAPs and the eye piece's turn.
+def _overlay(spec, frame, row, lids, eyes, jaw=None):
+    """The kinematic parts laid over a settled frame: the eyelid FAPs and the eye piece's turn, and
+    the lids' hold on a moving jaw's drift (``jaw (3,)`` the shape's DOFs, ``animate.eyelid_jaw_hold``).
     Returns (frame (n, 3), lid FAPs (68,), gaze (4,)); notes them in ``row``."""
     from faceforge.blendshapes.eyes import rotate_eye
 
     f68 = np.zeros(68)
     for f, v in spec.lids.items():
         f68[f - 1] = v
+    jawed = lids is not None and lids.jaw_hold > 0.0 and jaw is not None and np.any(np.asarray(jaw)[:2] != 0.0)
+    if spec.lids or jawed:
+        frame = lids.apply(frame[None], f68[None], None if jaw is None else np.asarray(jaw)[None])[0]
     if spec.lids:
-        frame = lids.apply(frame[None], f68[None])[0]
         row["lids"] = {str(f): v for f, v in spec.lids.items()}
     gaze = np.zeros(4)
     if spec.eye:

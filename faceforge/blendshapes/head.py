@@ -177,7 +177,7 @@ def _presets(head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_fap
     cc, jj = controls(mapping, faps, head)
     poses = simulate(cc, jj)
     if lids is not None:
-        poses = lids.apply(poses, faps)
+        poses = lids.apply(poses, faps, jj)
     for i, name in enumerate(table):
         names.append(name)
         made.append(True)

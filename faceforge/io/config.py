@@ -234,6 +234,7 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.eyelid_reach", Number(0.1, 10.0)),
     ("animate.eyelid_depth", Number(0.1, 10.0)),
     ("animate.eyelid_fold_deg", Number(0.0, 179.0)),       # degrees; 0 turns the lids' fold limit off
+    ("animate.eyelid_jaw_hold", Number(0.0, 1.0)),         # share of a moving jaw's drift the upper lids take back
     # sane upper bounds: a value past them is a typo, and 1e9 iterations hang, 1e9 s of
     # expression tried to allocate 186 GiB (issue 28)
     ("solver.iterations", Integer(1, 1000)),

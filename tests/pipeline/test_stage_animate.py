@@ -342,7 +342,11 @@ def test_the_warm_up_leaves_the_frames_of_a_cold_play(workdir, patched, tmp_path
                                          "animate_mapping": str(workdir / "mapping.yaml")})
     head = BoundHead(workdir / "fit", workdir / "bind", load_config(None, SETS))
     c, jaw, _, _ = track_controls(read_fap(tmp_path / "smile.fap"), load_fap_mapping(workdir / "mapping.yaml"), head)
-    cold = head.to_user(play(head.rig, c, jaw, 25.0)).astype(np.float32)
+    cold = play(head.rig, c, jaw, 25.0)
+    lids = head.eyelids(load_config(None, SETS))
+    if lids is not None:   # animate.eyelid_jaw_hold: the opening jaw's frames hold the upper lids
+        cold = lids.apply(cold, np.nan_to_num(read_fap(tmp_path / "smile.fap").values), jaw)
+    cold = head.to_user(cold).astype(np.float32)
     assert np.array_equal(load_npz(out / "animation.npz")["frames"], cold)
     assert c[:, 0].max() > 0.0 and jaw[:, 0].max() > 0.0
 

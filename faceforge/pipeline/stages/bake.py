@@ -99,11 +99,11 @@ BAKE = register_stage(Stage(
                  "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.commissure_fold_deg", "skin.fold_deg",
                  "bind.cheek_muscles", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.statics",
-                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.eyelid_fold_deg", "animate.jaw_glide",
+                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.eyelid_fold_deg", "animate.eyelid_jaw_hold", "animate.jaw_glide",
                  "animate.jaw_glide_slope", "animate.chin_path"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="9", run=run_bake,
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="10", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 

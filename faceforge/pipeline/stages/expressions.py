@@ -96,7 +96,7 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
             "unconverged")
     lids = head.eyelids(ctx.config)
     if lids is not None:
-        poses = lids.apply(poses, faps)
+        poses = lids.apply(poses, faps, jaw)
     report = {"mapping": mapping_path, "statics": statics, stem: {}}
     for i, name in enumerate(names):
         checks = check_animation(head.rest, poses[i:i + 1], head.faces,
@@ -160,11 +160,11 @@ _SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),
 
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),
-    version="7", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
+    version="8", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
 
 VISEMES_STAGE = register_stage(Stage(
     name="visemes", **_SHEET_STAGE, outputs=("visemes.png", "visemes.npz", "report.json"),
-    version="6", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
+    version="7", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
 
 
 def _sheet_command(stem: str, help_text: str):
