@@ -61,8 +61,8 @@ class SettleSettings:
         within ``tolerance`` of where it was two frames before while some vertex still moved more
         than that in the last frame: a vertex flipping between two states (a period-2 cycle of
         the fixed-point iteration), which ``stall`` waits out for its whole count of frames;
-        reported unconverged, the pose returned is the cycle's midpoint. 0: off (the sheets, the bake); calibration's probes use
-        ``animate.calibrate.cycle``
+        reported unconverged, the pose returned is the cycle's midpoint. 0: off (the sheets, the
+        bake); calibration's probes use ``animate.calibrate.cycle``
     """
 
     ramp: int = 10
