@@ -14,8 +14,9 @@ The rule. The eye frame: origin ``o`` the mean of the four eye corners 3.7, 3.11
 the face's left and up axes, scale ``s`` the outer corners' distance |3.7 - 3.12|. Each moved brow
 point (:data:`MOVED`) keeps the detector's side-to-side coordinate; its height above ``o`` becomes the
 canonical face's (:func:`canonical_height`, read off MediaPipe's canonical face model,
-points 336/107, 334/105, 300/70 over 263, 362, 133, 33); the point is then put on the skin
-from in front (along -forward). The outer brows (:data:`SIDEWAYS`) keep the detector's height
+points 336/107, 334/105, 300/70 over 263, 362, 133, 33); their side-to-side coordinate moves
+towards the midline by the detector's outward bias there (:data:`OUTWARD_BIAS`, measured on a grey
+render of the canonical face itself); the point is then put on the skin from in front (along -forward). The outer brows (:data:`SIDEWAYS`) keep the detector's height
 and take their side-to-side coordinate from the canonical face (:func:`canonical_lateral`). One set of proportions for every head: no constant comes
 from the heads it is measured on (the canonical face is the MediaPipe sample head, so that
 head's brows are not an independent check of it).
@@ -46,6 +47,14 @@ MOVED = ("4.1", "4.2", "4.3", "4.4")
 #: 0.644 the mask; canonical 0.643; detector 0.623-0.645), and on that steep surface the shortfall
 #: is mostly depth: the MakeHuman heads' 4.5 sat 1.0-1.6 % of the diagonal in front of the hand point
 SIDEWAYS = ("4.5", "4.6")
+#: the detector's outward bias at the inner and middle brows (away from the midline, in eye spans):
+#: on a grey render of MediaPipe's own canonical face (the MediaPipe sample head, whose vertices are
+#: the model's points) the consensus put them this much wider than the model's brow vertices, measured
+#: in the model's own eye frame, mean of the left and right point (4.1/4.2 0.012 / 0.025, 4.3/4.4
+#: 0.043 / 0.049; ``tools/brow_bias.py`` measures it again). The moved brows keep the detector's side
+#: position less this bias. On the whole heads the detector's middle brow sat 0.03-0.06 of the eye span
+#: outside the hand points too (MakeHuman, its young female identity, ICT)
+OUTWARD_BIAS = {"4.1": 0.019, "4.2": 0.019, "4.3": 0.046, "4.4": 0.046}
 
 
 def eye_frame(pos: dict, left: np.ndarray) -> tuple[np.ndarray, float]:
@@ -97,7 +106,8 @@ def brows(caster, pos: dict, frame, diagonal: float, moved=MOVED, sideways=SIDEW
     ids = [k for k in moved if k in pos] + [k for k in sideways if k in pos]
     if not ids or s <= 0:
         return {}
-    targets = np.array([pos[k] + up * (o @ up + heights[k] * s - pos[k] @ up) if k in moved else
+    inward = {k: -np.sign(lateral[k]) * OUTWARD_BIAS.get(k, 0.0) * s for k in ids}
+    targets = np.array([pos[k] + up * (o @ up + heights[k] * s - pos[k] @ up) + left * inward[k] if k in moved else
                         pos[k] + left * (o @ left + lateral[k] * s - pos[k] @ left) for k in ids])
     hits = _onto_skin(caster, targets, fwd, diagonal)
     return {k: p for k, p in zip(ids, hits) if np.isfinite(p).all()}

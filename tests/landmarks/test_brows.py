@@ -6,7 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from faceforge.landmarks.brows import BROW_POINTS, EYE_CORNERS, brows, canonical_height, canonical_lateral
+from faceforge.landmarks.brows import (BROW_POINTS, EYE_CORNERS, OUTWARD_BIAS, brows, canonical_height,
+                                      canonical_lateral)
 
 MASK = Path(__file__).resolve().parents[2] / "samples/mediapipe/face_model_with_iris.obj"
 FRAME = (np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]))
@@ -30,11 +31,13 @@ def test_canonical_heights_are_above_the_eyes_and_mirror_pairs_agree():
 
 def test_lowered_brows_go_back_to_the_canonical_brow_points():
     # the canonical face's own brows pulled down by 15 % of the eye span (what the detector does
-    # on a grey render) come back onto the model's brow vertices: only the height is changed
+    # on a grey render) and out from the midline by the detector's outward bias come back onto the
+    # model's brow vertices
     v, caster, diag = _mask()
     pos = {k: v[i] for k, i in {**EYE_CORNERS, **BROW_POINTS}.items()}
     span = abs(pos["3.7"][0] - pos["3.12"][0])
-    low = {k: (p - [0.0, 0.15 * span, 0.0] if k in BROW_POINTS else p) for k, p in pos.items()}
+    low = {k: (p + [np.sign(p[0]) * OUTWARD_BIAS.get(k, 0.0) * span, -0.15 * span, 0.0] if k in BROW_POINTS else p)
+           for k, p in pos.items()}
     out = brows(caster, low, FRAME, diag, moved=tuple(BROW_POINTS))
     assert set(out) == set(BROW_POINTS)
     for k, i in BROW_POINTS.items():
