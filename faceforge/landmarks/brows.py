@@ -51,7 +51,7 @@ SIDEWAYS = ("4.5", "4.6")
 #: on a grey render of MediaPipe's own canonical face (the MediaPipe sample head, whose vertices are
 #: the model's points) the consensus put them this much wider than the model's brow vertices, measured
 #: in the model's own eye frame, mean of the left and right point (4.1/4.2 0.012 / 0.025, 4.3/4.4
-#: 0.043 / 0.049; ``tools/brow_bias.py`` measures it again). The moved brows keep the detector's side
+#: 0.043 / 0.049; ``tools/detector_bias.py`` measures it again). The moved brows keep the detector's side
 #: position less this bias. On the whole heads the detector's middle brow sat 0.03-0.06 of the eye span
 #: outside the hand points too (MakeHuman, its young female identity, ICT)
 OUTWARD_BIAS = {"4.1": 0.019, "4.2": 0.019, "4.3": 0.046, "4.4": 0.046}

@@ -269,6 +269,9 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
     if all(k in moved for k in EYE_CORNERS):
         place("eyebrow height, the outer brows' side position (MediaPipe's canonical face over the eye corners)",
               brows(caster, pos(), frame, diagonal))
+        from faceforge.landmarks.nose import nose_base
+        place("the nose's lower edge (the detector's point less its bias on MediaPipe's canonical face)",
+              nose_base(caster, pos(), frame, diagonal))
     from faceforge.geometry.triangles import vertex_normals
     from faceforge.landmarks.lips import inner_corners, inner_lips
     normals = vertex_normals(v, f) if normals is None else normals

@@ -13,6 +13,9 @@ normal faces outwards (toward the point's side) at least :data:`FACING`. The mos
 them is the wing's edge. A mesh too coarse to draw the wing is left to the detector: the median
 edge near the point must be under :data:`RESOLUTION` of the detected alae's distance. The
 478-vertex MediaPipe mask fails this at 0.24; MakeHuman passes at 0.11, ICT at 0.06.
+
+The nose's lower edge points 9.4/9.5 (:func:`nose_base`) keep the detector's point less the
+detector's bias there on its own canonical face (:data:`NOSE_BASE_BIAS`).
 """
 
 from __future__ import annotations
@@ -25,6 +28,13 @@ SLAB = 0.005
 FACING = 0.85
 #: the median edge near the point must be shorter than this fraction of the alae's distance
 RESOLUTION = 1.0 / 6.0
+#: the detector's bias at the nose's lower edge 9.4/9.5 (MediaPipe 327/98), (outward from the
+#: midline, up) in eye spans (|3.7 - 3.12| across): on a grey render of MediaPipe's own canonical
+#: face (the MediaPipe sample head) the consensus put them this far from the model's vertices, the
+#: mean of the left and right point (outward 0.018 / 0.021, up 0.006 / 0.010; ``tools/detector_bias.py``).
+#: The whole heads' detected points sat 0.023-0.033 outward and 0.007-0.022 up of their hand points
+#: (MakeHuman, its young female identity, ICT)
+NOSE_BASE_BIAS = {"9.4": (0.0195, 0.008), "9.5": (0.0195, 0.008)}
 
 
 def alae(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, pos: dict, frame,
@@ -57,3 +67,24 @@ def alae(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, pos: dict
             idx = np.flatnonzero(sel)
             out[k] = int(idx[np.argmax(lateral[idx])])
     return out
+
+
+def nose_base(caster, pos: dict, frame, diagonal: float) -> dict:
+    """{"9.4" / "9.5": (3,)}: the detector's points less :data:`NOSE_BASE_BIAS` (eye spans from the
+    outer eye corners 3.7/3.12 in ``pos``), put on the skin from in front by
+    :func:`faceforge.landmarks.rules._onto_skin` (``caster``: a RayCaster or the frontal render);
+    a point whose ray misses the mesh is left out, and {} without the eye corners."""
+    from faceforge.landmarks.rules import _onto_skin
+
+    left, up, fwd = (np.asarray(a, dtype=np.float64) for a in frame)
+    if not all(k in pos for k in ("3.7", "3.12")):
+        return {}
+    span = float(abs((pos["3.7"] - pos["3.12"]) @ left))
+    mid = (pos["3.7"] + pos["3.12"]) / 2
+    ids = [k for k in NOSE_BASE_BIAS if k in pos]
+    if not ids or span <= 0:
+        return {}
+    targets = np.array([pos[k] - np.sign((pos[k] - mid) @ left) * NOSE_BASE_BIAS[k][0] * span * left
+                        - NOSE_BASE_BIAS[k][1] * span * up for k in ids])
+    hits = _onto_skin(caster, targets, fwd, diagonal)
+    return {k: p for k, p in zip(ids, hits) if np.isfinite(p).all()}

@@ -46,3 +46,25 @@ def test_a_mesh_too_coarse_to_draw_the_wing_is_left_to_the_detector():
     v, f, n, hand, diag = _head("samples/mediapipe/face_model_with_iris.obj")    # 478 vertices
     assert alae(v, f, n, {k: hand[k] for k in ("9.1", "9.2")}, FRAME, diag) == {}
     assert alae(v, f, n, {"9.1": hand["9.1"]}, FRAME, diag) == {}
+
+
+def test_nose_base_less_the_detector_bias_goes_back_to_the_canonical_vertices():
+    # MediaPipe's canonical face (the mask) with its nose-base points 9.4/9.5 moved as the detector
+    # moves them on a grey render of it (outwards and up by NOSE_BASE_BIAS) comes back onto the
+    # model's vertices; a missing eye corner places nothing
+    from faceforge.geometry.rays import RayCaster
+    from faceforge.landmarks.detect import fdp_table
+    from faceforge.landmarks.nose import NOSE_BASE_BIAS, nose_base
+
+    v, f, _, hand, diag = _head("samples/mediapipe/face_model_with_iris.obj")
+    table = fdp_table()
+    pos = {k: v[table[k]] for k in ("3.7", "3.12", "9.4", "9.5")}
+    span = abs(pos["3.7"][0] - pos["3.12"][0])
+    moved = dict(pos, **{k: pos[k] + np.array([np.sign(pos[k][0]) * NOSE_BASE_BIAS[k][0] * span,
+                                               NOSE_BASE_BIAS[k][1] * span, 0.0]) for k in ("9.4", "9.5")})
+    out = nose_base(RayCaster(v, f), moved, FRAME, diag)
+    assert set(out) == {"9.4", "9.5"}
+    for k in out:
+        assert np.linalg.norm(out[k] - pos[k]) < 1e-3 * diag, k
+        assert np.linalg.norm(moved[k] - pos[k]) > 0.005 * diag
+    assert nose_base(RayCaster(v, f), {k: p for k, p in moved.items() if k != "3.7"}, FRAME, diag) == {}
