@@ -269,6 +269,8 @@ def _apply_rules(det: Detection, v, f, plane, diagonal, front=None, normals=None
     if all(k in moved for k in EYE_CORNERS):
         place("eyebrow height, the outer brows' side position (MediaPipe's canonical face over the eye corners)",
               brows(caster, pos(), frame, diagonal))
+        # the nose base under the same condition: its bias is in eye spans, and on the mask (featureless
+        # eyes) the bias was measured on that very mesh, so the correction would only reproduce it
         from faceforge.landmarks.nose import nose_base
         place("the nose's lower edge (the detector's point less its bias on MediaPipe's canonical face)",
               nose_base(caster, pos(), frame, diagonal))
