@@ -1,6 +1,7 @@
 """A head with eyeballs and teeth in its mesh (faceforge.skin.parts, the rig's parts step): through
 fit, bind and animate the eyeballs and the upper teeth stay on the cranium and the lower teeth
-ride the jaw, rigidly, while the lids close and the jaw opens."""
+ride the jaw, rigidly, while the lids close and the jaw opens; the left eyeball turns with its
+yaw FAP (23)."""
 
 from __future__ import annotations
 
@@ -59,24 +60,31 @@ def test_eyeballs_and_teeth_ride_their_bones_rigidly(tmp_path):
     assert r.exit_code == 0, r.stderr
     assert "rigid pieces (eyeballs, teeth): 332 vertices ride the cranium, 8 the mandible" in r.stderr
     bits = ["0"] * 68
-    for fap in (3, 19, 20):                                # open_jaw, close_t_l/r_eyelid
+    for fap in (3, 19, 20, 23):                            # open_jaw, close_t_l/r_eyelid, yaw_l_eyeball
         bits[fap - 1] = "1"
     fap = tmp_path / "jaw_blink.fap"
-    fap.write_text("2.1 jaw 25 6\n" + "".join(f"{' '.join(bits)}\n{i} {i * 200} {i * 200} {i * 200}\n"
+    fap.write_text("2.1 jaw 25 6\n" + "".join(f"{' '.join(bits)}\n{i} {i * 200} {i * 200} {i * 200} {i * 8000}\n"
                                               for i in range(6)))
     r = cli_run("-w", w, "--set", "animate.calibrate.enabled=false", "animate", "--fap", fap,
                 "-o", tmp_path / "out.pc2")
     assert r.exit_code == 0, r.stderr
+    assert "eyeballs (FAPs 23-26) on 2 eyeball pieces" in r.stderr
     from faceforge.io.export_cache import read_pc2
 
     frames = np.asarray(read_pc2(tmp_path / "out.pc2")[0], dtype=float)
     rest, last = frames[0], frames[-1]
-    for name in ("eye_l", "eye_r", "upper_teeth"):         # the head does not turn: on the cranium, still
+    for name in ("eye_r", "upper_teeth"):                  # the head does not turn: on the cranium, still
         assert np.abs(frames[:, ids[name]] - rest[ids[name]]).max() < 1e-5, name
     teeth = ids["lower_teeth"]
     a, b = rest[teeth], last[teeth]
     pairs = np.linalg.norm(a[:, None] - a[None], axis=2), np.linalg.norm(b[:, None] - b[None], axis=2)
     assert np.abs(pairs[0] - pairs[1]).max() < 1e-4        # rigid (float32 frames)
     assert (b - a)[:, 1].mean() < -0.5                      # down with the jaw (cm)
+    eye = ids["eye_l"]                                     # turned 0.4 rad to the left, rigidly
+    a, b = rest[eye], last[eye]
+    pairs = np.linalg.norm(a[:, None] - a[None], axis=2), np.linalg.norm(b[:, None] - b[None], axis=2)
+    assert np.abs(pairs[0] - pairs[1]).max() < 1e-4
+    front = np.argmax(a[:, 2])                             # its front moves to the subject's left (+X)
+    assert b[front, 0] - a[front, 0] > 0.2
     # the skin did move: the lids closed over the (still) eyeballs
     assert np.abs(last[:468] - rest[:468]).max() > 0.3
