@@ -465,15 +465,20 @@ class Eyelids:
     reach, depth : see :func:`lid_field`
     fold_deg : ``animate.eyelid_fold_deg``: the skin the lids move, bent less than this (and
         :data:`FOLD_FLAT_DEG`) at rest, is kept within this dihedral (degrees; 0: off)
+    rigid : (n,) bool or None: vertices of pieces that ride a bone (eyeballs, teeth:
+        :func:`faceforge.skin.parts.rigid_parts`); the lids never move them, and a lid FDP never
+        names one of them as its lid
 
     Attributes: ``inv_mass (n,)``: the inverse masses the fold limit and (with it) the guard move
     the skin with, 0 on the margins and the lid FDPs (:func:`margin_inv_mass`); all 1 with the
-    limit off (the margins are then not looked for).
+    limit off (the margins are then not looked for). ``lashes``: (lash vertices, lid vertices) of
+    :func:`faceforge.animation.lashes.lash_carriers`: each lash vertex takes its lid vertex's move.
     """
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
-                 depth: float = 0.5, fold_deg: float = 0.0, jaw_hold: float = 0.0):
+                 depth: float = 0.5, fold_deg: float = 0.0, jaw_hold: float = 0.0, rigid=None):
         from faceforge.animation.guards.orientation import OrientationGuard
+        from faceforge.animation.lashes import lash_carriers
         from faceforge.geometry.triangles import vertex_components
 
         self.rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
@@ -481,18 +486,20 @@ class Eyelids:
         self.jaw_hold = float(jaw_hold)
         faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
         piece = vertex_components(len(self.rest), faces)
+        rigid = np.zeros(len(self.rest), bool) if rigid is None else np.asarray(rigid, bool).reshape(-1)
         self.fields, self._lid_vertices = [], []
         for eye in find_eyes(landmarks):
             field = lid_field(eye, self.rest, reach, depth)
             # only the skin the lids belong to: an eyeball or a lash in the same mesh stays put
             fdps = next(e[:2] for e in EYES if e[4] == eye.upper_fap)
-            lids = [int(np.argmin(np.linalg.norm(self.rest - np.asarray(landmarks[f], dtype=np.float64),
-                                                 axis=1))) for f in fdps]
+            lids = [int(np.argmin(np.linalg.norm(self.rest - np.asarray(landmarks[f], dtype=np.float64), axis=1)
+                                  + np.where(rigid, np.inf, 0.0))) for f in fdps]
             self._lid_vertices.append(lids)
-            keep = np.isin(piece[field.index], piece[lids])
+            keep = np.isin(piece[field.index], piece[lids]) & ~rigid[field.index]
             self.fields.append(replace(field, index=field.index[keep], up_share=field.up_share[keep],
                                        low_share=field.low_share[keep], hold=field.hold[keep],
                                        up_hold=field.up_hold[keep]))
+        self.lashes = lash_carriers(self.rest, piece, rigid, self.fields)
         moving = np.zeros(len(self.rest), dtype=bool)
         for field in self.fields:
             moving[field.index] = True
@@ -523,7 +530,7 @@ class Eyelids:
         DOFs, for ``animate.eyelid_jaw_hold`` (:func:`jaw_held_share`; None: no jaw hold)."""
         out = move_lids(frames, self.fields, faps, self.irisd, self.rest, jaw, self.jaw_hold)
         if self._guard is None:
-            return out
+            return self._carry_lashes(frames, out)
         live = np.zeros(len(out), dtype=bool)
         for field in self.fields:
             moves = lid_moves(field, faps, self.irisd)
@@ -537,6 +544,13 @@ class Eyelids:
                     self._fold(frame, sweeps=1)
                     self._guard.apply(frame)
             out[f] = frame
+        return self._carry_lashes(frames, out)
+
+    def _carry_lashes(self, frames, out):
+        """``out`` with each lash vertex moved as its lid vertex was moved from ``frames`` (in place)."""
+        lash, lid = self.lashes
+        if len(lash):
+            out[:, lash] += out[:, lid] - np.asarray(frames)[:, lid]
         return out
 
 

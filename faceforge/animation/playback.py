@@ -8,8 +8,9 @@ drives the shallower ones and never the reverse):
 3. **skin**: the anchor particles follow their surface points on the deformed muscles
    and bones, then the skin's PBD constraints are projected (``solver.substeps`` x
    ``solver.iterations``);
-4. the **influence map** weights the skin displacement: ``rest + w (sim - rest)``, then the
-   rig's optional ``finish`` pass corrects the weighted frame in place.
+4. the **influence map** weights the skin displacement: ``rest + w (sim - rest)``; the rig's
+   optional ``parts`` step puts the pieces that ride a bone (eyeballs, teeth) where it is, and
+   its optional ``finish`` pass corrects the weighted frame in place.
 
 The three layer steps are callables of a :class:`Rig` so the loop is independent of
 how the layers are built (and testable with stand-ins); :func:`play` times each of
@@ -43,6 +44,9 @@ class Rig:
         e.g. :meth:`faceforge.animation.guards.orientation.OrientationGuard.apply`: the influence map
         blends rest and simulation with weights that vary from vertex to vertex, which can
         turn over a triangle the simulation kept upright)
+    parts : callable (n, 3) float64 -> None, applied in place to each weighted frame before
+        ``finish`` (optional; e.g. :class:`faceforge.animation.rig.RigidParts`: the eyeballs and
+        teeth of the mesh put rigidly on their bone)
     """
 
     skull: Callable
@@ -52,6 +56,7 @@ class Rig:
     influence: np.ndarray | None = None
     reset: Callable | None = None
     finish: Callable | None = None
+    parts: Callable | None = None
 
 
 @dataclass
@@ -136,6 +141,8 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
         np.subtract(skin, rest, out=frame)
         np.multiply(w3, frame, out=frame)
         np.add(rest, frame, out=frame)
+        if rig.parts is not None:
+            rig.parts(frame)
         if rig.finish is not None:
             rig.finish(out[j])
         if sink is not None and (j == size - 1 or i == len(jaw) - 1):

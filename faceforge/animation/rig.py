@@ -40,6 +40,28 @@ class JawDrive:
         self.system.set_jaw(self.transform)  # returns at once when the mandible is already there
 
 
+class RigidParts:
+    """The rig's ``parts`` step: the mesh's pieces that ride a bone (bind.npz ``parts``,
+    :func:`faceforge.skin.parts.rigid_parts`) put rigidly where it is, in place on a weighted
+    frame (n, 3): those on the cranium at rest (head frame), those on the mandible by the jaw's
+    last transform (:attr:`JawDrive.transform`; at rest before the first frame)."""
+
+    def __init__(self, rest, parts, jaw: JawDrive):
+        from faceforge.skin.parts import ON_CRANIUM, ON_MANDIBLE
+
+        parts = np.asarray(parts)
+        self.cranium = np.flatnonzero(parts == ON_CRANIUM)
+        self.mandible = np.flatnonzero(parts == ON_MANDIBLE)
+        self.rest_cranium = np.asarray(rest, dtype=float)[self.cranium]
+        self.rest_mandible = np.asarray(rest, dtype=float)[self.mandible]
+        self.jaw = jaw
+
+    def __call__(self, frame):
+        frame[self.cranium] = self.rest_cranium
+        t = self.jaw.transform
+        frame[self.mandible] = self.rest_mandible if t is None else self.rest_mandible @ t[:3, :3].T + t[:3, 3]
+
+
 class MuscleDrive:
     """The rig's muscle step: contractions (m,) in the system's ``controls`` order, passed on as
     they are (each layer reads its muscles' columns)."""
@@ -73,6 +95,8 @@ class BoundHead:
     orientation : faceforge.animation.guards.orientation.OrientationGuard, or None when
         ``animate.orientation_guard.rounds`` is 0; after each skin step it alternates with
         the skull guard, and it is the rig's ``finish`` on each weighted frame
+    parts : (n,) int8, the pieces that ride a bone rigidly (eyeballs, teeth; bind.npz, 0 = skin),
+        put on it by the rig's ``parts`` step (:class:`RigidParts`)
     symmetric : bool, True on a rig symmetric by construction (fit.npz's mirror plane, every
         skin vertex with an exact mirror partner; set where the skin is loaded): calibration
         then probes one side of each left/right pair (``animation.calibrate_mirror``)
@@ -109,9 +133,13 @@ class BoundHead:
             system.reset()
             self.skin.reset()
 
+        #: (n,) int8, the pieces that ride a bone (:func:`faceforge.skin.parts.rigid_parts`; all 0
+        #: on a head bound before they were told apart)
+        self.parts = np.asarray(bind.get("parts", np.zeros(len(self.rest), np.int8)))
         self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
-                       finish=None if self.orientation is None else self.orientation.apply)
+                       finish=None if self.orientation is None else self.orientation.apply,
+                       parts=RigidParts(self.rest, self.parts, jaw) if self.parts.any() else None)
 
     def _glide_ratio(self, config) -> float:
         """``animate.jaw_glide``, or with ``animate.chin_path`` > 0 the fraction at which this
@@ -254,7 +282,7 @@ class BoundHead:
         return Eyelids(self.rest, self.faces, self.landmarks, self.fapu.unit("IRISD"),
                        config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"),
                        float(config.get("animate.eyelid_fold_deg") or 0.0),
-                       float(config.get("animate.eyelid_jaw_hold") or 0.0))
+                       float(config.get("animate.eyelid_jaw_hold") or 0.0), rigid=self.parts != 0)
 
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""

@@ -3,7 +3,7 @@
 A take's controls come as blocks (:class:`~faceforge.animation.control_stream.ControlBlocks`);
 each block is simulated (:func:`~faceforge.animation.playback.play`, the paper's real-time
 iterations, or :func:`~faceforge.animation.statics.play_converged` for offline quality), and its
-frames pass, a chunk at a time, through the kinematic lids, the physical checks, the head turn
+frames pass, a chunk at a time, through the kinematic lids and eyeballs, the physical checks, the head turn
 and the user's vertex order into the writer. Nothing here holds more than a block: a take's
 memory does not grow with its length.
 """
@@ -15,12 +15,13 @@ import time
 import numpy as np
 
 from faceforge.animation.check_stream import StreamChecker
+from faceforge.animation.eyeballs import apply_gaze, gaze_from_faps
 from faceforge.animation.head_motion import turn_head
 from faceforge.animation.playback import play, warm_up
 
 
 def play_take(head, source, writer, *, weights=None, lids=None, timings=None, offline=None,
-              bar=None, log=print, overlay=None) -> StreamChecker:
+              bar=None, log=print, overlay=None, eyes=None) -> StreamChecker:
     """Simulate every block of ``source`` on ``head`` and write its frames.
 
     head
@@ -43,11 +44,14 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
     overlay
         ``overlay(frames (k, n, 3), first) -> frames``, kinematic pieces moved over the skin after
         the lids (``first``: the index of the first frame in the take), or None.
+    eyes
+        the mesh's eyeball pieces (:func:`faceforge.animation.eyeballs.eye_pieces`), turned by the
+        block's eyeball FAPs 23-26 after the lids, or None.
 
     Returns the :class:`StreamChecker` that saw every frame (in the skull's frame, lids
     included, before the head turn). A diverging simulation raises ``FloatingPointError``.
     """
-    checker = StreamChecker(head.rest, head.faces, source.n_frames)
+    checker = StreamChecker(head.rest, head.faces, source.n_frames, rigid=getattr(head, "parts", None))
 
     def per_frame(frames, **_):   # one progress bar over the blocks
         for i in frames:
@@ -61,6 +65,10 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
             stop = start + len(frames)
             if lids is not None:   # kinematic, over the simulated skin; before the checks, which see them
                 frames = lids.apply(frames, block.faps[start:stop], block.jaw[start:stop])
+            if eyes:
+                gaze = gaze_from_faps(block.faps[start:stop])
+                if gaze.any():
+                    frames = apply_gaze(frames, gaze, eyes)
             if overlay is not None:
                 frames = overlay(frames, block.start + start)
             checker.add(frames)

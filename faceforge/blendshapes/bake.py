@@ -52,7 +52,7 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
         attribute: the same continuing from the last pose, used for a shape's refinements); observe_probes : list of Probe ->
         (frames -> (k, len) FAPU) (:func:`faceforge.blendshapes.rigsolve.probe_observer` bound to rest);
     lids : faceforge.animation.eyelids.Eyelids or None (then lid-only shapes are not made);
-    eyes : {side: (vertex ids, centre)} (:func:`faceforge.blendshapes.eyes.eye_pieces`) or None;
+    eyes : {side: (vertex ids, centre)} (:func:`faceforge.animation.eyeballs.eye_pieces`) or None;
     twins : (m,) mirror-twin column of each contraction column
         (:func:`faceforge.blendshapes.symmetric.mirror_columns`) on a symmetric rig, else None: then
         a shape that mirrors another is settled at its partner's mirrored pose instead of solved,
@@ -195,7 +195,7 @@ def _overlay(spec, frame, row, lids, eyes, jaw=None):
     """The kinematic parts laid over a settled frame: the eyelid FAPs and the eye piece's turn, and
     the lids' hold on a moving jaw's drift (``jaw (3,)`` the shape's DOFs, ``animate.eyelid_jaw_hold``).
     Returns (frame (n, 3), lid FAPs (68,), gaze (4,)); notes them in ``row``."""
-    from faceforge.blendshapes.eyes import rotate_eye
+    from faceforge.animation.eyeballs import rotate_eye
 
     f68 = np.zeros(68)
     for f, v in spec.lids.items():
@@ -349,21 +349,6 @@ def _reach(target: np.ndarray, got: np.ndarray) -> dict:
     verdict = ("on target" if err <= 0.1 else f"weak: {s:.0%} of its target, the right form" if form <= 0.15
                else f"approximation: its FAP motion differs in form ({form:.0%} off after scaling)")
     return {"reach": round(s, 3), "form_error": round(form, 3), "verdict": verdict}
-
-
-def apply_gaze(frames: np.ndarray, gaze: np.ndarray, eyes: dict) -> np.ndarray:
-    """Frames (F, n, 3) with each eye piece turned by ``gaze (F, 4)`` (yaw L, pitch L, yaw R,
-    pitch R; radians) about its centre (:func:`faceforge.blendshapes.eyes.eye_pieces`); a copy."""
-    from faceforge.blendshapes.eyes import rotate_eye
-
-    out = np.array(frames, dtype=float, copy=True)
-    for side, cols in (("L", (0, 1)), ("R", (2, 3))):
-        if side not in eyes:
-            continue
-        ids, centre = eyes[side]
-        for f in np.flatnonzero(np.any(gaze[:, cols] != 0.0, axis=1)):
-            out[f] = rotate_eye(out[f], ids, centre, gaze[f, cols[0]], gaze[f, cols[1]])
-    return out
 
 
 def mirror_agreement(user_rest: np.ndarray, deltas: dict, pairs) -> dict:

@@ -19,7 +19,7 @@ from faceforge.animation.checks import check_animation, folded_edges, inside_bon
 from faceforge.animation.controls import controls
 from faceforge.blendshapes.arkit import ARKIT_NAMES, mirror_name
 from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
-from faceforge.blendshapes.eyes import eye_pieces
+from faceforge.animation.eyeballs import eye_pieces
 from faceforge.blendshapes.rigsolve import probe_observer, settler
 from faceforge.blendshapes.solve import control_space
 

@@ -78,8 +78,7 @@ def _eye_turns(head, weights: np.ndarray, gaze: np.ndarray):
     shape), or None when no shape turns the eyes."""
     if not np.any(gaze):
         return None
-    from faceforge.blendshapes.bake import apply_gaze
-    from faceforge.blendshapes.eyes import eye_pieces
+    from faceforge.animation.eyeballs import apply_gaze, eye_pieces
 
     eyes = eye_pieces(head.rest, head.faces, head.landmarks)
     return lambda frames, first: apply_gaze(frames, weights[first:first + len(frames)] @ gaze, eyes)

@@ -40,6 +40,9 @@ class BoundSkin:
         The face-front region (in front of the ears, below the hairline).
     report : dict
         The bind report (JSON-ready).
+    parts : (n,) int8 or None
+        The pieces that ride a bone rigidly (:func:`faceforge.skin.parts.rigid_parts`: eyeballs,
+        teeth; 0 = skin), None without bones.
     """
 
     cut: object
@@ -50,6 +53,7 @@ class BoundSkin:
     scale: float
     front: np.ndarray
     report: dict
+    parts: np.ndarray | None = None
 
     def as_arrays(self) -> dict:
         """Flat arrays for ``bind.npz`` (no pickle). Anchor arrays are prefixed ``anchor_``."""
@@ -61,6 +65,8 @@ class BoundSkin:
             "influence": self.weights, "geodesic": self.geodesic,
             "influence_scale": np.float64(self.scale), "front": self.front,
         }
+        if self.parts is not None:
+            out["parts"] = self.parts
         for key, value in self.binding.as_arrays().items():
             out[key if key in ("status", "normals", "body_names") else f"anchor_{key}"] = value
         return out
@@ -239,9 +245,18 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                       "on_brow_muscles": int((np.isin(first_of, np.flatnonzero(eye))
                                               & np.isin(binding.body[first], eye_ids)).sum())}
     report["mouth"] = cut.report()
+    parts = None
+    if cranium is not None and mandible is not None and pts:
+        from faceforge.skin.parts import part_counts, rigid_parts
+
+        marks = _nearest_vertex(cut.vertices, np.array(list(pts.values())))
+        mouth = 0.5 * (pts["2.2"] + pts["2.3"]) @ np.asarray(up, FLOAT) / np.linalg.norm(up) \
+            if "2.2" in pts and "2.3" in pts else None
+        parts = rigid_parts(cut.vertices, cut.faces, marks, cranium, mandible, mouth, up)
+        report["rigid_parts"] = part_counts(parts)
     report["influence"] = {
         "sources": int(len(sources)), "normalisation": float(scale),
         "normalised_by": "geodesic distance to FDP 11.6" if back is not None else "largest distance",
         "mean_weight": float(weights.mean()) if len(weights) else 0.0,
     }
-    return BoundSkin(cut, binding, sides, weights, dist, float(scale), front, report)
+    return BoundSkin(cut, binding, sides, weights, dist, float(scale), front, report, parts)

@@ -258,3 +258,23 @@ def test_the_lining_behind_a_closing_margin_rides_forward_with_it():
     assert np.all(up == 0.0)                              # a lid opening wider never moves forward or back
     behind_skin = over_eyeball(y0, np.array([-20.0] * 4), y1, np.array([-15.0] * 4))[0]
     assert np.all(behind_skin == 0.0)                     # a surface behind the axis: no push
+
+
+def test_a_lash_card_rides_its_closing_lid_and_an_iris_disc_does_not():
+    """Two small pieces beside MakeHuman's left upper lid: a card at its margin (the lashes) takes
+    its lid vertex's move as the lid closes; a disc in the middle of the opening (an iris) stays."""
+    v, f, lm, _ = _load(HEADS["makehuman"])
+    eye = find_eyes(lm)[0]
+    top = eye.centre + eye.upper * eye.axes[1] + 0.05 * eye.half * eye.axes[2]
+    card = trimesh.creation.box(extents=[eye.half, 0.05 * eye.half, 0.02 * eye.half])
+    card.apply_translation(top + 0.04 * eye.half * eye.axes[1])
+    disc = trimesh.creation.cylinder(radius=0.2 * eye.half, height=0.01 * eye.half, sections=8)
+    disc.apply_translation(eye.centre + (eye.lid_depth + 0.01 * eye.half) * eye.axes[2])
+    n, k = len(v), len(card.vertices)
+    verts = np.concatenate([v, card.vertices, disc.vertices])
+    faces = np.concatenate([f, card.faces + n, disc.faces + n + k])
+    lids = Eyelids(verts, faces, lm, irisd=eye.gap / 1024.0)
+    assert set(lids.lashes[0].tolist()) == set(range(n, n + k))
+    out = lids.apply(verts[None], faps([{eye.upper_fap: 600}]))[0]   # the upper lid closes 600 IRISD
+    assert vertical(eye, out[n:n + k] - verts[n:n + k]).mean() < -0.2 * eye.gap   # down with the lid
+    assert np.array_equal(out[n + k:], verts[n + k:])

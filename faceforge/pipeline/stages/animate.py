@@ -39,6 +39,7 @@ def run_animate(ctx):
     import numpy as np
 
     from faceforge.animation.control_stream import ControlBlocks
+    from faceforge.animation.eyeballs import GAZE_FAPS, eye_pieces
     from faceforge.animation.head_motion import HEAD_FAPS
     from faceforge.animation.playback import Timings
     from faceforge.animation.rig import BoundHead
@@ -67,6 +68,12 @@ def run_animate(ctx):
         if lids.faps and np.any(summary.moving[[f - 1 for f in lids.faps]]):
             ctx.log(f"eyelids (FAPs {', '.join(map(str, lids.faps))}) on {len(lids.fields)} eye"
                     f"{'s' if len(lids.fields) > 1 else ''}")
+    eyes = None
+    if np.any(summary.moving[[f - 1 for f in GAZE_FAPS]]):
+        eyes = eye_pieces(head.rest, head.faces, head.landmarks)
+        if eyes:
+            unmapped = [f for f in unmapped if f not in GAZE_FAPS]
+            ctx.log(f"eyeballs (FAPs 23-26) on {len(eyes)} eyeball piece{'s' if len(eyes) > 1 else ''}")
     if summary.visemes:
         ctx.log(f"visemes (FAP 1) in {summary.viseme_frames} frames: {', '.join(summary.visemes)}")
     if unmapped:
@@ -80,7 +87,7 @@ def run_animate(ctx):
     with FrameNpzWriter(ctx.out_dir / "animation.npz", source.n_frames, len(head.user_index)) as writer:
         try:
             checker = play_take(head, source, writer, weights=weights, lids=lids, timings=timings,
-                                offline=offline, bar=bar, log=ctx.log)
+                                offline=offline, bar=bar, log=ctx.log, eyes=eyes)
         except FloatingPointError as exc:
             raise StageError(f"{exc}: the simulation diverged on this track (mapping {mapping_path}); "
                              "try more solver.iterations or a larger muscle.damping", ctx.param("fap")) from None
@@ -97,7 +104,8 @@ def run_animate(ctx):
         "user_vertices": int(len(head.user_index)), "working_vertices": int(len(head.rest)),
         "per_frame_ms": timings.per_frame_ms(), "threads": threads, "checks": checks.as_dict(),
         "max_contraction": summary.max_contraction,
-        "eyes_with_lids": len(lids.fields) if lids is not None else 0, "visemes": summary.visemes,
+        "eyes_with_lids": len(lids.fields) if lids is not None else 0, "eyeballs_turned": len(eyes or {}),
+        "visemes": summary.visemes,
         "max_head_rotation_deg": np.degrees(summary.max_angles).tolist(),
         "max_jaw": summary.max_jaw.tolist()})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame on {threads} thread"
@@ -115,7 +123,7 @@ ANIMATE = register_stage(Stage(
                                                 "animate", "template"),
     inputs=("fap", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="12", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="13", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- commands

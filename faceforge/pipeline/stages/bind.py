@@ -10,7 +10,8 @@ influence map (:mod:`faceforge.skin.influence`). Writes:
     (``vertices``, ``faces``; the first ``n_user`` vertices are the user's, in
     order, appended vertex ``n_user + i`` duplicates ``duplicate_source[i]``),
     the anchors (``anchor_*``, ``status``, ``body_names``), ``lip_sides``,
-    ``influence``, ``geodesic``, ``front``. The skin constraint topology is a
+    ``influence``, ``geodesic``, ``front``, ``parts`` (the pieces that ride a bone
+    rigidly, :func:`faceforge.skin.parts.rigid_parts`). The skin constraint topology is a
     pure function of ``faces`` (:func:`faceforge.skin.layer.skin_topology`), so it
     is rebuilt by whoever assembles the model, not stored.
 ``report.json``
@@ -116,6 +117,10 @@ def run(ctx):
                       cheek_muscles=tuple(str(n) for n in ctx.config.get("bind.cheek_muscles")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
+    rigid = bound.report.get("rigid_parts", {})
+    if any(rigid.values()):
+        ctx.log(f"rigid pieces (eyeballs, teeth): {rigid['on_cranium']} vertices ride the cranium, "
+                f"{rigid['on_mandible']} the mandible")
     save_npz(ctx.out_dir / "bind.npz", **bound.as_arrays())
     save_json(ctx.out_dir / "report.json", bound.report)
     save_influence_png(ctx.out_dir / "influence.png", bound.cut.vertices, bound.cut.faces,
@@ -124,7 +129,7 @@ def run(ctx):
 
 STAGE = register_stage(Stage(
     name="bind", deps=("fit",), config_keys=("bind",),
-    outputs=("bind.npz", "report.json", "influence.png"), version="8", run=run,
+    outputs=("bind.npz", "report.json", "influence.png"), version="9", run=run,
     description="bind the skin to muscles and bone, influence map (§8)", background=compile_solver_ahead))
 
 

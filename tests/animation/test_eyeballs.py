@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from faceforge.blendshapes.bake import apply_gaze
-from faceforge.blendshapes.eyes import EYEBALL_RADIUS, eye_pieces, gaze_rotation, rotate_eye
+from faceforge.animation.eyeballs import EYEBALL_RADIUS, apply_gaze, eye_pieces, gaze_rotation, rotate_eye
 
 
 def _head():
@@ -48,3 +47,34 @@ def test_gaze_turns_the_piece_rigidly_towards_its_direction():
     g = np.array([[0.0, 0, 0, 0], [np.radians(30), 0, 0, 0]])
     frames = apply_gaze(np.stack([v, v]), g, {"L": (ids, c)})
     assert np.array_equal(frames[0], v) and np.allclose(frames[1], out)
+
+
+def test_the_eyeball_faps_turn_left_and_down_as_mpeg4_says():
+    """FAP 23 / 24 (yaw) positive to the subject's left, 25 / 26 (pitch) positive down, in AU."""
+    from faceforge.animation.eyeballs import gaze_from_faps
+
+    faps = np.zeros((2, 68))
+    faps[0, 22], faps[0, 24] = 10000, 20000                # yaw_l 0.1 rad, pitch_l 0.2 rad down
+    faps[1, 23], faps[1, 25] = -30000, -5000               # yaw_r 0.3 rad right, pitch_r 0.05 rad up
+    g = gaze_from_faps(faps)
+    assert np.allclose(g, [[0.1, -0.2, 0.0, 0.0], [0.0, 0.0, -0.3, 0.05]])
+    forward = gaze_rotation(g[0, 0], g[0, 1]) @ [0.0, 0.0, 1.0]
+    assert forward[0] > 0.0 and forward[1] < 0.0            # towards the subject's left, and down
+
+
+def test_a_whole_eyeball_turns_in_place_with_its_iris():
+    """A sphere (the eyeball) and a disc in front of it (the iris), two pieces: both turn about the
+    sphere's centre, so the eyeball spins in place instead of swinging about a point behind it."""
+    import trimesh
+
+    v, f, lm = _head()
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=1.2)
+    ball.apply_translation([2.0, 1.0, 0.5 - 1.25])
+    n = len(v)
+    v2 = np.concatenate([v, ball.vertices])
+    f2 = np.concatenate([f, ball.faces + n])
+    ids, c = eye_pieces(v2, f2, lm)["L"]
+    assert set(range(9, 14)) <= set(ids.tolist()) and set(range(n, len(v2))) <= set(ids.tolist())
+    assert np.allclose(c, [2.0, 1.0, 0.5 - 1.25], atol=1e-6)
+    out = rotate_eye(v2, ids, c, np.radians(25), np.radians(-10))
+    assert np.allclose(out[n:].mean(axis=0), v2[n:].mean(axis=0), atol=1e-9)   # the ball stays put
