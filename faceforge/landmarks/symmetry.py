@@ -2,7 +2,9 @@
 
 :func:`mirror_plane` starts from the plane the detected landmarks suggest (normal along
 the mean left-right difference of the pairs, through their midpoints) and refines it by
-matching every vertex with the vertex nearest its mirror image (a few rounds). The mesh
+matching every vertex with the vertex nearest its mirror image (a few rounds; vertices whose
+mirror image is far from any vertex, :data:`OUTLIER`, such as a piece on one side only, are
+left out of the refinement). The mesh
 is symmetric when, after that, 90 % of the vertices have a mirror partner within
 :data:`SYMMETRY_TOLERANCE` of the diagonal.
 """
@@ -20,6 +22,9 @@ from faceforge.geometry.mirror import Mirror
 SYMMETRY_TOLERANCE = 0.002
 #: at most about this many vertices refine the plane (every k-th vertex)
 SAMPLE = 5000
+#: a vertex whose mirror image lies farther than this many times the median from any vertex does
+#: not refine the plane (:func:`mirror_plane`)
+OUTLIER = 3.0
 
 
 @dataclass(frozen=True)
@@ -49,7 +54,10 @@ def mirror_plane(vertices: np.ndarray, left: np.ndarray, right: np.ndarray, diag
         mirror = Mirror(point, normal)
         dist, partner = tree.query(mirror(sample))
         apart = sample - v[partner]
-        far = np.linalg.norm(apart, axis=1) > 1e-3 * diagonal
+        # the pairs that mirror each other: a piece on one side only (a lash card, an earring) has
+        # no mirror image, and its far-off partners tilted the plane (every FDP pair then moved)
+        mirrored = dist <= max(OUTLIER * np.median(dist), 1e-3 * diagonal)
+        far = (np.linalg.norm(apart, axis=1) > 1e-3 * diagonal) & mirrored
         side = np.sign(apart[far] @ mirror.normal)
         d = apart[far] * side[:, None]
         if len(d) < 3:

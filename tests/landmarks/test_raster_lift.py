@@ -116,6 +116,20 @@ def test_mirror_plane_of_a_symmetric_mesh_and_of_a_lopsided_one():
     assert not symmetric(mirror_plane(lopsided, left, right, diag))
 
 
+def test_a_piece_on_one_side_only_does_not_tilt_the_mirror_plane():
+    """A symmetric mesh plus a small lopsided piece (a lash card on one lid, an earring): the
+    plane stays the mesh's own (it tilted when every vertex refined it)."""
+    rng = np.random.default_rng(2)
+    half = rng.uniform(0.1, 1, (400, 3))
+    v = np.vstack([half, half * [-1, 1, 1]])
+    card = rng.uniform(0, 0.1, (8, 3)) + [0.5, 0.6, 1.4]   # in front, on the +x side only
+    mesh = np.vstack([v, card])
+    diag = float(np.linalg.norm(np.ptp(mesh, axis=0)))
+    plane = mirror_plane(mesh, v[:5] + 0.01, v[400:405], diag)
+    assert abs(abs(plane.mirror.normal[0]) - 1) < 1e-9 and abs(plane.mirror.point @ plane.mirror.normal) < 1e-9
+    assert symmetric(plane)
+
+
 def test_a_required_fdp_that_lands_nowhere_is_named():
     from faceforge.exceptions import LandmarkError
     from faceforge.landmarks.detect import _placeable, fdp_table
