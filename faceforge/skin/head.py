@@ -233,7 +233,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                                    "lip_band": lips, "back_and_neck": ~front})
     report["region_rules"] = rule
     report["mirrored_vertices"] = mirrored
-    report["forehead_on_bone"] = forehead
+    if forehead_bone_mm > 0:   # (off, the report as before: a workdir's calibration stays current)
+        report["forehead_on_bone"] = forehead
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
     kind = binding.status[corner]   # the kind of each corner vertex's (first) anchor
