@@ -296,3 +296,89 @@ def lid_hold(binding, vertices, landmarks: dict, stiffness: float, up=(0.0, 1.0,
         above |= (near <= EYE_REACH * width) & ((v - mid) @ u > 0.0)
     held = (eye & above)[np.asarray(binding.vertex_ids)] & binding.on_bone()
     return (np.where(held, float(stiffness), 0.0) if held.any() else None), held
+
+
+def forehead_mask(vertices, landmarks: dict, above_mm: float, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """(n,) bool: the forehead above the brow (``bind.forehead_bone_mm``): the vertices farther
+    than ``above_mm`` (scaled by ES0, :func:`faceforge.anatomy.tissue.units_per_mm`) from both
+    brow lines (:data:`BROW_LINES`) and higher along ``up`` than the closest point of the nearer
+    line. No vertex with ``above_mm`` <= 0 or without the brow FDPs."""
+    from faceforge.anatomy.tissue import units_per_mm
+
+    v = np.asarray(vertices, FLOAT)
+    n = len(v)
+    if above_mm <= 0.0:
+        return np.zeros(n, bool)
+    try:
+        mm = units_per_mm(landmarks)
+    except KeyError:
+        return np.zeros(n, bool)
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    best = np.full(n, np.inf)
+    height = np.zeros(n)   # the height along up of the closest brow-line point
+    for line in BROW_LINES:
+        pts = [np.asarray(landmarks[k], FLOAT) for k in line if k in landmarks]
+        for a, b in zip(pts[:-1], pts[1:]):
+            ab = b - a
+            t = np.clip(((v - a) @ ab) / max(float(ab @ ab), 1e-300), 0.0, 1.0)
+            c = a + t[:, None] * ab
+            d = np.linalg.norm(v - c, axis=1)
+            take = d < best
+            best[take], height[take] = d[take], (c @ u)[take]
+    return np.isfinite(best) & (best > above_mm * mm) & (v @ u > height)
+
+
+def forehead_binding(binding, vertices, bodies, raisers, mask, max_distance: float):
+    """``binding`` (:class:`faceforge.skin.binding.Binding`) with the vertices of ``mask`` (n,)
+    bool whose anchors are all on the bodies ``raisers`` (indices: the frontalis parts) bound
+    instead to the closest point of the cranium within ``max_distance`` (skin units), one
+    anchor each (``bind.forehead_bone_mm``, beyond §8); a vertex with no cranium in reach keeps
+    its anchors. Returns ``(binding, count rebound)``.
+
+    The frontalis inserts into the dermis of the brow; above it the muscle and the galea glide
+    under the forehead's skin on a loose areolar layer, and the skin, tied to the scalp's
+    layers rather than to the muscle, folds into the forehead's furrows when the brow rises. By
+    its ray (§8) that skin binds to the frontalis itself and rose with it: on the MakeHuman
+    sample a brow raise moved the forehead 3.9 cm above the brow 0.4 of the brow's rise, where
+    MakeHuman's eyebrows units are 0 (docs/notes/units9.md). Tied to the bone, it moves only as
+    far as the skin's stretch from the raised brow carries it."""
+    from dataclasses import replace
+
+    from faceforge.geometry.triangles import barycentric
+    from faceforge.skin.casting import CRANIUM
+
+    ids = np.asarray(binding.vertex_ids)
+    n = len(binding.status)
+    cranium = [i for i, b in enumerate(bodies) if getattr(b, "kind", "") == "cranium"]
+    raisers = [int(i) for i in raisers]
+    if not cranium or not raisers:
+        return binding, 0
+    off = np.bincount(ids[~np.isin(binding.body, raisers)], minlength=n) > 0   # a row on another body
+    has = np.bincount(ids, minlength=n) > 0
+    todo = np.flatnonzero(np.asarray(mask, bool) & has & ~off)
+    if not len(todo):
+        return binding, 0
+    body = np.full(n, -1, np.int64)
+    face = np.full(n, -1, np.int64)
+    pts = np.zeros((n, 3), FLOAT)
+    dist = np.full(n, np.inf, FLOAT)
+    done = _rebind(np.asarray(vertices, FLOAT), bodies, todo, cranium, max_distance, body, face, pts, dist, None)
+    moved = np.flatnonzero(done)
+    if not len(moved):
+        return binding, 0
+    keep = ~np.isin(ids, moved)
+    first = np.r_[True, ids[1:] != ids[:-1]] & ~keep   # the one row each moved vertex keeps
+    new = keep | first
+    rows = np.flatnonzero(new)
+    out = {k: np.asarray(getattr(binding, k)).copy() for k in
+           ("vertex_ids", "body", "face_ids", "bary", "points", "distance", "outward", "closest")}
+    r = np.flatnonzero(first)
+    vid = ids[r]
+    out["body"][r], out["face_ids"][r], out["points"][r], out["distance"][r] = body[vid], face[vid], pts[vid], dist[vid]
+    out["outward"][r] = out["closest"][r] = False
+    for b in np.unique(body[vid]):
+        sel = body[vid] == b
+        out["bary"][r[sel]] = barycentric(pts[vid][sel], bodies[b].vertices, bodies[b].faces, face[vid][sel])
+    status = np.asarray(binding.status).copy()
+    status[moved] = CRANIUM
+    return replace(binding, status=status, **{k: a[rows] for k, a in out.items()}), len(moved)

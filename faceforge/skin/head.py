@@ -82,6 +82,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               max_ray_fraction: float, up=(0.0, 1.0, 0.0), insertions=(), lips_to_ring=True,
               modiolus_radius: float = MODIOLUS_RADIUS, mirror=None, brow_band_mm: float = BROW_BAND_MM,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
+              forehead_bone_mm: float = 0.0,
               cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS,
               vermilion: float = 0.0) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
@@ -132,6 +133,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     brow_raisers : sequence of str
         ``bind.brow_raisers`` (names or pair names): brow skin on another muscle also anchors
         to the nearest of these within ``brow_shared_mm`` (:func:`faceforge.skin.brow.raiser_anchors`).
+    forehead_bone_mm : float
+        ``bind.forehead_bone_mm``: forehead skin farther than this many mm (scaled by ES0) above
+        the brow lines whose anchors are all on ``brow_raisers`` binds to the closest point of
+        the cranium instead (:func:`faceforge.skin.brow.forehead_binding`; 0: off).
     cheek_mm, cheek_muscles : float, sequence of str
         ``bind.cheek_mm``, ``bind.cheek_muscles``: cheek skin within this many mm of FDP 5.3 /
         5.4 that its rays bound to the bone binds to the closest cheek muscle
@@ -213,6 +218,13 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
 
         binding, _ = cheek_binding(binding, cut.vertices, bodies, cheek_ids, cheek_mask(cut.vertices, pts, cheek_mm, up),
                                    max_ray_fraction * diagonal)
+    forehead = 0
+    if forehead_bone_mm > 0 and raiser_ids:   # the forehead above the brow: on the galea and bone, not the frontalis
+        from faceforge.skin.brow import forehead_binding, forehead_mask
+
+        binding, forehead = forehead_binding(binding, cut.vertices, bodies, raiser_ids,
+                                             forehead_mask(cut.vertices, pts, forehead_bone_mm, up=up),
+                                             max_ray_fraction * diagonal)
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
@@ -227,6 +239,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                                    "lip_band": lips, "back_and_neck": ~front})
     report["region_rules"] = rule
     report["mirrored_vertices"] = mirrored
+    if forehead_bone_mm > 0:   # (off, the report as before: a workdir's calibration stays current)
+        report["forehead_on_bone"] = forehead
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
     kind = binding.status[corner]   # the kind of each corner vertex's (first) anchor
