@@ -511,6 +511,24 @@ class Eyelids:
         # animate.eyelid_fold_deg 0: the guard as it was (equal masses)
         self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING,
                                        inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None
+        # the jaw hold's take-back backed off where it would fold the skin or turn a triangle over
+        self._jaw_blend = self._backing(faces, fold_deg)
+
+    def _backing(self, faces, fold_deg: float):
+        """:class:`faceforge.skin.fold_limit.BlendLimit` over the skin the jaw hold may take back (the
+        upper holds): the take-back is a blend of rest and the simulated frame, ``rest + (1 - share)
+        (frame - rest)``; where its share changes steeply (the canthi, where the held upper lid meets
+        the free lower one) it turned MediaPipe's corner triangles over (pride.fap). None without
+        the hold."""
+        from faceforge.skin.fold_limit import BlendLimit
+
+        if not self.jaw_hold or not self.fields:
+            return None
+        may = np.ones(len(self.rest))
+        for field in self.fields:
+            may[field.index] = np.minimum(may[field.index], 1.0 - self.jaw_hold * field.up_hold)
+        return BlendLimit(self.rest, may, np.zeros((0, 4), np.int64), np.zeros(0), faces=faces,
+                          min_area=0.5 * MIN_OPENING)
 
     @property
     def faps(self) -> tuple[int, ...]:
@@ -525,11 +543,16 @@ class Eyelids:
         if self._guard is None:
             return out
         live = np.zeros(len(out), dtype=bool)
+        kept = np.ones((len(out), len(self.rest)))   # 1 - the jaw hold's share taken back
         for field in self.fields:
             moves = lid_moves(field, faps, self.irisd)
-            live |= np.any(moves != 0.0, axis=1) | jaw_held_share(field, moves, jaw, self.jaw_hold).any(axis=1)
+            jawed = jaw_held_share(field, moves, jaw, self.jaw_hold)
+            kept[:, field.index] = np.minimum(kept[:, field.index], 1.0 - jawed)
+            live |= np.any(moves != 0.0, axis=1) | jawed.any(axis=1)
         for f in np.flatnonzero(live):
             frame = np.ascontiguousarray(out[f], dtype=np.float64)
+            if self._jaw_blend is not None and (kept[f] < 1.0).any():   # before the guard and the limit
+                self._jaw_blend(frame, np.asarray(frames[f], dtype=np.float64), kept[f])
             if self._fold is None:
                 self._guard.apply(frame)
             else:   # animate.eyelid_fold_deg: gathered skin neither turns over nor folds

@@ -9,7 +9,8 @@ drives the shallower ones and never the reverse):
    and bones, then the skin's PBD constraints are projected (``solver.substeps`` x
    ``solver.iterations``);
 4. the **influence map** weights the skin displacement: ``rest + w (sim - rest)``, then the
-   rig's optional ``finish`` pass corrects the weighted frame in place.
+   rig's optional ``blend`` pass (given the simulated skin too) and ``finish`` pass correct the
+   weighted frame in place.
 
 The three layer steps are callables of a :class:`Rig` so the loop is independent of
 how the layers are built (and testable with stand-ins); :func:`play` times each of
@@ -43,6 +44,10 @@ class Rig:
         e.g. :meth:`faceforge.animation.guards.orientation.OrientationGuard.apply`: the influence map
         blends rest and simulation with weights that vary from vertex to vertex, which can
         turn over a triangle the simulation kept upright)
+    blend : callable (weighted frame (n, 3) float64, simulated skin (n, 3)) -> None, applied in
+        place to each weighted frame before ``finish`` (optional; e.g.
+        :class:`faceforge.skin.fold_limit.BlendLimit`: where the blend bends the skin past its
+        fold limit, the weights are raised toward the simulation)
     """
 
     skull: Callable
@@ -52,6 +57,7 @@ class Rig:
     influence: np.ndarray | None = None
     reset: Callable | None = None
     finish: Callable | None = None
+    blend: Callable | None = None
 
 
 @dataclass
@@ -136,6 +142,8 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
         np.subtract(skin, rest, out=frame)
         np.multiply(w3, frame, out=frame)
         np.add(rest, frame, out=frame)
+        if rig.blend is not None:
+            rig.blend(out[j], skin)
         if rig.finish is not None:
             rig.finish(out[j])
         if sink is not None and (j == size - 1 or i == len(jaw) - 1):

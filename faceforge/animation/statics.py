@@ -128,6 +128,8 @@ def settle(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, settings:
         if not np.all(np.isfinite(skin)):
             raise FloatingPointError(f"pose {i}: the simulation produced non-finite skin positions")
         frame = rest + (skin - rest) * (1.0 if w is None else w)
+        if rig.blend is not None:
+            rig.blend(frame, skin)
         if rig.finish is not None:
             rig.finish(frame)
         out[i] = frame

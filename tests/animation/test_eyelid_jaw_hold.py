@@ -73,3 +73,31 @@ def test_a_driven_lid_is_held_as_before_whatever_the_jaw(head):
     a = Eyelids(v, f, lm, irisd, fold_deg=80.0, jaw_hold=1.0).apply(frame, track, OPEN)[0]
     b = Eyelids(v, f, lm, irisd, fold_deg=80.0, jaw_hold=0.0).apply(frame, track, OPEN)[0]
     assert np.array_equal(a, b)
+
+
+def test_the_take_back_backs_off_where_it_would_turn_the_skin_over():
+    """The take-back is a blend of rest and the frame whose share falls from the upper margin (1) to
+    the lower one (0): the skin moved up as one (every triangle upright) by 0.6 of a lid opening, held
+    at the upper margin and free at the lower, is squeezed between them, and on a head whose lids are
+    a free boundary the lids' guard does not right every triangle it turns over (MediaPipe's pride.fap
+    turned its outer corners' triangles over so, frame 24). The hold backs off there (before the
+    lids' guard and limit): nothing is turned over on any sample head, and each upper lid FDP still
+    goes most of the way back."""
+    from faceforge.animation.checks import inverted_faces
+
+    turned = {}
+    for name in sorted(HEADS):
+        v, f, lm, _ = _load(HEADS[name])
+        eyes = find_eyes(lm)
+        irisd = np.mean([e.gap for e in eyes]) / 1024.0
+        lift = np.broadcast_to(0.6 * max(e.gap for e in eyes) * np.array([0.0, 1.0, 0.0]), v.shape)
+        frame = (v + lift)[None]
+        assert not inverted_faces(v, frame, f).any()
+        lids = Eyelids(v, f, lm, irisd, fold_deg=80.0, jaw_hold=1.0)
+        held = lids.apply(frame, faps([{}]), OPEN)
+        assert not inverted_faces(v, held, f).any(), name
+        for upper, _ in lids._lid_vertices:
+            assert np.linalg.norm(held[0, upper] - v[upper]) < 0.5 * np.linalg.norm(lift[upper]), name
+        lids._jaw_blend = None   # the take-back whole
+        turned[name] = int(inverted_faces(v, lids.apply(frame, faps([{}]), OPEN), f).sum())
+    assert sum(turned.values()) > 0, turned

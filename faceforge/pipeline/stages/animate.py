@@ -115,7 +115,7 @@ ANIMATE = register_stage(Stage(
                                                 "animate", "template"),
     inputs=("fap", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="12", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="13", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- commands
