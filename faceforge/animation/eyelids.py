@@ -512,14 +512,13 @@ class Eyelids:
         self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING,
                                        inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None
         # the jaw hold's take-back backed off where it would fold the skin or turn a triangle over
-        self._jaw_blend = self._backing(faces, fold_deg)
+        self._jaw_blend = self._backing(faces)
 
-    def _backing(self, faces, fold_deg: float):
-        """:class:`faceforge.skin.fold_limit.BlendLimit` over the skin the jaw hold may take back (the
-        upper holds): the take-back is a blend of rest and the simulated frame, ``rest + (1 - share)
-        (frame - rest)``; where its share changes steeply (the canthi, where the held upper lid meets
-        the free lower one) it turned MediaPipe's corner triangles over (pride.fap). None without
-        the hold."""
+    def _backing(self, faces):
+        """:class:`faceforge.skin.fold_limit.BlendLimit` over the skin the jaw hold may take back: the
+        take-back is a blend ``rest + (1 - share) (frame - rest)``, and where its share falls steeply
+        (the canthi: held upper lid, free lower lid) it turned MediaPipe's corner triangles over past
+        the lids' guard (pride.fap); there it is backed off (:meth:`apply`). None without the hold."""
         from faceforge.skin.fold_limit import BlendLimit
 
         if not self.jaw_hold or not self.fields:
@@ -527,8 +526,16 @@ class Eyelids:
         may = np.ones(len(self.rest))
         for field in self.fields:
             may[field.index] = np.minimum(may[field.index], 1.0 - self.jaw_hold * field.up_hold)
-        return BlendLimit(self.rest, may, np.zeros((0, 4), np.int64), np.zeros(0), faces=faces,
-                          min_area=0.5 * MIN_OPENING)
+        return BlendLimit(self.rest, may, np.zeros((0, 4), np.int64), np.zeros(0), faces=faces)
+
+    def _straighten(self, frame: np.ndarray) -> None:
+        """The lids' guard (and fold limit, ``animate.eyelid_fold_deg``, alternating) on ``frame``, in place."""
+        if self._fold is None:
+            self._guard.apply(frame)
+        else:   # animate.eyelid_fold_deg: gathered skin neither turns over nor folds
+            for _ in range(FOLD_ROUNDS):
+                self._fold(frame, sweeps=1)
+                self._guard.apply(frame)
 
     @property
     def faps(self) -> tuple[int, ...]:
@@ -551,14 +558,13 @@ class Eyelids:
             live |= np.any(moves != 0.0, axis=1) | jawed.any(axis=1)
         for f in np.flatnonzero(live):
             frame = np.ascontiguousarray(out[f], dtype=np.float64)
-            if self._jaw_blend is not None and (kept[f] < 1.0).any():   # before the guard and the limit
-                self._jaw_blend(frame, np.asarray(frames[f], dtype=np.float64), kept[f])
-            if self._fold is None:
-                self._guard.apply(frame)
-            else:   # animate.eyelid_fold_deg: gathered skin neither turns over nor folds
-                for _ in range(FOLD_ROUNDS):
-                    self._fold(frame, sweeps=1)
-                    self._guard.apply(frame)
+            held = frame.copy() if self._jaw_blend is not None and (kept[f] < 1.0).any() else None
+            self._straighten(frame)
+            turned = self._jaw_blend.below(frame) if held is not None else ()
+            if len(turned):   # the jaw hold turned triangles over that the guard could not right
+                self._jaw_blend(held, np.asarray(frames[f], dtype=np.float64), kept[f], turned)
+                frame = held
+                self._straighten(frame)
             out[f] = frame
         return out
 
