@@ -512,21 +512,21 @@ class Eyelids:
         self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING,
                                        inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None
         # the jaw hold's take-back backed off where it would fold the skin or turn a triangle over
-        self._jaw_blend = self._backing(faces)
+        self._jaw_blend = self._backing(faces, fold_deg)
 
-    def _backing(self, faces):
+    def _backing(self, faces, fold_deg: float):
         """:class:`faceforge.skin.fold_limit.BlendLimit` over the skin the jaw hold may take back: the
         take-back is a blend ``rest + (1 - share) (frame - rest)``, and where its share falls steeply
         (the canthi: held upper lid, free lower lid) it turned MediaPipe's corner triangles over past
-        the lids' guard (pride.fap); there it is backed off (:meth:`apply`). None without the hold."""
-        from faceforge.skin.fold_limit import BlendLimit
-
+        the lids' guard (pride.fap) and folded MakeHuman's; there it is backed off (:meth:`apply`)."""
+        from faceforge.skin.fold_limit import BlendLimit, fold_limits
         if not self.jaw_hold or not self.fields:
             return None
         may = np.ones(len(self.rest))
         for field in self.fields:
             may[field.index] = np.minimum(may[field.index], 1.0 - self.jaw_hold * field.up_hold)
-        return BlendLimit(self.rest, may, np.zeros((0, 4), np.int64), np.zeros(0), faces=faces)
+        folds = fold_limits(self.rest, faces, float(fold_deg or 0.0)) or (np.zeros((0, 4), np.int64), np.zeros(0))
+        return BlendLimit(self.rest, may, *folds, faces=faces)
 
     def _straighten(self, frame: np.ndarray) -> None:
         """The lids' guard (and fold limit, ``animate.eyelid_fold_deg``, alternating) on ``frame``, in place."""
@@ -560,9 +560,9 @@ class Eyelids:
             frame = np.ascontiguousarray(out[f], dtype=np.float64)
             held = frame.copy() if self._jaw_blend is not None and (kept[f] < 1.0).any() else None
             self._straighten(frame)
-            turned = self._jaw_blend.below(frame) if held is not None else ()
-            if len(turned):   # the jaw hold turned triangles over that the guard could not right
-                self._jaw_blend(held, np.asarray(frames[f], dtype=np.float64), kept[f], turned)
+            bad = self._jaw_blend.below(frame) if held is not None else ((), ())
+            if len(bad[0]) or len(bad[1]):   # the hold folded skin the lids' guard and limit did not right
+                self._jaw_blend(held, np.asarray(frames[f], dtype=np.float64), kept[f], bad)
                 frame = held
                 self._straighten(frame)
             out[f] = frame

@@ -92,7 +92,8 @@ class BlendLimit:
     Two blends use it: the influence map's weighted frame (``skin`` the simulated skin, ``weights``
     the map; :class:`faceforge.animation.playback.Rig`'s ``blend``), and the eyelids' take-back of a
     moving jaw's drift (``skin`` the simulated frame, ``w`` one less the share taken back, given per
-    call, on the triangles the lids' guard left turned over; :class:`faceforge.animation.eyelids.Eyelids`).
+    call, where the lids' guard and limit left the skin folded or turned over;
+    :class:`faceforge.animation.eyelids.Eyelids`).
 
     rest (n, 3) skin at rest; weights (n,) in [0, 1]: the blend's weights, or where a per-call
     blend may go below 1 (only quads and triangles with a vertex below 1 are looked at, and with
@@ -137,27 +138,31 @@ class BlendLimit:
         p = x[self.faces[rows]]
         return 0.5 * np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), self._normal[rows])
 
-    def below(self, x: np.ndarray) -> np.ndarray:
-        """(k,) rows of :attr:`faces` whose signed area along the rest normal in ``x (n, 3)`` is below
-        their floor."""
-        rows = np.arange(len(self.faces))
-        return rows[self._area(x, rows) < self._floor]
+    def below(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(rows of :attr:`quads` bent past their limit, rows of :attr:`faces` whose signed area along
+        the rest normal is below their floor) in ``x (n, 3)``."""
+        from faceforge.pbd.constraints.bending import dihedral_angle
 
-    def __call__(self, frame: np.ndarray, skin: np.ndarray, weights=None, faces=None) -> int:
+        q, t = np.arange(len(self.quads)), np.arange(len(self.faces))
+        return (q[np.abs(dihedral_angle(x, self.quads)) > self.limits + self.tol] if len(q) else q,
+                t[self._area(x, t) < self._floor])
+
+    def __call__(self, frame: np.ndarray, skin: np.ndarray, weights=None, look=None) -> int:
         """In place on the blended ``frame (n, 3)`` of ``skin (n, 3)`` (``weights (n,)``: this blend's,
-        None: the constructor's; ``faces``: rows of :attr:`faces` to look at first, None: all);
+        None: the constructor's; ``look``: (rows of :attr:`quads`, rows of :attr:`faces`) to look at
+        first, None: all);
         returns the number of quads and triangles whose weights were raised (0: the blend bent none
         past its limit nor turned one over, ``frame`` is untouched)."""
         from faceforge.pbd.constraints.bending import dihedral_angle
 
         self.raised = np.zeros(0, dtype=np.int64)
-        quads = np.zeros(0, dtype=np.int64)
-        if self._check is not None:
+        quads = np.zeros(0, dtype=np.int64) if look is None else np.asarray(look[0], dtype=np.int64)
+        if self._check is not None and look is None:
             np.copyto(self._scratch, frame)
             self._mark[:] = False
             if self._check(self._scratch, sweeps=1, touched=self._mark):
                 quads = _around(self._qstart, self._qof, np.flatnonzero(self._mark))
-        tris = np.arange(len(self.faces)) if faces is None else np.asarray(faces, dtype=np.int64)
+        tris = np.arange(len(self.faces)) if look is None else np.asarray(look[1], dtype=np.int64)
         w0 = self.weights if weights is None else np.asarray(weights, dtype=np.float64)
         w, done = None, 0
         skin = np.asarray(skin, dtype=np.float64)
