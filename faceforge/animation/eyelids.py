@@ -518,6 +518,31 @@ class Eyelids:
         # animate.eyelid_fold_deg 0: the guard as it was (equal masses)
         self._guard = OrientationGuard(self.rest, near, min_area=0.5 * MIN_OPENING,
                                        inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None
+        # the jaw hold's take-back backed off where it would fold the skin or turn a triangle over
+        self._jaw_blend = self._backing(faces, fold_deg)
+
+    def _backing(self, faces, fold_deg: float):
+        """:class:`faceforge.skin.fold_limit.BlendLimit` over the skin the jaw hold may take back: the
+        take-back is a blend ``rest + (1 - share) (frame - rest)``, and where its share falls steeply
+        (the canthi: held upper lid, free lower lid) it turned MediaPipe's corner triangles over past
+        the lids' guard (pride.fap) and folded MakeHuman's; there it is backed off (:meth:`apply`)."""
+        from faceforge.skin.fold_limit import BlendLimit, fold_limits
+        if not self.jaw_hold or not self.fields:
+            return None
+        may = np.ones(len(self.rest))
+        for field in self.fields:
+            may[field.index] = np.minimum(may[field.index], 1.0 - self.jaw_hold * field.up_hold)
+        folds = fold_limits(self.rest, faces, float(fold_deg or 0.0)) or (np.zeros((0, 4), np.int64), np.zeros(0))
+        return BlendLimit(self.rest, may, *folds, faces=faces)
+
+    def _straighten(self, frame: np.ndarray) -> None:
+        """The lids' guard (and fold limit, ``animate.eyelid_fold_deg``, alternating) on ``frame``, in place."""
+        if self._fold is None:
+            self._guard.apply(frame)
+        else:   # animate.eyelid_fold_deg: gathered skin neither turns over nor folds
+            for _ in range(FOLD_ROUNDS):
+                self._fold(frame, sweeps=1)
+                self._guard.apply(frame)
 
     @property
     def faps(self) -> tuple[int, ...]:
@@ -532,17 +557,21 @@ class Eyelids:
         if self._guard is None:
             return self._carry_lashes(frames, out)
         live = np.zeros(len(out), dtype=bool)
+        kept = np.ones((len(out), len(self.rest)))   # 1 - the jaw hold's share taken back
         for field in self.fields:
             moves = lid_moves(field, faps, self.irisd)
-            live |= np.any(moves != 0.0, axis=1) | jaw_held_share(field, moves, jaw, self.jaw_hold).any(axis=1)
+            jawed = jaw_held_share(field, moves, jaw, self.jaw_hold)
+            kept[:, field.index] = np.minimum(kept[:, field.index], 1.0 - jawed)
+            live |= np.any(moves != 0.0, axis=1) | jawed.any(axis=1)
         for f in np.flatnonzero(live):
             frame = np.ascontiguousarray(out[f], dtype=np.float64)
-            if self._fold is None:
-                self._guard.apply(frame)
-            else:   # animate.eyelid_fold_deg: gathered skin neither turns over nor folds
-                for _ in range(FOLD_ROUNDS):
-                    self._fold(frame, sweeps=1)
-                    self._guard.apply(frame)
+            held = frame.copy() if self._jaw_blend is not None and (kept[f] < 1.0).any() else None
+            self._straighten(frame)
+            bad = self._jaw_blend.below(frame) if held is not None else ((), ())
+            if len(bad[0]) or len(bad[1]):   # the hold folded skin the lids' guard and limit did not right
+                self._jaw_blend(held, np.asarray(frames[f], dtype=np.float64), kept[f], bad)
+                frame = held
+                self._straighten(frame)
             out[f] = frame
         return self._carry_lashes(frames, out)
 

@@ -8,9 +8,10 @@ drives the shallower ones and never the reverse):
 3. **skin**: the anchor particles follow their surface points on the deformed muscles
    and bones, then the skin's PBD constraints are projected (``solver.substeps`` x
    ``solver.iterations``);
-4. the **influence map** weights the skin displacement: ``rest + w (sim - rest)``; the rig's
-   optional ``parts`` step puts the pieces that ride a bone (eyeballs, teeth) where it is, and
-   its optional ``finish`` pass corrects the weighted frame in place.
+4. the **influence map** weights the skin displacement: ``rest + w (sim - rest)``, then the
+   rig's optional ``blend`` pass (given the simulated skin too) corrects the weighted frame in
+   place, its optional ``parts`` step puts the pieces that ride a bone (eyeballs, teeth) where
+   it is, and its optional ``finish`` pass corrects the frame in place.
 
 The three layer steps are callables of a :class:`Rig` so the loop is independent of
 how the layers are built (and testable with stand-ins); :func:`play` times each of
@@ -44,9 +45,13 @@ class Rig:
         e.g. :meth:`faceforge.animation.guards.orientation.OrientationGuard.apply`: the influence map
         blends rest and simulation with weights that vary from vertex to vertex, which can
         turn over a triangle the simulation kept upright)
-    parts : callable (n, 3) float64 -> None, applied in place to each weighted frame before
-        ``finish`` (optional; e.g. :class:`faceforge.animation.rig.RigidParts`: the eyeballs and
-        teeth of the mesh put rigidly on their bone)
+    blend : callable (weighted frame (n, 3) float64, simulated skin (n, 3)) -> None, applied in
+        place to each weighted frame before ``parts`` and ``finish`` (optional; e.g.
+        :class:`faceforge.skin.fold_limit.BlendLimit`: where the blend bends the skin past its
+        fold limit, the weights are raised toward the simulation)
+    parts : callable (n, 3) float64 -> None, applied in place to each weighted frame after
+        ``blend``, before ``finish`` (optional; e.g. :class:`faceforge.animation.rig.RigidParts`:
+        the eyeballs and teeth of the mesh put rigidly on their bone)
     """
 
     skull: Callable
@@ -56,6 +61,7 @@ class Rig:
     influence: np.ndarray | None = None
     reset: Callable | None = None
     finish: Callable | None = None
+    blend: Callable | None = None
     parts: Callable | None = None
 
 
@@ -141,13 +147,21 @@ def play(rig: Rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, progre
         np.subtract(skin, rest, out=frame)
         np.multiply(w3, frame, out=frame)
         np.add(rest, frame, out=frame)
-        if rig.parts is not None:
-            rig.parts(frame)
-        if rig.finish is not None:
-            rig.finish(out[j])
+        finish_frame(rig, out[j], skin)
         if sink is not None and (j == size - 1 or i == len(jaw) - 1):
             sink(i - j, out[:j + 1])
     return out if sink is None else None
+
+
+def finish_frame(rig: Rig, frame: np.ndarray, skin: np.ndarray) -> None:
+    """The rig's passes over an influence-weighted ``frame (n, 3)`` float64, in place: ``blend``
+    (given the simulated ``skin (n, 3)``), ``parts``, ``finish``; each when the rig has it."""
+    if rig.blend is not None:
+        rig.blend(frame, skin)
+    if rig.parts is not None:
+        rig.parts(frame)
+    if rig.finish is not None:
+        rig.finish(frame)
 
 
 def ease_in(settle: int = 30, ramp: int | None = None) -> np.ndarray:

@@ -139,6 +139,7 @@ class BoundHead:
         self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
                        finish=None if self.orientation is None else self.orientation.apply,
+                       blend=self._blend_limit(bind),
                        parts=RigidParts(self.rest, self.parts, jaw) if self.parts.any() else None)
 
     def _glide_ratio(self, config) -> float:
@@ -213,6 +214,7 @@ class BoundHead:
         partner = None if mirror is None else mirror.exact_partners(self.rest)
         #: True on a rig symmetric by construction whose skin has an exact mirror partner per vertex
         self.symmetric = partner is not None
+        self._folds = self._fold_limit(bind, config)
         from faceforge.skin.brow import lid_hold
         from faceforge.skin.cheek import cheek_tether
 
@@ -225,7 +227,7 @@ class BoundHead:
                               mirror=partner, join=bool(config.get("skin.join_insertions")),
                               tether=tether,
                               carry_radius=carry_radius(config, self.landmarks),
-                              fold_limit=self._fold_limit(bind, config))
+                              fold_limit=self._folds)
 
     def _fold_limit(self, bind: dict, config):
         """(quads (m, 4), limits (m,) radians) the skin may not bend past: ``skin.fold_deg`` on
@@ -238,6 +240,17 @@ class BoundHead:
         quads = commissure_quads(self.rest, self.faces, bind.get("lip_sides"), self.landmarks) \
             if corner > 0 else None
         return fold_limits(self.rest, self.faces, float(config.get("skin.fold_deg") or 0.0), quads, corner)
+
+    def _blend_limit(self, bind: dict):
+        """The influence blend kept within the skin's fold limit
+        (:class:`faceforge.skin.fold_limit.BlendLimit`, on the quads and limits of
+        :meth:`_fold_limit`), or None without a fold limit."""
+        from faceforge.skin.fold_limit import BlendLimit
+
+        if self._folds is None:
+            return None
+        blend = BlendLimit(self.rest, np.asarray(bind["influence"], dtype=float), *self._folds)
+        return blend if len(blend.quads) else None
 
     def _guards(self, config) -> None:
         """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""

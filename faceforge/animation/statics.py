@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from faceforge.animation.playback import finish_frame
+
 
 @dataclass
 class SettleStats:
@@ -128,8 +130,7 @@ def settle(rig, contractions: np.ndarray, jaw: np.ndarray, fps: float, settings:
         if not np.all(np.isfinite(skin)):
             raise FloatingPointError(f"pose {i}: the simulation produced non-finite skin positions")
         frame = rest + (skin - rest) * (1.0 if w is None else w)
-        if rig.finish is not None:
-            rig.finish(frame)
+        finish_frame(rig, frame, skin)
         out[i] = frame
         prev_c, prev_j = c, j
         if stats is not None:

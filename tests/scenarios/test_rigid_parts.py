@@ -88,3 +88,26 @@ def test_eyeballs_and_teeth_ride_their_bones_rigidly(tmp_path):
     assert b[front, 0] - a[front, 0] > 0.2
     # the skin did move: the lids closed over the (still) eyeballs
     assert np.abs(last[:468] - rest[:468]).max() > 0.3
+
+
+def test_held_poses_put_the_pieces_on_their_bones_too(tmp_path):
+    """The settled poses (expressions, visemes, calibration, the bake) finish their frames as
+    playback does (animation.playback.finish_frame): the eyeballs stay, the lower teeth open with
+    the jaw, rigidly."""
+    from faceforge.animation.rig import BoundHead
+    from faceforge.animation.statics import SettleSettings, settle
+    from faceforge.io.config import load_config
+
+    mesh, ids = _with_parts(tmp_path)
+    w = tmp_path / "w"
+    assert cli_run("-w", w, "fit", mesh).exit_code == 0
+    assert cli_run("-w", w, "bind").exit_code == 0
+    head = BoundHead(w / "fit", w / "bind", load_config())
+    c = np.zeros((1, len(head.controls)))
+    poses = settle(head.rig, c, np.array([[0.2, 0.0, 0.0]]), 25.0, SettleSettings(max_frames=40))
+    rest = head.rest
+    for name in ("eye_l", "eye_r", "upper_teeth"):
+        assert np.abs(poses[0, ids[name]] - rest[ids[name]]).max() < 1e-12, name
+    t = head.skull.jaw_transform(0.2, 0.0, 0.0)
+    teeth = rest[ids["lower_teeth"]] @ t[:3, :3].T + t[:3, 3]
+    assert np.abs(poses[0, ids["lower_teeth"]] - teeth).max() < 1e-12

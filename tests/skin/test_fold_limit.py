@@ -97,3 +97,72 @@ def test_the_guards_alternation_undoes_the_fold_a_push_makes():
         assert np.degrees(np.abs(dihedral_angle(held, quads))).max() < 80.5   # Gauss-Seidel: within a hair
         # the pushed vertex keeps its push: the limit turns the quads' wings about their edges
         assert np.linalg.norm(held[12] - v[12]) > 0.3
+
+
+def blended_sheet(shift: float):
+    """A 4 x 4 sheet moved as one, ``shift`` along (1, 0, 1) / sqrt 2 (the simulation keeps it flat),
+    with an influence map of 1 but at the middle vertex (12, 0.9) and a corner (0, 0.99): the
+    blend ``rest + w (skin - rest)`` leaves the middle vertex a tenth of the shift behind."""
+    v, f = grid(4, 4)
+    skin = v + shift * np.array([1.0, 0.0, 1.0]) / np.sqrt(2.0)
+    w = np.ones(len(v))
+    w[12], w[0] = 0.9, 0.99
+    return v, f, skin, w
+
+
+def test_the_blend_limit_raises_the_weights_where_the_blend_folds_the_skin():
+    from faceforge.skin.fold_limit import BlendLimit
+    from faceforge.skin.influence import apply_influence
+
+    v, f, skin, w = blended_sheet(10.0)
+    quads = skin_topology(f).bending_quads
+    plain = apply_influence(v, skin, w)
+    # the plain blend folds the quads round the middle vertex (it lags 0.7 behind, past its neighbour)
+    assert np.degrees(np.abs(dihedral_angle(plain, quads))).max() > 90
+    limit = BlendLimit(v, w, *fold_limits(v, f, 80.0))
+    frame = plain.copy()
+    assert limit(frame, skin) > 0
+    assert np.degrees(np.abs(dihedral_angle(frame, quads))).max() <= 80.0 + np.degrees(limit.tol) + 1e-6
+    # each vertex stays on its way from rest to the simulation, at a weight no lower than its own
+    move = skin - v
+    got = ((frame - v) * move).sum(axis=1) / (move * move).sum(axis=1)
+    np.testing.assert_allclose(frame, v + got[:, None] * move, atol=1e-12)
+    assert np.all(got >= w - 1e-12) and np.all(got <= 1.0 + 1e-12)
+    assert 12 in limit.raised and got[12] > w[12]
+    # the corner, whose quads the blend does not fold, keeps its weight bit for bit
+    np.testing.assert_array_equal(frame[0], plain[0])
+
+
+def test_the_blend_limit_leaves_a_frame_within_the_limit_bit_for_bit():
+    from faceforge.skin.fold_limit import BlendLimit
+    from faceforge.skin.influence import apply_influence
+
+    v, f, skin, w = blended_sheet(0.5)
+    plain = apply_influence(v, skin, w)
+    frame = plain.copy()
+    assert BlendLimit(v, w, *fold_limits(v, f, 80.0))(frame, skin) == 0
+    np.testing.assert_array_equal(frame, plain)
+
+
+def test_playback_and_statics_apply_the_rigs_blend_limit():
+    from faceforge.animation.playback import Rig, play
+    from faceforge.animation.statics import SettleSettings, settle
+    from faceforge.skin.fold_limit import BlendLimit
+
+    v, f, skin, w = blended_sheet(10.0)
+    quads = skin_topology(f).bending_quads
+
+    def rig(blend):
+        return Rig(skull=lambda jaw: None, muscles=lambda c, b, dt: None, skin=lambda b, m, dt: skin.copy(),
+                   rest=v, influence=w, reset=lambda: None, blend=blend)
+
+    def most(frames):
+        return np.degrees(np.abs(dihedral_angle(frames[-1], quads))).max()
+
+    c, jaw = np.zeros((2, 1)), np.zeros((2, 3))
+    limit = BlendLimit(v, w, *fold_limits(v, f, 80.0))
+    assert most(play(rig(None), c, jaw, 30.0)) > 90
+    assert most(play(rig(limit), c, jaw, 30.0)) < 80.1
+    s = SettleSettings(ramp=1, min_hold=1, max_frames=4)
+    assert most(settle(rig(None), c, jaw, 30.0, s)) > 90
+    assert most(settle(rig(limit), c, jaw, 30.0, s)) < 80.1
