@@ -2,18 +2,17 @@
 ``eyeLook*`` shapes of the bake.
 
 A mesh has an eye when connected components other than the skin (the largest in area) lie at a pupil
-FDP (3.5 the subject's left, 3.6 the right): every such piece with a vertex within half the
-eye's corner distance (3.7-3.11, 3.8-3.12) of the pupil and its centroid within 1.5 times that
-of the pupil and not in front of it (lashes are), so that a sclera, a cornea and an iris
-modelled apart turn together. They turn
-about the eyeball's centre: the centre of the sphere through the vertices of the largest of them
-(least squares) when it is eyeball-sized (radius within :data:`SPHERE_FIT` of
-:data:`~faceforge.animation.eyelids.EYEBALL_RADIUS` x half the corner distance: a 12 mm eye in a
-30 mm fissure, as the lids take it), else, for a flat piece such as MediaPipe's iris discs, that
-radius behind their centroid along the face's forward axis (+Z). ``yaw`` turns the gaze towards +X (the subject's left), ``pitch`` up. The pieces have no
-skin attached: nothing else moves (the lids do not follow the gaze). Between frames the bind's
-rigid parts (:mod:`faceforge.skin.parts`) keep them on the cranium; the turn is laid over each
-finished frame, as the lids are.
+FDP (3.5 the subject's left, 3.6 the right): every such piece with a vertex within half the eye's
+corner distance (3.7-3.11, 3.8-3.12) of the pupil and its centroid within 1.5 times that of the
+pupil and not in front of it (lashes are), so that a sclera, a cornea and an iris modelled apart
+turn together. They turn about the eyeball's centre: the centre of the sphere through the vertices
+of the largest of them (least squares) when it is eyeball-sized (radius within :data:`SPHERE_FIT` of
+:data:`~faceforge.animation.eyelids.EYEBALL_RADIUS` x half the corner distance: a 12 mm eye in a 30
+mm fissure, as the lids take it), else, for a flat piece such as MediaPipe's iris discs, that radius
+behind their centroid along the face's forward axis (+Z). ``yaw`` turns the gaze towards +X (the
+subject's left), ``pitch`` up. The pieces have no skin attached: nothing else moves (the lids do not
+follow the gaze). Between frames the bind's rigid parts (:mod:`faceforge.skin.parts`) keep them on
+the cranium; the turn is laid over each finished frame, as the lids are.
 
 MPEG-4's eyeball FAPs are angles in AU (1e-5 rad): ``yaw_l_eyeball`` (23) and ``yaw_r_eyeball``
 (24) positive to the left (the subject's, +X), ``pitch_l_eyeball`` (25) and ``pitch_r_eyeball``

@@ -59,15 +59,15 @@ fastest) can turn over. :class:`Eyelids` runs an
 reach, with a floor of half :data:`MIN_OPENING`, on each frame the lids moved. With
 ``animate.eyelid_fold_deg`` (80 by default; 0: off) the quads the lids move, flat at rest, are also
 kept from bending past that dihedral (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`),
-alternating with the guard (:data:`FOLD_ROUNDS`): the lining gathered onto the dipping line where
-the lids meet no longer folds at the canthi (the blinks).
+alternating with the guard (:data:`~faceforge.animation.lid_folds.FOLD_ROUNDS`): the lining gathered
+onto the dipping line where the lids meet no longer folds at the canthi (the blinks).
 
 **The margins stay where the FAPs put them.** Both passes move particles with inverse masses
-(:func:`margin_inv_mass`): the lid margins (:func:`lid_margins`: the vertices on each margin
-curve) and the lid FDPs weigh 0, so the limit and the guard bend the skin around them and a full
-blink stays closed to :data:`MIN_OPENING` (with equal masses the limit turned the margins too: the
-synthetic head's full blink stayed 6 % open). Only near the corners (the taper below
-:data:`MARGIN_FREE_TAPER`), where the margins close onto each other, do they ease free.
+(:mod:`faceforge.animation.lid_folds`): the lid margins (the vertices on each margin curve) and the
+lid FDPs weigh 0, so the limit and the guard bend the skin around them and a full blink stays closed
+to :data:`MIN_OPENING` (with equal masses the limit turned the margins too: the synthetic head's full
+blink stayed 6 % open). Only near the corners, where the margins close onto each other, do they ease
+free.
 
 All lengths are in the skin's units; frames are in the head's frame (+X the subject's left,
 +Y up, +Z forward).
@@ -78,6 +78,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+
+from faceforge.animation.lid_folds import FOLD_ROUNDS, fold_quads, margin_inv_mass
 
 #: FAP numbers of close_t_l_eyelid, close_t_r_eyelid, close_b_l_eyelid, close_b_r_eyelid
 EYELID_FAPS = (19, 20, 21, 22)
@@ -365,54 +367,6 @@ def over_eyeball(y0: np.ndarray, z0: np.ndarray, y1: np.ndarray, surface: np.nda
     return np.where(zf > 0.0, np.maximum(push, 0.0), 0.0)
 
 
-def lid_margins(eye: Eye, rest: np.ndarray, faces: np.ndarray, depth: float = 0.5) -> np.ndarray:
-    """``(p,)`` sorted vertex ids of ``rest (n, 3)`` (triangles ``faces (m, 3)``) that lie on the
-    eye's two lid margins: for each margin curve (heights ``top * s(u)``, ``bottom * s(u)``, module
-    docstring), every mesh edge the curve crosses (its two ends on either side of it, in height
-    along v, within the corners) gives its end nearer the curve; only skin in front of the depth
-    fade (``depth`` rest openings behind the margins, :func:`lid_field`): the socket's lining behind
-    a closed eye is not a margin. These are the vertices whose closing the FAPs set: a full blink
-    brings the two rows together, :data:`MIN_OPENING` apart."""
-    rest = np.asarray(rest, dtype=np.float64).reshape(-1, 3)
-    faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
-    x = (rest - eye.centre) @ eye.axes.T
-    s = eye.taper(x[:, 0])
-    front = eye.lid_depth * s - x[:, 2] <= depth * eye.gap
-    edges = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1), axis=0)
-    a, b = edges[:, 0], edges[:, 1]
-    ok = front[a] & front[b] & ((s[a] > 0.0) | (s[b] > 0.0))
-    out = []
-    for height in eye.margins:
-        h = x[:, 1] - height * s
-        cross = ok & ((h[a] >= 0.0) != (h[b] >= 0.0))
-        out.append(np.where(np.abs(h[a]) <= np.abs(h[b]), a, b)[cross])
-    return np.unique(np.concatenate(out))
-
-
-def margin_inv_mass(field: LidField, rest: np.ndarray, faces: np.ndarray, depth: float = 0.5) -> np.ndarray:
-    """``(n,)`` inverse masses in [0, 1] for :class:`Eyelids`' fold limit and guard: 0 on the lid
-    margins (:func:`lid_margins`, those in the field) where the taper ``s(u)`` is at least
-    :data:`MARGIN_FREE_TAPER`, rising linearly to 1 at the corners (``s`` 0); 1 everywhere else.
-    Where the lids meet, the margins stay where the FAPs put them and the skin bends around them;
-    in the canthi the two margins close onto each other with no opening left to keep, and two
-    pinned margin vertices facing each other across a sliver of lining would leave the limit
-    nothing to turn (MakeHuman's outer canthus: one folded edge per blink)."""
-    w = np.ones(len(rest))
-    margin = lid_margins(field.eye, rest, faces, depth)
-    margin = margin[np.isin(margin, field.index)]
-    s = field.eye.taper((rest[margin] - field.eye.centre) @ field.eye.axes[0])
-    w[margin] = np.clip(1.0 - s / MARGIN_FREE_TAPER, 0.0, 1.0)
-    return w
-
-
-#: below this taper ``s(u)`` (near the corners) the lid margins ease out of their pin
-#: (:func:`margin_inv_mass`): with TAPER 3, the outer eighth of the way to each corner. Pinned all
-#: along, MakeHuman's blinks kept 1 / 1 folded edges and ICT's 4 / 0; eased below 1/3, 0 / 0 and
-#: 3 / 0, the margins moving at most 0.014 of the opening, and only there (eased below 1: 0 / 0
-#: and 1 / 1, but the margins moved up to 0.06 of the opening where the lids meet)
-MARGIN_FREE_TAPER = 1.0 / 3.0
-
-
 def move_lids(frames: np.ndarray, fields: list[LidField], faps: np.ndarray, irisd: float,
               rest: np.ndarray, jaw=None, jaw_hold: float = 0.0) -> np.ndarray:
     """Frames ``(F, n, 3)`` with the lids moved by FAPs 19-22 of ``faps (F, 68)``.
@@ -464,14 +418,16 @@ class Eyelids:
     irisd : one IRISD unit (skin units)
     reach, depth : see :func:`lid_field`
     fold_deg : ``animate.eyelid_fold_deg``: the skin the lids move, bent less than this (and
-        :data:`FOLD_FLAT_DEG`) at rest, is kept within this dihedral (degrees; 0: off)
+        :data:`~faceforge.animation.lid_folds.FOLD_FLAT_DEG`) at rest, is kept within this
+        dihedral (degrees; 0: off)
     rigid : (n,) bool or None: vertices of pieces that ride a bone (eyeballs, teeth:
         :func:`faceforge.skin.parts.rigid_parts`); the lids never move them, and a lid FDP never
         names one of them as its lid
 
     Attributes: ``inv_mass (n,)``: the inverse masses the fold limit and (with it) the guard move
-    the skin with, 0 on the margins and the lid FDPs (:func:`margin_inv_mass`); all 1 with the
-    limit off (the margins are then not looked for). ``lashes``: (lash vertices, lid vertices) of
+    the skin with, 0 on the margins and the lid FDPs
+    (:func:`~faceforge.animation.lid_folds.margin_inv_mass`); all 1 with the limit off (the margins
+    are then not looked for). ``lashes``: (lash vertices, lid vertices) of
     :func:`faceforge.animation.lashes.lash_carriers`: each lash vertex takes its lid vertex's move.
     """
 
@@ -504,9 +460,9 @@ class Eyelids:
         for field in self.fields:
             moving[field.index] = True
         near = faces[moving[faces].any(axis=1)]
-        self._fold = _fold_quads(self.rest, faces, moving, fold_deg)
+        self._fold = fold_quads(self.rest, faces, moving, fold_deg)
         # the fold limit and the guard bend the skin around the margins, they do not move them
-        # (the inverse masses of :func:`margin_inv_mass`); the lid FDPs are pinned whatever the mesh
+        # (the inverse masses of lid_folds.margin_inv_mass); the lid FDPs are pinned whatever the mesh
         self.inv_mass = np.ones(len(self.rest))
         for field, lids in zip(self.fields, self._lid_vertices) if self._fold is not None else ():
             self.inv_mass = np.minimum(self.inv_mass, margin_inv_mass(field, self.rest, faces, depth))
@@ -581,34 +537,3 @@ class Eyelids:
         if len(lash):
             out[:, lash] += out[:, lid] - np.asarray(frames)[:, lid]
         return out
-
-
-#: rounds of (one sweep of the dihedral limit, orientation guard) over a frame the lids moved
-#: (``animate.eyelid_fold_deg``): each undoes a little of the other and the pair does not settle (every
-#: round projects something), so the count matters. With the margins pinned, 8 rounds of 4 sweeps left
-#: ICT's blinks 3 / 0 folded edges (and 19 of 29 on the raw ICT mesh's two blinks: the limit's whole-excess
-#: turns inverted triangles, the guard's repairs folded others); single sweeps, 16 rounds 1 / 2, 24 rounds
-#: 0 / 0 (raw mesh 3), 32 0 / 0 (4), 48 0 / 0 (7); MakeHuman and MediaPipe 0 / 0 from 16 on. 5-9 ms per
-#: frame on MakeHuman and ICT
-FOLD_ROUNDS = 24
-
-#: the lids' fold limit holds the quads bent less than this at rest (deg): taking in the quads
-#: bent 60-80 deg at rest (the socket's rim) folded MakeHuman's blink more (4 -> 13 edges), not less
-FOLD_FLAT_DEG = 60.0
-
-
-def _fold_quads(rest, faces, moving, fold_deg: float):
-    """(quads (q, 4), limits (q,) radians) of :class:`Eyelids`' fold limit: the skin's bending quads
-    whose four vertices the lids move and that are bent less than ``fold_deg`` and
-    :data:`FOLD_FLAT_DEG` at rest; None when
-    ``fold_deg`` is 0 or there are none."""
-    if not fold_deg or float(fold_deg) <= 0:
-        return None
-    from faceforge.pbd.constraints.bending import dihedral_angle
-    from faceforge.skin.layer import skin_topology
-
-    quads = np.asarray(skin_topology(faces).bending_quads, dtype=np.int64).reshape(-1, 4)
-    limit = np.radians(float(fold_deg))
-    quads = quads[moving[quads].all(axis=1)]
-    quads = quads[np.abs(dihedral_angle(rest, quads)) < min(limit, np.radians(FOLD_FLAT_DEG))]
-    return (np.ascontiguousarray(quads), np.full(len(quads), limit)) if len(quads) else None

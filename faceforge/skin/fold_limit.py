@@ -36,7 +36,7 @@ import numpy as np
 __all__ = ["FLAT_DEG", "BlendLimit", "fold_limits"]
 
 #: quads bent less than this at rest (degrees) are the skin's flat sheet, the ones the fold limit
-#: holds (the lids' limit uses the same, :data:`faceforge.animation.eyelids.FOLD_FLAT_DEG`)
+#: holds (the lids' limit uses the same, :data:`faceforge.animation.lid_folds.FOLD_FLAT_DEG`)
 FLAT_DEG = 60.0
 
 

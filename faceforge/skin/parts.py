@@ -9,15 +9,16 @@ it), the lower teeth and the tongue the mandible.
 
 :func:`rigid_parts` tells them apart. A *piece* is a connected component of the faces. The pieces
 that hold the landmarks are the skin: the one holding most, and any holding a fifth as many (a
-landmark may snap onto an eyeball: the pupils 3.5 / 3.6 lie on it, the lids' points beside it). Another piece is *inner* when the median of its vertices lies
-inside the convex hull of the fitted bones (cranium and mandible): an eyeball sits in the orbit
-and the teeth on the jaws, inside the hull, while eyelashes, brow or beard cards lie on the skin,
-outside it (the soft tissue is 3-15 mm deep), and a piece outside the head is another object.
-Vertices no face uses (MediaPipe's iris points) are left to the skin. (The skin's own normals do
-not tell an eyeball in: in a mesh with closed sockets the socket's lining faces the eyeball.)
-An inner piece rides the mandible when its median lies below the mouth's line (``mouth``: the
-height of the inner lips, FDPs 2.2 / 2.3, along ``up``), else the cranium; without the mouth's
-line, the bone whose vertices are nearer (median distance).
+landmark may snap onto an eyeball: the pupils 3.5 / 3.6 lie on it, the lids' points beside it).
+Another piece is *inner* when the median of its vertices lies inside the convex hull of the fitted
+bones (cranium and mandible): an eyeball sits in the orbit and the teeth on the jaws, inside the
+hull, while eyelashes, brow or beard cards lie on the skin, outside it (the soft tissue is 3-15 mm
+deep), and a piece outside the head is another object. Vertices no face uses (MediaPipe's iris
+points) are left to the skin. (The skin's own normals do not tell an eyeball in: in a mesh with
+closed sockets the socket's lining faces the eyeball.) An inner piece rides the mandible when its
+median lies below the mouth's line (``mouth``: the height of the inner lips, FDPs 2.2 / 2.3, along
+``up``), else the cranium; without the mouth's line, the bone whose vertices are nearer (median
+distance).
 
 Functions on arrays; any unit, the frame is the fit's (+Y up, +Z forward).
 """

@@ -48,10 +48,11 @@ def test_the_fold_limit_off_changes_nothing():
 @pytest.mark.parametrize("name", sorted(HEADS))
 def test_the_fold_limit_keeps_the_margins_where_the_faps_put_them(name):
     """The limit and the guard bend the skin around the lid margins (inverse mass 0 where the lids
-    meet, :func:`faceforge.animation.eyelids.margin_inv_mass`): the pinned vertices, the lid FDPs
+    meet, :func:`faceforge.animation.lid_folds.margin_inv_mass`): the pinned vertices, the lid FDPs
     among them, end bit for bit where the lid field alone puts them; only near the corners do the
     margins ease free."""
-    from faceforge.animation.eyelids import lid_margins, move_lids
+    from faceforge.animation.eyelids import move_lids
+    from faceforge.animation.lid_folds import lid_margins
 
     v, f, lm, _ = _load(HEADS[name])
     irisd = np.mean([e.gap for e in find_eyes(lm)]) / 1024.0
@@ -73,7 +74,8 @@ def test_lid_margins_are_the_rows_on_the_margin_curves():
     """On a strip of skin rows, the margins are the rows nearest each margin curve (heights
     ``top s(u)`` and ``bottom s(u)``), within the corners and in front; the rows between, above and
     below, and the skin behind, are not."""
-    from faceforge.animation.eyelids import Eye, lid_margins
+    from faceforge.animation.eyelids import Eye
+    from faceforge.animation.lid_folds import lid_margins
 
     eye = Eye(np.zeros(3), np.eye(3), 1.0, 0.5, -0.5, 0.0, 0.0, 0.0, 19, 21)
     us, vs = np.linspace(-0.9, 0.9, 19), np.array([-1.0, -0.52, -0.2, 0.2, 0.47, 1.0])

@@ -187,7 +187,7 @@ def test_packaged_templates_link_resolves_like_the_default_paths(repo_root):
 
 
 def test_rules_inferred_from_default_types_and_added_rules(monkeypatch):
-    from faceforge.io import config as cfg
+    from faceforge.io import config_rules as cfg
 
     assert cfg.rule_for("x.count", 3) == cfg.Integer(1, 1000)
     assert cfg.rule_for("x.seed", 0) == cfg.Integer(0, 1000)
