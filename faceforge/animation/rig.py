@@ -297,6 +297,17 @@ class BoundHead:
                        float(config.get("animate.eyelid_fold_deg") or 0.0),
                        float(config.get("animate.eyelid_jaw_hold") or 0.0), rigid=self.parts != 0)
 
+    def inside_at_rest(self) -> np.ndarray:
+        """(n,) bool: the working vertices the bone checks do not count (``inside_at_rest`` of
+        :func:`faceforge.animation.checks.check_animation`): those inside the bones at rest, and the
+        pieces that ride a bone (:attr:`parts`: an eyeball turning in its orbit, teeth moving with
+        the jaw are not skin). Computed once."""
+        if getattr(self, "_inside_at_rest", None) is None:
+            from faceforge.animation.checks import inside_bones
+
+            self._inside_at_rest = inside_bones(self.rest, self.skull_at(np.zeros(3))) | (self.parts != 0)
+        return self._inside_at_rest
+
     def skull_at(self, jaw_dofs):
         """[(vertices, faces)] of cranium and mandible for jaw DOFs (3,)."""
         t = self.skull.jaw_transform(*jaw_dofs)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from faceforge.animation.calibrate_head import calibration_probes
-from faceforge.animation.checks import check_animation, folded_edges, inside_bones
+from faceforge.animation.checks import check_animation, folded_edges
 from faceforge.animation.controls import controls
 from faceforge.blendshapes.arkit import ARKIT_NAMES, mirror_name
 from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
@@ -192,7 +192,7 @@ def _presets(head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_fap
 
 def _check_shapes(head, frames, jaw, names, made, report) -> None:
     """Per made shape: peak displacement (skin units) and the physical checks at full weight."""
-    base = inside_bones(head.rest, head.skull_at(np.zeros(3)))   # once, not once per shape
+    base = head.inside_at_rest()   # once, not once per shape; the rigid pieces are not skin
     for i, name in enumerate(names):
         if not made[i]:
             continue
