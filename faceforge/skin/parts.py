@@ -45,7 +45,7 @@ def rigid_parts(vertices, faces, skin_vertices, cranium, mandible, mouth: float 
 
     skin_vertices : ids of the landmarks' vertices; the pieces holding most of them are skin.
     cranium, mandible : (vertices (k, 3), faces) of the fitted bones at rest.
-    mouth : the inner lips' height along ``up`` (3,), or None.
+    mouth : the inner lips' height along ``up`` (a unit direction (3,)), or None.
     All :data:`SKIN` when no skin vertex is given or the mesh is one piece.
     """
     from scipy.spatial import ConvexHull, cKDTree
