@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.animation.checks import (FrameReport, _where, fold_limit, folded_edges, inside_bones, inside_skull,
+from faceforge.animation.checks import (FrameReport, _where, fold_limit, folded_edges, inside_skull,
                                         inverted_faces)
 
 
@@ -19,14 +19,14 @@ class StreamChecker:
     """Checks of an animation of ``n_frames`` frames fed in order with :meth:`add`.
 
     rest (n, 3), faces (m, 3) of the skin; ``sample``, ``tolerance``: as for
-    :func:`~faceforge.animation.checks.check_animation`; ``rigid`` (n,) bool or None: vertices of
-    the pieces that ride a bone (eyeballs, teeth: :func:`faceforge.skin.parts.rigid_parts`), not
-    skin, so never counted inside the bones (an eyeball turning in its orbit).
+    :func:`~faceforge.animation.checks.check_animation`; ``inside_at_rest`` (n,) bool or None: the
+    vertices the bone check does not count, as there (a bound head's
+    :meth:`~faceforge.animation.rig.BoundHead.inside_at_rest`: also its rigid pieces).
     """
 
     def __init__(self, rest: np.ndarray, faces: np.ndarray, n_frames: int, sample: int = 8,
-                 tolerance: float | None = None, rigid=None):
-        self.rigid = None if rigid is None or not np.any(rigid) else np.asarray(rigid, bool).reshape(-1)
+                 tolerance: float | None = None, inside_at_rest: np.ndarray | None = None):
+        self.inside_at_rest = inside_at_rest
         self.rest = np.asarray(rest, dtype=float)
         self.faces = np.asarray(faces, dtype=np.int64)
         self.n_frames = int(n_frames)
@@ -88,8 +88,8 @@ class StreamChecker:
         if skull is not None and self.n_frames:
             frames = dict(self.kept)
             frames[self.worst] = self.worst_frame
-            base = None if self.rigid is None else inside_bones(self.rest, skull(-1)) | self.rigid
-            inside = inside_skull(self.rest, frames, sorted(self.sampled | {self.worst}), skull, self.tolerance, base)
+            inside = inside_skull(self.rest, frames, sorted(self.sampled | {self.worst}), skull, self.tolerance,
+                                  self.inside_at_rest)
             if inside:
                 where["inside_skull"] = inside
         inside_total = sum(inside.values())

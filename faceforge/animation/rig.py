@@ -136,6 +136,7 @@ class BoundHead:
         #: (n,) int8, the pieces that ride a bone (:func:`faceforge.skin.parts.rigid_parts`; all 0
         #: on a head bound before they were told apart)
         self.parts = np.asarray(bind.get("parts", np.zeros(len(self.rest), np.int8)))
+        self._inside_at_rest = None   # inside_at_rest(), once asked
         self.rig = Rig(skull=jaw, muscles=MuscleDrive(system), skin=skin_step, rest=self.rest,
                        influence=np.asarray(bind["influence"], dtype=float), reset=reset,
                        finish=None if self.orientation is None else self.orientation.apply,
@@ -302,7 +303,7 @@ class BoundHead:
         :func:`faceforge.animation.checks.check_animation`): those inside the bones at rest, and the
         pieces that ride a bone (:attr:`parts`: an eyeball turning in its orbit, teeth moving with
         the jaw are not skin). Computed once."""
-        if getattr(self, "_inside_at_rest", None) is None:
+        if self._inside_at_rest is None:
             from faceforge.animation.checks import inside_bones
 
             self._inside_at_rest = inside_bones(self.rest, self.skull_at(np.zeros(3))) | (self.parts != 0)

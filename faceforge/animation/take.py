@@ -51,7 +51,7 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
     Returns the :class:`StreamChecker` that saw every frame (in the skull's frame, lids
     included, before the head turn). A diverging simulation raises ``FloatingPointError``.
     """
-    checker = StreamChecker(head.rest, head.faces, source.n_frames, rigid=getattr(head, "parts", None))
+    checker = StreamChecker(head.rest, head.faces, source.n_frames, inside_at_rest=head.inside_at_rest())
 
     def per_frame(frames, **_):   # one progress bar over the blocks
         for i in frames:
