@@ -5,7 +5,9 @@ a dense face reads as facets and a crease is hard to tell from a triangle edge. 
 vertex is lit with its area-weighted normal (:func:`faceforge.geometry.triangles.vertex_normals`)
 and matplotlib interpolates across the triangle (``tripcolor(shading="gouraud")``), triangles
 drawn back to front by centroid depth. A heat map colours each vertex by its displacement from
-a reference pose instead.
+a reference pose instead. Where the mesh has a hole one can see through (a face mask's mouth, a
+mesh without a mouth bag), the hole is drawn dark as a cavity would look
+(:func:`_fill_holes`), not the page's white.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from faceforge.viz.render import LIGHT, view_matrix
 
 #: skin tone at full light; the shade scales it
 SKIN = np.array([0.93, 0.86, 0.78])
+#: what a hole in the mesh shows (the cavity's shade: :func:`draw_smooth`'s darkest, 0.15 of the skin)
+HOLE = tuple(0.15 * SKIN)
 
 
 def _project(vertices, faces, view: str):
@@ -30,6 +34,18 @@ def _project(vertices, faces, view: str):
     return v, f[order]
 
 
+def _fill_holes(ax, v: np.ndarray, faces: np.ndarray, colour) -> None:
+    """Fill every boundary loop of ``faces`` (m, 3) projected by ``v`` (camera coordinates, n x 3)
+    in ``colour``, under the mesh (zorder 0). A surface covers the inside of its own boundary's
+    picture (the image of a disc covers every point its rim winds round), so the fills show only
+    where the mesh has a hole one can see through: a mask's mouth, or its eyes."""
+    from faceforge.io.mesh_check import boundary_loops
+
+    for loop in boundary_loops(np.asarray(faces, dtype=np.int64)):
+        if len(loop) >= 3:
+            ax.fill(v[loop, 0], v[loop, 1], color=colour, lw=0, zorder=0)
+
+
 def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front",
                 ambient: float = 0.3, dim: np.ndarray | None = None) -> None:
     """Draw the mesh ``vertices (n, 3)``, ``faces (m, 3)`` smooth-shaded into ``ax``; ``dim``
@@ -42,6 +58,7 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
     from faceforge.geometry.triangles import vertex_normals
 
     v, f = _project(vertices, faces, view)
+    _fill_holes(ax, v, faces, HOLE)
     n = vertex_normals(v, np.asarray(faces, dtype=np.int64))
     n = n * np.where(n[:, 2:3] < 0.0, -1.0, 1.0)
     light = ambient + (1.0 - ambient) * np.clip(n @ LIGHT, 0.0, 1.0)
@@ -126,5 +143,6 @@ def draw_heat(ax, vertices: np.ndarray, rest: np.ndarray, faces: np.ndarray, sca
     ``scale`` (same units) the top of the colour scale. Returns the mappable (for a colour bar)."""
     v, f = _project(vertices, faces, view)
     d = np.linalg.norm(np.asarray(vertices, float) - np.asarray(rest, float), axis=1)
+    _fill_holes(ax, v, faces, HOLE)
     return ax.tripcolor(v[:, 0], v[:, 1], f, d, shading="gouraud", cmap=cmap, vmin=0.0,
                         vmax=max(float(scale), 1e-30), rasterized=True)

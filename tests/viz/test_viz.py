@@ -236,3 +236,38 @@ def test_the_mouth_cavity_is_what_the_lips_hide_and_draws_dark(tmp_path):
         return img.mean()
 
     assert mean_light(np.ones(len(back))) < 0.8 * mean_light(None)
+
+
+def test_a_hole_one_sees_through_is_drawn_dark_not_white():
+    """A plane with a square hole (a mask's mouth): the hole's pixels are the cavity's dark,
+    the page round the plane stays white, and the plane itself is lit skin; the heat map
+    draws the hole dark too (the image of a surface covers its outer rim's inside, so the
+    rim's fill never shows)."""
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from faceforge.viz.smooth import draw_heat, draw_smooth
+
+    v, f = _plane(-1.0, 1.0, 0.0, 11)
+    centre = np.abs(v[f][:, :, :2]).max(axis=1).max(axis=1) <= 0.4 + 1e-9   # the middle 4 x 4 cells
+    f = f[~centre]
+
+    def pixels(draw):
+        fig, ax = plt.subplots(figsize=(3, 3), dpi=100)
+        draw(ax)
+        ax.set_xlim(-1.5, 1.5)
+        ax.set_ylim(-1.5, 1.5)
+        ax.axis("off")
+        fig.subplots_adjust(0, 0, 1, 1)
+        fig.canvas.draw()
+        img = np.asarray(fig.canvas.buffer_rgba(), dtype=float)[..., :3] / 255.0
+        plt.close(fig)
+        return img[150, 150], img[5, 5], img[150, 60]      # hole, page, plane (x = -0.7)
+
+    hole, page, skin = pixels(lambda ax: draw_smooth(ax, v, f))
+    assert hole.max() < 0.25 and page.min() > 0.99 and skin.mean() > 0.6
+    hole, page, _ = pixels(lambda ax: draw_heat(ax, v, v, f, 1.0))
+    assert hole.max() < 0.25 and page.min() > 0.99
