@@ -3,7 +3,8 @@
 Each panel is the face seen from the front, Gouraud-shaded: a Lambert intensity per vertex from
 the area-weighted vertex normals, interpolated across each triangle (matplotlib ``tripcolor``
 with ``shading="gouraud"``), triangles drawn back to front (painter's algorithm), those facing
-away from the camera left out. All panels share one frame (the ``region``'s extent at rest), so
+away from the camera left out; a hole one can see through is drawn dark
+(:func:`faceforge.viz.smooth.fill_holes`). All panels share one frame (the ``region``'s extent at rest), so
 a shape's motion is visible as motion against the others.
 """
 
@@ -48,6 +49,9 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
     from matplotlib.patches import Rectangle
     from matplotlib.tri import Triangulation
 
+    from faceforge.io.mesh_check import boundary_loops
+    from faceforge.viz.smooth import fill_holes
+
     frames = np.asarray(frames, dtype=float)
     labels = list(labels)
     rows = -(-len(labels) // cols)
@@ -69,6 +73,7 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
     ax.axis("off")
     cmap = LinearSegmentedColormap.from_list("skin", [(0, 0, 0), color])
     box = (lo - pad, hi + pad)
+    loops = boundary_loops(np.asarray(faces, dtype=np.int64))
     for k, (frame, name) in enumerate(zip(frames, labels)):
         xy, tri, shade = smooth_shade(frame, faces)
         centre = xy[tri].mean(axis=1)        # only the triangles in the panel (speed)
@@ -76,9 +81,11 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
         x0, y0 = (k % cols) * cw, -(k // cols) * ch
         if len(tri):
             at = xy - lo + (x0, y0)
+            cell = Rectangle((x0, y0), w, h, transform=ax.transData)
+            fill_holes(ax, at, faces, clip=cell, loops=loops)
             art = ax.tripcolor(Triangulation(at[:, 0], at[:, 1], tri), shade, shading="gouraud", cmap=cmap,
                                vmin=0.0, vmax=1.0, rasterized=True)
-            art.set_clip_path(Rectangle((x0, y0), w, h, transform=ax.transData))
+            art.set_clip_path(cell)
         ax.text(x0 + 0.5 * w, y0 + h + 0.01 * h, name, ha="center", va="bottom", fontsize=9)
     ax.set_xlim(-0.5 * (cw - w), cols * cw - 0.5 * (cw - w))
     ax.set_ylim(-(rows - 1) * ch - 0.02 * h, ch - 0.02 * h)

@@ -7,7 +7,7 @@ and matplotlib interpolates across the triangle (``tripcolor(shading="gouraud")`
 drawn back to front by centroid depth. A heat map colours each vertex by its displacement from
 a reference pose instead. Where the mesh has a hole one can see through (a face mask's mouth, a
 mesh without a mouth bag), the hole is drawn dark as a cavity would look
-(:func:`_fill_holes`), not the page's white.
+(:func:`fill_holes`), not the page's white.
 """
 
 from __future__ import annotations
@@ -34,16 +34,20 @@ def _project(vertices, faces, view: str):
     return v, f[order]
 
 
-def _fill_holes(ax, v: np.ndarray, faces: np.ndarray, colour) -> None:
-    """Fill every boundary loop of ``faces`` (m, 3) projected by ``v`` (camera coordinates, n x 3)
-    in ``colour``, under the mesh (zorder 0). A surface covers the inside of its own boundary's
-    picture (the image of a disc covers every point its rim winds round), so the fills show only
-    where the mesh has a hole one can see through: a mask's mouth, or its eyes."""
+def fill_holes(ax, xy: np.ndarray, faces: np.ndarray, colour=HOLE, clip=None, loops=None) -> None:
+    """Fill every boundary loop of ``faces`` (m, 3) at the projected vertices ``xy`` (n, >= 2) in
+    ``colour``, under the mesh (zorder 0), clipped to the patch ``clip`` when given; ``loops``
+    (:func:`faceforge.io.mesh_check.boundary_loops` of ``faces``) saves finding them again. A
+    surface covers the inside of its own boundary's picture (the image of a disc covers every
+    point its rim winds round), so the fills show only where the mesh has a hole one can see
+    through: a mask's mouth, an eye opening with nothing behind it."""
     from faceforge.io.mesh_check import boundary_loops
 
-    for loop in boundary_loops(np.asarray(faces, dtype=np.int64)):
+    for loop in boundary_loops(np.asarray(faces, dtype=np.int64)) if loops is None else loops:
         if len(loop) >= 3:
-            ax.fill(v[loop, 0], v[loop, 1], color=colour, lw=0, zorder=0)
+            for patch in ax.fill(xy[loop, 0], xy[loop, 1], color=colour, lw=0, zorder=0):
+                if clip is not None:
+                    patch.set_clip_path(clip)
 
 
 def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front",
@@ -58,7 +62,7 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
     from faceforge.geometry.triangles import vertex_normals
 
     v, f = _project(vertices, faces, view)
-    _fill_holes(ax, v, faces, HOLE)
+    fill_holes(ax, v, faces)
     n = vertex_normals(v, np.asarray(faces, dtype=np.int64))
     n = n * np.where(n[:, 2:3] < 0.0, -1.0, 1.0)
     light = ambient + (1.0 - ambient) * np.clip(n @ LIGHT, 0.0, 1.0)
@@ -143,6 +147,6 @@ def draw_heat(ax, vertices: np.ndarray, rest: np.ndarray, faces: np.ndarray, sca
     ``scale`` (same units) the top of the colour scale. Returns the mappable (for a colour bar)."""
     v, f = _project(vertices, faces, view)
     d = np.linalg.norm(np.asarray(vertices, float) - np.asarray(rest, float), axis=1)
-    _fill_holes(ax, v, faces, HOLE)
+    fill_holes(ax, v, faces)
     return ax.tripcolor(v[:, 0], v[:, 1], f, d, shading="gouraud", cmap=cmap, vmin=0.0,
                         vmax=max(float(scale), 1e-30), rasterized=True)
