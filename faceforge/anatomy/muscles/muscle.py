@@ -38,7 +38,7 @@ from faceforge.anatomy.muscles.hexmesh import HexTopology, hex_topology, morph_h
 from faceforge.anatomy.muscles.linear import (LINEAR_MAX_CONTRACTION, _row_blend, interior_grid, interior_targets,
                                               row_bases)
 from faceforge.anatomy.muscles.sphincter import (SPHINCTER_MAX_CONTRACTION, _sphincter_grid, lower_raise,
-                                                 sphincter_displacement)
+                                                 sphincter_displacement, vertical_share)
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
@@ -154,8 +154,9 @@ class Muscle:
         ellipse's centre: the mean of both loops) to the inner loop's own mean (1, the mouth
         opening). See :func:`build_sphincter_muscle`.
     closure_vertical, eversion_up : float, bool
-        Sphincter: the closure's share along the plane's up direction (1, the paper) and the
-        eversion along it (:func:`faceforge.anatomy.muscles.sphincter.sphincter_displacement`).
+        Sphincter: the closure's share along the plane's up direction at a full protrusion
+        drive (1, the paper) and the eversion along it (:func:`~faceforge.anatomy.muscles.
+        sphincter.vertical_share`, :func:`~faceforge.anatomy.muscles.sphincter.sphincter_displacement`).
     interior : (h-2, w-2, 3) float64 or None
         Linear: the rest offset of each interior bottom particle (rows ``i = 1..h-2``,
         columns ``j = 1..w-2``) from the blend of its row's side samples, in the row's
@@ -287,6 +288,7 @@ class Muscle:
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         lift = self._lift(protrude)
         low = lower_raise(lower, self.active, self.max_contraction) if self.kind != "linear" else 0.0
+        vert = vertical_share(self.closure_vertical, protrude, self.active)
         g = self.bound_grid
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
@@ -295,9 +297,9 @@ class Muscle:
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
                             c * self.max_contraction, grid, r1, r3, carry, lift, self.forward, low,
-                            self.closure_centre, self.closure_vertical, self.eversion_up)
+                            self.closure_centre, vert, self.eversion_up)
         else:
-            grid = self._grid_targets(c, points, lift, low)
+            grid = self._grid_targets(c, points, lift, low, vert)
         return grid[g[:, 0], g[:, 1]]
 
     @property
@@ -356,7 +358,7 @@ class Muscle:
             g = self.__dict__["_cg"] = g
         return g
 
-    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0) -> np.ndarray:
+    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0, vert: float = 1.0) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
         grid = np.empty((h, w, 3))
         if self.kind == "linear":
@@ -386,7 +388,7 @@ class Muscle:
                 s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
             if c > 0 or lift > 0 or low > 0:
                 d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward, low,
-                                           self.closure_centre, self.closure_vertical, self.eversion_up)
+                                           self.closure_centre, vert, self.eversion_up)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3

@@ -246,6 +246,22 @@ def protrusion_control(name: str) -> str:
     return name + PROTRUSION_SUFFIX
 
 
+def vertical_share(closure_vertical: float, protrude: float, active: bool) -> float:
+    """The closure's share along the loops' plane's up direction for :func:`sphincter_displacement`
+    (``vertical``) / the compiled targets: ``1 - (1 - closure_vertical) p``, ``p`` the protrusion
+    drive clipped to [0, 1] (0 when passive; :attr:`Muscle.closure_vertical`).
+
+    Anatomy: the closure alone is the lips pressed together (AU23/24; the upper lip lowered, FAP
+    4/51), the paper's isotropic closure; with the lips pushed out (the pars peripheralis, a
+    pucker or a rounded viseme) the ring shortens along its fibres round the mouth: on a wide,
+    flat mouth the corners come in while the lips, held behind by the teeth, go forward, and the
+    ring's height barely shrinks. The paper's closure toward the loops' mean, which lies below the
+    mouth where the outer loop reaches the chin, pulled the upper lip 5-7 mm down in a pucker
+    (docs/notes/pucker16.md); taken always, the lowered upper lip of FAP 4/51 was lost."""
+    p = float(np.clip(protrude, 0.0, 1.0)) if active else 0.0
+    return 1.0 - (1.0 - float(closure_vertical)) * p
+
+
 #: suffix of a sphincter's lower-part control (:func:`lower_control`)
 LOWER_SUFFIX = ".lower"
 
