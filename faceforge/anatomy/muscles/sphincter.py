@@ -246,10 +246,16 @@ def protrusion_control(name: str) -> str:
     return name + PROTRUSION_SUFFIX
 
 
+#: the protrusion drive from which a sphincter's closure keeps the ring's height in full
+#: (:func:`vertical_share`): the bake's pucker solved to a drive of 0.36-0.5 with the closure at 1,
+#: and a share proportional to the drive left half of the upper lip's fall (MakeHuman: 8.1 1.9 mm down)
+VERTICAL_RAMP = 0.25
+
+
 def vertical_share(closure_vertical: float, protrude: float, active: bool) -> float:
     """The closure's share along the loops' plane's up direction for :func:`sphincter_displacement`
     (``vertical``) / the compiled targets: ``1 - (1 - closure_vertical) p``, ``p`` the protrusion
-    drive clipped to [0, 1] (0 when passive; :attr:`Muscle.closure_vertical`).
+    drive over :data:`VERTICAL_RAMP`, clipped to [0, 1] (0 when passive; :attr:`Muscle.closure_vertical`).
 
     Anatomy: the closure alone is the lips pressed together (AU23/24; the upper lip lowered, FAP
     4/51), the paper's isotropic closure; with the lips pushed out (the pars peripheralis, a
@@ -258,7 +264,7 @@ def vertical_share(closure_vertical: float, protrude: float, active: bool) -> fl
     ring's height barely shrinks. The paper's closure toward the loops' mean, which lies below the
     mouth where the outer loop reaches the chin, pulled the upper lip 5-7 mm down in a pucker
     (docs/notes/pucker16.md); taken always, the lowered upper lip of FAP 4/51 was lost."""
-    p = float(np.clip(protrude, 0.0, 1.0)) if active else 0.0
+    p = float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0)) if active else 0.0
     return 1.0 - (1.0 - float(closure_vertical)) * p
 
 
