@@ -431,7 +431,9 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
                                    float(config.get("muscle.sphincter.carry_inner")),
                                    float(config.get("muscle.sphincter.protrusion")), mirror=Mirror.from_arrays(fit),
                                    inner_on_bone=bool(config.get("muscle.sphincter.inner_on_bone")),
-                                   closure_centre=float(config.get("muscle.sphincter.closure_centre")))
+                                   closure_centre=float(config.get("muscle.sphincter.closure_centre")),
+                                   closure_vertical=float(config.get("muscle.sphincter.closure_vertical")),
+                                   eversion_up=bool(config.get("muscle.sphincter.eversion_up")))
     except TemplateError as exc:
         raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
                          "another muscle map)") from None

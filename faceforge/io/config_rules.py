@@ -186,6 +186,8 @@ RULES: list[tuple[str, Rule]] = [
     ("muscle.sphincter.protrusion", Number(0.0)),
     ("muscle.sphincter.inner_on_bone", Boolean()),
     ("muscle.sphincter.closure_centre", Number(0.0, 1.0)),
+    ("muscle.sphincter.closure_vertical", Number(0.0, 1.0)),
+    ("muscle.sphincter.eversion_up", Boolean()),
     ("solver.stiffness_mode", Choice(("paper", "iteration_independent", "xpbd"))),
     ("solver.gravity", Number()),
     ("fit.rbf_kernel", Choice(("multiquadric", "inverse_multiquadric", "thin_plate_spline", "gaussian"))),

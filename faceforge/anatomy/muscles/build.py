@@ -17,7 +17,7 @@ def eq5_thickness(fraction: float, skull_diagonal: float) -> float:
 
 def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness: dict | None = None,
                      carry_inner: float = 0.0, protrusion: float = 0.0, mirror=None,
-                     inner_on_bone: bool = False, closure_centre: float = 0.0) -> list:
+                     inner_on_bone: bool = False, closure_centre: float = 0.0, **shape) -> list:
     """Build every muscle of ``specs`` on the given skull, deepest layer first.
 
     Each muscle's action lines are projected (outermost surface) onto the concatenation of
@@ -31,7 +31,8 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     ``mirror_of`` a muscle built before it is built as that muscle's mirror image;
     ``inner_on_bone`` (``muscle.sphincter.inner_on_bone``): a sphincter's inner loop (A1, the
     lips' contact line) lies on the bones it lies on only (:func:`_inner_on_bone`);
-    ``closure_centre``: the sphincter's ``closure_centre`` (``muscle.sphincter.closure_centre``)
+    ``closure_centre``: the sphincter's ``closure_centre`` (``muscle.sphincter.closure_centre``);
+    ``shape``: its ``closure_vertical`` and ``eversion_up`` (:func:`build_sphincter_muscle`)
     (:func:`faceforge.anatomy.muscles.mirror.mirror_muscle`). Returns ``[Muscle]`` in build order.
     Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
     """
@@ -94,7 +95,7 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
                 m = build_sphincter_muscle(spec.name, loops[0], loops[1], v, f, spec.h,
                                            spec.w, t, stiffness.get("sphincter", {}), carry_inner=carry_inner,
                                            carry_faces=bone, protrusion=protrusion,
-                                           closure_centre=closure_centre, **kw)
+                                           closure_centre=closure_centre, **shape, **kw)
                 if mirror is not None:   # its cells split as mirror images too
                     from dataclasses import replace
 

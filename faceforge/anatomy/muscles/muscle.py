@@ -38,7 +38,7 @@ from faceforge.anatomy.muscles.hexmesh import HexTopology, hex_topology, morph_h
 from faceforge.anatomy.muscles.linear import (LINEAR_MAX_CONTRACTION, _row_blend, interior_grid, interior_targets,
                                               row_bases)
 from faceforge.anatomy.muscles.sphincter import (SPHINCTER_MAX_CONTRACTION, _sphincter_grid, lower_raise,
-                                                 sphincter_displacement)
+                                                 sphincter_displacement, vertical_share)
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
@@ -153,6 +153,10 @@ class Muscle:
         Sphincter: where its closure pulls the inner loop, from the paper's centre (0, the
         ellipse's centre: the mean of both loops) to the inner loop's own mean (1, the mouth
         opening). See :func:`build_sphincter_muscle`.
+    closure_vertical, eversion_up : float, bool
+        Sphincter: the closure's share along the plane's up direction at a full protrusion
+        drive (1, the paper) and the eversion along it (:func:`~faceforge.anatomy.muscles.
+        sphincter.vertical_share`, :func:`~faceforge.anatomy.muscles.sphincter.sphincter_displacement`).
     interior : (h-2, w-2, 3) float64 or None
         Linear: the rest offset of each interior bottom particle (rows ``i = 1..h-2``,
         columns ``j = 1..w-2``) from the blend of its row's side samples, in the row's
@@ -179,6 +183,8 @@ class Muscle:
     carry_inner: object = None
     protrusion: float = 0.0
     closure_centre: float = 0.0
+    closure_vertical: float = 1.0
+    eversion_up: bool = False
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -282,6 +288,7 @@ class Muscle:
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         lift = self._lift(protrude)
         low = lower_raise(lower, self.active, self.max_contraction) if self.kind != "linear" else 0.0
+        vert = vertical_share(self.closure_vertical, protrude, self.active)
         g = self.bound_grid
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
@@ -290,9 +297,9 @@ class Muscle:
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
                             c * self.max_contraction, grid, r1, r3, carry, lift, self.forward, low,
-                            self.closure_centre)
+                            self.closure_centre, vert, self.eversion_up)
         else:
-            grid = self._grid_targets(c, points, lift, low)
+            grid = self._grid_targets(c, points, lift, low, vert)
         return grid[g[:, 0], g[:, 1]]
 
     @property
@@ -351,7 +358,7 @@ class Muscle:
             g = self.__dict__["_cg"] = g
         return g
 
-    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0) -> np.ndarray:
+    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0, vert: float = 1.0) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
         grid = np.empty((h, w, 3))
         if self.kind == "linear":
@@ -381,7 +388,7 @@ class Muscle:
                 s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
             if c > 0 or lift > 0 or low > 0:
                 d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward, low,
-                                           self.closure_centre)
+                                           self.closure_centre, vert, self.eversion_up)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3
@@ -438,6 +445,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
     carry = kw.pop("carry_inner", None)
     protrusion = float(kw.pop("protrusion", 0.0))
     centre = float(kw.pop("closure_centre", 0.0))
+    shape = (float(kw.pop("closure_vertical", 1.0)), bool(kw.pop("eversion_up", False)))
     proto = Muscle(name, kind, topo, np.zeros((topo.n_particles, 3)), topo.faces, lines,
                    tuple(kw.pop("lies_on", ())), stiffness, **kw)   # carry_inner 0: the true rest samples
     kw["material_sampling"] = material
@@ -467,7 +475,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
         pos[: h * w].reshape(h, w, 3)[1:-1, 1:-1] = interior_targets(a0, a2, interior)  # round-off
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
                   proto.layer, proto.active, float(thickness), proto.max_contraction, params,
-                  interior, carry, protrusion, centre)
+                  interior, carry, protrusion, centre, *shape)
 
 
 def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:
@@ -519,7 +527,7 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
                            lies_on=(), layer=0, active=True,
                            max_contraction=SPHINCTER_MAX_CONTRACTION, material_sampling=True,
                            carry_inner=0.0, carry_faces=None, protrusion=0.0,
-                           closure_centre=0.0) -> Muscle:
+                           closure_centre=0.0, closure_vertical=1.0, eversion_up=False) -> Muscle:
     """A sphincter (§5.2.2) from its closed inner (A1) and outer (A3) loops.
 
     ``material_sampling`` (default True, a deliberate departure from a literal
@@ -562,6 +570,9 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
     7.1) where a real pucker moves it up and forward. The fibres of the pars marginalis run
     round the mouth opening; their purse-string pulls toward it: the closure's centre is moved
     ``closure_centre`` of the way from the ellipse's centre to the inner loop's own mean.
+    ``closure_vertical`` in [0, 1] (default 1, the paper; ``muscle.sphincter.closure_vertical``) and
+    ``eversion_up`` (``muscle.sphincter.eversion_up``): see
+    :func:`~faceforge.anatomy.muscles.sphincter.sphincter_displacement`.
 
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
@@ -579,8 +590,11 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
         raise ValueError(f"sphincter {name}: protrusion must be a finite number >= 0, got {protrusion}")
     if not 0.0 <= closure_centre <= 1.0:
         raise ValueError(f"sphincter {name}: closure_centre must lie in [0, 1], got {closure_centre}")
+    if not 0.0 <= closure_vertical <= 1.0:
+        raise ValueError(f"sphincter {name}: closure_vertical must lie in [0, 1], got {closure_vertical}")
     return _build(name, "sphincter", topo, lines, vertices, faces, thickness, stiffness,
                   lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
                   material_sampling=material_sampling, protrusion=float(protrusion),
-                  closure_centre=float(closure_centre),
+                  closure_centre=float(closure_centre), closure_vertical=float(closure_vertical),
+                  eversion_up=bool(eversion_up),
                   carry_inner=(float(carry_inner), np.ones(len(faces), bool) if carry_faces is None else carry_faces))

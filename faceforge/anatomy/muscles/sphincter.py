@@ -110,7 +110,8 @@ def _conic_lstsq(x, y):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd, low=0.0, centre=0.0):  # pragma: no cover - numba
+def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd, low=0.0, centre=0.0,
+                    vert=1.0, evup=False):  # pragma: no cover - numba
     """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
@@ -119,7 +120,9 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
     (h,)`` (:attr:`Muscle.carry_inner`, empty: none), each inner sample gets ``carry[i] ((s3 -
     r3) - (s1 - r1))``, ``r1, r3 (h, 3)`` the rest samples; ``low``: the lower part's raise
     (:func:`lower_raise`, already times the maximal closure); ``centre``: where the closure pulls
-    (:attr:`Muscle.closure_centre`). Same values as the numpy code to round-off (LAPACK's,
+    (:attr:`Muscle.closure_centre`); ``vert``, ``evup``: the closure's vertical share and the
+    eversion along the plane's up direction (:attr:`Muscle.closure_vertical`,
+    :attr:`Muscle.eversion_up`). Same values as the numpy code to round-off (LAPACK's,
     summation order).
 
     Length: one compiled kernel (ellipse fit and the per-sample displacement in one pass); kept
@@ -191,10 +194,15 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
     ub = db[1]
     un = np.sqrt(ua * ua + ub * ub)
     ru = 0.0
-    if low > 0.0 and un > 1e-12:
+    if un > 1e-12:
         ua /= un
         ub /= un
-        ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
+        if low > 0.0:
+            ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
+    else:              # no up direction in the plane: the paper's isotropic closure, eversion along db
+        vert = 1.0
+        evup = False
+    flat = 1.0 - vert  # the share of the closure along u that is taken away (closure_vertical)
     if not ru > 0.0:   # no raise asked, or no up direction in the plane (a degenerate ellipse)
         low = 0.0
         ru = 1.0
@@ -215,8 +223,13 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         r = np.sqrt(xo * xo * b * b + yo * yo * a * a) / (a * b)
         fall = np.cos(0.5 * np.pi * min(max(1.0 - r, -1.0), 1.0))
         wl = low * min(max(-(xo * ua + yo * ub) / ru, 0.0), 1.0) if low > 0.0 else 0.0   # lower_weights
+        tu = flat * (ta * ua + tb * ub)      # closure_vertical: less of the pull along u
+        ta -= tu * ua
+        tb -= tu * ub
+        yu = xo * ua + yo * ub               # the outer sample's height along u
         for j in range(3):
-            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * yo / b * db[j])
+            ev = yu * (ua * da[j] + ub * db[j]) if evup else yo * db[j]
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * ev / b)
                   + wl * (ua * da[j] + ub * db[j] - LOWER_INWARD * nrm[j])) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
@@ -231,6 +244,28 @@ def protrusion_control(name: str) -> str:
     a contraction-like value in [0, 1] that FAP mappings and ``MusculoskeletalSystem.step`` take
     alongside the muscles' own (:attr:`Muscle.protrusion`)."""
     return name + PROTRUSION_SUFFIX
+
+
+#: the protrusion drive from which a sphincter's closure keeps the ring's height in full
+#: (:func:`vertical_share`): the bake's pucker solved to a drive of 0.36-0.5 with the closure at 1,
+#: and a share proportional to the drive left half of the upper lip's fall (MakeHuman: 8.1 1.9 mm down)
+VERTICAL_RAMP = 0.25
+
+
+def vertical_share(closure_vertical: float, protrude: float, active: bool) -> float:
+    """The closure's share along the loops' plane's up direction for :func:`sphincter_displacement`
+    (``vertical``) / the compiled targets: ``1 - (1 - closure_vertical) p``, ``p`` the protrusion
+    drive over :data:`VERTICAL_RAMP`, clipped to [0, 1] (0 when passive; :attr:`Muscle.closure_vertical`).
+
+    Anatomy: the closure alone is the lips pressed together (AU23/24; the upper lip lowered, FAP
+    4/51), the paper's isotropic closure; with the lips pushed out (the pars peripheralis, a
+    pucker or a rounded viseme) the ring shortens along its fibres round the mouth: on a wide,
+    flat mouth the corners come in while the lips, held behind by the teeth, go forward, and the
+    ring's height barely shrinks. The paper's closure toward the loops' mean, which lies below the
+    mouth where the outer loop reaches the chin, pulled the upper lip 5-7 mm down in a pucker
+    (docs/notes/pucker16.md); taken always, the lowered upper lip of FAP 4/51 was lost."""
+    p = float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0)) if active else 0.0
+    return 1.0 - (1.0 - float(closure_vertical)) * p
 
 
 #: suffix of a sphincter's lower-part control (:func:`lower_control`)
@@ -294,7 +329,8 @@ EVERSION = 1.0
 SPHINCTER_MAX_CONTRACTION = 0.5
 #: fraction of the fibre length that c = 1 removes from a linear muscle
 def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None,
-                           low: float = 0.0, centre: float = 0.0) -> np.ndarray:
+                           low: float = 0.0, centre: float = 0.0, vertical: float = 1.0,
+                           eversion_up: bool = False) -> np.ndarray:
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
@@ -307,6 +343,12 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     along the plane (:func:`lower_weights`) and :data:`LOWER_INWARD` times that inward
     (``forward`` needed). ``centre`` in [0, 1] (:attr:`Muscle.closure_centre`): the closure pulls
     toward ``o + centre (mean(inner) - o)`` instead of the ellipse's centre ``o`` (0, the paper).
+    ``vertical`` in [0, 1] (:attr:`Muscle.closure_vertical`): the closure's part along ``u``, the
+    plane's direction nearest +Y, is scaled by it (1, the paper: isotropic; 0: the ring narrows, its
+    height stays); ``eversion_up`` (:attr:`Muscle.eversion_up`): the eversion is taken along ``u``
+    by the outer sample's height along ``u`` instead of along ``dir_b`` (the same on a mouth whose
+    minor axis is vertical; on one whose fitted ellipse is taller than wide ``dir_b`` runs across
+    it and the eversion spread the corners). Without an up direction in the plane both are off.
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -316,18 +358,22 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     r = np.sqrt(x * x * b * b + y * y * a * a) / (a * b)
     fall = np.cos(0.5 * np.pi * np.clip(1.0 - r, -1.0, 1.0))
     to = o + float(centre) * (s1.mean(axis=0) - o) - s1
+    un = np.hypot(da[1], db[1])
+    up = (da[1] * da + db[1] * db) / un if un > 1e-12 else None    # u: the plane's direction nearest +Y
+    if up is not None and vertical != 1.0:
+        to = to - (1.0 - float(vertical)) * np.outer(to @ up, up)      # closure_vertical
     d = float(c) * (np.outer(to @ da, da) + np.outer(to @ db, db))      # in the ellipse's plane
     if lift or low:                                # the plane's normal on the side of forward
         n = np.cross(da, db)
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
-    if lift:
-        d = d + lift * (b * n + EVERSION * np.outer(y, db))    # forward, and the lips turned out
-    un = np.hypot(da[1], db[1]) if low else 0.0
-    if un > 1e-12:      # u: the plane's direction nearest +Y; ru: the ellipse's radius along it
+    if lift:                                       # forward, and the lips turned out
+        ev = np.outer((s3 - o) @ up, up) if eversion_up and up is not None else np.outer(y, db)
+        d = d + lift * (b * n + EVERSION * ev)
+    if low and up is not None:      # ru: the ellipse's radius along u
         ua, ub = da[1] / un, db[1] / un
         ru = 1.0 / np.sqrt(ua * ua / (a * a) + ub * ub / (b * b))
-        d = d + (low * ru) * np.outer(lower_weights(x * ua + y * ub, ru), ua * da + ub * db - LOWER_INWARD * n)
+        d = d + (low * ru) * np.outer(lower_weights(x * ua + y * ub, ru), up - LOWER_INWARD * n)
     return d * fall[:, None]
 
 
