@@ -198,6 +198,29 @@ def test_the_pucker_pushes_both_lips_forward_and_turns_them_out(head):
     assert top[1] > 0.2 and bottom[1] < -1.0, (top, bottom)
 
 
+def test_a_full_pucker_narrows_the_mouth_and_does_not_drop_the_upper_lip(head):
+    """The orbicularis oris closed and its lips pushed out together (``orbicularis_oris`` 1 and
+    ``.protrude`` 1, the bake's mouthPucker and the visemes o / u): the corners come in, both
+    lips' middles go forward and the upper one does not go down. With the paper's closure along
+    the ring's height too (``muscle.sphincter.closure_vertical`` 1) the upper lip fell 1.9 mm on
+    this head (ICT 4.3, MediaPipe 6.1: docs/notes/pucker16.md); with the default (0) it rises
+    3.0 mm, 8.1 forward 4.1, the corner in 4.1."""
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.playback import static_poses
+
+    h, _ = head
+
+    ctr = np.zeros((1, len(h.controls)))
+    for name in ("orbicularis_oris", "orbicularis_oris.protrude"):
+        ctr[0, list(h.controls).index(name)] = 1.0
+    d = (static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest) / units_per_mm(h.landmarks)
+    top, bottom = d[h.fdp_vertex["8.1"]], d[h.fdp_vertex["8.2"]]
+    left = h.rest[h.fdp_vertex["8.3"], 0] - h.rest[h.fdp_vertex["8.4"], 0]
+    inward = -np.sign(left) * d[h.fdp_vertex["8.3"], 0]
+    assert top[1] > 0.5 and top[2] > 2.0 and bottom[2] > 2.0, (top, bottom)
+    assert inward > 2.0, inward
+
+
 def test_the_inner_brow_raise_lifts_the_brow_not_the_forehead_above_it(head):
     """frontalis_inner_L at 0.5 lifts the inner brow (FDP 4.1) more than the forehead 10 mm and
     30 mm above it (at 30 mm by half again), and mostly up, not back. A real inner-brow raise
