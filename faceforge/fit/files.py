@@ -76,13 +76,16 @@ def _skin_mirror(lm, vertices, faces, tolerance: float, log):
     for ``tolerance`` 0: never)."""
     import numpy as np
 
-    from faceforge.fit.symmetry import mirror_plane, skin_asymmetry
+    from faceforge.fit.symmetry import exact_plane, mirror_plane, skin_asymmetry
 
     plane = mirror_plane(dict(zip(lm.ids, lm.positions))) if tolerance > 0 else None
     if plane is None:
         return None
     mirror, es0 = plane
-    off = skin_asymmetry(np.asarray(vertices)[np.unique(faces)], mirror) / es0
+    used = np.asarray(vertices)[np.unique(faces)]
+    if mirror.exact_partners(used) is None:   # the landmarks' plane may miss an exactly symmetric skin
+        mirror = exact_plane(used, mirror) or mirror
+    off = skin_asymmetry(used, mirror) / es0
     if off > tolerance:
         log(f"the skin is asymmetric ({off:.3f} ES0 from its mirror image): the rig is fitted as it is")
         return None

@@ -35,8 +35,8 @@ import numpy as np
 
 from faceforge.geometry.mirror import Mirror
 
-__all__ = ["Mirror", "bone_partners", "mirror_plane", "pairs_halfway", "skin_asymmetry", "symmetrize_bones",
-           "symmetrize_fit"]
+__all__ = ["Mirror", "bone_partners", "exact_plane", "mirror_plane", "pairs_halfway", "skin_asymmetry",
+           "symmetrize_bones", "symmetrize_fit"]
 
 #: left/right FDP pairs that span the midsagittal plane (ISO/IEC 14496-2 Annex C)
 FDP_PAIRS = (("3.5", "3.6"), ("3.7", "3.12"), ("3.11", "3.8"), ("4.1", "4.2"), ("4.3", "4.4"),
@@ -59,6 +59,31 @@ def mirror_plane(landmarks: dict) -> tuple[Mirror, float] | None:
     es0 = float(np.linalg.norm(np.asarray(landmarks[eyes[0]], float) - landmarks[eyes[1]])) \
         if eyes[0] in landmarks and eyes[1] in landmarks else float(np.linalg.norm(left - right, axis=1).mean())
     return mirror, es0
+
+
+def exact_plane(vertices: np.ndarray, mirror: Mirror, rounds: int = 3) -> Mirror | None:
+    """The plane about which ``vertices (n, 3)`` are their own mirror image exactly
+    (:meth:`Mirror.exact_partners`), found from ``mirror`` (the landmarks' plane) by matching each
+    vertex with the vertex nearest its mirror image and putting the plane through the pairs'
+    midpoints, normal along their differences (``rounds`` times); None when the vertices are not
+    exactly symmetric about it.
+
+    The landmarks' plane misses a symmetric skin when its points were snapped onto a surface whose
+    triangulation is not symmetric (quads split along either diagonal): the skin then counted as
+    symmetric within ``fit.symmetric_tolerance`` but no vertex found its exact partner, and the rig
+    was built lopsided (every right entry calibrated on its own)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    for _ in range(rounds):
+        if mirror.exact_partners(v) is not None:
+            return mirror
+        j, _ = mirror.partners(v)
+        apart = v - v[j]
+        off = np.linalg.norm(apart, axis=1) > 0.0            # pairs of two vertices (not on the plane)
+        if off.sum() < 3:
+            return None
+        d = apart[off] * np.sign(apart[off] @ mirror.normal)[:, None]
+        mirror = Mirror(0.5 * (v[off] + v[j[off]]).mean(axis=0), d.mean(axis=0))
+    return mirror if mirror.exact_partners(v) is not None else None
 
 
 def skin_asymmetry(vertices: np.ndarray, mirror: Mirror) -> float:

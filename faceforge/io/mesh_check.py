@@ -15,7 +15,8 @@ duplicate triangles    dropped internally (same three vertices)
 non-manifold edges     rejected: an edge shared by more than two triangles
 inconsistent winding   triangles turned to agree with their neighbours (per piece)
 holes                  reported as boundary loops (open heads are normal)
-several components     kept and reported (e.g. iris points, eyeballs)
+several components     kept and reported (e.g. iris points, eyeballs); rejected when a
+                       piece as large as half the skin lies wholly beside it (two heads)
 unused vertices        kept and reported
 =====================  ==========================================================
 
@@ -36,6 +37,10 @@ from faceforge.exceptions import MeshError
 
 #: vertices closer than this fraction of the diagonal are duplicates
 MERGE_DISTANCE = 1e-9
+
+#: a separate piece whose box diagonal is at least this share of the largest piece's, and whose
+#: box does not meet that piece's box, is a second head (eyeballs, teeth, lashes, hair lie in or on it)
+SECOND_HEAD_SHARE = 0.5
 
 
 @dataclass
@@ -217,12 +222,33 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>") ->
     labels = face_components(f, len(iv))
     report.components = sorted(np.bincount(np.unique(labels, return_inverse=True)[1]).tolist(), reverse=True)
     if len(report.components) > 1:
+        _reject_second_head(iv, f, labels, path)
         report.warnings.append(f"{len(report.components)} separate pieces (face counts {report.components[:5]}); "
                                "all are kept, the largest is the skin")
     used = np.zeros(len(iv), bool)
     used[f.ravel()] = True
     report.unused_vertices = int((~used).sum())
     return CheckedMesh(iv, f, user_to_internal, internal_to_user, report)
+
+
+def _reject_second_head(vertices: np.ndarray, faces: np.ndarray, labels: np.ndarray, path: str) -> None:
+    """Raise :class:`MeshError` when a piece of the mesh is another head: its bounding box is at
+    least :data:`SECOND_HEAD_SHARE` of the largest piece's (by diagonal) and the two boxes do not
+    meet. ``vertices (k, 3)``, ``faces (m, 3)``, ``labels (m,)`` the faces' pieces."""
+    pieces = np.unique(labels)
+    boxes = []
+    for piece in pieces:
+        pv = vertices[np.unique(faces[labels == piece])]
+        boxes.append((pv.min(axis=0), pv.max(axis=0)))
+    size = np.array([np.linalg.norm(hi - lo) for lo, hi in boxes])
+    big = int(np.argmax(np.bincount(labels)[pieces]))           # the piece with the most faces: the skin
+    lo0, hi0 = boxes[big]
+    apart = [k for k, (lo, hi) in enumerate(boxes)
+             if k != big and size[k] >= SECOND_HEAD_SHARE * size[big] and (np.any(lo > hi0) or np.any(hi < lo0))]
+    if apart:
+        raise MeshError(f"{len(apart) + 1} separate head-sized pieces side by side (the largest is "
+                        f"{np.bincount(labels)[pieces][big]} triangles); faceforge animates one head a file: "
+                        "save each head on its own", path)
 
 
 def _fix_winding(faces: np.ndarray) -> int:

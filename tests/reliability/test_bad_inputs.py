@@ -33,6 +33,15 @@ def landmarks_text(drop=(), extra="") -> str:
     return "\n".join(keep) + "\n" + extra
 
 
+def two_boxes_text() -> str:
+    """Two unit cubes side by side, 3 units apart: a file holding two heads."""
+    corners = [(x, y, z) for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+    quads = [(1, 2, 4, 3), (5, 7, 8, 6), (1, 5, 6, 2), (3, 4, 8, 7), (1, 3, 7, 5), (2, 6, 8, 4)]
+    verts = [f"v {x + dx} {y} {z}" for dx in (0, 3) for x, y, z in corners]
+    faces = [f"f {' '.join(str(i + k) for i in q)}" for k in (0, 8) for q in quads]
+    return "\n".join(verts + faces) + "\n"
+
+
 BOMB = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
     f"{c}: &{c} [{', '.join(['*' + p] * 10)}]\n" for p, c in zip("abcdefgh", "bcdefghi"))
 
@@ -149,6 +158,10 @@ CASES = {
     "bake mapping malformed": ({"m.yaml": "shapes: [\n"}, ["bake", "--mapping", "{tmp}/m.yaml"], ["m.yaml:2", "YAML"]),
     "landmarks of a malformed mesh": ({"bad.obj": "v 1 2\nf 1 2 3\n"}, ["landmarks", "{tmp}/bad.obj"],
                                       ["bad.obj:1", "OBJ"]),
+    "landmarks of a mesh with two heads": ({"two.obj": two_boxes_text()}, ["landmarks", "{tmp}/two.obj"],
+                                           ["two.obj", "2 separate head-sized pieces"]),
+    "fit of a mesh with two heads": ({"two.obj": two_boxes_text()}, ["fit", "{tmp}/two.obj"],
+                                     ["two.obj", "2 separate head-sized pieces"]),
     "landmarks output is the mesh": ({}, ["landmarks", "{mesh}", "-o", "{mesh}"], ["is your mesh"]),
     "landmarks output folder missing": ({}, ["landmarks", "{mesh}", "-o", "{tmp}/no/x.yaml"],
                                         ["x.yaml", "does not exist"]),
