@@ -341,10 +341,17 @@ class SkinSimulation:
         quad) they may not bend past (those bent more at rest: their rest angle), enforced after
         each solver step (:meth:`limit_folds`, :func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
         ``skin.fold_deg``, ``skin.commissure_fold_deg``: :func:`faceforge.skin.fold_limit.fold_limits`).
+    lip_contact : (points (m,), (start (m + 1,), cand (k,)), tris (t, 3), floor (m,), reach), optional
+        Skin vertices that may touch the skin triangles ``tris`` (skin vertex ids; each point's
+        candidates ``cand[start[i]:start[i + 1]]``; pushed out from at most ``reach`` skin units
+        behind), not cross them (``skin.lip_contact_mm``:
+        :func:`faceforge.skin.lip_contact.lip_contacts`), enforced with the fold limit
+        (:meth:`limit_folds`, :class:`faceforge.pbd.triangle_contact.TriangleContact`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None, mirror=None, join=False, tether=None, carry_radius=0.0, fold_limit=None):
+                 carried=None, mirror=None, join=False, tether=None, carry_radius=0.0, fold_limit=None,
+                 lip_contact=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -376,6 +383,14 @@ class SkinSimulation:
             quads = np.asarray(fold_limit[0], INT).reshape(-1, 4)   # never below a quad's rest angle
             self._fold = DihedralLimit(self.layer.first + quads, rest_limits(self.rest, quads, fold_limit[1]),
                                        self.model.particle_count, tol=FOLD_TOL)
+        self._contact = None
+        if lip_contact is not None and len(lip_contact[0]):
+            from faceforge.pbd.triangle_contact import TriangleContact
+
+            pts, cands, tris, floor, reach = lip_contact
+            self._contact = TriangleContact(self.layer.first + np.asarray(pts, INT), cands,
+                                            self.layer.first + np.asarray(tris, INT),
+                                            self.model.particle_count, floor=floor, reach=reach)
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self._fold_mark = np.zeros(len(self.state.positions), dtype=bool)   # limit_folds' scratch
@@ -459,12 +474,18 @@ class SkinSimulation:
     def limit_folds(self) -> int:
         """Keep the fold limit's quads within their limits, in place on the skin's state (after each
         step, and again by the guards after they move the skin). Returns the projections made (0:
-        none needed, or no limit); :attr:`folded` then holds the skin vertices it moved ((p,) int)."""
-        if self._fold is None:
+        none needed, or no limit); :attr:`folded` then holds the skin vertices it moved ((p,) int).
+        The lips' contact (``lip_contact``), when there is one, goes first: its pushes count as
+        the limit's."""
+        if self._fold is None and self._contact is None:
             return 0
         mark = self._fold_mark
         mark[:] = False
-        done = self._fold(self.state.positions, touched=mark)
+        done = 0
+        if self._contact is not None:
+            done += self._contact(self.state.positions, touched=mark)
+        if self._fold is not None:
+            done += self._fold(self.state.positions, touched=mark)
         self.folded = np.flatnonzero(self.layer.skin_positions(mark))
         return done
 

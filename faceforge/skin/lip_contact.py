@@ -18,11 +18,15 @@ import numpy as np
 
 from faceforge.skin.rules import COMMISSURE_RADIUS, _near_fdps
 
-__all__ = ["commissure_quads", "LIP_CORNER_FDPS"]
+__all__ = ["commissure_quads", "lip_contacts", "LIP_CORNER_FDPS"]
 
 #: the corners where the lips meet: inner (2.4 / 2.5) and outer (8.3 / 8.4). On the MakeHuman
 #: sample they are 0.08 MW0 apart and the lip line between them folded too
 LIP_CORNER_FDPS = ("2.4", "2.5", "8.3", "8.4")
+
+#: a lip vertex behind the other lip's sheet at rest by more than this fraction of the contact's
+#: radius is on its far side (inside the mouth), not in contact with it (:func:`lip_contacts`)
+BEHIND = 0.1
 
 
 def commissure_quads(vertices, faces, lip_sides, landmarks: dict,
@@ -42,3 +46,60 @@ def commissure_quads(vertices, faces, lip_sides, landmarks: dict,
     s = sides[quads]
     keep = (s > 0).any(axis=1) & (s < 0).any(axis=1) & near[quads].any(axis=1)
     return quads[keep]
+
+
+def lip_contacts(vertices, faces, lip_sides, radius: float):
+    """The lips' one-sided contact (``skin.lip_contact_mm``): the upper and the lower lip may
+    touch, not pass through each other. Returns ``(points (m,) int64, (start (m + 1,), cand (k,))
+    int64, tris (t, 3) int64, floor (m,) float, reach = radius)`` for :class:`faceforge.pbd.triangle_contact.TriangleContact`
+    (skin vertex ids; None when there are no lips or no pair within ``radius``).
+
+    Each lip's *sheet* is its faces whose three vertices are of that lip (``lip_sides`` +1 upper,
+    -1 lower; a face bridging the two lips, as MediaPipe's, belongs to neither), oriented as the
+    skin's faces (their front is the skin's outside). The points are every vertex of one lip
+    within ``radius`` (skin units) at rest of a vertex of the other; each is checked against the
+    other lip's sheet triangles with a vertex within ``radius`` of it at rest. ``floor`` is 0, or
+    the depth a point is already behind the other lip's sheet at rest (rest stays a fixed point).
+    vertices (n, 3) rest skin, faces (f, 3), lip_sides (n,) int.
+    """
+    from scipy.spatial import cKDTree
+
+    from faceforge.pbd.triangle_contact import signed_depths
+
+    if lip_sides is None or not radius > 0:
+        return None
+    v = np.asarray(vertices, np.float64)
+    f = np.asarray(faces, np.int64).reshape(-1, 3)
+    sides = np.asarray(lip_sides).reshape(-1)
+    fs = sides[f]
+    sheet = {s: np.flatnonzero((fs == s).all(axis=1)) for s in (1, -1)}
+    points, cands = [], []
+    tris = f[np.r_[sheet[1], sheet[-1]]]
+    offset = {1: 0, -1: len(sheet[1])}
+    for s in (1, -1):
+        mine, theirs = np.flatnonzero(sides == s), np.flatnonzero(sides == -s)
+        if not len(mine) or not len(sheet[-s]):
+            continue
+        near = cKDTree(v[theirs]).query_ball_point(v[mine], radius)
+        tree = cKDTree(v[f[sheet[-s]]].reshape(-1, 3))   # three rows per triangle
+        for x, hits in zip(mine, near):
+            if not hits:
+                continue
+            rows = np.unique(np.asarray(tree.query_ball_point(v[x], radius), np.int64) // 3)
+            if len(rows):
+                points.append(x)
+                cands.append(offset[-s] + rows)
+    if not points:
+        return None
+    start = np.r_[0, np.cumsum([len(c) for c in cands])].astype(np.int64)
+    cand = np.concatenate(cands).astype(np.int64)
+    pts = np.asarray(points, np.int64)
+    depth = np.nan_to_num(signed_depths(v, pts, start, cand, tris), nan=0.0)
+    # a point well behind the other lip at rest is on its far side (the mouth's inside), not in contact
+    keep = depth >= -BEHIND * radius
+    if not keep.any():
+        return None
+    lens = np.diff(start)[keep]
+    cand = np.concatenate([c for c, k in zip(cands, keep) if k]).astype(np.int64)
+    return pts[keep], (np.r_[0, np.cumsum(lens)].astype(np.int64), cand), np.ascontiguousarray(tris), \
+        np.minimum(depth[keep], 0.0), float(radius)
