@@ -341,10 +341,10 @@ class SkinSimulation:
         quad) they may not bend past (those bent more at rest: their rest angle), enforced after
         each solver step (:meth:`limit_folds`, :func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
         ``skin.fold_deg``, ``skin.commissure_fold_deg``: :func:`faceforge.skin.fold_limit.fold_limits`).
-    lip_contact : (points (m,), (start (m + 1,), cand (k,)), tris (t, 3), floor (m,), reach), optional
+    lip_contact : (points (m,), (start (m + 1,), cand (k,)), tris (t, 3), floor (m,), reach, margin), optional
         Skin vertices that may touch the skin triangles ``tris`` (skin vertex ids; each point's
         candidates ``cand[start[i]:start[i + 1]]``; pushed out from at most ``reach`` skin units
-        behind), not cross them (``skin.lip_contact_mm``:
+        behind; ``margin`` the barycentric slack of "over a face"), not cross them (``skin.lip_contact_mm``:
         :func:`faceforge.skin.lip_contact.lip_contacts`), enforced with the fold limit
         (:meth:`limit_folds`, :class:`faceforge.pbd.triangle_contact.TriangleContact`).
     """
@@ -387,10 +387,10 @@ class SkinSimulation:
         if lip_contact is not None and len(lip_contact[0]):
             from faceforge.pbd.triangle_contact import TriangleContact
 
-            pts, cands, tris, floor, reach = lip_contact
+            pts, cands, tris, floor, reach, margin = lip_contact
             self._contact = TriangleContact(self.layer.first + np.asarray(pts, INT), cands,
                                             self.layer.first + np.asarray(tris, INT),
-                                            self.model.particle_count, floor=floor, reach=reach)
+                                            self.model.particle_count, floor=floor, reach=reach, margin=margin)
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self._fold_mark = np.zeros(len(self.state.positions), dtype=bool)   # limit_folds' scratch

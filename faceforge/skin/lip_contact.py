@@ -28,6 +28,11 @@ LIP_CORNER_FDPS = ("2.4", "2.5", "8.3", "8.4")
 #: radius is on its far side (inside the mouth), not in contact with it (:func:`lip_contacts`)
 BEHIND = 0.1
 
+#: barycentric slack of a lip vertex's "over the other lip's face": the lips meet at a rim (MakeHuman's
+#: cut lip ring sits exactly on the other lip's border edge), and a vertex that slid a hair past the
+#: rim must still be held (:class:`faceforge.pbd.triangle_contact.TriangleContact`'s ``margin``)
+MARGIN = 0.25
+
 
 def commissure_quads(vertices, faces, lip_sides, landmarks: dict,
                      radius: float = COMMISSURE_RADIUS) -> np.ndarray:
@@ -51,7 +56,7 @@ def commissure_quads(vertices, faces, lip_sides, landmarks: dict,
 def lip_contacts(vertices, faces, lip_sides, radius: float):
     """The lips' one-sided contact (``skin.lip_contact_mm``): the upper and the lower lip may
     touch, not pass through each other. Returns ``(points (m,) int64, (start (m + 1,), cand (k,))
-    int64, tris (t, 3) int64, floor (m,) float, reach = radius)`` for :class:`faceforge.pbd.triangle_contact.TriangleContact`
+    int64, tris (t, 3) int64, floor (m,) float, reach = radius, margin =`` :data:`MARGIN` ``)`` for :class:`faceforge.pbd.triangle_contact.TriangleContact`
     (skin vertex ids; None when there are no lips or no pair within ``radius``).
 
     Each lip's *sheet* is its faces whose three vertices are of that lip (``lip_sides`` +1 upper,
@@ -94,7 +99,7 @@ def lip_contacts(vertices, faces, lip_sides, radius: float):
     start = np.r_[0, np.cumsum([len(c) for c in cands])].astype(np.int64)
     cand = np.concatenate(cands).astype(np.int64)
     pts = np.asarray(points, np.int64)
-    depth = np.nan_to_num(signed_depths(v, pts, start, cand, tris), nan=0.0)
+    depth = np.nan_to_num(signed_depths(v, pts, start, cand, tris, MARGIN), nan=0.0)
     # a point well behind the other lip at rest is on its far side (the mouth's inside), not in contact
     keep = depth >= -BEHIND * radius
     if not keep.any():
@@ -102,4 +107,4 @@ def lip_contacts(vertices, faces, lip_sides, radius: float):
     lens = np.diff(start)[keep]
     cand = np.concatenate([c for c, k in zip(cands, keep) if k]).astype(np.int64)
     return pts[keep], (np.r_[0, np.cumsum(lens)].astype(np.int64), cand), np.ascontiguousarray(tris), \
-        np.minimum(depth[keep], 0.0), float(radius)
+        np.minimum(depth[keep], 0.0), float(radius), MARGIN
