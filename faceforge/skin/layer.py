@@ -345,8 +345,8 @@ class SkinSimulation:
         Skin vertices that may touch the skin triangles ``tris`` (skin vertex ids; each point's
         candidates ``cand[start[i]:start[i + 1]]``; pushed out from at most ``reach`` skin units
         behind; ``margin`` the barycentric slack of "over a face"), not cross them (``skin.lip_contact_mm``:
-        :func:`faceforge.skin.lip_contact.lip_contacts`), enforced with the fold limit
-        (:meth:`limit_folds`, :class:`faceforge.pbd.triangle_contact.TriangleContact`).
+        :func:`faceforge.skin.lip_contact.lip_contacts`), enforced after each solver step, before the
+        fold limit (:meth:`touch_lips`, :class:`faceforge.pbd.triangle_contact.TriangleContact`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
@@ -469,23 +469,28 @@ class SkinSimulation:
             if not self._direct:
                 targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
+        self.touch_lips()
         self.limit_folds()
+
+    def touch_lips(self) -> int:
+        """Push lip vertices that passed through the other lip back to it (``lip_contact``), in place
+        on the skin's state, once after each solver step; returns the projections made (0: none, or
+        no contact). Not repeated in the guards' alternation: there the skull guard pushes lip skin
+        out of the teeth and the contact back in, round after round, and on ICT's sadness the lips'
+        corners were thrown 10-160 mm (202 folded edges; once a step: none)."""
+        if self._contact is None:
+            return 0
+        return self._contact(self.state.positions)
 
     def limit_folds(self) -> int:
         """Keep the fold limit's quads within their limits, in place on the skin's state (after each
         step, and again by the guards after they move the skin). Returns the projections made (0:
-        none needed, or no limit); :attr:`folded` then holds the skin vertices it moved ((p,) int).
-        The lips' contact (``lip_contact``), when there is one, goes first: its pushes count as
-        the limit's."""
-        if self._fold is None and self._contact is None:
+        none needed, or no limit); :attr:`folded` then holds the skin vertices it moved ((p,) int)."""
+        if self._fold is None:
             return 0
         mark = self._fold_mark
         mark[:] = False
-        done = 0
-        if self._contact is not None:
-            done += self._contact(self.state.positions, touched=mark)
-        if self._fold is not None:
-            done += self._fold(self.state.positions, touched=mark)
+        done = self._fold(self.state.positions, touched=mark)
         self.folded = np.flatnonzero(self.layer.skin_positions(mark))
         return done
 

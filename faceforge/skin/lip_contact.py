@@ -28,6 +28,10 @@ LIP_CORNER_FDPS = ("2.4", "2.5", "8.3", "8.4")
 #: radius is on its far side (inside the mouth), not in contact with it (:func:`lip_contacts`)
 BEHIND = 0.1
 
+#: a lip vertex meets a face of the other lip only where they face each other: the cosine between
+#: the vertex's normal and the face's is below -FACING (at the lip corners both face forward)
+FACING = 0.0
+
 #: barycentric slack of a lip vertex's "over the other lip's face": the lips meet at a rim (MakeHuman's
 #: cut lip ring sits exactly on the other lip's border edge), and a vertex that slid a hair past the
 #: rim must still be held (:class:`faceforge.pbd.triangle_contact.TriangleContact`'s ``margin``)
@@ -69,6 +73,7 @@ def lip_contacts(vertices, faces, lip_sides, radius: float):
     """
     from scipy.spatial import cKDTree
 
+    from faceforge.geometry.triangles import vertex_normals
     from faceforge.pbd.triangle_contact import signed_depths
 
     if lip_sides is None or not radius > 0:
@@ -81,6 +86,9 @@ def lip_contacts(vertices, faces, lip_sides, radius: float):
     points, cands = [], []
     tris = f[np.r_[sheet[1], sheet[-1]]]
     offset = {1: 0, -1: len(sheet[1])}
+    vn = vertex_normals(v, f)
+    fn = np.cross(v[tris[:, 1]] - v[tris[:, 0]], v[tris[:, 2]] - v[tris[:, 0]])
+    fn /= np.maximum(np.linalg.norm(fn, axis=1), 1e-300)[:, None]
     for s in (1, -1):
         mine, theirs = np.flatnonzero(sides == s), np.flatnonzero(sides == -s)
         if not len(mine) or not len(sheet[-s]):
@@ -90,10 +98,13 @@ def lip_contacts(vertices, faces, lip_sides, radius: float):
         for x, hits in zip(mine, near):
             if not hits:
                 continue
-            rows = np.unique(np.asarray(tree.query_ball_point(v[x], radius), np.int64) // 3)
+            rows = offset[-s] + np.unique(np.asarray(tree.query_ball_point(v[x], radius), np.int64) // 3)
+            # the lips touch where their surfaces face each other (the red faces across the lip
+            # line); at the corners both face forward, side by side: no contact there
+            rows = rows[fn[rows] @ vn[x] < -FACING]
             if len(rows):
                 points.append(x)
-                cands.append(offset[-s] + rows)
+                cands.append(rows)
     if not points:
         return None
     start = np.r_[0, np.cumsum([len(c) for c in cands])].astype(np.int64)
