@@ -62,11 +62,11 @@ def _sheet(p, x, cand, tris, margin):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touched):  # pragma: no cover - numba
+def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touched, sheet):  # pragma: no cover - numba
     """In place on ``p (n, 3)``: ``points (m,)`` particle ids, their candidates
     ``cand[start[i]:start[i + 1]]`` (rows of ``tris (f, 3)``), ``floor (m,)`` <= 0, ``reach`` > 0,
-    ``margin`` >= 0, ``w (n,)`` inverse masses, ``touched (n,)`` bool or ``(0,)``. Returns the
-    projections made."""
+    ``margin`` >= 0, ``w (n,)`` inverse masses, ``touched (n,)`` bool or ``(0,)``, ``sheet`` in [0, 1]
+    (the triangles' inverse masses are scaled by it: 0 pins the sheet). Returns the projections made."""
     mark = touched.shape[0] > 0
     moved = 0
     for _ in range(sweeps):
@@ -81,7 +81,8 @@ def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touc
             s = u + v + t
             u, v, t = u / s, v / s, t / s
             a, b, c = tris[j, 0], tris[j, 1], tris[j, 2]
-            den = w[x] + u * u * w[a] + v * v * w[b] + t * t * w[c]
+            wa, wb, wc = sheet * w[a], sheet * w[b], sheet * w[c]
+            den = w[x] + u * u * wa + v * v * wb + t * t * wc
             if den <= 0.0:
                 continue
             e1x, e1y, e1z = p[b, 0] - p[a, 0], p[b, 1] - p[a, 1], p[b, 2] - p[a, 2]
@@ -90,7 +91,7 @@ def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touc
             nl = math.sqrt(nx * nx + ny * ny + nz * nz)
             nx, ny, nz = nx / nl, ny / nl, nz / nl
             lam = (floor[i] - d) / den
-            for k, f in ((x, w[x]), (a, -u * w[a]), (b, -v * w[b]), (c, -t * w[c])):
+            for k, f in ((x, w[x]), (a, -u * wa), (b, -v * wb), (c, -t * wc)):
                 if f != 0.0:
                     p[k, 0] += f * lam * nx
                     p[k, 1] += f * lam * ny
@@ -115,7 +116,7 @@ class TriangleContact:
     """
 
     def __init__(self, points, candidates, tris, n: int, floor=0.0, reach: float = 1.0,
-                 margin: float = 0.0, inv_mass=None):
+                 margin: float = 0.0, inv_mass=None, sheet: float = 1.0):
         self.points = np.ascontiguousarray(points, dtype=np.int64).reshape(-1)
         if isinstance(candidates, tuple):
             start, cand = candidates
@@ -139,7 +140,9 @@ class TriangleContact:
             raise ValueError("floor must be <= 0")
         if not (reach > 0 and margin >= 0):
             raise ValueError(f"reach must be > 0 and margin >= 0, got {reach}, {margin}")
-        self.n, self.reach, self.margin = int(n), float(reach), float(margin)
+        if not 0.0 <= sheet <= 1.0:
+            raise ValueError(f"sheet must be in [0, 1], got {sheet}")
+        self.n, self.reach, self.margin, self.sheet = int(n), float(reach), float(margin), float(sheet)
         self.inv_mass = inverse_masses(inv_mass, self.n)
         self._untracked = np.zeros(0, dtype=np.bool_)
 
@@ -156,7 +159,7 @@ class TriangleContact:
         if not len(self.points):
             return 0
         return int(_contact(positions, self.points, self.start, self.cand, self.tris, self.floor,
-                            self.reach, self.margin, self.inv_mass, int(sweeps), touched))
+                            self.reach, self.margin, self.inv_mass, int(sweeps), touched, self.sheet))
 
     def depths(self, positions: np.ndarray) -> np.ndarray:
         """(m,) each point's signed distance to its sheet in ``positions`` (nan: no sheet)."""

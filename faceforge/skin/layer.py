@@ -297,6 +297,11 @@ def _particle_mirror(layer: SkinLayer, partner, binding) -> np.ndarray | None:
 #: the 10 deg between ``skin.fold_deg`` and what the fold check counts)
 FOLD_TOL = 1e-3
 
+#: the lips' contact moves only the vertex that crossed (0), not the other lip's face too (1, PBD's
+#: share): each face pushed by the several vertices over it crumpled ICT's lower lip's middle in
+#: anger and p_b_m (docs/notes/lipcontact16.md); with the face held the lip line is smooth
+CONTACT_SHEET = 0.0
+
 
 class SkinSimulation:
     """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
@@ -390,7 +395,8 @@ class SkinSimulation:
             pts, cands, tris, floor, reach, margin = lip_contact
             self._contact = TriangleContact(self.layer.first + np.asarray(pts, INT), cands,
                                             self.layer.first + np.asarray(tris, INT),
-                                            self.model.particle_count, floor=floor, reach=reach, margin=margin)
+                                            self.model.particle_count, floor=floor, reach=reach, margin=margin,
+                                            sheet=CONTACT_SHEET)
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self._fold_mark = np.zeros(len(self.state.positions), dtype=bool)   # limit_folds' scratch
