@@ -10,6 +10,12 @@ there and cannot pass through each other. :func:`commissure_quads` picks the qua
 vertex of each lip with one within ``radius`` x MW0 of a lip corner (inner or outer); the skin layer keeps
 their dihedral within ``skin.commissure_fold_deg`` after every step
 (:func:`faceforge.pbd.dihedral_limit.limit_dihedrals`).
+
+Along the rest of the lip line the red faces of the two lips press on each other in anger and the
+closed visemes, and without contact the upper lip's skin went 2-3 mm through the lower one's (a
+sawtooth line; docs/notes/lipcontact16.md). :func:`lip_contacts` pairs each lip's vertices near the
+other lip with the other lip's faces that face them, for a one-sided contact
+(:class:`faceforge.pbd.triangle_contact.TriangleContact`, ``skin.lip_contact_mm``, off by default).
 """
 
 from __future__ import annotations
@@ -67,7 +73,9 @@ def lip_contacts(vertices, faces, lip_sides, radius: float):
     -1 lower; a face bridging the two lips, as MediaPipe's, belongs to neither), oriented as the
     skin's faces (their front is the skin's outside). The points are every vertex of one lip
     within ``radius`` (skin units) at rest of a vertex of the other; each is checked against the
-    other lip's sheet triangles with a vertex within ``radius`` of it at rest. ``floor`` is 0, or
+    other lip's sheet triangles with a vertex within ``radius`` of it at rest that face it (the
+    cosine of its vertex normal and the face's normal below -:data:`FACING`; at the lip corners the
+    two lips face forward side by side and are left to the commissure's quads). ``floor`` is 0, or
     the depth a point is already behind the other lip's sheet at rest (rest stays a fixed point).
     vertices (n, 3) rest skin, faces (f, 3), lip_sides (n,) int.
     """
