@@ -228,7 +228,23 @@ class BoundHead:
                               mirror=partner, join=bool(config.get("skin.join_insertions")),
                               tether=tether,
                               carry_radius=carry_radius(config, self.landmarks),
-                              fold_limit=self._folds)
+                              fold_limit=self._folds, lip_contact=self._lip_contact(bind, config))
+
+    def _lip_contact(self, bind: dict, config):
+        """The lips' one-sided contact (``skin.lip_contact_mm``, the radius in mm within which a lip's
+        vertex meets the other lip at rest: :func:`faceforge.skin.lip_contact.lip_contacts`); None
+        when it is 0 or the head has no lips."""
+        from faceforge.anatomy.tissue import units_per_mm
+        from faceforge.skin.lip_contact import lip_contacts
+
+        mm = float(config.get("skin.lip_contact_mm") or 0.0)
+        if mm <= 0.0:
+            return None
+        try:
+            radius = mm * units_per_mm(self.landmarks)
+        except KeyError:
+            return None
+        return lip_contacts(self.rest, self.faces, bind.get("lip_sides"), radius)
 
     def _fold_limit(self, bind: dict, config):
         """(quads (m, 4), limits (m,) radians) the skin may not bend past: ``skin.fold_deg`` on

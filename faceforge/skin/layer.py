@@ -297,6 +297,11 @@ def _particle_mirror(layer: SkinLayer, partner, binding) -> np.ndarray | None:
 #: the 10 deg between ``skin.fold_deg`` and what the fold check counts)
 FOLD_TOL = 1e-3
 
+#: the lips' contact moves only the vertex that crossed (0), not the other lip's face too (1, PBD's
+#: share): each face pushed by the several vertices over it crumpled ICT's lower lip's middle in
+#: anger and p_b_m (docs/notes/lipcontact16.md); with the face held the lip line is smooth
+CONTACT_SHEET = 0.0
+
 
 class SkinSimulation:
     """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
@@ -341,10 +346,17 @@ class SkinSimulation:
         quad) they may not bend past (those bent more at rest: their rest angle), enforced after
         each solver step (:meth:`limit_folds`, :func:`faceforge.pbd.dihedral_limit.limit_dihedrals`;
         ``skin.fold_deg``, ``skin.commissure_fold_deg``: :func:`faceforge.skin.fold_limit.fold_limits`).
+    lip_contact : (points (m,), (start (m + 1,), cand (k,)), tris (t, 3), floor (m,), reach, margin), optional
+        Skin vertices that may touch the skin triangles ``tris`` (skin vertex ids; each point's
+        candidates ``cand[start[i]:start[i + 1]]``; pushed out from at most ``reach`` skin units
+        behind; ``margin`` the barycentric slack of "over a face"), not cross them (``skin.lip_contact_mm``:
+        :func:`faceforge.skin.lip_contact.lip_contacts`), enforced after each solver step, before the
+        fold limit (:meth:`touch_lips`, :class:`faceforge.pbd.triangle_contact.TriangleContact`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
-                 carried=None, mirror=None, join=False, tether=None, carry_radius=0.0, fold_limit=None):
+                 carried=None, mirror=None, join=False, tether=None, carry_radius=0.0, fold_limit=None,
+                 lip_contact=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -376,6 +388,15 @@ class SkinSimulation:
             quads = np.asarray(fold_limit[0], INT).reshape(-1, 4)   # never below a quad's rest angle
             self._fold = DihedralLimit(self.layer.first + quads, rest_limits(self.rest, quads, fold_limit[1]),
                                        self.model.particle_count, tol=FOLD_TOL)
+        self._contact = None
+        if lip_contact is not None and len(lip_contact[0]):
+            from faceforge.pbd.triangle_contact import TriangleContact
+
+            pts, cands, tris, floor, reach, margin = lip_contact
+            self._contact = TriangleContact(self.layer.first + np.asarray(pts, INT), cands,
+                                            self.layer.first + np.asarray(tris, INT),
+                                            self.model.particle_count, floor=floor, reach=reach, margin=margin,
+                                            sheet=CONTACT_SHEET)
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
         self._fold_mark = np.zeros(len(self.state.positions), dtype=bool)   # limit_folds' scratch
@@ -454,7 +475,18 @@ class SkinSimulation:
             if not self._direct:
                 targets[self.layer.anchor_slots] = t
         self.solver.step(self.state, self.state, self.control, dt)
+        self.touch_lips()
         self.limit_folds()
+
+    def touch_lips(self) -> int:
+        """Push lip vertices that passed through the other lip back to it (``lip_contact``), in place
+        on the skin's state, once after each solver step; returns the projections made (0: none, or
+        no contact). Not repeated in the guards' alternation: there the skull guard pushes lip skin
+        out of the teeth and the contact back in, round after round, and on ICT's sadness the lips'
+        corners were thrown 10-160 mm (202 folded edges; once a step: none)."""
+        if self._contact is None:
+            return 0
+        return self._contact(self.state.positions)
 
     def limit_folds(self) -> int:
         """Keep the fold limit's quads within their limits, in place on the skin's state (after each

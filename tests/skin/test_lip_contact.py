@@ -8,7 +8,7 @@ from faceforge.pbd import SolverSettings
 from faceforge.pbd.constraints.bending import dihedral_angle
 from faceforge.skin.binding import Body, bind_skin
 from faceforge.skin.layer import SkinSimulation, SkinStiffness, skin_topology
-from faceforge.skin.lip_contact import commissure_quads
+from faceforge.skin.lip_contact import commissure_quads, lip_contacts
 from tests.skin.synthetic import grid, mouth_grid
 from tests.skin.test_carry import Bodies
 
@@ -57,3 +57,62 @@ def test_the_fold_limit_keeps_quads_from_turning_over():
     held = _dragged_over(75.0)
     assert (free > 90).sum() >= 2, free.max()
     assert held.max() < 80, held.max()
+
+
+def _two_lips():
+    """Two sheets 0.05 apart: the lower lip (6 x 6 cells over [-0.25, 1.25]^2) at z = 0 facing +z,
+    the upper (4 x 4 over [0, 1]^2, over the lower one's inside) at z = 0.05 facing -z (each lip's
+    outside toward the other), as one skin; lip_sides -1 / +1."""
+    v, f = grid(6, 6, 1.5, 1.5)
+    v = v - [0.25, 0.25, 0.0]
+    u, g = grid(4, 4)
+    up = u + [0.0, 0.0, 0.05]
+    verts = np.r_[v, up]
+    faces = np.r_[f, g[:, ::-1] + len(v)]
+    sides = np.r_[np.full(len(v), -1), np.full(len(up), 1)]
+    return verts, faces, sides
+
+
+def test_lip_contacts_pair_each_lip_with_the_other_lips_faces():
+    v, f, sides = _two_lips()
+    pts, (start, cand), tris, floor, reach, margin = lip_contacts(v, f, sides, 0.1)
+    assert set(sides[pts]) == {1, -1}
+    assert (sides[pts] > 0).sum() == 25 and (sides[pts] < 0).sum() < 49   # the lower lip's rim is too far
+    for i, x in enumerate(pts):   # every candidate is a face of the other lip
+        assert (sides[tris[cand[start[i]:start[i + 1]]]] == -sides[x]).all()
+    assert np.all(floor == 0.0) and reach == 0.1
+    assert lip_contacts(v, f, None, 0.1) is None
+    assert lip_contacts(v, f, np.zeros(len(v), int), 0.1) is None
+    # a face bridging the two lips belongs to neither
+    bridged = np.r_[f, [[0, 1, 60]]]
+    _, _, tris2, _, _, _ = lip_contacts(v, bridged, sides, 0.1)
+    assert len(tris2) == len(f)
+
+
+def _pressed(contact: bool):
+    """The upper lip's body driven 0.2 down over 20 frames, through the lower lip: the upper lip's signed
+    distances to the lower lip's faces after 40 steps (negative: crossed)."""
+    from faceforge.pbd.triangle_contact import signed_depths
+
+    v, f, sides = _two_lips()
+    body_v = np.where((sides < 0)[:, None], v - [0, 0, 0.05], v + [0, 0, 0.05])
+    b = bind_skin(v, f, [Body("muscle", "muscle", body_v, f)], max_distance=0.075)   # each lip its own body
+    assert np.allclose(np.abs(b.points[:, 2] - v[b.vertex_ids, 2]), 0.05)
+    pairs = lip_contacts(v, f, sides, 0.3)
+    sim = SkinSimulation(v, f, b, SkinStiffness(), SolverSettings(iterations=10),
+                         carried=np.ones(len(b.vertex_ids), bool), tether=np.ones(len(b.vertex_ids)),
+                         lip_contact=pairs if contact else None)
+    body = Bodies(body_v, f)
+    body.v = body_v.copy()
+    for k in range(40):   # pressed down over 20 frames, then held
+        body.v[sides > 0] = body_v[sides > 0] + [0.0, 0.0, -0.2 * min(1.0, (k + 1) / 20)]
+        sim.step(body, 1 / 25)
+    pts, (start, cand), tris, _, _, margin = pairs
+    return signed_depths(sim.simulated(), pts, start, cand, tris, margin)[sides[pts] > 0]
+
+
+def test_the_lips_touch_but_do_not_pass_through_each_other():
+    free = _pressed(False)
+    held = _pressed(True)
+    assert np.nanmin(free) < -0.05, np.nanmin(free)   # without the contact the upper lip crosses
+    assert np.nanmin(held) > -1e-3, np.nanmin(held)   # with it, the lips meet

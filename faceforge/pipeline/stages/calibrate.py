@@ -79,7 +79,7 @@ CALIBRATE = register_stage(Stage(
     # cost a recalibration
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
-        "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.commissure_fold_deg", "skin.fold_deg",
+        "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm",
         "bind.cheek_muscles", "muscle", "animate.fap_mapping", "animate.fps",
         "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",
         "animate.jaw_glide_slope", "animate.chin_path", "animate.statics", "template"),
