@@ -19,8 +19,14 @@ into a mouth cavity, MakeHuman; lips touching in front of a mouth hole, ICT) giv
 the upper inner point is the vertex of the upper part whose normal turns most downward,
 where the lip rolls under into the mouth (MakeHuman's hand points are those vertices), the
 lower one the lower part's vertex turned most upward. If the two parts meet (lips joined by
-a forward-facing sheet, the MediaPipe mask's bridged mouth) or no vertex turns at least
-:data:`ROLL`, the detector's points are kept.
+a forward-facing sheet, the MediaPipe mask's bridged mouth), the lips are told apart by height
+instead: the upper inner point is the column's lowest vertex above the middle of the detector's
+two inner points, the lower one its highest vertex below it (the sheet bridging parted lips has no
+vertex of its own, so those are the two lips' inner edges; a detector's point lifted onto the sheet
+snapped to the *other* lip's edge, and ``bind`` then cut the mask's upper lip off its lower as a
+shared ring: the mask's lower lip did not move in the user's file). A separate lip with no vertex
+turned at least :data:`ROLL` gives its edge nearest the other lip (its lowest vertex in the column
+for the upper lip, the highest for the lower).
 """
 
 from __future__ import annotations
@@ -85,12 +91,24 @@ def inner_lips(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, pos
         parts = [_component(int(cand[np.argmin(np.linalg.norm(v[cand] - pos[k], axis=1))]), ok, start, nbr)
                  for k in (up_out, lo_out)]
         if np.intersect1d(parts[0], parts[1]).size:
+            out.update(_split_by_height(cand, height, 0.5 * (pos[up_in] + pos[lo_in]) @ up, up_in, lo_in))
             continue
         for inner, ids, sign in ((up_in, parts[0], 1.0), (lo_in, parts[1], -1.0)):
             best = ids[np.argmin(sign * rolled[ids])]
             if sign * rolled[best] <= -ROLL:
                 out[inner] = int(best)
+            else:                       # a lip that does not roll in: its edge nearest the other
+                out[inner] = int(ids[np.argmin(sign * height[ids])])
     return out
+
+
+def _split_by_height(cand: np.ndarray, height: np.ndarray, middle: float, up_in: str, lo_in: str) -> dict:
+    """{upper inner fdp: the lowest of ``cand`` (vertex ids) above ``middle``, lower inner fdp: the
+    highest below it} by ``height`` (n,); {} when either side is empty."""
+    above, below = cand[height[cand] > middle], cand[height[cand] <= middle]
+    if len(above) == 0 or len(below) == 0:
+        return {}
+    return {up_in: int(above[np.argmin(height[above])]), lo_in: int(below[np.argmax(height[below])])}
 
 
 #: the inner-lip corners: FDP -> +1 on the face's left side, -1 on its right

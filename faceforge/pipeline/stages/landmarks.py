@@ -30,7 +30,8 @@ from faceforge.pipeline.workdir_guard import check_outside_workdir
 #: 2: the rules measure in eye spans on a face smaller than a whole head (the MediaPipe mask, cut heads)
 #: 3: the inner and middle brows keep the detector's side position less its outward bias, and the nose's
 #: lower edge 9.4/9.5 the detector's point less its bias, both measured on MediaPipe's canonical face
-VERSION = "3"
+#: 4: lips joined in front (a bridged mask) are told apart by height; a lip that does not roll in gives its edge
+VERSION = "4"
 
 
 def run(ctx) -> None:
