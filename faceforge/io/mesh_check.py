@@ -15,8 +15,9 @@ duplicate triangles    dropped internally (same three vertices)
 non-manifold edges     rejected: an edge shared by more than two triangles
 inconsistent winding   triangles turned to agree with their neighbours (per piece)
 holes                  reported as boundary loops (open heads are normal)
-several components     kept and reported (e.g. iris points, eyeballs); rejected when a
-                       piece as large as half the skin lies wholly beside it (two heads)
+several components     kept and reported (e.g. iris points, eyeballs); with ``one_head``
+                       (landmarks to find) rejected when a piece as large as half the skin
+                       lies wholly beside it (two heads: which one to find?)
 unused vertices        kept and reported
 =====================  ==========================================================
 
@@ -151,7 +152,7 @@ def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     return label[:m].astype(np.int64)
 
 
-def check_mesh(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>") -> CheckedMesh:
+def check_mesh(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>", one_head: bool = False) -> CheckedMesh:
     """Validate and repair a head mesh.
 
     Parameters
@@ -159,6 +160,8 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>") ->
     vertices : (n, 3) float, user's vertices (any units)
     faces : (m, 3) int, triangles (quads must be split by the loader)
     path : file name used in error messages
+    one_head : reject a second head-sized piece beside the skin (:func:`_reject_second_head`): the
+        landmarks are to be found, and the detector would pick one head
 
     Returns
     -------
@@ -222,7 +225,8 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>") ->
     labels = face_components(f, len(iv))
     report.components = sorted(np.bincount(np.unique(labels, return_inverse=True)[1]).tolist(), reverse=True)
     if len(report.components) > 1:
-        _reject_second_head(iv, f, labels, path)
+        if one_head:
+            _reject_second_head(iv, f, labels, path)
         report.warnings.append(f"{len(report.components)} separate pieces (face counts {report.components[:5]}); "
                                "all are kept, the largest is the skin")
     used = np.zeros(len(iv), bool)

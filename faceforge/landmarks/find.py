@@ -50,7 +50,8 @@ def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True) -> Fo
         raw = read_landmarks(path)    # an explicit path that is absent: "not found"
         if set(fdp_table()) - set(RULE_ONLY) <= set(raw.ids):   # the jaw angles are optional
             return Found("given", None, str(path), v, f)
-    check_mesh(v, f, str(mesh_path))     # a broken mesh says what is wrong with it, not "no face"
+    # a broken mesh says what is wrong with it, not "no face"; with two heads, which one to find?
+    check_mesh(v, f, str(mesh_path), one_head=True)
     det = detect_landmarks(v, f, str(mesh_path), symmetrise=symmetrise)
     if raw is None:
         return Found("detected", det, None, v, f)

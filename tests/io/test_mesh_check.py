@@ -115,15 +115,18 @@ def test_inconsistent_winding_is_repaired(ellipsoid):
 
 
 def test_two_heads_side_by_side_rejected(ellipsoid):
-    """Two heads in one file gave a fit of one of them and bound the other as skin; it is one error."""
+    """Two heads in one file with no landmarks: the detector fitted one of them and bound the other
+    as skin; it is one error when the landmarks are to be found (``one_head``). With a landmark file
+    the user chose the head, and the other is a kept piece (tests/reliability/test_scenarios.py)."""
     v, f = ellipsoid
     width = np.ptp(v[:, 0])
     with pytest.raises(MeshError, match="2 separate head-sized pieces"):
-        check_mesh(np.vstack([v, v + [1.2 * width, 0, 0]]), np.vstack([f, f + len(v)]), "two.obj")
+        check_mesh(np.vstack([v, v + [1.2 * width, 0, 0]]), np.vstack([f, f + len(v)]), "two.obj", one_head=True)
+    assert len(check_mesh(np.vstack([v, v + [1.2 * width, 0, 0]]), np.vstack([f, f + len(v)])).report.components) == 2
     # a smaller head-sized piece beside it (a child's head) too; a small prop beside it is kept
     with pytest.raises(MeshError, match="separate head-sized"):
-        check_mesh(np.vstack([v, 0.6 * v + [1.2 * width, 0, 0]]), np.vstack([f, f + len(v)]), "two.obj")
-    c = check_mesh(np.vstack([v, 0.2 * v + [1.2 * width, 0, 0]]), np.vstack([f, f + len(v)]), "prop.obj")
+        check_mesh(np.vstack([v, 0.6 * v + [1.2 * width, 0, 0]]), np.vstack([f, f + len(v)]), "two.obj", one_head=True)
+    c = check_mesh(np.vstack([v, 0.2 * v + [1.2 * width, 0, 0]]), np.vstack([f, f + len(v)]), "prop.obj", one_head=True)
     assert len(c.report.components) == 2
 
 
@@ -131,5 +134,5 @@ def test_pieces_in_or_on_the_head_are_not_a_second_head(ellipsoid):
     """A hair cap as large as the head but overlapping it stays a piece of the head."""
     v, f = ellipsoid
     cap = v * 1.05 + [0, 0.3 * np.ptp(v[:, 1]), 0]
-    c = check_mesh(np.vstack([v, cap]), np.vstack([f, f + len(v)]), "hair.obj")
+    c = check_mesh(np.vstack([v, cap]), np.vstack([f, f + len(v)]), "hair.obj", one_head=True)
     assert len(c.report.components) == 2
