@@ -33,7 +33,7 @@ import numba
 import numpy as np
 
 from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.model import inverse_masses
+from faceforge.pbd.model import checked_positions, inverse_masses
 
 __all__ = ["DihedralLimit", "limit_dihedrals", "rest_limits"]
 
@@ -146,7 +146,6 @@ class DihedralLimit:
         self.n, self.tol = int(n), float(tol)
         self.inv_mass = inverse_masses(inv_mass, self.n)
         self._below = -np.cos(np.minimum(self.limit + self.tol, math.pi))
-        self._untracked = np.zeros(0, dtype=np.bool_)
 
     def __call__(self, positions: np.ndarray, sweeps: int = 2, touched: np.ndarray | None = None) -> int:
         """Keep every quad's unsigned dihedral at most its limit (+ tol), in place on
@@ -154,12 +153,7 @@ class DihedralLimit:
         pass that projects nothing ends them). ``touched`` (n,) bool, optional: set True (never
         cleared) where a particle moved. Returns the number of projections made (0: every quad
         was within its limit or could not move)."""
-        if positions.dtype != np.float64 or positions.shape != (self.n, 3) or not positions.flags.c_contiguous:
-            raise ValueError(f"positions must be a C-contiguous ({self.n}, 3) float64 array")
-        if touched is None:
-            touched = self._untracked
-        elif touched.dtype != np.bool_ or touched.shape != (self.n,):
-            raise ValueError(f"touched must be a ({self.n},) bool array")
+        touched = checked_positions(positions, touched, self.n)
         if not len(self.quads):
             return 0
         return int(_limit(positions, self.quads, self.limit, self._below, int(sweeps), self.inv_mass,

@@ -43,6 +43,19 @@ class Control:
     kinematic_positions: np.ndarray
 
 
+def checked_positions(positions: np.ndarray, touched, n: int) -> np.ndarray:
+    """The ``touched`` buffer of an in-place projection over ``positions`` ((n, 3) float64,
+    C-contiguous; ValueError otherwise): ``touched`` itself ((n,) bool, set True where a particle
+    moves) or, when None, an empty one (the kernels skip recording)."""
+    if positions.dtype != np.float64 or positions.shape != (n, 3) or not positions.flags.c_contiguous:
+        raise ValueError(f"positions must be a C-contiguous ({n}, 3) float64 array")
+    if touched is None:
+        return np.zeros(0, dtype=np.bool_)
+    if touched.dtype != np.bool_ or touched.shape != (n,):
+        raise ValueError(f"touched must be a ({n},) bool array")
+    return touched
+
+
 def inverse_masses(inv_mass, n: int) -> np.ndarray:
     """``(n,)`` C-contiguous float64 inverse masses (0: kinematic / pinned) from ``inv_mass``:
     None (all 1), a scalar (the same for all) or an ``(n,)`` array (not copied when it already is

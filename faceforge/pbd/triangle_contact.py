@@ -27,7 +27,7 @@ import numba
 import numpy as np
 
 from faceforge.constants import NUMBA_OPTIONS
-from faceforge.pbd.model import inverse_masses
+from faceforge.pbd.model import checked_positions, inverse_masses
 
 __all__ = ["TriangleContact", "signed_depths"]
 
@@ -144,18 +144,12 @@ class TriangleContact:
             raise ValueError(f"sheet must be in [0, 1], got {sheet}")
         self.n, self.reach, self.margin, self.sheet = int(n), float(reach), float(margin), float(sheet)
         self.inv_mass = inverse_masses(inv_mass, self.n)
-        self._untracked = np.zeros(0, dtype=np.bool_)
 
     def __call__(self, positions: np.ndarray, sweeps: int = 2, touched: np.ndarray | None = None) -> int:
         """Push every point that is behind its sheet back to its floor, in place on ``positions``
         ((n, 3) float64, C-contiguous), in at most ``sweeps`` Gauss-Seidel passes; ``touched`` (n,)
         bool, optional, set True where a particle moved. Returns the projections made."""
-        if positions.dtype != np.float64 or positions.shape != (self.n, 3) or not positions.flags.c_contiguous:
-            raise ValueError(f"positions must be a C-contiguous ({self.n}, 3) float64 array")
-        if touched is None:
-            touched = self._untracked
-        elif touched.dtype != np.bool_ or touched.shape != (self.n,):
-            raise ValueError(f"touched must be a ({self.n},) bool array")
+        touched = checked_positions(positions, touched, self.n)
         if not len(self.points):
             return 0
         return int(_contact(positions, self.points, self.start, self.cand, self.tris, self.floor,

@@ -101,6 +101,18 @@ def sphincter_on(name, v, f, centre, inner_axes, outer_axes, h=16, w=3, thicknes
                                   lies_on=lies_on, layer=layer)
 
 
+def chin_mouth_on(v, f, **kw):
+    """A sphincter on the sphere ``v, f`` whose outer loop reaches further down than up (a chin);
+    ``kw`` goes to :func:`build_sphincter_muscle` (``closure_centre``, ``protrusion``, ...)."""
+    ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    inner = on_sphere(*np.stack([0.15 * np.cos(ang), -0.3 + 0.05 * np.sin(ang)], 1))
+    outer = on_sphere(*np.stack([0.32 * np.cos(ang), -0.38 + 0.2 * np.sin(ang)], 1))
+    inner, outer = align_loops(inner, outer)
+    return build_sphincter_muscle("oris", ActionLine.from_points(inner, v, f, closed=True),
+                                  ActionLine.from_points(outer, v, f, closed=True), v, f, 16, 3, 0.03,
+                                  SPHINCTER_STIFFNESS, lies_on=("skull",), layer=1, **kw)
+
+
 def synthetic_head(subdivisions=3):
     """``(cranium, mandible, muscles)`` of the table in the module docstring."""
     cranium, mandible = split_skull(subdivisions)

@@ -7,12 +7,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.muscles.action_line import ActionLine
-from faceforge.anatomy.muscles.muscle import build_sphincter_muscle
-from faceforge.anatomy.muscles.sphincter import (VERTICAL_RAMP, align_loops, fit_ellipse, sphincter_displacement,
+from faceforge.anatomy.muscles.sphincter import (VERTICAL_RAMP, fit_ellipse, sphincter_displacement,
                                                  vertical_share)
 
-from tests.anatomy.conftest import SPHINCTER_STIFFNESS, icosphere, on_sphere
+from tests.anatomy.conftest import chin_mouth_on, icosphere
 
 FWD = np.array([0.0, 0.0, 1.0])
 
@@ -64,14 +62,7 @@ def sphere():
 
 
 def _mouth_on(v, f, **kw):
-    """A sphincter on the sphere whose outer loop reaches further down than up (a chin)."""
-    ang = np.linspace(0, 2 * np.pi, 12, endpoint=False)
-    inner = on_sphere(*np.stack([0.15 * np.cos(ang), -0.3 + 0.05 * np.sin(ang)], 1))
-    outer = on_sphere(*np.stack([0.32 * np.cos(ang), -0.38 + 0.2 * np.sin(ang)], 1))
-    inner, outer = align_loops(inner, outer)
-    return build_sphincter_muscle("oris", ActionLine.from_points(inner, v, f, closed=True),
-                                  ActionLine.from_points(outer, v, f, closed=True), v, f, 16, 3, 0.03,
-                                  SPHINCTER_STIFFNESS, lies_on=("skull",), layer=1, protrusion=0.5, **kw)
+    return chin_mouth_on(v, f, protrusion=0.5, **kw)
 
 
 def test_compiled_up_frame_matches_the_numpy_twin(sphere):
