@@ -19,7 +19,6 @@ import argparse
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -75,11 +74,10 @@ def main(argv=None) -> dict:
                          "depressor supercilii, orbicularis oculi; no jaw): results units_brows.json")
     args = ap.parse_args(argv)
     from faceforge.animation.fap_mapping import load_fap_mapping
-    from faceforge.blendshapes.rigsolve import field_observer, settler
-    from faceforge.blendshapes.solve import control_space, field_agreement, jacobian, solve_activations
-    from faceforge.io.config import load_config
     from faceforge.animation.rig import BoundHead
     from faceforge.animation.statics import SettleSettings
+    from faceforge.blendshapes.match import FieldMatcher
+    from faceforge.io.config import load_config
     from faceforge.pipeline.mapping import mapping_template_path
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -92,35 +90,25 @@ def main(argv=None) -> dict:
         # bake settle them: 30 fixed frames left the skin short (mouth-corner-puller 0.773 / 0.759
         # at 30 frames, 0.814 / 0.812 converged)
         settle = SettleSettings.from_config(cfg)
-        simulate = settler(head.rig, float(cfg.get("animate.fps")), settle)
-        observe = field_observer(head.rest, head.user_index, head.user_rotation)
-        muscles = set(mapping.muscles)
-        chosen = CHOSEN
+        muscles, chosen = None, CHOSEN
         if args.brows:
-            muscles = {m for m in muscles if m.startswith(BROW_MUSCLES)}
+            muscles = {m for m in mapping.muscles if m.startswith(BROW_MUSCLES)}
             chosen = tuple(n for n in CHOSEN if n.startswith("eyebrows-"))
-        space = control_space(head.controls, muscles, {} if args.brows else mapping.jaw_limits, head.levers.pitch,
-                              mapping.max_contraction)
-        simulate(*space.pose(np.zeros(len(space.names))))   # compile outside the timing
-        t0 = time.perf_counter()
-        J = jacobian(simulate, observe, space)
-        t_jac = time.perf_counter() - t0
+        matcher = FieldMatcher(head, mapping, float(cfg.get("animate.fps")), settle, muscles=muscles,
+                               jaw=not args.brows)
+        J = matcher.J
         units = np.load(UNITS)
         names = [str(n) for n in units["names"]]
         rows, fields = {}, {}
         for name, delta in ((n, units["deltas"][names.index(n)]) for n in chosen):
-            t0 = time.perf_counter()
-            res = solve_activations(delta.astype(float).ravel(), J, space, simulate, observe, passes=args.passes,
-                                     rescale=args.rescale, local=args.local)
-            cos, ratio = field_agreement(res.observed, delta)
-            used = {n: round(float(v), 3) for n, v in zip(space.names, res.x) if abs(v) > 1e-3}
-            fields[str(name)] = res.observed.reshape(-1, 3)
-            rows[str(name)] = {"cosine": round(cos, 3), "ratio": round(ratio, 3),
-                               "ok": bool(cos >= 0.8 and 0.8 <= ratio <= 1.25),
-                               "residuals": [round(r, 3) for r in res.residuals], "controls": used,
+            m = matcher.match(delta, passes=args.passes, local=args.local, rescale=args.rescale)
+            used = {n: round(v, 3) for n, v in matcher.used(m).items()}
+            fields[str(name)] = m.field
+            rows[str(name)] = {"cosine": round(m.cosine, 3), "ratio": round(m.ratio, 3), "ok": m.good,
+                               "residuals": [round(r, 3) for r in m.residuals], "controls": used,
                                "peak_unit": float(np.linalg.norm(delta, axis=1).max()),
-                               "seconds": round(time.perf_counter() - t0, 2)}
-            print(f"{name:30s} cos {cos:6.3f} ratio {ratio:6.3f} residuals {rows[str(name)]['residuals']} {used}")
+                               "seconds": round(m.seconds, 2)}
+            print(f"{name:30s} cos {m.cosine:6.3f} ratio {m.ratio:6.3f} residuals {rows[str(name)]['residuals']} {used}")
         user_rest = (head.rest[head.user_index] @ head.user_rotation)
         mi = mirror_index(user_rest)
         mirror = {}
@@ -130,9 +118,10 @@ def main(argv=None) -> dict:
                 a, b = fields[left], fields[right][mi] * np.array([-1.0, 1.0, 1.0])
                 mirror[left] = round(float(np.linalg.norm(a - b) / max(np.linalg.norm(a), 1e-12)), 3)
         worst = min(rows, key=lambda n: (rows[n]["cosine"], -abs(np.log(max(rows[n]["ratio"], 1e-9)))))
+        space, t_jac = matcher.space, matcher.jacobian_seconds
         out = {"head": str(MESH.relative_to(ROOT)), "controls": list(space.names),
                "settle": {"tolerance": settle.tolerance, "max_frames": settle.max_frames,
-                          **(simulate.stats.as_dict() if simulate.stats else {})},
+                          **(matcher.simulate.stats.as_dict() if matcher.simulate.stats else {})},
                "jacobian_seconds": round(t_jac, 2), "units": rows, "worst_unit": worst,
                "passing": sum(r["ok"] for r in rows.values()), "of": len(rows),
                "mirror_rel_diff": mirror, "config_sets": list(args.set)}

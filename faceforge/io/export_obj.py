@@ -46,6 +46,25 @@ def _vertex_text(positions: np.ndarray) -> str:
     return ("v %.9g %.9g %.9g\n" * positions.shape[0]) % tuple(flat)
 
 
+def write_obj(path: str | Path, positions: object, faces: object, comment: str = "") -> Path:
+    """Write one posed mesh as an OBJ file (the input's vertex order and polygons, as a sequence's
+    frame is written), replacing ``path`` atomically.
+
+    positions : (n_verts, 3) float; faces : (m, k) int array or sequence of int sequences, 0-based;
+    comment : one header line (without the ``#``).
+    """
+    from faceforge.io.stagefiles import atomic_write_bytes
+
+    data = np.asarray(positions, dtype=np.float64)
+    if data.ndim != 2 or data.shape[1] != 3:
+        raise ExportError(f"expected positions (n, 3), got {data.shape}", path)
+    indices, starts = faces_to_csr(faces, data.shape[0])
+    header = f"# {comment}\n" if comment else ""
+    text = header + f"o {Path(path).stem}\n" + _vertex_text(data) + _face_text(indices, starts)
+    atomic_write_bytes(Path(path), text.encode("ascii"))
+    return Path(path)
+
+
 def write_obj_sequence(path: str | Path, frames: object, faces: object, fps: float) -> Path:
     """Write one OBJ file per frame into the folder ``path``.
 

@@ -81,7 +81,7 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     from faceforge.animation.controls import controls
     from faceforge.animation.rig import BoundHead
     from faceforge.pipeline.mapping import stage_mapping
-    from faceforge.viz.contact_sheet import contact_sheet
+    from faceforge.viz.head_sheet import head_sheet
 
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     mapping, mapping_path = stage_mapping(ctx)
@@ -106,12 +106,7 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
                               "residual": settled.residual[i], "converged": settled.converged[i]}
         if not checks.ok:
             ctx.log(f"{name}: checks {checks.as_dict()}")
-    from faceforge.anatomy.tissue import units_per_mm
-
-    mm = units_per_mm(head.landmarks)   # heat maps beside each pose: 0-8 mm of motion
-    contact_sheet(ctx.out_dir / f"{stem}.png", poses, head.faces, range(len(names)), 1.0,
-                  cols=cols, panel=3.2, dpi=120, labels=names, title=title + ", heat map 0-8 mm",
-                  region=_face_region(head), heat=8.0 * mm, heat_label="0-8 mm", dim=_cavity(head, mm))
+    head_sheet(ctx.out_dir / f"{stem}.png", head, poses, names, title, cols)
     save_npz(ctx.out_dir / f"{stem}.npz", names=np.asarray(names), poses=head.to_user(poses).astype(np.float32),
              contractions=c, controls=np.asarray(head.controls, dtype=str), jaw=jaw)
     save_json(ctx.out_dir / "report.json", report)
@@ -129,27 +124,6 @@ def settled_poses(head, c, jaw, config):
                    stats=stats)
     head.rig.reset()
     return poses, stats
-
-
-def _cavity(head, mm: float):
-    """(n,) in [0, 1]: the mouth's inside, drawn dark in the sheets (None without the lip FDPs)."""
-    from faceforge.viz.smooth import mouth_cavity
-
-    fv = head.fdp_vertex
-    if not all(k in fv for k in ("2.2", "2.3", "8.1", "8.2", "8.3", "8.4")):
-        return None
-    r = head.rest
-    return mouth_cavity(r, head.faces, r[fv["2.2"]], r[fv["2.3"]], r[[fv["8.3"], fv["8.4"]]],
-                        r[[fv["8.1"], fv["8.2"]]], mm)
-
-
-def _face_region(head):
-    """(n,) bool: the face to frame in a sheet (:func:`faceforge.viz.contact_sheet.face_region`),
-    else the whole head above the bone's lowest point."""
-    from faceforge.viz.contact_sheet import face_region
-
-    region = face_region(head.rest, head.landmarks)
-    return region if region is not None else head.rest[:, 1] >= head.bone_heights()[0]
 
 
 _SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),

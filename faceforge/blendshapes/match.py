@@ -1,0 +1,106 @@
+"""Match a sculpted or scanned pose of a head with its muscles: the contractions and jaw pose whose
+settled skin best reproduces a displacement field over the user's vertices (issue 25 item 2;
+``faceforge match`` and ``benchmarks/bench_units.py``).
+
+A :class:`FieldMatcher` holds one bound head's activation solve (:mod:`faceforge.blendshapes.solve`):
+the control space (the mapping's muscles, the jaw's three DOFs within its limits), the settle of a
+held pose (``animate.statics``: until the skin stops moving) and the Jacobian, built once on first use
+(one settled pose a control) and shared by every target matched after it. Fields are in the user's
+frame, units and vertex order (``(n_user, 3)``: a posed copy of the user's mesh less the mesh).
+The eyelids are not part of the solve (their FAPs are kinematic; a target's lid motion stays in the
+residual).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.blendshapes.rigsolve import field_observer, settler
+from faceforge.blendshapes.solve import control_space, field_agreement, jacobian, solve_activations
+
+#: the agreement issue 25 asks of a matched field: cosine at least this ...
+GOOD_COSINE = 0.8
+#: ... and the magnitude ratio |matched| / |target| within this range
+GOOD_RATIO = (0.8, 1.25)
+
+
+@dataclass
+class Match:
+    """One matched target.
+
+    x : (q,) the solve's controls (:attr:`FieldMatcher.names`: contractions in [0, max], jaw pitch
+        and yaw in rad, protrusion in skin units); contractions : (m,) in the head's
+        ``controls`` order; jaw : (3,) pitch, yaw, protrusion
+    frame : (n, 3) the settled working skin; field : (n_user, 3) its displacement in the user's
+        frame and units; cosine, ratio : agreement with the target (:func:`field_agreement`);
+    residuals : relative residual |target - field| / |target| after the linear solve and each
+        refinement kept; seconds : the solve's wall time (the Jacobian not included)
+    """
+
+    x: np.ndarray
+    contractions: np.ndarray
+    jaw: np.ndarray
+    frame: np.ndarray
+    field: np.ndarray
+    cosine: float
+    ratio: float
+    residuals: list
+    seconds: float
+
+    @property
+    def good(self) -> bool:
+        """Within issue 25's agreement (:data:`GOOD_COSINE`, :data:`GOOD_RATIO`)."""
+        return self.cosine >= GOOD_COSINE and GOOD_RATIO[0] <= self.ratio <= GOOD_RATIO[1]
+
+
+class FieldMatcher:
+    """The activation solve of one bound head against displacement fields.
+
+    head : :class:`faceforge.animation.rig.BoundHead`; mapping : a FAP mapping (its ``muscles``,
+    ``jaw_limits`` and ``max_contraction``); fps : the settle's frame rate; settle : a
+    :class:`faceforge.animation.statics.SettleSettings` (held until it stops moving) or a number of
+    frames; muscles : the muscle names to solve with (default: the mapping's); jaw : solve the jaw too.
+    """
+
+    def __init__(self, head, mapping, fps: float, settle, muscles=None, jaw: bool = True):
+        self.head = head
+        self.simulate = settler(head.rig, fps, settle)
+        self.observe = field_observer(head.rest, head.user_index, head.user_rotation)
+        self.space = control_space(head.controls, set(mapping.muscles) if muscles is None else set(muscles),
+                                   mapping.jaw_limits if jaw else {}, head.levers.pitch, mapping.max_contraction)
+        self._J = None
+        self.jacobian_seconds = 0.0
+
+    @property
+    def names(self) -> tuple:
+        """(q,) the controls solved for."""
+        return self.space.names
+
+    @property
+    def J(self) -> np.ndarray:
+        """(3 n_user, q) the Jacobian: each control settled alone at its probe level (built once)."""
+        if self._J is None:
+            self.simulate(*self.space.pose(np.zeros(len(self.space.names))))   # compiles outside the timing
+            t0 = time.perf_counter()
+            self._J = jacobian(self.simulate, self.observe, self.space)
+            self.jacobian_seconds = time.perf_counter() - t0
+        return self._J
+
+    def match(self, target: np.ndarray, passes: int = 2, local: int = 2, rescale: int = 2) -> Match:
+        """The controls whose settled skin best matches ``target`` (n_user, 3) (user frame and units);
+        ``passes``, ``local``, ``rescale``: :func:`faceforge.blendshapes.solve.solve_activations`."""
+        target = np.asarray(target, dtype=float)
+        J = self.J
+        t0 = time.perf_counter()
+        res = solve_activations(target.ravel(), J, self.space, self.simulate, self.observe, passes=passes,
+                                rescale=rescale, local=local)
+        cos, ratio = field_agreement(res.observed, target)
+        return Match(res.x, res.contractions, res.jaw, res.frame, res.observed.reshape(-1, 3), cos, ratio,
+                     list(res.residuals), time.perf_counter() - t0)
+
+    def used(self, match: Match, least: float = 1e-3) -> dict:
+        """{control: value} of the controls ``match`` uses (|value| > ``least``)."""
+        return {n: float(v) for n, v in zip(self.space.names, match.x) if abs(v) > least}
