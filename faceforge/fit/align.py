@@ -1,5 +1,5 @@
-"""Alignment (§7): the similarity transform, Hardy RBF warps and the enhancement flow, and the
-sampling of new landmark pairs."""
+"""Alignment (§7): Hardy RBF warps and the enhancement flow, and the sampling of new landmark
+pairs (the similarity transform is :mod:`faceforge.geometry.rigid`'s)."""
 
 from __future__ import annotations
 
@@ -12,31 +12,6 @@ from faceforge.geometry.rbf import hardy_rbf
 
 
 # ----------------------------------------------------------------------------- alignment
-
-
-def similarity_transform(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Least-squares similarity (4, 4) with ``dst ~ s R src + t`` (Umeyama 1991).
-
-    src, dst : (n, 3) float, n >= 3 corresponding points. R is a proper rotation.
-    """
-    src = np.asarray(src, dtype=np.float64)
-    dst = np.asarray(dst, dtype=np.float64)
-    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 3:
-        raise ValueError(f"similarity_transform: src {src.shape} and dst {dst.shape} must be (n>=3, 3)")
-    mu_s, mu_d = src.mean(0), dst.mean(0)
-    xs, xd = src - mu_s, dst - mu_d
-    cov = xd.T @ xs / len(src)
-    u, sig, vt = np.linalg.svd(cov)
-    e = np.eye(3)
-    if np.linalg.det(u) * np.linalg.det(vt) < 0:
-        e[2, 2] = -1.0
-    rot = u @ e @ vt
-    var_s = (xs ** 2).sum() / len(src)
-    scale = float(np.trace(np.diag(sig) @ e) / var_s)
-    out = np.eye(4)
-    out[:3, :3] = scale * rot
-    out[:3, 3] = mu_d - scale * rot @ mu_s
-    return out
 
 
 def apply_affine(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -24,7 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.fit.align import apply_affine, similarity_transform
+from faceforge.fit.align import apply_affine
+from faceforge.geometry.rigid import similarity_transform
 
 #: which template bone's best rotation turns each axis' direction
 AXIS_BONE = {"pitch": "mandible", "yaw": "mandible", "protrusion": "cranium"}

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from faceforge.anatomy import tissue as fit_tissue
-from faceforge.fit.align import (Flow, Warp, apply_affine, enhancement_field, grid_subsample,
-                                 similarity_transform, worst_first_sample)
+from faceforge.fit.align import Flow, Warp, apply_affine, enhancement_field, grid_subsample, worst_first_sample
+from faceforge.geometry.rigid import similarity_transform
 from faceforge.fit.surface import SkinSurface, front_mask, inside_closed, outer_vertices, signed_skin_depth
 from faceforge.geometry.rbf import hardy_epsilon, hardy_rbf
 from faceforge.geometry.triangles import vertex_normals

@@ -7,7 +7,8 @@ import pytest
 import trimesh
 
 from faceforge.anatomy import tissue as fit_tissue
-from faceforge.fit.align import Warp, apply_affine, map_directions, similarity_transform, worst_first_sample
+from faceforge.fit.align import Warp, apply_affine, map_directions, worst_first_sample
+from faceforge.geometry.rigid import similarity_transform
 from faceforge.fit.head import FitSettings, FitTemplate, fit_head
 from faceforge.fit.surface import SkinSurface, front_mask, orient_outward, signed_skin_depth
 from faceforge.anatomy.muscles.build import eq5_thickness

@@ -83,6 +83,28 @@ def test_a_target_that_is_not_the_head_posed_is_one_line(tmp_path):
         assert name in str(err.value.path)
 
 
+def test_rigid_takes_the_targets_head_motion_out(tmp_path):
+    """A posed head that also turned 20 deg and moved: without --rigid it is refused with the hint,
+    with it the displacement is the pose's alone and the motion is reported."""
+    from scipy.spatial.transform import Rotation
+
+    from faceforge.exceptions import StageError
+    from faceforge.io.mesh import save_mesh
+    from faceforge.pipeline.stages.match import read_target
+
+    v, f = S.skin_mesh()
+    pose = np.zeros_like(v)
+    low = v[:, 1] < np.quantile(v[:, 1], 0.3)
+    pose[low, 1] = -0.05 * np.ptp(v[:, 1])                    # the lower third drops: a jaw, say
+    R = Rotation.from_euler("xyz", [5.0, 20.0, -3.0], degrees=True).as_matrix()
+    t = np.array([0.3, -0.2, 0.5]) * np.ptp(v, axis=0)
+    save_mesh(tmp_path / "turned.obj", (v + pose) @ R.T + t, f)
+    with pytest.raises(StageError, match="give --rigid"):
+        read_target(tmp_path / "turned.obj", v)
+    delta, motion = read_target(tmp_path / "turned.obj", v, rigid=True)
+    assert np.allclose(motion[:3, :3], R, atol=1e-6) and np.allclose(delta, pose, atol=1e-6 * np.ptp(v))
+
+
 def test_match_never_writes_over_the_users_files(invoke, remembered, tmp_path):  # noqa: F811
     work, mesh, _ = remembered
     target = tmp_path / "smile.obj"

@@ -40,27 +40,38 @@ from faceforge.pipeline.workdir_guard import check_outside_workdir
 FAR = 0.05
 
 
-def read_target(path, neutral):
+def read_target(path, neutral, rigid: bool = False):
     """The displacement ``(n_user, 3)`` of the posed mesh at ``path`` from ``neutral (n_user, 3)``
-    (the user's mesh); a one-line error when it is not the head posed."""
+    (the user's mesh) and the rigid motion (4, 4) of its still part (:func:`faceforge.geometry.rigid.
+    still_part_motion`), taken out of the displacement when ``rigid``; a one-line error when it is
+    not the head posed."""
     import numpy as np
 
     from faceforge.exceptions import StageError
+    from faceforge.geometry.rigid import still_part_motion
     from faceforge.io.mesh import load_mesh
 
     v, _, _ = load_mesh(path)
     if len(v) != len(neutral):
         raise StageError(f"has {len(v)} vertices, the head {len(neutral)}: the target must be the head's own mesh "
                          "posed (the same vertices in the same order)", path)
-    delta = np.asarray(v, dtype=float) - neutral
+    v = np.asarray(v, dtype=float)
+    motion, _ = still_part_motion(neutral, v)
+    aligned = (v - motion[:3, 3]) @ motion[:3, :3]    # back onto the head: the still part's motion undone
+    delta = (aligned if rigid else v) - neutral
     diagonal = float(np.linalg.norm(np.ptp(neutral, axis=0)))
-    far = float(np.median(np.linalg.norm(delta, axis=1))) / diagonal
-    if far > FAR:
-        raise StageError(f"is not the head posed: its vertices lie a median {far:.0%} of the head's size from the "
-                         "head's (the same vertex order, frame and units are needed)", path)
-    if not np.any(delta):
+
+    def far(d):
+        return float(np.median(np.linalg.norm(d, axis=1))) / diagonal
+
+    if far(delta) > FAR:
+        hint = ("it lies on the head once its head motion is taken out: give --rigid" if not rigid and
+                far(aligned - neutral) <= FAR else "the same vertex order, frame and units are needed")
+        raise StageError(f"is not the head posed: its vertices lie a median {far(delta):.0%} of the head's size from "
+                         f"the head's ({hint})", path)
+    if np.abs(delta).max() <= 1e-9 * diagonal:
         raise StageError("is the head at rest: nothing to match", path)
-    return delta
+    return delta, motion
 
 
 def run_match(ctx):
@@ -80,13 +91,19 @@ def run_match(ctx):
     target_path = ctx.param("match_target")
     head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
     neutral = head.to_user(head.rest[None])[0]
-    delta = read_target(target_path, neutral)
+    rigid = bool(ctx.config.get("match.rigid"))
+    delta, motion = read_target(target_path, neutral, rigid)
+    turn = float(np.degrees(np.arccos(np.clip((np.trace(motion[:3, :3]) - 1) / 2, -1.0, 1.0))))
+    shift = float(np.linalg.norm(motion[:3, 3] + neutral.mean(0) @ motion[:3, :3].T - neutral.mean(0)))
     mapping = load_fap_mapping(mapping_template_path(ctx.config))
     matcher = FieldMatcher(head, mapping, float(ctx.config.get("animate.fps")), SettleSettings.from_config(ctx.config))
+    mm = units_per_mm(head.landmarks)
+    if not rigid and (turn > 1.0 or shift / mm > 1.0):
+        ctx.log(f"the target's head itself moved ({turn:.1f} deg, {shift / mm:.1f} mm): if that is not the face's "
+                "motion, match --rigid takes it out first")
     ctx.log(f"{len(matcher.names)} controls (muscles and jaw), one settled pose each")
     m = matcher.match(delta)
     head.rig.reset()
-    mm = units_per_mm(head.landmarks)
     checks = check_animation(head.rest, m.frame[None], head.faces, inside_at_rest=head.inside_at_rest(),
                              skull=lambda k: head.skull_at(m.jaw if k >= 0 else np.zeros(3)))
     used = matcher.used(m)
@@ -97,6 +114,7 @@ def run_match(ctx):
         "agreement": {"cosine": round(m.cosine, 4), "ratio": round(m.ratio, 4),
                       "within": {"cosine_at_least": GOOD_COSINE, "ratio": list(GOOD_RATIO), "met": m.good}},
         "residuals": [round(r, 4) for r in m.residuals],
+        "head_motion": {"turn_deg": round(turn, 3), "shift_mm": round(shift / mm, 3), "removed": rigid},
         "controls": shown, "units": {"contractions": "0-1", "jaw.pitch": "deg", "jaw.yaw": "deg",
                                      "jaw.protrusion": "mm"},
         "peak_mm": {"target": round(float(np.linalg.norm(delta, axis=1).max()) / mm, 2),
@@ -121,7 +139,7 @@ def run_match(ctx):
 
 MATCH_STAGE = register_stage(Stage(
     name="match", deps=("fit", "bind"),
-    config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm", "skin.join_insertions",
+    config_keys=("match", "solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm", "skin.join_insertions",
                  "skin.cheek_tether", "skin.lid_hold", "skin.commissure_fold_deg", "skin.fold_deg",
                  "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template"),
     inputs=("match_target", "animate.fap_mapping", "template.skull", "template.muscle_map"),
@@ -133,11 +151,17 @@ MATCH_STAGE = register_stage(Stage(
 @click.argument("target", type=click.Path(dir_okay=False, exists=True))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), default=None,
               help="Also write the matched pose as a mesh (.obj keeps your polygons; .ply, .off, .stl, .glb).")
+@click.option("--rigid/--no-rigid", default=None,
+              help="Take the target's head motion out first (a scan whose whole head moved); remembered "
+                   "[default: off].")
 @click.option("--force", is_flag=True, help="Rerun even if up to date.")
 @keep_going_option
 @click.pass_obj
-def match_command(app, target, output, force):
+def match_command(app, target, output, rigid, force):
     from faceforge.exceptions import StageError
+
+    if rigid is not None:
+        app.add_sets(f"match.rigid={'true' if rigid else 'false'}")
 
     check_outside_workdir(app.workspace, output, "-o")
     params = app.workspace.load_params()
