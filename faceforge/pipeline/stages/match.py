@@ -175,6 +175,11 @@ def match_command(app, target, output, rigid, force):
         protect_inputs(output, {"mesh": params.get("mesh"), "landmark file": params.get("landmarks"),
                                 "target": target})
         check_writable(output, "-o")
+    mesh = params.get("mesh")
+    if mesh and Path(mesh).is_file():   # a target that is not the head posed fails before the head is built
+        from faceforge.io.mesh import load_mesh
+
+        read_target(target, load_mesh(mesh)[0], bool(app.config.get("match.rigid")))
     app.run_stage("match", params={"match_target": str(target)}, force=force)
     out = app.workspace.stage_dir("match")
     app.log(f"match: {out / 'report.json'}, {out / 'match.png'}")
