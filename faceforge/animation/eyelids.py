@@ -18,8 +18,8 @@ heights ``top * s(u)`` and ``bottom * s(u)``, depth ``lid_depth * s(u)``, with t
 vertically in proportion to ``s(u)``, by exactly ``d * IRISD`` at its FDP (upper lid down,
 lower lid up; both FAPs are bidirectional); at about 1024 + 0 the upper margin lies on the
 lower. The lids stop where they meet: when the two requests
-together exceed the opening, both are scaled back to leave :data:`MIN_OPENING` of it. A lid
-opening wider is held at half its fade's height (below).
+together exceed the opening, both are scaled back to leave :data:`MIN_OPENING` of it. An upper
+lid opening wider is held at :data:`UPPER_OPEN` of its fade's height, a lower lid at half of its.
 
 **The skin around them.** A vertex between the margins moves as the affine blend of the two
 margins' moves at its height: the cover of a closed eye (a mask's triangles, a socket's
@@ -96,6 +96,15 @@ MIN_OPENING = 0.02
 #: 350 IRISD, ICT 3.5 mm) over half a reach (2.5 mm on ICT) stretched the skin under it to twice
 #: its height and turned the margin's rim over (ICT: anger's 4 lid folds -> 2, disgust's 3 -> 0)
 LOWER_FADE = 1.0
+
+#: how far the upper lid may open wider, as a fraction of its fade's height (``reach x gap``; the
+#: skin it pushes into is squeezed to ``1 - UPPER_OPEN`` of its height there): at the default reach
+#: (0.5) 0.375 openings, 3.7 mm on ICT's 10 mm eye. A real upper lid raise (AU5) is 2-4 mm on an
+#: adult; MakeHuman's own "eye-opened-up" unit raises its lid FDP 312 IRISD (0.30 openings). At half
+#: the fade (0.25 openings, as the lower lid) a wide-eyed surprise could not show the sclera above
+#: the iris: its lids opened 1.30 times on every sample head whatever it asked past 256 IRISD
+#: (docs/notes/read17.md)
+UPPER_OPEN = 0.75
 
 #: exponent of the margins' taper ``s(u)`` (module docstring)
 TAPER = 3.0
@@ -281,14 +290,14 @@ def lid_moves(field: LidField, faps: np.ndarray, irisd: float) -> np.ndarray:
 
     Where the two would close more than the opening less :data:`MIN_OPENING`, both are scaled
     back to meet there (the margins' opening ``(top - bottom) s(u)`` is left that fraction
-    everywhere along them). A lid that opens wider is held at half its fade's height
-    (``reach / 2`` openings up for the upper lid, ``LOWER_FADE x reach / 2`` down for the lower one), where
-    the skin it pushes into has been squeezed to half its height."""
+    everywhere along them). A lid that opens wider is held where the skin it pushes into is
+    squeezed: ``UPPER_OPEN x reach`` openings up for the upper lid (:data:`UPPER_OPEN`),
+    ``LOWER_FADE x reach / 2`` down for the lower one (half its height)."""
     faps = np.nan_to_num(np.atleast_2d(np.asarray(faps, dtype=np.float64)))
     eye = field.eye
     g = eye.gap
     move = faps[:, [eye.upper_fap - 1, eye.lower_fap - 1]] * irisd
-    move = np.maximum(move, [-0.5 * field.reach * g, -0.5 * LOWER_FADE * field.reach * g])
+    move = np.maximum(move, [-UPPER_OPEN * field.reach * g, -0.5 * LOWER_FADE * field.reach * g])
     top, bottom = eye.margins
     per_s = move / eye.taper([eye.upper_u, eye.lower_u])      # the moves at the margins' peak
     closing = per_s.sum(axis=1)

@@ -67,6 +67,23 @@ def test_fear_differs_from_surprise_as_facs_says(mapping):
         assert fear[stretch - 1] > 0 >= surprise[stretch - 1]
     assert 0 < fear[3 - 1] < surprise[3 - 1]
 
+def test_surprise_and_fear_widen_the_eyes_surprise_most(mapping):
+    # AU5 (upper lid raiser) shows the sclera above the iris: a real lid rises 2-4 mm, 0.2-0.4 of a
+    # 10 mm opening. Surprise (5B, the lower lids let down) opens each eye by 0.35 openings or more;
+    # fear (5 with the lower lids tensed up) opens it too, by less. The lids play the FAP as asked up
+    # to UPPER_OPEN of their fade (animation.eyelids). Surprise's lids once opened 1.30x (a person saw
+    # no change on ICT) and fear's closed to 0.90x (narrower than neutral; docs/notes/read17.md)
+    from faceforge.animation.eyelids import UPPER_OPEN
+
+    limit = UPPER_OPEN * 0.5 * 1024        # IRISD at the default animate.eyelid_reach (0.5)
+    fear, surprise = mapping.expressions["fear"], mapping.expressions["surprise"]
+    for upper, lower in ((19, 21), (20, 22)):
+        widen = {name: -row[upper - 1] - row[lower - 1] for name, row in (("fear", fear), ("surprise", surprise))}
+        assert -surprise[upper - 1] >= 0.3 * 1024 and -surprise[upper - 1] <= limit
+        assert widen["surprise"] >= 0.35 * 1024
+        assert 0.1 * 1024 <= widen["fear"] < widen["surprise"]
+
+
 def test_every_preset_fap_drives_something(mapping):
     # a preset's FAP that no entry maps would be dropped without a word; the lids (19-22) are
     # played over the skin by animation.eyelids

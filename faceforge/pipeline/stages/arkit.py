@@ -80,7 +80,7 @@ ARKIT = register_stage(Stage(
                  "skin.lid_hold", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template"),
     inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="8", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
+    version="9", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
 
 
 def write_curves(app, stage: str, curves: str | None, output: str | None) -> bool:
