@@ -495,9 +495,10 @@ class SkinSimulation:
     def touch_lips(self) -> int:
         """Push lip vertices that passed through the other lip back to it (``lip_contact``), in place
         on the skin's state, once after each solver step, with the step's history (the positions at
-        its start, :data:`CONTACT_LOST`); returns the projections made (0: none, or no contact). Not repeated in the guards' alternation: there the skull guard pushes lip skin
-        out of the teeth and the contact back in, round after round, and on ICT's sadness the lips'
-        corners were thrown 10-160 mm (202 folded edges; once a step: none)."""
+        its start, :data:`CONTACT_LOST`); returns the projections made (0: none, or no contact). Not
+        repeated in the guards' alternation: there the skull guard pushes lip skin out of the teeth
+        and the contact back in, round after round, and on ICT's sadness the lips' corners were
+        thrown 10-160 mm (202 folded edges; once a step: none)."""
         if self._contact is None:
             return 0
         return self._contact(self.state.positions, previous=self._contact_prev,

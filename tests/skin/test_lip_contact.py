@@ -81,6 +81,11 @@ def test_lip_contacts_pair_each_lip_with_the_other_lips_faces():
     for i, x in enumerate(pts):   # every candidate is a face of the other lip
         assert (sides[tris[cand[start[i]:start[i + 1]]]] == -sides[x]).all()
     assert np.all(floor == 0.0) and reach == 0.1
+    # a wide radius: each vertex keeps at most NEAREST faces of the other lip
+    from faceforge.skin.lip_contact import NEAREST
+
+    pts, (start, cand), tris, _, _, _ = lip_contacts(v, f, sides, 0.6)
+    assert np.diff(start).max() == NEAREST   # (the 0.6 ball holds more: a lip face is 0.25 x 0.25)
     assert lip_contacts(v, f, None, 0.1) is None
     assert lip_contacts(v, f, np.zeros(len(v), int), 0.1) is None
     # a face bridging the two lips belongs to neither
