@@ -14,6 +14,17 @@ momentum is kept.
 
 It is applied after a solver step (as :mod:`faceforge.pbd.dihedral_limit`), Gauss-Seidel over
 the points, ``sweeps`` times (a sweep that moves nothing ends them). No velocities are touched.
+
+*With the step's history* (the positions ``prev`` at the step's start given): a point that was
+already behind its sheet (in ``prev``) by more than ``lost`` past its floor did not cross in this
+step (it jumped further than a step's contact can sort out, or something after the contact put it
+there) and is left where it is until it comes back out; and when the sheet jumped onto the point
+(``a_s = max(0, n . (s - s_prev)) > lost``, ``s`` the projection, the barycentric mean of the
+sheet's vertices, ``n`` its normal) the point is pushed out only by its share of the approach,
+``a_x / (a_x + a_s)`` of the crossing with ``a_x = max(0, -n . (x - x_prev))`` (a press, the sheet
+coming on less than ``lost`` in a step, is pushed out whole). Two sheets whose vertices are each
+other's points (the two lips) then stop the one that jumped through the other instead of dragging
+the one that stood still. Each sweep applies the rule anew (the test's twin uses one sweep).
 The numba kernel has a plain-numpy twin in ``tests/pbd/test_triangle_contact.py``. Knows nothing
 of faces: the caller chooses the points and their candidates
 (:func:`faceforge.skin.lip_contact.lip_contacts`).
@@ -62,12 +73,16 @@ def _sheet(p, x, cand, tris, margin):  # pragma: no cover - numba
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touched, sheet):  # pragma: no cover - numba
+def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touched, sheet,
+             prev, lost):  # pragma: no cover - numba
     """In place on ``p (n, 3)``: ``points (m,)`` particle ids, their candidates
     ``cand[start[i]:start[i + 1]]`` (rows of ``tris (f, 3)``), ``floor (m,)`` <= 0, ``reach`` > 0,
     ``margin`` >= 0, ``w (n,)`` inverse masses, ``touched (n,)`` bool or ``(0,)``, ``sheet`` in [0, 1]
-    (the triangles' inverse masses are scaled by it: 0 pins the sheet). Returns the projections made."""
+    (the triangles' inverse masses are scaled by it: 0 pins the sheet); ``prev (n, 3)`` the positions
+    at the step's start or ``(0, 3)`` (no history), ``lost`` >= 0 (module docstring). Returns the
+    projections made."""
     mark = touched.shape[0] > 0
+    history = prev.shape[0] > 0
     moved = 0
     for _ in range(sweeps):
         before = moved
@@ -76,6 +91,12 @@ def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touc
             j, d, u, v, t = _sheet(p, x, cand[start[i]:start[i + 1]], tris, margin)
             if j < 0 or d >= floor[i] or d < floor[i] - reach:
                 continue
+            if history:
+                # behind its sheet already at the step's start: it did not cross in this step (a jump,
+                # or a guard put it there); pushed now it would be torn from its neighbours
+                jp, dp, _u, _v, _t = _sheet(prev, x, cand[start[i]:start[i + 1]], tris, margin)
+                if jp >= 0 and dp < floor[i] - lost:
+                    continue
             # clamp the barycentrics into the triangle for the weights (the margin lets them stray)
             u, v, t = max(u, 0.0), max(v, 0.0), max(t, 0.0)
             s = u + v + t
@@ -90,7 +111,21 @@ def _contact(p, points, start, cand, tris, floor, reach, margin, w, sweeps, touc
             nx, ny, nz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
             nl = math.sqrt(nx * nx + ny * ny + nz * nz)
             nx, ny, nz = nx / nl, ny / nl, nz / nl
-            lam = (floor[i] - d) / den
+            share = 1.0
+            if history:
+                # the crossing is the point's in proportion to how far it moved onto the sheet, against
+                # how far the sheet moved onto it (a lip springing back through the other one is
+                # stopped by the other lip's points against its faces, not the other lip dragged)
+                ap = -((p[x, 0] - prev[x, 0]) * nx + (p[x, 1] - prev[x, 1]) * ny + (p[x, 2] - prev[x, 2]) * nz)
+                sm = 0.0
+                for k, f in ((a, u), (b, v), (c, t)):
+                    sm += f * ((p[k, 0] - prev[k, 0]) * nx + (p[k, 1] - prev[k, 1]) * ny + (p[k, 2] - prev[k, 2]) * nz)
+                ap, sm = max(ap, 0.0), max(sm, 0.0)
+                if sm > lost:   # a press (the sheet coming on a little a step) is pushed out whole
+                    share = ap / (ap + sm)
+                if share <= 0.0:
+                    continue
+            lam = share * (floor[i] - d) / den
             for k, f in ((x, w[x]), (a, -u * wa), (b, -v * wb), (c, -t * wc)):
                 if f != 0.0:
                     p[k, 0] += f * lam * nx
@@ -145,15 +180,26 @@ class TriangleContact:
         self.n, self.reach, self.margin, self.sheet = int(n), float(reach), float(margin), float(sheet)
         self.inv_mass = inverse_masses(inv_mass, self.n)
 
-    def __call__(self, positions: np.ndarray, sweeps: int = 2, touched: np.ndarray | None = None) -> int:
+    def __call__(self, positions: np.ndarray, sweeps: int = 2, touched: np.ndarray | None = None,
+                 previous: np.ndarray | None = None, lost: float = 0.0) -> int:
         """Push every point that is behind its sheet back to its floor, in place on ``positions``
         ((n, 3) float64, C-contiguous), in at most ``sweeps`` Gauss-Seidel passes; ``touched`` (n,)
-        bool, optional, set True where a particle moved. Returns the projections made."""
+        bool, optional, set True where a particle moved. ``previous`` ((n, 3) float64, optional):
+        the positions at the step's start; then a point already more than ``lost`` (>= 0, positions'
+        units) behind its floor there is left, and a crossing is pushed out in proportion to the
+        point's share of the approach (module docstring). Returns the projections made."""
         touched = checked_positions(positions, touched, self.n)
         if not len(self.points):
             return 0
+        if previous is None:
+            previous = np.zeros((0, 3))
+        elif previous.dtype != np.float64 or previous.shape != (self.n, 3) or not previous.flags.c_contiguous:
+            raise ValueError(f"previous must be a C-contiguous ({self.n}, 3) float64 array")
+        if not lost >= 0:
+            raise ValueError(f"lost must be >= 0, got {lost}")
         return int(_contact(positions, self.points, self.start, self.cand, self.tris, self.floor,
-                            self.reach, self.margin, self.inv_mass, int(sweeps), touched, self.sheet))
+                            self.reach, self.margin, self.inv_mass, int(sweeps), touched, self.sheet,
+                            previous, float(lost)))
 
     def depths(self, positions: np.ndarray) -> np.ndarray:
         """(m,) each point's signed distance to its sheet in ``positions`` (nan: no sheet)."""

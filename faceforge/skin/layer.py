@@ -302,6 +302,16 @@ FOLD_TOL = 1e-3
 #: anger and p_b_m (docs/notes/lipcontact16.md); with the face held the lip line is smooth
 CONTACT_SHEET = 0.0
 
+#: the lips' contact looks at each step's history (:class:`faceforge.pbd.triangle_contact.TriangleContact`'s
+#: ``previous``, ``lost`` = this fraction of the contact's reach): a lip vertex already that far behind
+#: the other lip at the step's start is left (it did not cross in this step), and a lip that jumped
+#: more than that onto a vertex in one step does not drag it (the vertex moves by its own share).
+#: Without it ICT's lower lip springing back from raise_b_lip_lm -870 MNS in one frame passed 2-6 mm
+#: through the upper lip's vertices, which the contact then dragged up, those within reach and not
+#: their neighbours: 30 folded edges in the frame (0.1: the presses' remainders got lost, MakeHuman's
+#: p_b_m kept 20 crossed vertices; docs/notes/lips17.md)
+CONTACT_LOST = 0.3
+
 
 class SkinSimulation:
     """The skin as the shallowest layer of a :class:`~faceforge.anatomy.layers.MusculoskeletalSystem`.
@@ -399,6 +409,8 @@ class SkinSimulation:
                                             sheet=CONTACT_SHEET)
         self.solver = Solver(self.model, settings or SolverSettings(), _particle_mirror(self.layer, mirror, binding))
         self.state = self.model.state()
+        #: the positions at the step's start, for the lips' contact (:meth:`touch_lips`)
+        self._contact_prev = self.state.positions.copy()
         self._fold_mark = np.zeros(len(self.state.positions), dtype=bool)   # limit_folds' scratch
         #: the skin vertices the last :meth:`limit_folds` moved
         self.folded = np.zeros(0, dtype=np.int64)
@@ -474,19 +486,23 @@ class SkinSimulation:
                     join(t, *self._joined)
             if not self._direct:
                 targets[self.layer.anchor_slots] = t
+        if self._contact is not None:
+            self._contact_prev[:] = self.state.positions
         self.solver.step(self.state, self.state, self.control, dt)
         self.touch_lips()
         self.limit_folds()
 
     def touch_lips(self) -> int:
         """Push lip vertices that passed through the other lip back to it (``lip_contact``), in place
-        on the skin's state, once after each solver step; returns the projections made (0: none, or
-        no contact). Not repeated in the guards' alternation: there the skull guard pushes lip skin
-        out of the teeth and the contact back in, round after round, and on ICT's sadness the lips'
-        corners were thrown 10-160 mm (202 folded edges; once a step: none)."""
+        on the skin's state, once after each solver step, with the step's history (the positions at
+        its start, :data:`CONTACT_LOST`); returns the projections made (0: none, or no contact). Not
+        repeated in the guards' alternation: there the skull guard pushes lip skin out of the teeth
+        and the contact back in, round after round, and on ICT's sadness the lips' corners were
+        thrown 10-160 mm (202 folded edges; once a step: none)."""
         if self._contact is None:
             return 0
-        return self._contact(self.state.positions)
+        return self._contact(self.state.positions, previous=self._contact_prev,
+                             lost=CONTACT_LOST * self._contact.reach)
 
     def limit_folds(self) -> int:
         """Keep the fold limit's quads within their limits, in place on the skin's state (after each

@@ -81,6 +81,11 @@ def test_lip_contacts_pair_each_lip_with_the_other_lips_faces():
     for i, x in enumerate(pts):   # every candidate is a face of the other lip
         assert (sides[tris[cand[start[i]:start[i + 1]]]] == -sides[x]).all()
     assert np.all(floor == 0.0) and reach == 0.1
+    # a wide radius: each vertex keeps at most NEAREST faces of the other lip
+    from faceforge.skin.lip_contact import NEAREST
+
+    pts, (start, cand), tris, _, _, _ = lip_contacts(v, f, sides, 0.6)
+    assert np.diff(start).max() == NEAREST   # (the 0.6 ball holds more: a lip face is 0.25 x 0.25)
     assert lip_contacts(v, f, None, 0.1) is None
     assert lip_contacts(v, f, np.zeros(len(v), int), 0.1) is None
     # a face bridging the two lips belongs to neither
@@ -116,3 +121,27 @@ def test_the_lips_touch_but_do_not_pass_through_each_other():
     held = _pressed(True)
     assert np.nanmin(free) < -0.05, np.nanmin(free)   # without the contact the upper lip crosses
     assert np.nanmin(held) > -1e-3, np.nanmin(held)   # with it, the lips meet
+
+
+def test_a_lip_that_jumps_through_the_other_one_does_not_drag_it():
+    """The lower lip springs 0.2 up through the upper lip within one step (a released FAP): the
+    skin's contact, given the step's start, does not drag the upper lip's vertices up with the lower
+    lip's faces (ICT's released raise_b_lip_lm: 30 folded edges in a frame, docs/notes/lips17.md);
+    the contact without the history does."""
+    v, f, sides = _two_lips()
+    body_v = np.where((sides < 0)[:, None], v - [0, 0, 0.05], v + [0, 0, 0.05])
+    b = bind_skin(v, f, [Body("muscle", "muscle", body_v, f)], max_distance=0.075)
+    sim = SkinSimulation(v, f, b, SkinStiffness(), SolverSettings(iterations=10),
+                         carried=np.ones(len(b.vertex_ids), bool), lip_contact=lip_contacts(v, f, sides, 0.3))
+    first = sim.layer.first
+    sim._contact_prev[:] = sim.state.positions            # the step's start: at rest
+    jumped = sim.state.positions.copy()
+    jumped[first + np.flatnonzero(sides < 0), 2] += 0.2   # the step's end: the lower lip 0.15 past the upper
+    sim.state.positions[:] = jumped
+    sim.touch_lips()
+    up = first + np.flatnonzero(sides > 0)
+    assert np.allclose(sim.state.positions[up], jumped[up])                 # the upper lip stays
+    assert (sim.state.positions[first + np.flatnonzero(sides < 0), 2] < jumped[first + np.flatnonzero(sides < 0), 2]).any()
+    blind = jumped.copy()
+    sim._contact(blind)                                                     # no history
+    assert (blind[up, 2] - jumped[up, 2]).max() > 0.1                       # dragged up
