@@ -114,6 +114,7 @@ def run(ctx):
                       brow_shared_mm=float(ctx.config.get("bind.brow_shared_mm")),
                       brow_raisers=tuple(str(n) for n in (ctx.config.get("bind.brow_raisers") or ())),
                       forehead_bone_mm=float(ctx.config.get("bind.forehead_bone_mm")),
+                      nose_on_bone=bool(ctx.config.get("bind.nose_on_bone")),
                       cheek_mm=float(ctx.config.get("bind.cheek_mm")),
                       cheek_muscles=tuple(str(n) for n in ctx.config.get("bind.cheek_muscles")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
