@@ -198,6 +198,7 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.commissure_radius", Number(0.0, 0.5)),
     ("bind.vermilion_reach", Number(0.0, 5.0)),
     ("bind.forehead_bone_mm", Number(0.0, 100.0)),                # 0: off (the forehead by its rays)
+    ("bind.nose_on_bone", Boolean()),
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
     ("animate.calibrate.magnitudes", PathValue()),

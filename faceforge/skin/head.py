@@ -14,7 +14,7 @@ from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
 from faceforge.skin.brow import BROW_BAND_MM, brow_mask, eye_mask
 from faceforge.skin.rules import (COMMISSURE_RADIUS, MODIOLUS_RADIUS, lip_band, lip_band_width, match_insertions,
-                                  modiolus_mask, commissure_mask, vermilion_mask)
+                                  modiolus_mask, commissure_mask, nose_mask, vermilion_mask)
 
 
 @dataclass(frozen=True)
@@ -84,7 +84,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
               forehead_bone_mm: float = 0.0,
               cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS,
-              vermilion: float = 0.0) -> BoundSkin:
+              vermilion: float = 0.0, nose_on_bone: bool = False) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -141,6 +141,14 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.cheek_mm``, ``bind.cheek_muscles``: cheek skin within this many mm of FDP 5.3 /
         5.4 that its rays bound to the bone binds to the closest cheek muscle
         (:mod:`faceforge.skin.cheek`; 0 or none: by its rays, as the paper).
+    nose_on_bone : bool
+        ``bind.nose_on_bone``: the nose's skin (:func:`nose_mask`: at or above the nose base 9.15,
+        within the alae, the nostrils' insides) whose anchors are all on the muscles around the
+        mouth binds to the closest point of the cranium instead (the nasal cartilages; the
+        rebinding of :func:`faceforge.skin.brow.forehead_binding`). The ring's upper rows (its
+        pars peripheralis, at the nasal sill) lie behind the nostrils and the columella, and by
+        their rays these bound to it: a pucker or a rounded viseme, which lifts and pushes the
+        ring, carried the nose with the lip (docs/notes/tent17.md). False: by the rays.
     mirror : faceforge.geometry.mirror.Mirror or None
         A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
         image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
@@ -225,6 +233,13 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         binding, forehead = forehead_binding(binding, cut.vertices, bodies, raiser_ids,
                                              forehead_mask(cut.vertices, pts, forehead_bone_mm, up=up),
                                              max_ray_fraction * diagonal)
+    nose = 0
+    if nose_on_bone:   # the nose on its cartilages, off the ring behind the nostrils
+        from faceforge.skin.brow import forehead_binding
+
+        ring = [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH]
+        binding, nose = forehead_binding(binding, cut.vertices, bodies, ring, nose_mask(cut.vertices, pts, up),
+                                         max_ray_fraction * diagonal)
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
@@ -241,6 +256,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     report["mirrored_vertices"] = mirrored
     if forehead_bone_mm > 0:   # (off, the report as before: a workdir's calibration stays current)
         report["forehead_on_bone"] = forehead
+    if nose_on_bone:   # (off, the report as before)
+        report["nose_on_bone"] = nose
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
     kind = binding.status[corner]   # the kind of each corner vertex's (first) anchor

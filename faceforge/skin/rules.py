@@ -1,6 +1,7 @@
 """Binding rules beyond the paper (§8): the inner lip band, the muscles inserting through
-others (``bind.insertions``) and the modiolus at the mouth corners (``bind.modiolus_radius``);
-:mod:`faceforge.skin.binding` explains each."""
+others (``bind.insertions``), the modiolus at the mouth corners (``bind.modiolus_radius``), the
+commissure, the vermilion and the nose (``bind.nose_on_bone``); :mod:`faceforge.skin.binding`
+and :func:`faceforge.skin.head.bind_head` explain each."""
 
 from __future__ import annotations
 
@@ -131,3 +132,62 @@ def vermilion_mask(cut, sides, landmarks: dict, scale: float = 1.0) -> np.ndarra
                      limit=reach * (1.0 + 1e-9))
         out |= (sides == side) & (d <= reach)
     return out
+
+
+#: the nose's FDPs (:func:`nose_mask`): its base at the midline (subnasale), its tip, the alar
+#: bases (the nostrils' outer ends at the lip) and the alar creases (the nose's widest points)
+NOSE_FDPS = ("9.15", "9.3", "9.4", "9.5", "9.1", "9.2")
+
+
+#: how far above the nose base (FDP 9.15) the nose's skin leaves the ring, mm (scaled by ES0,
+#: :func:`faceforge.anatomy.tissue.units_per_mm`; :func:`nose_mask`): the subnasale and the
+#: nostrils' sills, where the orbicularis oris' upper fibres insert (with the depressor septi),
+#: move with the lip; with them on the bone MediaPipe's coarse philtrum (one row of triangles
+#: from 9.15 to the lip) held the upper lip up (FAP 55/56 +112 MNS: 34 % short)
+NOSE_BASE_MM = 2.0
+
+
+def nose_mask(vertices, landmarks: dict, up=(0.0, 1.0, 0.0), base_mm: float = NOSE_BASE_MM) -> np.ndarray:
+    """(n,) bool: the external nose and its nostrils (``bind.nose_on_bone``) -- the vertices on or
+    above the nose's lower outline along ``up`` (the line from the nose base, FDP 9.15, at the
+    midline to the alar bases' height at their side: the skin under the nostrils' sills is the upper
+    lip's; measured from 9.15, never below ``base_mm`` above it, :data:`NOSE_BASE_MM`), within the
+    nose's half width of the midline
+    (the alar bases' 9.4 / 9.5 at their height, widening linearly to the alar creases' 9.1 / 9.2
+    at theirs and above; measured across, from 9.15) and no deeper behind 9.15 than the tip (9.3)
+    is in front of it (the nostrils' insides, not the palate). No vertex without the six FDPs
+    (:data:`NOSE_FDPS`)."""
+    v = np.asarray(vertices, FLOAT)
+    if any(k not in landmarks for k in NOSE_FDPS):
+        return np.zeros(len(v), bool)
+    p = {k: np.asarray(landmarks[k], FLOAT) for k in NOSE_FDPS}
+    u = np.asarray(up, FLOAT) / np.linalg.norm(up)
+    base = p["9.15"]
+    across = p["9.1"] - p["9.2"]
+    across -= (across @ u) * u
+    fwd = p["9.3"] - base
+    fwd -= (fwd @ u) * u
+    if np.linalg.norm(across) <= 0.0 or np.linalg.norm(fwd) <= 0.0:
+        return np.zeros(len(v), bool)
+    across /= np.linalg.norm(across)
+    depth = float(np.linalg.norm(fwd))
+    fwd /= depth
+    d = v - base
+    h, side, ahead = d @ u, np.abs(d @ across), d @ fwd
+
+    def at(a, b):   # (height, half width) of an FDP pair
+        m = 0.5 * (p[a] + p[b]) - base
+        return float(m @ u), 0.5 * abs(float((p[a] - p[b]) @ across))
+
+    (hb, wb), (hc, wc) = at("9.4", "9.5"), at("9.1", "9.2")
+    t = np.clip((h - hb) / (hc - hb), 0.0, 1.0) if hc > hb else np.ones(len(v))
+    width = wb + t * (wc - wb) if hc > hb else np.full(len(v), max(wb, wc))
+    floor = max(hb, 0.0) * np.clip(side / wb, 0.0, 1.0) if wb > 0.0 else np.zeros(len(v))   # base to alar base
+    if base_mm > 0.0:
+        from faceforge.anatomy.tissue import units_per_mm
+
+        try:
+            floor = np.maximum(floor, base_mm * units_per_mm(landmarks))
+        except KeyError:   # no ES0: from the nose base itself
+            pass
+    return (h >= floor - 1e-9 * depth) & (side <= width) & (ahead >= -depth)

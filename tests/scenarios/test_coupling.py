@@ -221,6 +221,27 @@ def test_a_full_pucker_narrows_the_mouth_and_does_not_drop_the_upper_lip(head):
     assert inward > 2.0, inward
 
 
+def test_a_full_pucker_leaves_the_nose_where_it_is(head):
+    """The orbicularis oris closed and its lips pushed out together (the bake's mouthPucker, the
+    visemes o / u): the upper lip goes forward, the nose's tip (FDP 9.3) stays within 1.5 mm and
+    its base (9.15, the subnasale, which rides the lip: skin.rules.NOSE_BASE_MM) within 3. The
+    ring's upper rows lie behind the nostrils and the columella; bound there by their rays
+    (``bind.nose_on_bone`` false) the nose rode the lip: tip 4.0 mm, base 4.5 mm on this head
+    (ICT 4.6 / 5.2 in the viseme u, MediaPipe 4.3 / 4.9: docs/notes/tent17.md); with the default
+    (true) the nose's skin is on the cranium: tip 0.9, base 2.2 mm (8.1 forward 4.4 either way)."""
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.playback import static_poses
+
+    h, _ = head
+    ctr = np.zeros((1, len(h.controls)))
+    for name in ("orbicularis_oris", "orbicularis_oris.protrude"):
+        ctr[0, list(h.controls).index(name)] = 1.0
+    d = (static_poses(h.rig, ctr, np.zeros((1, 3)), 25.0, settle=40)[0] - h.rest) / units_per_mm(h.landmarks)
+    tip, base, top = (d[h.fdp_vertex[k]] for k in ("9.3", "9.15", "8.1"))
+    assert top[2] > 2.0, top
+    assert np.linalg.norm(tip) < 1.5 and np.linalg.norm(base) < 3.0, (tip, base)
+
+
 def test_the_inner_brow_raise_lifts_the_brow_not_the_forehead_above_it(head):
     """frontalis_inner_L at 0.5 lifts the inner brow (FDP 4.1) more than the forehead 10 mm and
     30 mm above it (at 30 mm by half again), and mostly up, not back. A real inner-brow raise
