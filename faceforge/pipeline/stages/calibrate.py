@@ -57,17 +57,27 @@ def run_calibrate(ctx):
 
 
 def without_lip_contact(config):
-    """``config`` with ``skin.lip_contact_mm`` 0: the calibration fits the muscles' mapping with the
-    lips free. A lip FAP's entry drives the inner and the outer lip point together and is fitted to
-    their mean; with the contact on, a raised lower lip's inner point is stopped by the upper lip
-    (106 of 150 MNS on the MakeHuman sample) while the outer one is not, and the fit drove the outer
-    point to 188 (docs/notes/lips17.md). Stopped by the other lip is what contact means in
-    playback, not a weak muscle to drive harder."""
-    from faceforge.io.config import Config
+    """``config`` read through with ``skin.lip_contact_mm`` 0: the calibration fits the muscles'
+    mapping with the lips free. A lip FAP's entry drives the inner and the outer lip point together
+    and is fitted to their mean; with the contact on, a raised lower lip's inner point is stopped by
+    the upper lip (106 of 150 MNS on the MakeHuman sample) while the outer one is not, and the fit
+    drove the outer point to 188 (docs/notes/lips17.md). Stopped by the other lip is what contact
+    means in playback, not a weak muscle to drive harder. Every other key is read from ``config``
+    itself (so a stage's record of what it read stays whole)."""
+    return _Overridden(config, {"skin.lip_contact_mm": 0.0})
 
-    data = config.as_dict()
-    data.setdefault("skin", {})["lip_contact_mm"] = 0.0
-    return Config(data, config.origins)
+
+class _Overridden:
+    """A config whose ``get`` answers ``values`` (key -> value) for those keys and defers the rest."""
+
+    def __init__(self, config, values: dict):
+        self._config, self._values = config, dict(values)
+
+    def get(self, key, *args, **kwargs):
+        return self._values[key] if key in self._values else self._config.get(key, *args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._config, name)
 
 
 def _uncalibrated(ctx, template, template_path) -> None:
