@@ -11,7 +11,8 @@ def _umeyama(src, dst, with_scale: bool) -> np.ndarray:
     src = np.asarray(src, dtype=np.float64)
     dst = np.asarray(dst, dtype=np.float64)
     if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 3:
-        raise ValueError(f"similarity_transform: src {src.shape} and dst {dst.shape} must be (n>=3, 3)")
+        name = "similarity_transform" if with_scale else "rigid_transform"
+        raise ValueError(f"{name}: src {src.shape} and dst {dst.shape} must be (n>=3, 3)")
     mu_s, mu_d = src.mean(0), dst.mean(0)
     xs, xd = src - mu_s, dst - mu_d
     cov = xd.T @ xs / len(src)

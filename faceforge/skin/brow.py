@@ -328,20 +328,23 @@ def forehead_mask(vertices, landmarks: dict, above_mm: float, up=(0.0, 1.0, 0.0)
     return np.isfinite(best) & (best > above_mm * mm) & (v @ u > height)
 
 
-def forehead_binding(binding, vertices, bodies, raisers, mask, max_distance: float):
+def onto_cranium(binding, vertices, bodies, only_on, mask, max_distance: float):
     """``binding`` (:class:`faceforge.skin.binding.Binding`) with the vertices of ``mask`` (n,)
-    bool whose anchors are all on the bodies ``raisers`` (indices: the frontalis parts) bound
-    instead to the closest point of the cranium within ``max_distance`` (skin units), one
-    anchor each (``bind.forehead_bone_mm``, beyond §8); a vertex with no cranium in reach keeps
-    its anchors. Returns ``(binding, count rebound)``.
+    bool whose anchors are all on the bodies ``only_on`` (indices) bound instead to the closest
+    point of the cranium within ``max_distance`` (skin units), one anchor each (beyond §8); a
+    vertex with no cranium in reach keeps its anchors. Returns ``(binding, count rebound)``.
 
-    The frontalis inserts into the dermis of the brow; above it the muscle and the galea glide
-    under the forehead's skin on a loose areolar layer, and the skin, tied to the scalp's
-    layers rather than to the muscle, folds into the forehead's furrows when the brow rises. By
-    its ray (§8) that skin binds to the frontalis itself and rose with it: on the MakeHuman
-    sample a brow raise moved the forehead 3.9 cm above the brow 0.4 of the brow's rise, where
-    MakeHuman's eyebrows units are 0 (docs/notes/units9.md). Tied to the bone, it moves only as
-    far as the skin's stretch from the raised brow carries it."""
+    Two uses (:func:`faceforge.skin.head.bind_head`): the forehead above the brow off the
+    frontalis (``bind.forehead_bone_mm``, :func:`forehead_mask`) and the nose off the orbicularis
+    oris (``bind.nose_on_bone``, :func:`faceforge.skin.rules.nose_mask`). The frontalis inserts
+    into the dermis of the brow; above it the muscle and the galea glide under the forehead's skin
+    on a loose areolar layer, and the skin, tied to the scalp's layers rather than to the muscle,
+    folds into the forehead's furrows when the brow rises. By its ray (§8) that skin binds to the
+    frontalis itself and rose with it: on the MakeHuman sample a brow raise moved the forehead 3.9 cm
+    above the brow 0.4 of the brow's rise, where MakeHuman's eyebrows units are 0
+    (docs/notes/units9.md). Tied to the bone, it moves only as far as the skin's stretch from the
+    raised brow carries it. The nose's skin lies over the ring's upper rows (behind the nostrils)
+    and by its rays rode the pucker (docs/notes/tent17.md)."""
     from dataclasses import replace
 
     from faceforge.geometry.triangles import barycentric
@@ -350,10 +353,10 @@ def forehead_binding(binding, vertices, bodies, raisers, mask, max_distance: flo
     ids = np.asarray(binding.vertex_ids)
     n = len(binding.status)
     cranium = [i for i, b in enumerate(bodies) if getattr(b, "kind", "") == "cranium"]
-    raisers = [int(i) for i in raisers]
-    if not cranium or not raisers:
+    only_on = [int(i) for i in only_on]
+    if not cranium or not only_on:
         return binding, 0
-    off = np.bincount(ids[~np.isin(binding.body, raisers)], minlength=n) > 0   # a row on another body
+    off = np.bincount(ids[~np.isin(binding.body, only_on)], minlength=n) > 0   # a row on another body
     has = np.bincount(ids, minlength=n) > 0
     todo = np.flatnonzero(np.asarray(mask, bool) & has & ~off)
     if not len(todo):

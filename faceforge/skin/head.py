@@ -136,7 +136,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     forehead_bone_mm : float
         ``bind.forehead_bone_mm``: forehead skin farther than this many mm (scaled by ES0) above
         the brow lines whose anchors are all on ``brow_raisers`` binds to the closest point of
-        the cranium instead (:func:`faceforge.skin.brow.forehead_binding`; 0: off).
+        the cranium instead (:func:`faceforge.skin.brow.onto_cranium`; 0: off).
     cheek_mm, cheek_muscles : float, sequence of str
         ``bind.cheek_mm``, ``bind.cheek_muscles``: cheek skin within this many mm of FDP 5.3 /
         5.4 that its rays bound to the bone binds to the closest cheek muscle
@@ -145,7 +145,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.nose_on_bone``: the nose's skin (:func:`nose_mask`: at or above the nose base 9.15,
         within the alae, the nostrils' insides) whose anchors are all on the muscles around the
         mouth binds to the closest point of the cranium instead (the nasal cartilages; the
-        rebinding of :func:`faceforge.skin.brow.forehead_binding`). The ring's upper rows (its
+        rebinding of :func:`faceforge.skin.brow.onto_cranium`). The ring's upper rows (its
         pars peripheralis, at the nasal sill) lie behind the nostrils and the columella, and by
         their rays these bound to it: a pucker or a rounded viseme, which lifts and pushes the
         ring, carried the nose with the lip (docs/notes/tent17.md). False: by the rays.
@@ -228,18 +228,18 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                                    max_ray_fraction * diagonal)
     forehead = 0
     if forehead_bone_mm > 0 and raiser_ids:   # the forehead above the brow: on the galea and bone, not the frontalis
-        from faceforge.skin.brow import forehead_binding, forehead_mask
+        from faceforge.skin.brow import forehead_mask, onto_cranium
 
-        binding, forehead = forehead_binding(binding, cut.vertices, bodies, raiser_ids,
-                                             forehead_mask(cut.vertices, pts, forehead_bone_mm, up=up),
-                                             max_ray_fraction * diagonal)
+        binding, forehead = onto_cranium(binding, cut.vertices, bodies, raiser_ids,
+                                         forehead_mask(cut.vertices, pts, forehead_bone_mm, up=up),
+                                         max_ray_fraction * diagonal)
     nose = 0
     if nose_on_bone:   # the nose on its cartilages, off the ring behind the nostrils
-        from faceforge.skin.brow import forehead_binding
+        from faceforge.skin.brow import onto_cranium
 
         ring = [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH]
-        binding, nose = forehead_binding(binding, cut.vertices, bodies, ring, nose_mask(cut.vertices, pts, up),
-                                         max_ray_fraction * diagonal)
+        binding, nose = onto_cranium(binding, cut.vertices, bodies, ring, nose_mask(cut.vertices, pts, up),
+                                     max_ray_fraction * diagonal)
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding

@@ -1,9 +1,9 @@
-"""The forehead above the brow on the bone (faceforge.skin.brow.forehead_binding, bind.forehead_bone_mm)."""
+"""The forehead above the brow on the bone (faceforge.skin.brow.onto_cranium, bind.forehead_bone_mm)."""
 
 import numpy as np
 
 from faceforge.skin.binding import Binding, Body
-from faceforge.skin.brow import forehead_binding, forehead_mask
+from faceforge.skin.brow import forehead_mask, onto_cranium
 from faceforge.skin.casting import CRANIUM, MUSCLE
 
 # a face in the xy plane, y up, eyes 63 units apart (1 unit = 1 mm), the brows 15 mm above them
@@ -46,7 +46,7 @@ def test_forehead_skin_on_the_frontalis_only_moves_to_the_cranium():
                       points=pts, distance=np.abs(pts[:, 2]), outward=np.ones(6, bool),
                       normals=np.tile([0.0, 0.0, 1.0], (4, 1)), closest=np.zeros(6, bool))
     mask = np.array([True, True, False, True])
-    out, moved = forehead_binding(binding, v, bodies, [0], mask, 20.0)
+    out, moved = onto_cranium(binding, v, bodies, [0], mask, 20.0)
     assert moved == 2
     assert out.vertex_ids.tolist() == [0, 1, 1, 2, 3]
     assert out.body.tolist() == [2, 0, 1, 0, 2]
@@ -57,7 +57,7 @@ def test_forehead_skin_on_the_frontalis_only_moves_to_the_cranium():
     tri = bodies[2].vertices[bodies[2].faces[out.face_ids[4]]]
     np.testing.assert_allclose(out.bary[4] @ tri, out.points[4])
     assert binding.body.tolist() == [0, 0, 1, 0, 0, 0]   # the input is not changed
-    same, none = forehead_binding(binding, v, bodies, [0], mask, 5.0)   # no bone in reach
+    same, none = onto_cranium(binding, v, bodies, [0], mask, 5.0)   # no bone in reach
     assert none == 0 and same is binding
-    same, none = forehead_binding(binding, v, bodies, [], mask, 20.0)   # no raisers
+    same, none = onto_cranium(binding, v, bodies, [], mask, 20.0)   # no raisers
     assert none == 0 and same is binding
