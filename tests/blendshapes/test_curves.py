@@ -117,6 +117,18 @@ def test_the_template_covers_all_52_and_mirrors():
     assert mirror_name("eyeBlinkLeft") == "eyeBlinkRight" and mirror_name("jawOpen") == "jawOpen"
 
 
+def test_eye_wide_raises_the_lids_as_far_as_surprise():
+    # ARKit's eyeWide is AU5 at full weight; the surprise preset (AU 1+2+5B+26) raises the upper
+    # lids as far as the lid model allows a preset (read17): the shape must not widen the eye less
+    # than the expression does (it asked -250 IRISD, 1.24x the opening, against surprise's -350)
+    from faceforge.animation.fap_mapping import load_fap_mapping
+
+    surprise = load_fap_mapping(default_mapping_path().parent / "fap_mapping.yaml").expressions["surprise"]
+    specs = load_arkit_mapping(default_mapping_path())
+    assert specs["eyeWideLeft"].lids == {19: surprise[19 - 1]}
+    assert specs["eyeWideRight"].lids == {20: surprise[20 - 1]}
+
+
 def test_a_bad_template_is_named(tmp_path):
     p = tmp_path / "m.yaml"
     p.write_text("shapes:\n  jawOpen: {faps: {3: 100}}\n")
