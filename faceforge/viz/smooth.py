@@ -18,6 +18,11 @@ from faceforge.viz.render import LIGHT, view_matrix
 
 #: skin tone at full light; the shade scales it
 SKIN = np.array([0.93, 0.86, 0.78])
+#: passes of :func:`soften_field` over the mouth's cavity field (its edge a ramp 2-3 edges wide)
+SOFTEN = 3
+#: hidden vertices deeper than this (mm behind the inner lip line) stay fully in the cavity: the
+#: softening is for the rolled-in lips, where hidden and seen vertices meet
+DEEP_MM = 10.0
 #: what a hole in the mesh shows (the cavity's shade: :func:`draw_smooth`'s darkest, 0.15 of the skin)
 HOLE = tuple(0.15 * SKIN)
 
@@ -54,9 +59,9 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
                 ambient: float = 0.3, dim: np.ndarray | None = None) -> None:
     """Draw the mesh ``vertices (n, 3)``, ``faces (m, 3)`` smooth-shaded into ``ax``; ``dim``
     (n,) in [0, 1] darkens vertices (the mouth's cavity, :func:`mouth_cavity`, which a lamp in
-    front would light like the skin): a triangle with a vertex of ``dim`` at least 1/2 is drawn
-    dark whole (light times 0.15 at those vertices, 0.4 at its others: a coarse mouth's few long
-    triangles would streak if only their dark vertices were darkened)."""
+    front would light like the skin): the light times ``1 - 0.85 dim``, interpolated like the
+    light (darkening whole triangles, as this did, traced their edges round an opened mouth;
+    :func:`mouth_cavity` marks a coarse mouth's long triangles dark at every vertex)."""
     from matplotlib.colors import LinearSegmentedColormap
 
     from faceforge.geometry.triangles import vertex_normals
@@ -67,22 +72,14 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
     n = n * np.where(n[:, 2:3] < 0.0, -1.0, 1.0)
     light = ambient + (1.0 - ambient) * np.clip(n @ LIGHT, 0.0, 1.0)
     if dim is not None:
-        dim = np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)
-        dark = (dim[f] >= 0.5).any(axis=1)
-        copies = np.unique(f[dark])                        # their vertices, drawn dark
-        where = np.zeros(len(v), dtype=np.int64)
-        where[copies] = len(v) + np.arange(len(copies))
-        f = f.copy()
-        f[dark] = where[f[dark]]
-        v = np.concatenate([v, v[copies]])
-        light = np.concatenate([light, light[copies] * np.where(dim[copies] >= 0.5, 0.15, 0.4)])
+        light = light * (1.0 - 0.85 * np.clip(np.asarray(dim, dtype=float), 0.0, 1.0))
     cmap = LinearSegmentedColormap.from_list("skin", [(0, 0, 0), tuple(SKIN)])
     ax.tripcolor(v[:, 0], v[:, 1], f, light, shading="gouraud", cmap=cmap, vmin=0.0, vmax=1.0,
                  rasterized=True)
 
 
 def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, corners, outer,
-                 mm: float) -> np.ndarray:
+                 mm: float, soften: int = SOFTEN) -> np.ndarray:
     """(n,) in [0, 1]: how deep inside the mouth each vertex of ``rest`` (n, 3) lies, from the
     rest geometry, ``faces`` (m, 3): the vertices of the mouth's box (x between the ``corners``
     (2, 3) widened by 10 %, y within 15 mm of the inner lip line, FDP 2.2 / 2.3, points (3,))
@@ -90,8 +87,14 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     down, meets the skin: a straight one can escape along the closed lips' seam; or most of its
     neighbours (half) are hidden), 0 at the inner
     lip line rising to 1 at 0.5 mm behind it; ``mm`` skin units per mm. +Z is the face's front.
-    The box's height: the outer lip contour (``outer`` (2, 3): FDP 8.1, 8.2) +- 2 mm, so that
-    the hollow under the lower lip (a tilted ray meets the lip) stays skin."""
+    The tilted rays count only within the outer lip contour (``outer`` (2, 3): FDP 8.1, 8.2)
+    +- 2 mm, so that the hollow under the lower lip (a tilted ray meets the lip) stays skin; a
+    straight one counts over the whole box (a mouth bag's walls above and below the lips). The field is then
+    softened ``soften`` times over the mesh's edges (:func:`soften_field`): the hidden set is
+    decided a vertex at a time, and a fine mesh's rolled-in lips mix hidden and seen vertices,
+    whose edge drawn as is traced a ragged outline round an opened mouth; hidden vertices more
+    than :data:`DEEP_MM` behind the inner lip line keep their full depth (a coarse mouth bag's
+    or head's inside, a band of a row or two, would fade)."""
     rest = np.asarray(rest, dtype=float)
     corners = np.asarray(corners, dtype=float)
     mid_x, half = corners[:, 0].mean(), 0.55 * abs(corners[0, 0] - corners[1, 0])
@@ -100,13 +103,15 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     z0 = max(inner_upper[2], inner_lower[2])
     box = (np.abs(rest[:, 0] - mid_x) < half) & (np.abs(rest[:, 1] - y0) < 15.0 * mm)
     lo, hi = min(outer[0][1], outer[1][1]) - 2.0 * mm, max(outer[0][1], outer[1][1]) + 2.0 * mm
-    cand = np.flatnonzero(box & (rest[:, 2] < z0 - 0.1 * mm) & (rest[:, 1] > lo) & (rest[:, 1] < hi))
-    faces = np.asarray(faces, dtype=np.int64)
-    faces = faces[np.all(box[faces], axis=1)]               # the box's triangles (all 3 in it)
+    cand = np.flatnonzero(box & (rest[:, 2] < z0 - 0.1 * mm))
+    band = (rest[cand, 1] > lo) & (rest[cand, 1] < hi)
+    mesh_faces = np.asarray(faces, dtype=np.int64)
+    faces = mesh_faces[np.all(box[mesh_faces], axis=1)]     # the box's triangles (all 3 in it)
     hits = np.zeros(len(cand), dtype=int)
     for tilt in (0.0, 0.36, -0.36):                          # rays (0, tilt, 1)
         p = np.column_stack([rest[:, 0], rest[:, 1] - tilt * rest[:, 2], rest[:, 2]])
-        hits += _hidden(p, faces, cand, 0.5 * mm)
+        seen = _hidden(p, faces, cand, 0.5 * mm)
+        hits += seen if tilt == 0.0 else seen & band
     out = np.zeros(len(rest))
     hidden = np.zeros(len(rest), dtype=bool)
     hidden[cand[hits >= 1]] = True
@@ -119,6 +124,33 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     hidden[cand[votes[cand] >= 0.5 * count[cand]]] = True
     inside = np.flatnonzero(hidden)
     out[inside] = np.clip((z0 - rest[inside, 2]) / (0.5 * mm), 0.0, 1.0)
+    soft = soften_field(out, mesh_faces, soften)
+    # deep inside (a bag's walls, the head's inside): whole, with the deep vertices just outside
+    # the box that share a triangle with them (a coarse mesh's long triangles cross the box)
+    far = rest[:, 2] < z0 - DEEP_MM * mm
+    deep = np.zeros(len(rest), dtype=bool)
+    deep[inside] = far[inside]
+    touching = mesh_faces[deep[mesh_faces].any(axis=1)].ravel()
+    deep[touching[far[touching] & ~box[touching]]] = True
+    soft[deep] = 1.0
+    return soft
+
+
+def soften_field(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
+    """``values`` (n,) averaged ``passes`` times with their edge neighbours' mean (half each):
+    a step across one edge becomes a ramp a few edges wide. ``faces`` (m, 3) int."""
+    out = np.asarray(values, dtype=float)
+    if passes <= 0 or len(faces) == 0:
+        return out
+    from scipy.sparse import coo_matrix
+
+    n = len(out)
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    adj = coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
+    adj.data[:] = 1.0                                       # an edge shared by two triangles counts once
+    degree = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
+    for _ in range(passes):
+        out = 0.5 * out + 0.5 * (adj @ out) / degree
     return out
 
 

@@ -211,13 +211,25 @@ def test_the_mouth_cavity_is_what_the_lips_hide_and_draws_dark(tmp_path):
     v = np.concatenate([front, back])
     f = np.concatenate([ff, bf + len(front)])
     args = ((0, 0.02, 0), (0, -0.02, 0), ((1.0, 0, 0), (-1.0, 0, 0)), ((0, 0.3, 0), (0, -0.3, 0)), 0.01)
-    dim = mouth_cavity(v, f, *args)
+    dim = mouth_cavity(v, f, *args, soften=0)                               # the hidden set itself
     behind = np.arange(len(front), len(v))
     in_box = behind[np.abs(v[behind, 1]) < 0.15]
     assert np.all(dim[in_box] == 1.0) and np.all(dim[: len(front)] == 0.0)
     assert np.all(dim[behind[np.abs(v[behind, 1]) > 0.35]] == 0.0)        # outside the lips' band
     alone = mouth_cavity(back, bf, *args)                                   # nothing in front of it
     assert not alone.any()
+    # a deep wall (a mouth bag's, 50 mm back) stays whole: every hidden vertex and the deep ones
+    # sharing a triangle with them (a coarse bag's triangles cross the box's edge)
+    deep = mouth_cavity(v, f, *args)
+    assert np.all(deep[in_box] == 1.0) and np.all(deep[: len(front)] == 0.0)
+    assert np.all(deep[behind[np.isclose(np.abs(v[behind, 1]), 0.2)]] == 1.0)   # the box's next row
+    # a shallow one (the rolled-in lips, 2 mm back): softened, its edge a ramp, not a step
+    shallow = np.concatenate([front, back + (0, 0, 0.48)])
+    raw, soft = mouth_cavity(shallow, f, *args, soften=0), mouth_cavity(shallow, f, *args)
+    edges = bf + len(front)
+    step = lambda d: np.abs(d[edges] - d[np.roll(edges, 1, axis=1)]).max()
+    assert step(raw) == 1.0 and step(soft) <= 0.5
+    assert soft[behind[np.abs(v[behind, 1]) < 0.05]].min() > 0.8 and np.all(soft[: len(front)] == 0.0)
 
     import matplotlib
 

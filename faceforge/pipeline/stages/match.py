@@ -144,7 +144,7 @@ MATCH_STAGE = register_stage(Stage(
                  "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template"),
     inputs=("match_target", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("match.npz", "match.png", "report.json"),
-    version="1", run=run_match, description="the muscle pose of a posed copy of the head"))
+    version="2", run=run_match, description="the muscle pose of a posed copy of the head"))
 
 
 @click.command("match", help="Find the muscle contractions and jaw pose that reproduce a posed copy of the head.")
