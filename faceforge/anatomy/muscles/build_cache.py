@@ -33,8 +33,11 @@ from pathlib import Path
 
 import numpy as np
 
-#: the packages whose source enters the key: the muscle build, the geometry it projects with
-CODE_PACKAGES = ("faceforge.anatomy", "faceforge.geometry")
+#: the packages and modules whose source enters the key: the muscle build, the geometry it projects
+#: with, the dtypes it builds in, the YAML reader of the templates
+CODE_PACKAGES = ("faceforge.anatomy", "faceforge.geometry", "faceforge.constants", "faceforge.io.stagefiles")
+#: the libraries whose versions enter the key (numerics, the ray caster)
+LIBRARIES = ("numpy", "numba", "trimesh", "embreex", "pyyaml")
 #: the modules whose dataclasses a cache file may hold
 MODULES = ("faceforge.anatomy.", "faceforge.geometry.")
 #: files kept per cache folder
@@ -46,15 +49,24 @@ _code_digest = None
 
 
 def code_digest() -> str:
-    """SHA-256 of the ``.py`` sources of :data:`CODE_PACKAGES` (relative names and bytes), once
-    per process."""
+    """SHA-256 of the ``.py`` sources of :data:`CODE_PACKAGES` (relative names and bytes) and the
+    versions of :data:`LIBRARIES`, once per process."""
     global _code_digest
     if _code_digest is None:
+        from importlib import metadata
+
         h = hashlib.sha256(FORMAT.encode())
         for name in CODE_PACKAGES:
-            root = Path(importlib.import_module(name).__file__).parent
-            for p in sorted(root.rglob("*.py")):
-                h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
+            module = importlib.import_module(name)
+            path = Path(module.__file__)
+            files = sorted(path.parent.rglob("*.py")) if hasattr(module, "__path__") else [path]
+            for p in files:
+                h.update(f"{name}:{p.relative_to(path.parent).as_posix()}".encode() + b"\0" + p.read_bytes() + b"\0")
+        for lib in LIBRARIES:
+            try:
+                h.update(f"{lib}={metadata.version(lib)}".encode())
+            except metadata.PackageNotFoundError:
+                h.update(f"{lib}=none".encode())
         _code_digest = h.hexdigest()
     return _code_digest
 
