@@ -129,7 +129,7 @@ class BoundHead:
         self.muscle_names = tuple(system.muscles)
         self.controls = system.controls
         self.skin = self._skin(bind, Path(bind_dir), settings, config, fit)
-        self._guards(config)
+        self._guards(config, cache)
         jaw = JawDrive(self.skull, system)
         skin_step = self._skin_step(jaw, int(config.get("animate.orientation_guard.rounds")))
 
@@ -273,21 +273,31 @@ class BoundHead:
         blend = BlendLimit(self.rest, np.asarray(bind["influence"], dtype=float), *self._folds)
         return blend if len(blend.quads) else None
 
-    def _guards(self, config) -> None:
-        """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""
+    def _guards(self, config, cache=None) -> None:
+        """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them; the skull
+        guard and the bone collision read back from ``cache`` (a folder) when built there before on
+        the same skin, bones and settings (:func:`faceforge.anatomy.muscles.build_cache.cached`)."""
+        from faceforge.anatomy.muscles.build_cache import cached
         from faceforge.animation.guards.bone_collision import BoneCollision
         from faceforge.animation.guards.orientation import OrientationGuard
         from faceforge.animation.guards.skull import SkullGuard
 
         bones = {"cranium": self.cranium, "mandible": self.mandible}
+        head = (("rest", self.rest), *((f"{n}_{i}", np.asarray(b[i])) for n, b in bones.items() for i in (0, 1)))
         diag = float(np.linalg.norm(np.ptp(self.rest, axis=0)))
         keep = float(config.get("animate.skull_guard.keep"))
-        self.guard = SkullGuard(self.rest, bones, reach=float(config.get("animate.skull_guard.reach")) * diag,
-                                keep=keep)
+        reach = float(config.get("animate.skull_guard.reach")) * diag
+        self.guard = cached(cache, "skullguard", (*head, ("reach", reach), ("keep", keep)),
+                            lambda: SkullGuard(self.rest, bones, reach=reach, keep=keep))
         reach = float(config.get("animate.skull_guard.collision_reach")) * diag
-        self.collision = BoneCollision(self.rest, bones, reach=reach, keep=float(
-            config.get("animate.skull_guard.collision_keep")),
-            sweeps={"mandible": jaw_sweep(self.skull, self.mandible[0], reach)}) if reach > 0 else None
+        if reach > 0:
+            sweeps = {"mandible": jaw_sweep(self.skull, self.mandible[0], reach)}
+            keep = float(config.get("animate.skull_guard.collision_keep"))
+            self.collision = cached(cache, "collision", (*head, ("reach", reach), ("keep", keep),
+                                                         ("sweeps", sweeps["mandible"])),
+                                    lambda: BoneCollision(self.rest, bones, reach=reach, keep=keep, sweeps=sweeps))
+        else:
+            self.collision = None
         rounds = int(config.get("animate.orientation_guard.rounds"))
         self.orientation = OrientationGuard(
             self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \

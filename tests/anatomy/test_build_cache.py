@@ -25,7 +25,7 @@ def assert_same(a, b, path="muscles"):
         assert a.dtype == b.dtype and a.shape == b.shape, path
         assert a.flags.c_contiguous == b.flags.c_contiguous and a.flags.f_contiguous == b.flags.f_contiguous, path
         assert a.tobytes() == b.tobytes(), path
-    elif dataclasses.is_dataclass(a):
+    elif dataclasses.is_dataclass(a) or type(a).__module__.startswith("faceforge."):
         assert set(vars(a)) == set(vars(b)), path
         for name in vars(a):
             assert_same(getattr(a, name), getattr(b, name), f"{path}.{name}")
@@ -153,3 +153,48 @@ def test_built_muscles_reads_back_what_the_build_kept(head, tmp_path, monkeypatc
     assert len(builds) == 3
     rig.built_muscles(fit, cranium, mandible, config, None)                  # no cache: builds
     assert len(builds) == 4
+
+
+def _skin_around(cranium, mandible, radius=1.04):
+    """A skin a little outside the synthetic skull (its vertices scaled out from the centre)."""
+    v = np.vstack([cranium[0], mandible[0]])
+    return v * radius
+
+
+def test_stored_guards_push_the_skin_out_the_same(head, tmp_path):
+    """The skull guard and the bone collision (plain objects of faceforge.animation.guards, their
+    grids plain objects of faceforge.geometry) come back as they were built: the same pushes."""
+    from faceforge.anatomy.muscles.build_cache import cached
+    from faceforge.animation.guards.bone_collision import BoneCollision
+    from faceforge.animation.guards.skull import SkullGuard
+
+    cranium, mandible, _ = head
+    rest = _skin_around(cranium, mandible)
+    bones = {"cranium": cranium, "mandible": mandible}
+    builds = []
+
+    def build_guard():
+        builds.append("guard")
+        return SkullGuard(rest, bones, reach=0.2, keep=0.5)
+
+    def build_collision():
+        builds.append("collision")
+        return BoneCollision(rest, bones, reach=0.2, keep=0.5)
+
+    items = (("rest", rest), ("reach", 0.2))
+    made = [cached(tmp_path, "skullguard", items, build_guard), cached(tmp_path, "collision", items, build_collision)]
+    back = [cached(tmp_path, "skullguard", items, build_guard), cached(tmp_path, "collision", items, build_collision)]
+    assert builds == ["guard", "collision"]            # the second pair was read back
+    for a, b in zip(made, back):
+        assert type(a) is type(b) and a is not b
+        assert_same(vars(a), vars(b))
+    pushed = rest * 0.9                                   # the skin sunk into the bones
+    moved = []
+    for guard, collision in (made, back):
+        p, q = pushed.copy(), pushed.copy()
+        n = guard.apply(p, {k: v[0] for k, v in bones.items()})
+        m = collision.apply(q, {})
+        moved.append((n, m, p.tobytes(), q.tobytes()))
+    assert moved[0][0] > 0 and moved[0][1] > 0
+    assert moved[0] == moved[1]
+    assert cached(None, "skullguard", items, build_guard) is not None and builds[-1] == "guard"

@@ -6,20 +6,23 @@ rebuilds its muscles from the template and the fitted points
 map projected onto it, every action line projected onto the layers under it, the hexahedral
 sheets morphed -- about 3 s of CPU on the MakeHuman sample, the same work with the same result
 in every command. This module stores what :func:`~faceforge.anatomy.muscles.build.build_muscles_on`
-returned, keyed by everything it read, and gives it back bit for bit.
+returned, keyed by everything it read, and gives it back bit for bit; :func:`cached` does the same
+for other rest-state builds of the rig (the skull guard and the bone collision of
+:mod:`faceforge.animation.guards`, ~0.8 s of CPU on MakeHuman).
 
-A cache file is ``<folder>/muscles-<key>.npz`` (no pickle): the arrays under ``a0``, ``a1``, ...
-and ``tree`` (a 0-d unicode array) holding the JSON description of the object graph
-(:func:`encode`): dataclasses of this package and of :mod:`faceforge.geometry.surface_points`,
-dicts, lists, tuples, ``None``, ``bool``, ``int``, ``float`` (JSON keeps a float's repr, so its
-bits), ``str`` and arrays (``np.save`` keeps dtype, shape and memory order). A dataclass is
-rebuilt without calling its ``__init__`` (its fields set as they were: a muscle's
-``__post_init__`` would recompute its constraints). Anything else makes :func:`save_muscles`
-store nothing. A missing, unreadable or foreign file is a miss: the caller builds again.
+A cache file is ``<folder>/<kind>-<key>.npz`` (``muscles``, ``skullguard``, ``collision``; no
+pickle): the arrays under ``a0``, ``a1``, ... and ``tree`` (a 0-d unicode array) holding the JSON
+description of the object graph (:func:`encode`): dataclasses and plain objects (their
+``__dict__``) of :data:`MODULES`, dicts, lists, tuples, ``None``, ``bool``, ``int``, ``float``
+(JSON keeps a float's repr, so its bits), ``str`` and arrays (``np.save`` keeps dtype, shape and
+memory order). An object is rebuilt without calling its ``__init__`` (its fields set as they
+were: a muscle's ``__post_init__`` would recompute its constraints). Anything else (a numpy
+scalar, a function, an object of another package) makes :func:`save_muscles` store nothing. A
+missing, unreadable or foreign file is a miss: the caller builds again.
 
 The key (:func:`cache_key`) hashes the caller's inputs and the source of the code that builds
 them (:data:`CODE_PACKAGES`), so an edit of that code misses instead of returning a stale
-build. At most :data:`KEEP` files are kept per folder (oldest removed first).
+build. At most :data:`KEEP` files of a kind are kept per folder (oldest removed first).
 """
 
 from __future__ import annotations
@@ -35,11 +38,12 @@ import numpy as np
 
 #: the packages and modules whose source enters the key: the muscle build, the geometry it projects
 #: with, the dtypes it builds in, the YAML reader of the templates
-CODE_PACKAGES = ("faceforge.anatomy", "faceforge.geometry", "faceforge.constants", "faceforge.io.stagefiles")
+CODE_PACKAGES = ("faceforge.anatomy", "faceforge.geometry", "faceforge.animation.guards", "faceforge.constants",
+                 "faceforge.io.stagefiles")
 #: the libraries whose versions enter the key (numerics, the ray caster)
 LIBRARIES = ("numpy", "numba", "trimesh", "embreex", "pyyaml")
-#: the modules whose dataclasses a cache file may hold
-MODULES = ("faceforge.anatomy.", "faceforge.geometry.")
+#: the modules whose objects a cache file may hold (dataclasses, or plain objects: their ``__dict__``)
+MODULES = ("faceforge.anatomy.", "faceforge.geometry.", "faceforge.animation.guards.")
 #: files kept per cache folder
 KEEP = 8
 #: bumped when the file layout changes
@@ -115,15 +119,15 @@ def encode(obj, arrays: list, seen: dict | None = None):
         return {"@l" if isinstance(obj, list) else "@t": [encode(x, arrays, seen) for x in obj]}
     if type(obj) is dict:
         return {"@d": [[encode(k, arrays, seen), encode(v, arrays, seen)] for k, v in obj.items()]}
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        cls = type(obj)
-        if not cls.__module__.startswith(MODULES):
-            raise _Unstorable(f"{cls.__module__}.{cls.__qualname__}")
-        fields = {f.name: encode(getattr(obj, f.name), arrays, seen) for f in dataclasses.fields(obj)}
-        if hasattr(obj, "__dict__") and set(vars(obj)) != set(fields):
+    cls = type(obj)
+    if cls.__module__.startswith(MODULES) and not isinstance(obj, type) and hasattr(obj, "__dict__") \
+            and not hasattr(cls, "__slots__"):
+        names = [f.name for f in dataclasses.fields(obj)] if dataclasses.is_dataclass(obj) else list(vars(obj))
+        if set(vars(obj)) != set(names):
             raise _Unstorable(f"{cls.__qualname__} holds attributes besides its fields")
-        return {"@c": f"{cls.__module__}:{cls.__qualname__}", "f": fields}
-    raise _Unstorable(type(obj).__name__)
+        return {"@c": f"{cls.__module__}:{cls.__qualname__}",
+                "f": {n: encode(getattr(obj, n), arrays, seen) for n in names}}
+    raise _Unstorable(f"{cls.__module__}.{cls.__qualname__}")
 
 
 def decode(desc, arrays):
@@ -150,45 +154,58 @@ def decode(desc, arrays):
     return obj
 
 
-def cache_path(folder, key: str) -> Path:
-    """Where the build of ``key`` is kept in ``folder``."""
-    return Path(folder) / f"muscles-{key}.npz"
+def cached(folder, kind: str, items, build):
+    """``build()``, or what a call with the same ``kind`` and key items (:func:`cache_key`) stored
+    in ``folder`` (None: no cache, always built); a fresh build is stored."""
+    if folder is None:
+        return build()
+    key = cache_key((("kind", kind), *items))
+    obj = load_muscles(folder, key, kind)
+    if obj is None:
+        obj = build()
+        save_muscles(folder, key, obj, kind)
+    return obj
 
 
-def load_muscles(folder, key: str):
-    """The muscles stored under ``key`` in ``folder``, or None (no file, or one that does not read)."""
-    path = cache_path(folder, key)
+def cache_path(folder, key: str, kind: str = "muscles") -> Path:
+    """Where the build of ``key`` is kept in ``folder`` (``kind``: what it is, a file name prefix)."""
+    return Path(folder) / f"{kind}-{key}.npz"
+
+
+def load_muscles(folder, key: str, kind: str = "muscles"):
+    """What is stored under ``key`` in ``folder``, or None (no file, or one that does not read)."""
+    path = cache_path(folder, key, kind)
     if not path.is_file():
         return None
     try:
         with np.load(path, allow_pickle=False) as data:
             tree = json.loads(str(data["tree"][()]))
             arrays = [data[f"a{i}"] for i in range(int(tree["count"]))]
-        if tree.get("key") != key:
+        if tree.get("key") != key or tree.get("kind", "muscles") != kind:
             return None
         return decode(tree["muscles"], arrays)
     except (OSError, ValueError, KeyError, AttributeError, TypeError, json.JSONDecodeError):
         return None
 
 
-def save_muscles(folder, key: str, muscles) -> Path | None:
-    """Store ``muscles`` under ``key`` in ``folder`` (written to a temporary name, then renamed);
-    None when they hold something :func:`encode` cannot describe or the folder is not writable.
-    Keeps the :data:`KEEP` newest files."""
+def save_muscles(folder, key: str, muscles, kind: str = "muscles") -> Path | None:
+    """Store ``muscles`` (a list of them, or with ``kind`` another object of :data:`MODULES`) under
+    ``key`` in ``folder`` (written to a temporary name, then renamed); None when they hold something
+    :func:`encode` cannot describe or the folder is not writable. Keeps the :data:`KEEP` newest files."""
     arrays: list = []
     try:
-        desc = encode(list(muscles), arrays)
+        desc = encode(list(muscles) if kind == "muscles" else muscles, arrays)
     except _Unstorable:
         return None
     folder = Path(folder)
-    path = cache_path(folder, key)
+    path = cache_path(folder, key, kind)
     tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp.npz")
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        tree = json.dumps({"key": key, "count": len(arrays), "muscles": desc})
+        tree = json.dumps({"key": key, "kind": kind, "count": len(arrays), "muscles": desc})
         np.savez(tmp, tree=np.array(tree), **{f"a{i}": a for i, a in enumerate(arrays)})
         os.replace(tmp, path)
-        old = sorted(folder.glob("muscles-*.npz"), key=lambda p: p.stat().st_mtime)[:-KEEP]
+        old = sorted(folder.glob(f"{kind}-*.npz"), key=lambda p: p.stat().st_mtime)[:-KEEP]
         for p in old:
             p.unlink(missing_ok=True)
     except OSError:
