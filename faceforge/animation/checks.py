@@ -59,16 +59,38 @@ def folded_edges(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
     forehead raising the brows), so this is a measure, not a failure. rest (n, 3), frames
     (F, n, 3), faces (m, 3) -> (F, q) bool.
     """
-    from faceforge.skin.layer import skin_topology
     from faceforge.pbd.constraints.bending import dihedral_angle
 
-    quads = skin_topology(faces).bending_quads
+    quads = _bending_quads(faces)
     flat = np.abs(dihedral_angle(rest, quads)) < np.radians(flat_deg)
     limit = np.radians(fold_deg)
     out = np.zeros((len(frames), len(quads)), dtype=bool)
     for i, p in enumerate(np.asarray(frames)):
         out[i] = flat & (np.abs(dihedral_angle(p, quads)) > limit)
     return out
+
+
+_QUADS: dict = {}
+
+
+def _bending_quads(faces) -> np.ndarray:
+    """:func:`faceforge.skin.layer.skin_topology`'s ``bending_quads`` of ``faces (m, 3)``, kept for
+    the last few face arrays by content (a bake checks ~60 shapes of one mesh: each rebuilt the
+    topology, ~20 ms). Read-only."""
+    import hashlib
+
+    from faceforge.skin.layer import skin_topology
+
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    key = (f.shape, hashlib.blake2b(f.tobytes(), digest_size=16).hexdigest())
+    quads = _QUADS.get(key)
+    if quads is None:
+        quads = np.asarray(skin_topology(f).bending_quads)
+        quads.setflags(write=False)
+        while len(_QUADS) >= 4:
+            _QUADS.pop(next(iter(_QUADS)))
+        _QUADS[key] = quads
+    return quads
 
 
 def points_inside(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -100,9 +100,12 @@ class BoundHead:
     symmetric : bool, True on a rig symmetric by construction (fit.npz's mirror plane, every
         skin vertex with an exact mirror partner; set where the skin is loaded): calibration
         then probes one side of each left/right pair (``animation.calibrate_mirror``)
+
+    ``cache`` (a folder, or None): where the built muscles are kept between commands
+    (:func:`built_muscles`; the stages pass ``<workdir>/cache``).
     """
 
-    def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None):
+    def __init__(self, fit_dir: Path, bind_dir: Path, config, log=lambda m: None, cache: Path | None = None):
         from faceforge.animation.playback import Rig
         from faceforge.io.stagefiles import load_npz
         from faceforge.pbd import SolverSettings
@@ -121,11 +124,12 @@ class BoundHead:
                                    self.jaw_glide, config.get("animate.jaw_glide_slope"))
             self.skull = replace(self.skull, jaw=replace(jaw, glide=glide))
         settings = SolverSettings.from_config(config.get("solver"))
-        self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log)
+        self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log,
+                                                     cache=cache)
         self.muscle_names = tuple(system.muscles)
         self.controls = system.controls
         self.skin = self._skin(bind, Path(bind_dir), settings, config, fit)
-        self._guards(config)
+        self._guards(config, cache)
         jaw = JawDrive(self.skull, system)
         skin_step = self._skin_step(jaw, int(config.get("animate.orientation_guard.rounds")))
 
@@ -269,21 +273,31 @@ class BoundHead:
         blend = BlendLimit(self.rest, np.asarray(bind["influence"], dtype=float), *self._folds)
         return blend if len(blend.quads) else None
 
-    def _guards(self, config) -> None:
-        """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them."""
+    def _guards(self, config, cache=None) -> None:
+        """:attr:`guard`, :attr:`collision` and :attr:`orientation` as the config sets them; the skull
+        guard and the bone collision read back from ``cache`` (a folder) when built there before on
+        the same skin, bones and settings (:func:`faceforge.anatomy.muscles.build_cache.cached`)."""
+        from faceforge.anatomy.muscles.build_cache import cached
         from faceforge.animation.guards.bone_collision import BoneCollision
         from faceforge.animation.guards.orientation import OrientationGuard
         from faceforge.animation.guards.skull import SkullGuard
 
         bones = {"cranium": self.cranium, "mandible": self.mandible}
+        head = (("rest", self.rest), *((f"{n}_{i}", np.asarray(b[i])) for n, b in bones.items() for i in (0, 1)))
         diag = float(np.linalg.norm(np.ptp(self.rest, axis=0)))
         keep = float(config.get("animate.skull_guard.keep"))
-        self.guard = SkullGuard(self.rest, bones, reach=float(config.get("animate.skull_guard.reach")) * diag,
-                                keep=keep)
+        reach = float(config.get("animate.skull_guard.reach")) * diag
+        self.guard = cached(cache, "skullguard", (*head, ("reach", reach), ("keep", keep)),
+                            lambda: SkullGuard(self.rest, bones, reach=reach, keep=keep))
         reach = float(config.get("animate.skull_guard.collision_reach")) * diag
-        self.collision = BoneCollision(self.rest, bones, reach=reach, keep=float(
-            config.get("animate.skull_guard.collision_keep")),
-            sweeps={"mandible": jaw_sweep(self.skull, self.mandible[0], reach)}) if reach > 0 else None
+        if reach > 0:
+            sweeps = {"mandible": jaw_sweep(self.skull, self.mandible[0], reach)}
+            keep = float(config.get("animate.skull_guard.collision_keep"))
+            self.collision = cached(cache, "collision", (*head, ("reach", reach), ("keep", keep),
+                                                         ("sweeps", sweeps["mandible"])),
+                                    lambda: BoneCollision(self.rest, bones, reach=reach, keep=keep, sweeps=sweeps))
+        else:
+            self.collision = None
         rounds = int(config.get("animate.orientation_guard.rounds"))
         self.orientation = OrientationGuard(
             self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \
@@ -406,7 +420,7 @@ def fdp_vertices(landmarks: dict, rest, lip_sides) -> dict:
     return out
 
 
-def muscle_system(fit, cranium, mandible, settings, config, log):
+def muscle_system(fit, cranium, mandible, settings, config, log, cache=None):
     """The layered muscles of the fitted head (§6), rebuilt from fit.npz.
 
     The muscle map's specs (``template.muscle_map`` on ``template.skull``) get the fitted
@@ -414,19 +428,69 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
     are built on the fitted skull (Eq. 5 thickness from its diagonal), deepest layer first;
     on a symmetric rig (fit.npz has ``mirror_point`` / ``mirror_normal``) each right muscle is
     built as the mirror image of its left twin. Without muscles in fit.npz the system is the
-    skull alone.
+    skull alone. ``cache`` (a folder, or None): the built muscles are kept there and read back
+    when everything the build reads is unchanged (:func:`built_muscles`).
     """
     from faceforge.anatomy.layers import MusculoskeletalSystem
-    from faceforge.anatomy.muscles.muscle_map import load_muscle_map
-    from faceforge.anatomy.skull import load_skull
-    from faceforge.exceptions import StageError, TemplateError
-    from faceforge.anatomy.muscles.build import build_muscles_on
     from faceforge.geometry.mirror import Mirror
-    from faceforge.io.templates import resolve_template_path
 
     if "muscle_map_names" not in fit or not len(fit["muscle_map_names"]):
         log("fit.npz has no muscles: animating the skull alone")
         return MusculoskeletalSystem.from_parts(cranium, mandible, [], settings)
+    muscles = built_muscles(fit, cranium, mandible, config, cache)
+    settings = replace(settings, damping=float(config.get("muscle.damping")))
+    system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings, Mirror.from_arrays(fit))
+    from faceforge.anatomy.muscles.modiolus import attach_modiolus
+
+    attach_modiolus(system, muscles=tuple(config.get("muscle.sphincter.modiolus.muscles")),
+                    radius=float(config.get("muscle.sphincter.modiolus.radius")),
+                    ramp=float(config.get("muscle.sphincter.modiolus.ramp")))
+    return system
+
+
+#: the muscle build's config keys (:func:`built_muscles`)
+BUILD_KEYS = ("template.muscle_map", "template.skull", "muscle.linear.stiffness", "muscle.sphincter.stiffness",
+              "muscle.sphincter.carry_inner", "muscle.sphincter.protrusion", "muscle.sphincter.inner_on_bone",
+              "muscle.sphincter.closure_centre", "muscle.sphincter.closure_vertical",
+              "muscle.sphincter.eversion_up")
+
+
+def built_muscles(fit, cranium, mandible, config, cache=None) -> list:
+    """The fitted head's ``[Muscle]`` (:func:`faceforge.anatomy.muscles.build.build_muscles_on`),
+    built, or read back from ``cache`` (a folder) where a build of the same fit arrays, template
+    files, config keys (:data:`BUILD_KEYS`) and build code was kept
+    (:mod:`faceforge.anatomy.muscles.build_cache`); a fresh build is kept there."""
+    from faceforge.anatomy.muscles.build_cache import cache_key, load_muscles, save_muscles
+    from faceforge.io.templates import resolve_template_path
+
+    key = None
+    if cache is not None:
+        mirror = tuple((k, np.asarray(fit[k])) for k in ("mirror_point", "mirror_normal") if k in fit)
+        key = cache_key((
+            *((k, np.asarray(fit[k])) for k in ("muscle_map_names", "muscle_map_start", "muscle_map_points")),
+            ("cranium", np.asarray(cranium[0])), ("cranium_faces", np.asarray(cranium[1])),
+            ("mandible", np.asarray(mandible[0])), ("mandible_faces", np.asarray(mandible[1])), *mirror,
+            ("muscle_map_file", Path(resolve_template_path(config.get("template.muscle_map")))),
+            ("skull_folder", Path(resolve_template_path(config.get("template.skull")))),
+            *((k, config.get(k)) for k in BUILD_KEYS)))
+        muscles = load_muscles(cache, key)
+        if muscles is not None:
+            return muscles
+    muscles = _build_muscles(fit, cranium, mandible, config)
+    if key is not None:
+        save_muscles(cache, key, muscles)
+    return muscles
+
+
+def _build_muscles(fit, cranium, mandible, config) -> list:
+    """:func:`built_muscles` without the cache."""
+    from faceforge.anatomy.muscles.build import build_muscles_on
+    from faceforge.anatomy.muscles.muscle_map import load_muscle_map
+    from faceforge.anatomy.skull import load_skull
+    from faceforge.exceptions import StageError, TemplateError
+    from faceforge.geometry.mirror import Mirror
+    from faceforge.io.templates import resolve_template_path
+
     specs = load_muscle_map(resolve_template_path(config.get("template.muscle_map")),
                             load_skull(resolve_template_path(config.get("template.skull"))))
     start = fit["muscle_map_start"]
@@ -453,11 +517,4 @@ def muscle_system(fit, cranium, mandible, settings, config, log):
     except TemplateError as exc:
         raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
                          "another muscle map)") from None
-    settings = replace(settings, damping=float(config.get("muscle.damping")))
-    system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings, Mirror.from_arrays(fit))
-    from faceforge.anatomy.muscles.modiolus import attach_modiolus
-
-    attach_modiolus(system, muscles=tuple(config.get("muscle.sphincter.modiolus.muscles")),
-                    radius=float(config.get("muscle.sphincter.modiolus.radius")),
-                    ramp=float(config.get("muscle.sphincter.modiolus.ramp")))
-    return system
+    return muscles

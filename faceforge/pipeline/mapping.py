@@ -36,10 +36,11 @@ def mapping_digest_without_presets(path) -> str:
 
     import yaml
 
+    from faceforge.io.stagefiles import yaml_safe_load
     from faceforge.pipeline.cache import file_digest
 
-    try:
-        data = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+    try:   # libyaml's parser: the same documents, ~0.5 s less per command that keys calibrate
+        data = yaml_safe_load(Path(path).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError):
         return file_digest(path)
     if not isinstance(data, dict):

@@ -99,9 +99,10 @@ def write_fit(fit_dir, count=(24, 32), extra_muscles: int = 0):
     return v, f, lm
 
 
-def muscle_system(fit, cranium, mandible, settings, config, log, extra: int = 0):
+def muscle_system(fit, cranium, mandible, settings, config, log, extra: int = 0, cache=None):
     """Stand-in for the fit stage's muscle rebuild: a zygomaticus on the cranium, plus
-    ``extra`` passive sheets (h 6, w 3) around the upper skull (for timing a full map)."""
+    ``extra`` passive sheets (h 6, w 3) around the upper skull (for timing a full map); ``cache``
+    (the real one's folder of built muscles) is not used."""
     from faceforge.anatomy.muscles.action_line import ActionLine
     from faceforge.anatomy.layers import MusculoskeletalSystem
     from faceforge.anatomy.muscles.muscle import build_linear_muscle

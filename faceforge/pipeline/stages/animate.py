@@ -51,7 +51,7 @@ def run_animate(ctx):
     from faceforge.mpeg4.fap_stream import FapFile
     from faceforge.pipeline.mapping import stage_mapping
 
-    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log, cache=ctx.workdir / "cache")
     mapping, mapping_path = stage_mapping(ctx)
     fap = FapFile(ctx.param("fap"))
     turn = bool(ctx.config.get("animate.head_rotation"))

@@ -43,7 +43,7 @@ def run_arkit(ctx):
     take = ctx.param("arkit_take")
     names, weights, fps = read_weights(take)
     baked = load_npz(ctx.input("bake") / "shapes.npz")
-    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log, cache=ctx.workdir / "cache")
     mapping, _ = stage_mapping(ctx)
     if [str(c) for c in baked["controls"]] != list(head.controls):
         raise StageError("the bake's controls are not this head's; rerun `faceforge bake`", ctx.input("bake"))

@@ -56,7 +56,7 @@ def run_bake(ctx):
 
     kinds = Path(ctx.param("bake_shapes")).read_text().split()
     specs = load_arkit_mapping(ctx.param("arkit_mapping")) if "arkit" in kinds else {}
-    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log, cache=ctx.workdir / "cache")
     mapping, mapping_path = stage_mapping(ctx)
     lids = head.eyelids(ctx.config)
     mirror = Mirror.from_arrays(load_npz(ctx.input("fit") / "fit.npz"))

@@ -30,7 +30,7 @@ def run_calibrate(ctx):
         _uncalibrated(ctx, template, template_path)
         return
     config = without_lip_contact(ctx.config)
-    head = BoundHead(ctx.input("fit"), ctx.input("bind"), config, log=ctx.log)
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), config, log=ctx.log, cache=ctx.workdir / "cache")
     result = calibrate_head(head, template, config, log=ctx.log, progress=ctx.progress)
     calibrated, rows, summary, lips, probes = (result.mapping, result.rows, result.summary, result.lips,
                                                result.probes)

@@ -83,7 +83,7 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     from faceforge.pipeline.mapping import stage_mapping
     from faceforge.viz.head_sheet import head_sheet
 
-    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log, cache=ctx.workdir / "cache")
     mapping, mapping_path = stage_mapping(ctx)
     presets = rows(mapping, mapping_path)
     names = ["neutral", *presets]

@@ -89,7 +89,7 @@ def run_match(ctx):
     from faceforge.viz.head_sheet import head_sheet
 
     target_path = ctx.param("match_target")
-    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log)
+    head = BoundHead(ctx.input("fit"), ctx.input("bind"), ctx.config, log=ctx.log, cache=ctx.workdir / "cache")
     neutral = head.to_user(head.rest[None])[0]
     rigid = bool(ctx.config.get("match.rigid"))
     delta, motion = read_target(target_path, neutral, rigid)
