@@ -190,7 +190,7 @@ class MusculoskeletalSystem:
         self.settings = settings
         self._extra: list = []
         self._jaw = np.eye(4)
-        self._modiolus: dict = {}   # sphincter name -> anatomy.muscles.modiolus.Modiolus
+        self._ties: dict = {}   # sphincter name -> [anatomy.muscles.modiolus.LoopTie], applied in order
 
     # -- construction -------------------------------------------------------------
     @classmethod
@@ -357,13 +357,17 @@ class MusculoskeletalSystem:
                     return {key: pts[sl].copy() for key, sl in own.items()}
         raise KeyError(f"unknown muscle {name!r}")
 
-    def set_modiolus(self, name: str, modiolus) -> None:
-        """Tie sphincter ``name``'s corners to a modiolus (:mod:`faceforge.anatomy.muscles.modiolus`;
-        None unties them); the rest targets are set again."""
-        if modiolus is None:
-            self._modiolus.pop(name, None)
-        else:
-            self._modiolus[name] = modiolus
+    def add_loop_tie(self, name: str, tie) -> None:
+        """Tie some of sphincter ``name``'s loop points to the muscles inserting there (a
+        :class:`faceforge.anatomy.muscles.modiolus.LoopTie`: the modiolus at the corners, a lip on
+        its depressor or levator), after the ties it has; the rest targets are set again."""
+        self._ties.setdefault(name, []).append(tie)
+        for layer in self._layers:
+            self._set_targets(layer, self._rest_controls)
+
+    def clear_loop_ties(self, name: str) -> None:
+        """Untie sphincter ``name``'s loop points (:meth:`add_loop_tie`)."""
+        self._ties.pop(name, None)
         for layer in self._layers:
             self._set_targets(layer, self._rest_controls)
 
@@ -452,8 +456,8 @@ class MusculoskeletalSystem:
         for i, (m, s, own) in enumerate(zip(layer.muscles, layer.slots, layer.pieces)):
             if len(s) and m.kind != "linear":          # the sphincter, in numpy
                 lp = {key: pts[sl] for key, sl in own.items()}
-                if m.name in self._modiolus:   # the corners ride on the muscles inserting there
-                    lp = self._modiolus[m.name].apply(lp, self._world_v, contractions)
+                for tie in self._ties.get(m.name, ()):   # points ride on the muscles inserting there
+                    lp = tie.apply(lp, self._world_v, contractions)
                 c = contractions[layer.columns[i]]
                 k = layer.protrusion_columns[i]
                 p = contractions[k] if k >= 0 else 0.0

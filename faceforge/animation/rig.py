@@ -440,11 +440,15 @@ def muscle_system(fit, cranium, mandible, settings, config, log, cache=None):
     muscles = built_muscles(fit, cranium, mandible, config, cache)
     settings = replace(settings, damping=float(config.get("muscle.damping")))
     system = MusculoskeletalSystem.from_parts(cranium, mandible, muscles, settings, Mirror.from_arrays(fit))
-    from faceforge.anatomy.muscles.modiolus import attach_modiolus
+    from faceforge.anatomy.muscles.modiolus import attach_lip_ties, attach_modiolus
 
     attach_modiolus(system, muscles=tuple(config.get("muscle.sphincter.modiolus.muscles")),
                     radius=float(config.get("muscle.sphincter.modiolus.radius")),
                     ramp=float(config.get("muscle.sphincter.modiolus.ramp")))
+    attach_lip_ties(system, lower=tuple(config.get("muscle.sphincter.lip_ties.lower")),
+                    upper=tuple(config.get("muscle.sphincter.lip_ties.upper")),
+                    radius=float(config.get("muscle.sphincter.lip_ties.radius")),
+                    ramp=float(config.get("muscle.sphincter.lip_ties.ramp")))
     return system
 
 

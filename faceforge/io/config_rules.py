@@ -190,6 +190,10 @@ RULES: list[tuple[str, Rule]] = [
     ("muscle.sphincter.closure_centre", Number(0.0, 1.0)),
     ("muscle.sphincter.closure_vertical", Number(0.0, 1.0)),
     ("muscle.sphincter.eversion_up", Boolean()),
+    ("muscle.sphincter.lip_ties.lower", ListOf(String())),          # []: off
+    ("muscle.sphincter.lip_ties.upper", ListOf(String())),          # []: off
+    ("muscle.sphincter.lip_ties.radius", Number(0.0, 1.0)),         # 0: off
+    ("muscle.sphincter.lip_ties.ramp", Number(0.001, 1.0)),
     ("solver.stiffness_mode", Choice(("paper", "iteration_independent", "xpbd"))),
     ("solver.gravity", Number()),
     ("fit.rbf_kernel", Choice(("multiquadric", "inverse_multiquadric", "thin_plate_spline", "gaussian"))),
