@@ -155,6 +155,18 @@ def test_built_muscles_reads_back_what_the_build_kept(head, tmp_path, monkeypatc
     assert len(builds) == 4
 
 
+def test_the_build_reads_only_the_keys_its_cache_key_holds():
+    """Every config key ``rig._build_muscles`` reads is in ``rig.BUILD_KEYS`` (else a change of it
+    would read a stale build back)."""
+    import inspect
+    import re
+
+    from faceforge.animation import rig
+
+    read = set(re.findall(r'config\.get\("([^"]+)"\)', inspect.getsource(rig._build_muscles)))
+    assert read and read <= set(rig.BUILD_KEYS), read - set(rig.BUILD_KEYS)
+
+
 def _skin_around(cranium, mandible, radius=1.04):
     """A skin a little outside the synthetic skull (its vertices scaled out from the centre)."""
     v = np.vstack([cranium[0], mandible[0]])

@@ -37,9 +37,10 @@ from pathlib import Path
 import numpy as np
 
 #: the packages and modules whose source enters the key: the muscle build, the geometry it projects
-#: with, the dtypes it builds in, the YAML reader of the templates
+#: with, the dtypes it builds in, the YAML reader of the templates, the rig that calls the build with
+#: its config keys
 CODE_PACKAGES = ("faceforge.anatomy", "faceforge.geometry", "faceforge.animation.guards", "faceforge.constants",
-                 "faceforge.io.stagefiles")
+                 "faceforge.io.stagefiles", "faceforge.animation.rig")
 #: the libraries whose versions enter the key (numerics, the ray caster)
 LIBRARIES = ("numpy", "numba", "trimesh", "embreex", "pyyaml")
 #: the modules whose objects a cache file may hold (dataclasses, or plain objects: their ``__dict__``)
