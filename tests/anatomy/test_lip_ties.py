@@ -84,7 +84,7 @@ def test_the_ties_chain_after_the_modiolus(parts):
     """A lip tie and the modiolus on one ring: both kept, applied in order."""
     system = MusculoskeletalSystem.from_parts(*parts)
     assert attach_modiolus(system, muscles=("depressor_labii_inferioris",), radius=0.3) is not None
-    assert len(attach_lip_ties(system, lower=("depressor_labii_inferioris", "levator_labii"))) == 1
+    assert len(attach_lip_ties(system, lower=("depressor_labii_inferioris",))) == 1
     assert len(system._ties["orbicularis_oris"]) == 2
     system.clear_loop_ties("orbicularis_oris")
     assert "orbicularis_oris" not in system._ties
@@ -135,3 +135,12 @@ def test_both_sides_share_the_middle_whatever_their_order():
     np.testing.assert_allclose(a[mid], [0.0, -0.2, 0.0], atol=1e-12)   # both pulls, mirrored: straight down
     mirror = np.array([int(np.argmin(np.linalg.norm(rest["A3"] - p * [-1, 1, 1], axis=1))) for p in rest["A3"]])
     np.testing.assert_allclose(a[mirror] * [-1, 1, 1], a, atol=1e-12)
+
+
+def test_a_pair_the_map_lacks_is_a_config_error(parts):
+    """A user's typo in ``muscle.sphincter.lip_ties.lower`` is named, not skipped."""
+    from faceforge.exceptions import ConfigError
+
+    system = MusculoskeletalSystem.from_parts(*parts)
+    with pytest.raises(ConfigError, match=r"lip_ties\.lower: .*depresor_labii_L"):
+        attach_lip_ties(system, lower=("depresor_labii",))

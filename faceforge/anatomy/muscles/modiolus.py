@@ -256,11 +256,14 @@ LIP_TIE_LOWER = ("depressor_labii_inferioris",)
 def attach_lip_ties(system, sphincter: str = "orbicularis_oris", lower=LIP_TIE_LOWER, upper=(),
                     radius: float = 0.25, ramp: float = 0.1) -> list:
     """Tie the lower lip of ``sphincter`` in ``system`` to each muscle pair of ``lower`` and its
-    upper lip to each pair of ``upper`` (names without ``_L`` / ``_R``; those the map lacks are
-    skipped; :class:`LipTie`, one per pair, applied after the modiolus in that order). Returns
-    the ties (also kept by the system)."""
+    upper lip to each pair of ``upper`` (names without ``_L`` / ``_R``; :class:`LipTie`, one per
+    pair, applied after the modiolus in that order). Returns the ties (also kept by the system).
+    A pair the muscle map lacks (a linear ``name_L`` and ``name_R``) is a
+    :class:`faceforge.exceptions.ConfigError`: the user named it."""
     if sphincter not in system.muscles or radius <= 0.0:
         return []
+    from faceforge.exceptions import ConfigError
+
     rest, _ = system.world(rest=True)
     lines = system.sphincter_lines(sphincter, rest)
     ties = []
@@ -268,7 +271,8 @@ def attach_lip_ties(system, sphincter: str = "orbicularis_oris", lower=LIP_TIE_L
         for name in names:
             sides = _sides(system, (name,))
             if sides is None:
-                continue
+                key = f"muscle.sphincter.lip_ties.{'lower' if is_lower else 'upper'}"
+                raise ConfigError(f"{key}: the muscle map has no linear pair {name}_L / {name}_R")
             tie = LipTie(lines, sides, rest, radius, ramp, lower=is_lower)
             system.add_loop_tie(sphincter, tie)
             ties.append(tie)
