@@ -89,8 +89,8 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     lip line rising to 1 at 0.5 mm behind it; ``mm`` skin units per mm. +Z is the face's front.
     The tilted rays count only within the outer lip contour (``outer`` (2, 3): FDP 8.1, 8.2)
     +- 2 mm, so that the hollow under the lower lip (a tilted ray meets the lip) stays skin; a
-    straight one counts over the whole box (a mouth bag's walls above and below the lips). The field is then
-    softened ``soften`` times over the mesh's edges (:func:`soften_field`): the hidden set is
+    straight one counts over the whole box (a mouth bag's walls above and below the lips). The
+    field is then softened ``soften`` times over the mesh's edges (:func:`soften_field`): the hidden set is
     decided a vertex at a time, and a fine mesh's rolled-in lips mix hidden and seen vertices,
     whose edge drawn as is traced a ragged outline round an opened mouth; hidden vertices more
     than :data:`DEEP_MM` behind the inner lip line keep their full depth (a coarse mouth bag's
