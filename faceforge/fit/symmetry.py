@@ -109,19 +109,14 @@ def _surface_halfway(v: np.ndarray, f: np.ndarray, mirror: Mirror, rounds: int =
     """Each vertex (n, 3) of the mesh (v, f) moved halfway to the closest point of the mirrored
     surface, ``rounds`` times (the mirrored surface taken afresh each time), the move smoothed
     by ``smooth`` sweeps of the neighbours' average."""
-    from scipy.sparse import coo_matrix, diags
-
     from faceforge.geometry.closest import TriangleGrid
+    from faceforge.geometry.triangles import neighbour_average
 
     v = np.asarray(v, dtype=np.float64)
     f = np.asarray(f)
     # the move is smoothed over the mesh (a few Jacobi sweeps of the umbrella average), so a
     # thin plate whose two sides find different partners is not folded through itself
-    i, j = f.ravel(), f[:, [1, 2, 0]].ravel()
-    adj = coo_matrix((np.ones(len(i)), (i, j)), shape=(len(v), len(v))).tocsr()
-    adj = adj + adj.T
-    adj.data[:] = 1.0
-    avg = diags(1.0 / np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)) @ adj
+    avg = neighbour_average(len(v), f)
     for _ in range(rounds):
         q, _ = TriangleGrid(mirror(v)[f]).closest(v)
         move = 0.5 * (q - v)

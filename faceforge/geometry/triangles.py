@@ -153,3 +153,18 @@ def vertex_components(n_vertices: int, faces) -> np.ndarray:
     used = np.zeros(n_vertices, bool)
     used[faces.ravel()] = True
     return np.where(used, labels, -1).astype(INT)
+
+
+def neighbour_average(n_vertices: int, faces):
+    """The umbrella operator of the mesh: a sparse ``(n, n)`` matrix whose product with a vertex
+    field ``(n,)`` or ``(n, k)`` is each vertex's mean over its edge neighbours (an edge shared by
+    two triangles counts once; a vertex no face uses averages to 0). A few Jacobi sweeps
+    ``x = 0.5 (x + A x)`` smooth a field over the surface."""
+    from scipy.sparse import coo_matrix, diags
+
+    faces = np.asarray(faces).reshape(-1, 3)
+    i, j = faces.ravel(), faces[:, [1, 2, 0]].ravel()
+    adj = coo_matrix((np.ones(len(i)), (i, j)), shape=(n_vertices, n_vertices)).tocsr()
+    adj = adj + adj.T
+    adj.data[:] = 1.0
+    return diags(1.0 / np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)) @ adj

@@ -137,20 +137,17 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
 
 
 def soften_field(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
-    """``values`` (n,) averaged ``passes`` times with their edge neighbours' mean (half each):
-    a step across one edge becomes a ramp a few edges wide. ``faces`` (m, 3) int."""
+    """``values`` (n,) averaged ``passes`` times with their edge neighbours' mean (half each,
+    :func:`faceforge.geometry.triangles.neighbour_average`): a step across one edge becomes a
+    ramp a few edges wide. ``faces`` (m, 3) int."""
+    from faceforge.geometry.triangles import neighbour_average
+
     out = np.asarray(values, dtype=float)
     if passes <= 0 or len(faces) == 0:
         return out
-    from scipy.sparse import coo_matrix
-
-    n = len(out)
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    adj = coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)).tocsr()
-    adj.data[:] = 1.0                                       # an edge shared by two triangles counts once
-    degree = np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)
+    avg = neighbour_average(len(out), faces)
     for _ in range(passes):
-        out = 0.5 * out + 0.5 * (adj @ out) / degree
+        out = 0.5 * (out + avg @ out)
     return out
 
 
