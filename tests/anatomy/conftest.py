@@ -113,6 +113,20 @@ def chin_mouth_on(v, f, **kw):
                                   SPHINCTER_STIFFNESS, lies_on=("skull",), layer=1, **kw)
 
 
+def ring_with_pair(name, origin, insertion, inner_axes, centre=(0.0, -0.3), outer_axes=(0.32, 0.17)):
+    """(cranium, mandible, muscles) of the split sphere: a linear pair ``name_L`` / ``name_R``
+    (layer 0, on the bone; ``origin`` / ``insertion``: the left one's (x, y) points, the right
+    one mirrored in x) and the orbicularis oris (layer 1, on the bone only: nothing ties the
+    pair to it unless a test does)."""
+    cranium, mandible = split_skull(3)
+    v, f, _ = concatenate_meshes([cranium, mandible])
+    muscles = [linear_on(name + suffix, v, f, [(s * x, y) for x, y in origin],
+                         [(s * x, y) for x, y in insertion], h=5)
+               for s, suffix in ((1.0, "_L"), (-1.0, "_R"))]
+    muscles.append(sphincter_on("orbicularis_oris", v, f, centre, inner_axes, outer_axes, layer=1))
+    return cranium, mandible, muscles
+
+
 def synthetic_head(subdivisions=3):
     """``(cranium, mandible, muscles)`` of the table in the module docstring."""
     cranium, mandible = split_skull(subdivisions)

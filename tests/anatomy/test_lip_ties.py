@@ -8,8 +8,7 @@ import pytest
 from faceforge.anatomy.layers import MusculoskeletalSystem
 from faceforge.anatomy.muscles.modiolus import LipTie, attach_lip_ties, attach_modiolus, lip_arc
 
-from tests.anatomy.conftest import linear_on, sphincter_on, split_skull
-from faceforge.geometry.triangles import concatenate_meshes
+from tests.anatomy.conftest import ring_with_pair
 
 CENTRE, INNER, OUTER = (0.0, -0.3), (0.15, 0.07), (0.32, 0.17)
 
@@ -19,15 +18,8 @@ def parts():
     """Skull, a depressor of the lower lip per side (layer 0, on the bone, from below the chin to
     the lower lip beside the midline) and the ring (layer 1, on the bone only: untied, the
     depressors cannot move it)."""
-    cranium, mandible = split_skull(3)
-    v, f, _ = concatenate_meshes([cranium, mandible])
-    muscles = []
-    for s, suffix in ((1.0, "_L"), (-1.0, "_R")):
-        muscles.append(linear_on("depressor_labii_inferioris" + suffix, v, f,
-                                 [(s * 0.06, -0.78), (s * 0.16, -0.76)], [(s * 0.03, -0.41), (s * 0.12, -0.40)],
-                                 h=5))
-    muscles.append(sphincter_on("orbicularis_oris", v, f, CENTRE, INNER, OUTER, layer=1))
-    return cranium, mandible, muscles
+    return ring_with_pair("depressor_labii_inferioris", [(0.06, -0.78), (0.16, -0.76)],
+                          [(0.03, -0.41), (0.12, -0.40)], INNER, CENTRE, OUTER)
 
 
 def lip_motion(parts, tie: bool, controls: dict, frames: int = 60):

@@ -6,9 +6,8 @@ import pytest
 
 from faceforge.anatomy.layers import MusculoskeletalSystem
 from faceforge.anatomy.muscles.modiolus import Modiolus, attach_modiolus
-from faceforge.geometry.triangles import concatenate_meshes
 
-from tests.anatomy.conftest import linear_on, sphincter_on, split_skull
+from tests.anatomy.conftest import ring_with_pair
 
 CENTRE, OUTER = (0.0, -0.3), (0.32, 0.17)
 
@@ -17,15 +16,8 @@ CENTRE, OUTER = (0.0, -0.3), (0.32, 0.17)
 def parts():
     """Skull, a depressor per side (layer 0, on the bone, inserting at the ring's corner) and the
     ring (layer 1, on the bone only: without the modiolus the depressors cannot move it)."""
-    cranium, mandible = split_skull(3)
-    v, f, _ = concatenate_meshes([cranium, mandible])
-    muscles = []
-    for s, suffix in ((1.0, "_L"), (-1.0, "_R")):
-        muscles.append(linear_on("depressor_anguli" + suffix, v, f,
-                                 [(s * 0.30, -0.75), (s * 0.42, -0.72)], [(s * 0.30, -0.33), (s * 0.36, -0.30)],
-                                 h=5))
-    muscles.append(sphincter_on("orbicularis_oris", v, f, CENTRE, (0.15, 0.07), OUTER, layer=1))
-    return cranium, mandible, muscles
+    return ring_with_pair("depressor_anguli", [(0.30, -0.75), (0.42, -0.72)], [(0.30, -0.33), (0.36, -0.30)],
+                          (0.15, 0.07), CENTRE, OUTER)
 
 
 def corner_motion(parts, tie: bool, controls: dict, frames: int = 60):
