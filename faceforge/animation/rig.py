@@ -464,26 +464,17 @@ def built_muscles(fit, cranium, mandible, config, cache=None) -> list:
     built, or read back from ``cache`` (a folder) where a build of the same fit arrays, template
     files, config keys (:data:`BUILD_KEYS`) and build code was kept
     (:mod:`faceforge.anatomy.muscles.build_cache`); a fresh build is kept there."""
-    from faceforge.anatomy.muscles.build_cache import cache_key, load_muscles, save_muscles
+    from faceforge.anatomy.muscles.build_cache import cached
     from faceforge.io.templates import resolve_template_path
 
-    key = None
-    if cache is not None:
-        mirror = tuple((k, np.asarray(fit[k])) for k in ("mirror_point", "mirror_normal") if k in fit)
-        key = cache_key((
-            *((k, np.asarray(fit[k])) for k in ("muscle_map_names", "muscle_map_start", "muscle_map_points")),
-            ("cranium", np.asarray(cranium[0])), ("cranium_faces", np.asarray(cranium[1])),
-            ("mandible", np.asarray(mandible[0])), ("mandible_faces", np.asarray(mandible[1])), *mirror,
-            ("muscle_map_file", Path(resolve_template_path(config.get("template.muscle_map")))),
-            ("skull_folder", Path(resolve_template_path(config.get("template.skull")))),
-            *((k, config.get(k)) for k in BUILD_KEYS)))
-        muscles = load_muscles(cache, key)
-        if muscles is not None:
-            return muscles
-    muscles = _build_muscles(fit, cranium, mandible, config)
-    if key is not None:
-        save_muscles(cache, key, muscles)
-    return muscles
+    mirror = tuple((k, np.asarray(fit[k])) for k in ("mirror_point", "mirror_normal") if k in fit)
+    return cached(cache, "muscles", (
+        *((k, np.asarray(fit[k])) for k in ("muscle_map_names", "muscle_map_start", "muscle_map_points")),
+        ("cranium", np.asarray(cranium[0])), ("cranium_faces", np.asarray(cranium[1])),
+        ("mandible", np.asarray(mandible[0])), ("mandible_faces", np.asarray(mandible[1])), *mirror,
+        ("muscle_map_file", Path(resolve_template_path(config.get("template.muscle_map")))),
+        ("skull_folder", Path(resolve_template_path(config.get("template.skull")))),
+        *((k, config.get(k)) for k in BUILD_KEYS)), lambda: _build_muscles(fit, cranium, mandible, config))
 
 
 def _build_muscles(fit, cranium, mandible, config) -> list:
