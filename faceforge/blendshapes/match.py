@@ -104,3 +104,51 @@ class FieldMatcher:
     def used(self, match: Match, least: float = 1e-3) -> dict:
         """{control: value} of the controls ``match`` uses (|value| > ``least``)."""
         return {n: float(v) for n, v in zip(self.space.names, match.x) if abs(v) > least}
+
+
+def head_motion(motion: np.ndarray, neutral: np.ndarray) -> tuple[float, float]:
+    """(turn in degrees, shift in skin units) of a target's rigid head motion ``motion (4, 4)``
+    (:func:`faceforge.geometry.rigid.still_part_motion`): the rotation's angle, and how far it
+    carries the centroid of ``neutral (n, 3)``."""
+    R, t = np.asarray(motion, dtype=float)[:3, :3], np.asarray(motion, dtype=float)[:3, 3]
+    turn = float(np.degrees(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0))))
+    centre = np.asarray(neutral, dtype=float).mean(axis=0)
+    return turn, float(np.linalg.norm(t + centre @ R.T - centre))
+
+
+def match_posed(head, matcher: FieldMatcher, delta: np.ndarray, motion: np.ndarray, rigid: bool,
+                log=lambda m: None) -> tuple[Match, dict]:
+    """Match ``delta (n_user, 3)`` (a posed copy of ``head``'s mesh less the mesh, user frame; its
+    head motion ``motion (4, 4)``, already taken out when ``rigid``) with ``matcher``; the match and
+    its report: the agreement against :data:`GOOD_COSINE` / :data:`GOOD_RATIO`, the residuals, the
+    head motion, the controls used (jaw in degrees and mm), the peaks in mm, the physical checks of
+    the settled pose (:func:`faceforge.animation.checks.check_animation`) and the seconds."""
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.checks import check_animation
+
+    neutral = head.to_user(head.rest[None])[0]
+    mm = units_per_mm(head.landmarks)
+    turn, shift = head_motion(motion, neutral)
+    if not rigid and (turn > 1.0 or shift / mm > 1.0):
+        log(f"the target's head itself moved ({turn:.1f} deg, {shift / mm:.1f} mm): if that is not the face's "
+            "motion, match --rigid takes it out first")
+    log(f"{len(matcher.names)} controls (muscles and jaw), one settled pose each")
+    m = matcher.match(delta)
+    head.rig.reset()
+    checks = check_animation(head.rest, m.frame[None], head.faces, inside_at_rest=head.inside_at_rest(),
+                             skull=lambda k: head.skull_at(m.jaw if k >= 0 else np.zeros(3)))
+    shown = {n: (round(float(np.degrees(v)), 2) if n in ("jaw.pitch", "jaw.yaw") else
+                 round(v / mm, 2) if n == "jaw.protrusion" else round(v, 3)) for n, v in matcher.used(m).items()}
+    report = {
+        "agreement": {"cosine": round(m.cosine, 4), "ratio": round(m.ratio, 4),
+                      "within": {"cosine_at_least": GOOD_COSINE, "ratio": list(GOOD_RATIO), "met": m.good}},
+        "residuals": [round(r, 4) for r in m.residuals],
+        "head_motion": {"turn_deg": round(turn, 3), "shift_mm": round(shift / mm, 3), "removed": bool(rigid)},
+        "controls": shown, "units": {"contractions": "0-1", "jaw.pitch": "deg", "jaw.yaw": "deg",
+                                     "jaw.protrusion": "mm"},
+        "peak_mm": {"target": round(float(np.linalg.norm(delta, axis=1).max()) / mm, 2),
+                    "matched": round(float(np.linalg.norm(m.field, axis=1).max()) / mm, 2)},
+        "checks": checks.as_dict(),
+        "seconds": {"jacobian": round(matcher.jacobian_seconds, 2), "solve": round(m.seconds, 2)},
+    }
+    return m, report

@@ -78,12 +78,10 @@ def run_match(ctx):
     """Solve the muscle pose of ``ctx.params['match_target']``; write match.npz, match.png, report.json."""
     import numpy as np
 
-    from faceforge.anatomy.tissue import units_per_mm
-    from faceforge.animation.checks import check_animation
     from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.animation.rig import BoundHead
     from faceforge.animation.statics import SettleSettings
-    from faceforge.blendshapes.match import GOOD_COSINE, GOOD_RATIO, FieldMatcher
+    from faceforge.blendshapes.match import GOOD_COSINE, GOOD_RATIO, FieldMatcher, match_posed
     from faceforge.io.stagefiles import save_json, save_npz
     from faceforge.pipeline.mapping import mapping_template_path
     from faceforge.viz.head_sheet import head_sheet
@@ -93,45 +91,19 @@ def run_match(ctx):
     neutral = head.to_user(head.rest[None])[0]
     rigid = bool(ctx.config.get("match.rigid"))
     delta, motion = read_target(target_path, neutral, rigid)
-    turn = float(np.degrees(np.arccos(np.clip((np.trace(motion[:3, :3]) - 1) / 2, -1.0, 1.0))))
-    shift = float(np.linalg.norm(motion[:3, 3] + neutral.mean(0) @ motion[:3, :3].T - neutral.mean(0)))
     mapping = load_fap_mapping(mapping_template_path(ctx.config))
     matcher = FieldMatcher(head, mapping, float(ctx.config.get("animate.fps")), SettleSettings.from_config(ctx.config))
-    mm = units_per_mm(head.landmarks)
-    if not rigid and (turn > 1.0 or shift / mm > 1.0):
-        ctx.log(f"the target's head itself moved ({turn:.1f} deg, {shift / mm:.1f} mm): if that is not the face's "
-                "motion, match --rigid takes it out first")
-    ctx.log(f"{len(matcher.names)} controls (muscles and jaw), one settled pose each")
-    m = matcher.match(delta)
-    head.rig.reset()
-    checks = check_animation(head.rest, m.frame[None], head.faces, inside_at_rest=head.inside_at_rest(),
-                             skull=lambda k: head.skull_at(m.jaw if k >= 0 else np.zeros(3)))
-    used = matcher.used(m)
-    shown = {n: (round(float(np.degrees(v)), 2) if n in ("jaw.pitch", "jaw.yaw") else
-                 round(v / mm, 2) if n == "jaw.protrusion" else round(v, 3)) for n, v in used.items()}
-    report = {
-        "target": str(target_path),
-        "agreement": {"cosine": round(m.cosine, 4), "ratio": round(m.ratio, 4),
-                      "within": {"cosine_at_least": GOOD_COSINE, "ratio": list(GOOD_RATIO), "met": m.good}},
-        "residuals": [round(r, 4) for r in m.residuals],
-        "head_motion": {"turn_deg": round(turn, 3), "shift_mm": round(shift / mm, 3), "removed": rigid},
-        "controls": shown, "units": {"contractions": "0-1", "jaw.pitch": "deg", "jaw.yaw": "deg",
-                                     "jaw.protrusion": "mm"},
-        "peak_mm": {"target": round(float(np.linalg.norm(delta, axis=1).max()) / mm, 2),
-                    "matched": round(float(np.linalg.norm(m.field, axis=1).max()) / mm, 2)},
-        "checks": checks.as_dict(),
-        "seconds": {"jacobian": round(matcher.jacobian_seconds, 2), "solve": round(m.seconds, 2)},
-    }
-    save_json(ctx.out_dir / "report.json", report)
+    m, report = match_posed(head, matcher, delta, motion, rigid, log=ctx.log)
+    save_json(ctx.out_dir / "report.json", {"target": str(target_path), **report})
     target_work = head.rest.copy()
-    R = head.user_rotation
-    target_work[head.user_index] = (neutral + delta) @ R.T      # user = head @ R
-    poses = np.stack([head.rest, target_work, m.frame])
-    head_sheet(ctx.out_dir / "match.png", head, poses, ["neutral", "target", f"matched (cosine {m.cosine:.2f}, "
-               f"size x{m.ratio:.2f})"], f"{Path(target_path).name} matched by the muscles", cols=3)
+    target_work[head.user_index] = (neutral + delta) @ head.user_rotation.T      # user = head @ R
+    head_sheet(ctx.out_dir / "match.png", head, np.stack([head.rest, target_work, m.frame]),
+               ["neutral", "target", f"matched (cosine {m.cosine:.2f}, size x{m.ratio:.2f})"],
+               f"{Path(target_path).name} matched by the muscles", cols=3)
     save_npz(ctx.out_dir / "match.npz", target=(neutral + delta).astype(np.float32),
              matched=(neutral + m.field).astype(np.float32), controls=np.asarray(matcher.names, dtype=str),
              x=m.x, contractions=m.contractions, columns=np.asarray(head.controls, dtype=str), jaw=m.jaw)
+    shown = report["controls"]
     ctx.log(f"cosine {m.cosine:.3f}, size x{m.ratio:.3f} ({'within' if m.good else 'outside'} cosine >= "
             f"{GOOD_COSINE}, size {GOOD_RATIO[0]}-{GOOD_RATIO[1]}); "
             + ", ".join(f"{n} {v:g}" for n, v in sorted(shown.items(), key=lambda kv: -abs(kv[1]))[:6]))
