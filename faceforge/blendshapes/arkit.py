@@ -16,7 +16,8 @@ A mapping entry says how one shape is made on a head:
     eyelid FAPs 19-22, laid over the settled skin kinematically (:mod:`faceforge.animation.eyelids`);
 ``eye: {side: L|R, yaw: deg, pitch: deg}``
     turn that eye's eyeball piece (yaw towards +X, the subject's left; pitch up) when the mesh
-    has one (:mod:`faceforge.animation.eyeballs`), else the shape is not made;
+    has one (:mod:`faceforge.animation.eyeballs`); without one, a shape that also has ``lids``
+    is those lids alone (reported as an approximation), any other is not made;
 ``mirror: otherShape``
     this shape is ``otherShape`` with left and right swapped (FAPs, controls, lids);
 ``approximation: why``

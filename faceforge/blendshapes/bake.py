@@ -114,12 +114,16 @@ def bake_shapes(specs: dict, space, probes: dict, simulate, observe_probes, rest
             log(f"{spec.name}: not made: {why}")
             continue
         frame, f68, gaze = _overlay(spec, frame, row, lids, eyes or {}, jaw)
-        row.update(made=True, approximation=spec.approximation or None, mirror_of=spec.mirror_of or None)
+        lids_only = "not_turned" in row.get("eye", {})
+        approximation = "; ".join(filter(None, [spec.approximation, "the lids follow the gaze, no eyeball turns: "
+                                                + row["eye"]["not_turned"] if lids_only else ""]))
+        row.update(made=True, approximation=approximation or None, mirror_of=spec.mirror_of or None)
         report[spec.name] = row
         for k, v in zip(out, (spec.name, frame, c, jaw, f68, gaze)):
             out[k].append(v)
         log(f"{spec.name}: " + (f"FAP error {row['error']:.0%}" if "error" in row else
-                                "eye rotation" if spec.eye else "lids only")
+                                ("lids only (no eyeball piece)" if lids_only else "eye rotation") if spec.eye
+                                else "lids only")
             + (" (mirrored shape)" if row.get("mirrored_shape") else
                " (mirrored pose)" if row.get("mirrored_pose") else ""))
     t_solve = time.perf_counter() - t0
@@ -186,9 +190,13 @@ def _not_made(spec, space, probes, lids, eyes) -> str:
         return f"no FDP on this head for FAP {missing[0]}"
     if spec.lids and lids is None:
         return "the head has no eyelids"
-    if spec.eye and spec.eye["side"] not in eyes:
-        return f"eye rotation: the mesh has no eyeball piece at the {spec.eye['side']} pupil"
+    if spec.eye and spec.eye["side"] not in eyes and not spec.lids:
+        return f"eye rotation: {_no_piece(spec)}"
     return ""
+
+
+def _no_piece(spec) -> str:
+    return f"the mesh has no eyeball piece at the {spec.eye['side']} pupil"
 
 
 def _overlay(spec, frame, row, lids, eyes, jaw=None):
@@ -208,10 +216,14 @@ def _overlay(spec, frame, row, lids, eyes, jaw=None):
     gaze = np.zeros(4)
     if spec.eye:
         gaze[[0, 1] if spec.eye["side"] == "L" else [2, 3]] = spec.eye["yaw"], spec.eye["pitch"]
-        ids, centre = eyes[spec.eye["side"]]
-        frame = rotate_eye(frame, ids, centre, spec.eye["yaw"], spec.eye["pitch"])
         row["eye"] = {"side": spec.eye["side"], "yaw_deg": round(float(np.degrees(spec.eye["yaw"])), 2),
-                      "pitch_deg": round(float(np.degrees(spec.eye["pitch"])), 2), "vertices": int(len(ids))}
+                      "pitch_deg": round(float(np.degrees(spec.eye["pitch"])), 2), "vertices": 0}
+        if spec.eye["side"] in eyes:
+            ids, centre = eyes[spec.eye["side"]]
+            frame = rotate_eye(frame, ids, centre, spec.eye["yaw"], spec.eye["pitch"])
+            row["eye"]["vertices"] = int(len(ids))
+        else:   # a gaze shape whose lids follow the eye (_not_made let it through): the lids only
+            row["eye"]["not_turned"] = _no_piece(spec)
     return frame, f68, gaze
 
 

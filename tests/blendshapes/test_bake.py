@@ -269,3 +269,37 @@ def test_a_warm_result_stays_when_settling_from_rest_folds_no_less():
                       folds=lambda f: 2)
     assert out.report["smileL"]["settled_from_rest"] == {"warm_folds": 2, "folds": 2, "cold_folds": 2}
     assert out.frames[0, 0, 1] == pytest.approx(cold(out.contractions[:1], np.zeros((1, 3)))[0, 0, 1] + 0.05)
+
+
+class _Lids:
+    """A stand-in for :class:`faceforge.animation.eyelids.Eyelids`: FAP 19 (upper lid closed, IRISD)
+    lowers vertex 4 by 0.001 a unit, FAP 21 raises vertex 5 as much; no jaw hold."""
+
+    jaw_hold = 0.0
+
+    def apply(self, frames, faps, jaw=None):
+        out = np.array(frames, dtype=float)
+        out[:, 4, 1] -= 0.001 * faps[:, 18]
+        out[:, 5, 1] += 0.001 * faps[:, 20]
+        return out
+
+
+def test_a_gaze_with_lids_on_a_head_without_eyeballs_is_its_lids_alone():
+    """eyeLookDown on a head without an eyeball piece: the lids follow the gaze (made, said to be an
+    approximation); a gaze shape with no lids is not made; with the piece, it turns as well."""
+    rest, simulate, probes, space = _head()
+    specs = {"down": ShapeSpec("down", lids={19: 400.0, 21: -130.0}, eye={"side": "L", "yaw": 0.0, "pitch": -0.4}),
+             "in": ShapeSpec("in", eye={"side": "L", "yaw": -0.5, "pitch": 0.0})}
+    out = bake_shapes(specs, space, probes, simulate, lambda ps: probe_observer(rest, ps), rest, lids=_Lids())
+    assert out.names == ["down"]
+    assert not out.report["in"]["made"] and "no eyeball piece at the L pupil" in out.report["in"]["reason"]
+    down = out.report["down"]
+    assert down["made"] and "no eyeball turns" in down["approximation"] and down["eye"]["vertices"] == 0
+    d = out.frames[0] - rest
+    assert d[4, 1] == pytest.approx(-0.4) and d[5, 1] == pytest.approx(-0.13)       # the lids moved, nothing else
+    assert np.abs(np.delete(d, [4, 5], axis=0)).max() == 0.0
+    assert out.gaze[0] == pytest.approx([0.0, -0.4, 0.0, 0.0])                      # the gaze is still recorded
+    turned = bake_shapes(specs, space, probes, simulate, lambda ps: probe_observer(rest, ps), rest, lids=_Lids(),
+                         eyes={"L": (np.array([0]), np.array([0.9, 0.0, -0.2]))})
+    assert turned.names == ["down", "in"] and turned.report["down"]["approximation"] is None
+    assert turned.report["down"]["eye"]["vertices"] == 1 and np.abs(turned.frames[0][0] - rest[0]).max() > 0.01

@@ -103,7 +103,7 @@ BAKE = register_stage(Stage(
                  "animate.jaw_glide_slope", "animate.chin_path"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="12", run=run_bake,
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="13", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 
