@@ -5,7 +5,8 @@ bound; default: fitted and bound here in a temporary folder through the CLI).
 
 For each unit of :data:`CHOSEN` (MakeHuman's units that one or a few muscles or the jaw produce,
 from ``tests/data/mh_head_expression_units_caucasian.npz``; CC0, tests/data/README.md) the activation solve (:mod:`faceforge.blendshapes.solve`)
-finds the contractions + jaw pose whose skin, settled until it stops moving (``animate.statics``) best matches the unit's displacement field
+finds the contractions + jaw pose + eyelid FAPs (the lids laid over as playback lays them; ``--no-lids``:
+without) whose skin, settled until it stops moving (``animate.statics``) best matches the unit's displacement field
 over all the head's vertices, and reports the cosine of the two fields and the magnitude ratio
 ``|result| / |unit|`` (targets: cosine >= 0.8, ratio 0.8-1.25), the residual after the linear
 solve and each Gauss-Newton pass, the controls used, and the solve's time. Also: each left unit
@@ -37,6 +38,9 @@ CHOSEN = ("mouth-open", "mouth-corner-puller", "eyebrows-left-inner-up", "eyebro
           "eyebrows-left-up", "eyebrows-right-up", "mouth-depression", "mouth-elevation", "mouth-pursing",
           "mouth-retraction", "mouth-protusion", "nose-left-elevation", "nose-right-elevation",
           "mouth-upward-retraction")
+#: ``--eyes``: the lids' units (reported apart: the lids are kinematic controls, not simulated muscles)
+EYE_UNITS = ("eye-left-closure", "eye-right-closure", "eye-left-opened-up", "eye-right-opened-up",
+             "eye-left-slit", "eye-right-slit")
 MESH = ROOT / "samples" / "makehuman" / "mh_head_default.obj"
 #: ``--brows``: the muscles that move the brows
 BROW_MUSCLES = ("frontalis", "corrugator_supercilii", "depressor_supercilii", "orbicularis_oculi")
@@ -72,6 +76,11 @@ def main(argv=None) -> dict:
     ap.add_argument("--brows", action="store_true",
                     help="the brow units only, solved with the brow muscles only (frontalis, corrugator, "
                          "depressor supercilii, orbicularis oculi; no jaw): results units_brows.json")
+    ap.add_argument("--no-lids", action="store_true",
+                    help="solve without the eyelid FAPs 19-22 (as faceforge match did before the eighteenth "
+                         "session): a unit's lid motion stays in the residual")
+    ap.add_argument("--eyes", action="store_true",
+                    help="also the six eye units (eye-*-closure, -opened-up, -slit), reported apart")
     args = ap.parse_args(argv)
     from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.animation.rig import BoundHead
@@ -95,14 +104,16 @@ def main(argv=None) -> dict:
             muscles = {m for m in mapping.muscles if m.startswith(BROW_MUSCLES)}
             chosen = tuple(n for n in CHOSEN if n.startswith("eyebrows-"))
         matcher = FieldMatcher(head, mapping, float(cfg.get("animate.fps")), settle, muscles=muscles,
-                               jaw=not args.brows)
+                               jaw=not args.brows, lids=None if args.no_lids else head.eyelids(cfg))
+        if args.eyes:
+            chosen = chosen + EYE_UNITS
         J = matcher.J
         units = np.load(UNITS)
         names = [str(n) for n in units["names"]]
         rows, fields = {}, {}
         for name, delta in ((n, units["deltas"][names.index(n)]) for n in chosen):
             m = matcher.match(delta, passes=args.passes, local=args.local, rescale=args.rescale)
-            used = {n: round(v, 3) for n, v in matcher.used(m).items()}
+            used = {n: round(v, 1 if n.startswith("lid.") else 3) for n, v in matcher.used(m).items()}
             fields[str(name)] = m.field
             rows[str(name)] = {"cosine": round(m.cosine, 3), "ratio": round(m.ratio, 3), "ok": m.good,
                                "residuals": [round(r, 3) for r in m.residuals], "controls": used,
@@ -117,6 +128,7 @@ def main(argv=None) -> dict:
             if right in fields:
                 a, b = fields[left], fields[right][mi] * np.array([-1.0, 1.0, 1.0])
                 mirror[left] = round(float(np.linalg.norm(a - b) / max(np.linalg.norm(a), 1e-12)), 3)
+        eyes = {n: rows.pop(n) for n in EYE_UNITS if n in rows}
         worst = min(rows, key=lambda n: (rows[n]["cosine"], -abs(np.log(max(rows[n]["ratio"], 1e-9)))))
         space, t_jac = matcher.space, matcher.jacobian_seconds
         out = {"head": str(MESH.relative_to(ROOT)), "controls": list(space.names),
@@ -124,12 +136,14 @@ def main(argv=None) -> dict:
                           **(matcher.simulate.stats.as_dict() if matcher.simulate.stats else {})},
                "jacobian_seconds": round(t_jac, 2), "units": rows, "worst_unit": worst,
                "passing": sum(r["ok"] for r in rows.values()), "of": len(rows),
-               "mirror_rel_diff": mirror, "config_sets": list(args.set)}
-        print(f"worst {worst}; {out['passing']}/{len(rows)} pass; jacobian {t_jac:.1f} s; mirror {mirror}")
+               "mirror_rel_diff": mirror, "config_sets": list(args.set), "lids": not args.no_lids,
+               **({"eye_units": eyes, "eye_passing": sum(r["ok"] for r in eyes.values())} if eyes else {})}
+        print(f"worst {worst}; {out['passing']}/{len(rows)} pass; jacobian {t_jac:.1f} s; mirror {mirror}"
+              + (f"; eye units {out['eye_passing']}/{len(eyes)} pass" if eyes else ""))
         if args.fields:
             np.savez_compressed(args.fields, J=J, controls=np.array(space.names), names=np.array(list(fields)),
                                 solved=np.stack(list(fields.values())), user_rest=user_rest,
-                                x=np.stack([[rows[n]["controls"].get(c, 0.0) for c in space.names] for n in fields]))
+                                x=np.stack([[{**rows, **eyes}[n]["controls"].get(c, 0.0) for c in space.names] for n in fields]))
         write_results("units_brows" if args.brows else "units", out)
         return out
 

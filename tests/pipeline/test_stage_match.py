@@ -60,6 +60,31 @@ def test_match_finds_the_controls_that_made_the_pose(matched):
     assert (matched / "match.png").stat().st_size > 10_000
 
 
+def test_a_closed_lid_is_matched_by_the_lids(workdir, patched, tmp_path):  # noqa: F811
+    """A target whose left upper lid is half closed (FAP 19 at 500 IRISD, laid over the rest face as
+    playback lays it) is matched by the lid control, not by the muscles (without the lids among the
+    controls the lid's motion stayed in the residual)."""
+    from faceforge.animation.rig import BoundHead
+    from faceforge.io.config import load_config
+    from faceforge.io.mesh import save_mesh
+
+    config = load_config(None, SETS)
+    head = BoundHead(workdir / "fit", workdir / "bind", config)
+    lids = head.eyelids(config)
+    assert lids is not None and 19 in lids.faps
+    f68 = np.zeros((1, 68))
+    f68[0, 18] = 500.0
+    frame = lids.apply(head.rest[None], f68, np.zeros((1, 3)))
+    path = tmp_path / "blink.obj"
+    save_mesh(path, head.to_user(frame)[0], S.skin_mesh()[1])
+    sets = (*SETS, f"animate.fap_mapping={workdir / 'mapping.yaml'}")
+    out = run_stage("match", workdir, {"match_target": str(path)}, sets=sets)
+    report = json.loads((out / "report.json").read_text())
+    assert report["agreement"]["cosine"] > 0.95 and report["agreement"]["within"]["met"]
+    assert report["controls"]["lid.19"] == pytest.approx(500.0, rel=0.1)
+    assert max([0.0, *(abs(v) for n, v in report["controls"].items() if not n.startswith("lid."))]) < 0.05
+
+
 def test_match_reads_only_the_config_keys_it_declares(matched):
     assert "animate.statics.tolerance" in MATCH_READ or any(k.startswith("animate.statics") for k in MATCH_READ)
     assert not undeclared_reads("match", MATCH_READ)

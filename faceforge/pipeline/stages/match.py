@@ -20,7 +20,8 @@ report.json
     degrees and mm), the largest motion of target and result in mm, the physical checks of the
     matched pose, the seconds.
 
-The eyelids are kinematic (their FAPs are not muscles): a target's lid motion stays unmatched.
+The eyelids are kinematic: their FAPs 19-22 are solved with the muscles and laid over the pose as
+playback lays them (``animate.eyelids``; the report gives them as ``lid.19`` ... in IRISD).
 Depends on fit and bind only: the solve uses the template mapping's muscles and jaw limits, not
 the calibrated gains.
 """
@@ -92,7 +93,8 @@ def run_match(ctx):
     rigid = bool(ctx.config.get("match.rigid"))
     delta, motion = read_target(target_path, neutral, rigid)
     mapping = load_fap_mapping(mapping_template_path(ctx.config))
-    matcher = FieldMatcher(head, mapping, float(ctx.config.get("animate.fps")), SettleSettings.from_config(ctx.config))
+    matcher = FieldMatcher(head, mapping, float(ctx.config.get("animate.fps")), SettleSettings.from_config(ctx.config),
+                           lids=head.eyelids(ctx.config))
     m, report = match_posed(head, matcher, delta, motion, rigid, log=ctx.log)
     save_json(ctx.out_dir / "report.json", {"target": str(target_path), **report})
     target_work = head.rest.copy()
@@ -116,7 +118,7 @@ MATCH_STAGE = register_stage(Stage(
                  "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template"),
     inputs=("match_target", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("match.npz", "match.png", "report.json"),
-    version="2", run=run_match, description="the muscle pose of a posed copy of the head"))
+    version="3", run=run_match, description="the muscle pose of a posed copy of the head"))
 
 
 @click.command("match", help="Find the muscle contractions and jaw pose that reproduce a posed copy of the head.")
