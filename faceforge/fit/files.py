@@ -26,8 +26,15 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     v, f, _ = load_mesh(mesh_path)
     checked = check_mesh(v, f, str(mesh_path))
     raw = read_landmarks(lm_path)
-    orientation = head_orientation(fit_config.get("orientation", "auto"), raw, v)
-    if not orientation.identity:   # exact (a signed permutation): same head space bits as an upright mesh
+    straighten = float(fit_config.get("straighten_deg", 0.0))   # 0: off
+    reference = None
+    if straighten > 0:   # the template's own landmark frame: where an upright head's lies
+        from faceforge.io.landmarks import points_frame
+
+        reference = points_frame(template.fit_template.landmarks)
+    orientation = head_orientation(fit_config.get("orientation", "auto"), raw, v, reference,
+                                   straighten if straighten > 0 else None)
+    if not orientation.identity:   # a signed permutation is exact: same head space bits as an upright mesh
         checked.vertices = checked.vertices @ orientation.rotation.T
         log(f"{mesh_path}: {orientation.describe()}")
     checked.faces = orient_outward(checked.vertices, checked.faces)   # stage files: outward winding
