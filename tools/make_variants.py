@@ -92,6 +92,76 @@ def cluster_decimate(verts, faces, target):
     return compact(new, list(t))
 
 
+def collapse_decimate(verts, faces, target):
+    """Shortest-edge collapse to about ``target`` vertices (triangles out; a stand-in for quadric
+    decimation, which the installed trimesh lacks). An edge collapses to its midpoint (to the
+    boundary vertex when one end is on the boundary, never two boundary vertices across the
+    inside) only if its ends share exactly the opposite vertices of its faces (the link
+    condition: the surface stays a manifold) and no face around turns over."""
+    import heapq
+
+    tris = np.asarray([t for f in faces for t in ([f[0], f[i], f[i + 1]] for i in range(1, len(f) - 1))])
+    v = verts.copy()
+    alive = np.ones(len(tris), bool)
+    vf = [set() for _ in range(len(v))]
+    for i, t in enumerate(tris):
+        for a in t:
+            vf[a].add(i)
+
+    def nbrs(a):
+        return {b for i in vf[a] for b in tris[i]} - {a}
+
+    def boundary(a):
+        cnt = {}
+        for i in vf[a]:
+            for b in tris[i]:
+                if b != a:
+                    cnt[b] = cnt.get(b, 0) + 1
+        return any(c == 1 for c in cnt.values())
+
+    def normal(t, p):
+        return np.cross(p[t[1]] - p[t[0]], p[t[2]] - p[t[0]])
+
+    heap = [(np.linalg.norm(v[a] - v[b]), a, b) for t in tris for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))]
+    heapq.heapify(heap)
+    n_alive = len(v)
+    gone = np.zeros(len(v), bool)
+    while n_alive > target and heap:
+        d, a, b = heapq.heappop(heap)
+        if gone[a] or gone[b] or abs(np.linalg.norm(v[a] - v[b]) - d) > 1e-12:
+            continue
+        shared = vf[a] & vf[b]
+        if not shared or nbrs(a) & nbrs(b) != {c for i in shared for c in tris[i]} - {a, b}:
+            continue
+        ba, bb = boundary(a), boundary(b)
+        if ba and bb and len(shared) != 1:
+            continue
+        p = v[a] if ba and not bb else v[b] if bb and not ba else 0.5 * (v[a] + v[b])
+        trial = v.copy()
+        trial[a] = trial[b] = p
+        ok = True
+        for i in (vf[a] | vf[b]) - shared:
+            if normal(tris[i], trial) @ normal(tris[i], v) <= 0:
+                ok = False
+                break
+        if not ok:
+            continue
+        v[a] = p
+        for i in shared:
+            alive[i] = False
+            for c in tris[i]:
+                vf[c].discard(i)
+        for i in list(vf[b]):
+            tris[i][tris[i] == b] = a
+            vf[a].add(i)
+        vf[b] = set()
+        gone[b] = True
+        n_alive -= 1
+        for c in nbrs(a):
+            heapq.heappush(heap, (np.linalg.norm(v[a] - v[c]), a, c))
+    return compact(v, list(tris[alive]))
+
+
 def subdivide_quads(verts, faces):
     """Split each polygon into quads at its centroid and edge midpoints (Catmull-Clark topology,
     positions not smoothed: the surface is unchanged). Returns vertices and quad faces."""
@@ -144,21 +214,19 @@ def main():
     mv, mf = read_obj(MH)
     iv, iff = read_obj(ICT)
 
-    v, f = cluster_decimate(mv, mf, 2000)
-    write_obj(a.out / "mh_low.obj", v, f, "MakeHuman, vertex clustering to ~2000 vertices")
+    v, f = collapse_decimate(mv, mf, 2000)
+    write_obj(a.out / "mh_low.obj", v, f, "MakeHuman, shortest-edge collapse to ~2000 vertices")
     v, f = subdivide_quads(iv, iff)
     write_obj(a.out / "ict_sub1.obj", v, f, "ICT, quads split in four")
     v2, f2 = subdivide_quads(v, f)
     write_obj(a.out / "ict_sub2.obj", v2, f2, "ICT, quads split in four twice")
 
     noisy = mv + RNG.normal(0, 0.4 / MM_PER_UNIT_MH, mv.shape)
-    lo = mv[:, 1].min()
-    h = mv[:, 1].max() - lo
-    n = np.array([0.0, 1.0, 0.0]) @ rotation(0, 0)
-    nrm = np.array([0.25, 1.0, -0.35]); nrm /= np.linalg.norm(nrm)
-    v, f = neck_cut(noisy, mf, nrm, np.array([0.0, lo + 0.12 * h, 0.0]))
+    lo, hi = mv.min(0), mv.max(0)
+    nrm = np.array([0.2, 1.0, 0.45])
+    nrm /= np.linalg.norm(nrm)   # rises toward the back and to the right: a scan's slanted neck cut
+    v, f = neck_cut(noisy, mf, nrm, lo + (hi - lo) * [0.5, 0.12, 0.8])
     write_obj(a.out / "mh_scan.obj", v, f, "MakeHuman, 0.4 mm noise, neck cut at a slanted plane")
-    del n
     v, f = holes(mv, mf, 6, 0.06)
     write_obj(a.out / "mh_holes.obj", v, f, "MakeHuman with 6 holes of 6 mm radius")
 
