@@ -41,7 +41,7 @@ BAND = 0.06
 ROLL = 0.5
 #: the walk stays within this fraction of the mouth's width behind the column's outer lip points
 #: (the hand files' inner points lie 0.02-0.08 behind them; a 2,000-vertex MakeHuman's walk went
-#: on into the mouth cavity and put 2.9 5 cm behind the lips, docs/notes/robust19.md)
+#: on into the mouth cavity and put 2.9 10 cm behind the lips, docs/notes/robust19.md)
 DEPTH = 0.2
 
 

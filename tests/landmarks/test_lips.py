@@ -97,7 +97,7 @@ def test_outer_corners_from_the_inner_ones_and_the_canonical_offset():
 
 def test_the_walk_stays_at_the_lips_not_in_the_mouth_cavity(monkeypatch):
     # a decimated MakeHuman (2,000 vertices) walked from the lower lip's outer point on into the
-    # mouth cavity and took a vertex 5 cm behind the lips for 2.9. Here the cavity behind the lower
+    # mouth cavity and took a vertex 10 cm behind the lips for 2.9. Here the cavity behind the lower
     # lip is made to face forward and up (as the decimated one did) on the full sample: the walk
     # stops within lips.DEPTH of the mouth's width behind the outer lip points
     import faceforge.landmarks.lips as lips
