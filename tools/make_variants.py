@@ -4,7 +4,8 @@
 
 Writes OBJ files (no landmark file beside them) into OUT_DIR:
 
-- ``mh_low.obj``: MakeHuman decimated by vertex clustering to ~2,000 vertices (triangles);
+- ``mh_low.obj``: MakeHuman decimated by shortest-edge collapse to ~2,000 vertices (triangles;
+  ``cluster_decimate``, vertex clustering, is kept: it makes non-manifold edges, which fit refuses);
 - ``ict_sub1.obj`` / ``ict_sub2.obj``: ICT with each quad split into four (45k / 180k vertices);
 - ``mh_scan.obj``: MakeHuman with 0.4 mm Gaussian noise and the neck cut at a slanted plane;
 - ``mh_holes.obj``: MakeHuman with a few random patches of faces removed;
