@@ -26,8 +26,15 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     v, f, _ = load_mesh(mesh_path)
     checked = check_mesh(v, f, str(mesh_path))
     raw = read_landmarks(lm_path)
-    orientation = head_orientation(fit_config.get("orientation", "auto"), raw, v)
-    if not orientation.identity:   # exact (a signed permutation): same head space bits as an upright mesh
+    straighten = float(fit_config.get("straighten_deg", 0.0))   # 0: off
+    reference = None
+    if straighten > 0:   # the template's own landmark frame: where an upright head's lies
+        from faceforge.io.landmarks import points_frame
+
+        reference = points_frame(template.fit_template.landmarks)
+    orientation = head_orientation(fit_config.get("orientation", "auto"), raw, v, reference,
+                                   straighten if straighten > 0 else None)
+    if not orientation.identity:   # a signed permutation is exact: same head space bits as an upright mesh
         checked.vertices = checked.vertices @ orientation.rotation.T
         log(f"{mesh_path}: {orientation.describe()}")
     checked.faces = orient_outward(checked.vertices, checked.faces)   # stage files: outward winding
@@ -65,9 +72,29 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     report["orientation"] = orientation.as_dict()
     report["symmetric_rig"] = {"made_symmetric": mirror is not None,
                                "skin_asymmetry_es0": None if mirror is None else mirror.asymmetry_es0}
+    gap = lip_gap_ratio(dict(zip(lm.ids, lm.positions)))
+    report["mouth"]["rest_gap_mw"] = gap
+    limit = float(fit_config.get("open_mouth_warn", 0.0))
+    if limit > 0 and gap is not None and gap > limit:
+        log(f"the mouth is open at rest (inner lips {gap:.2f} of the mouth's width apart, more than "
+            f"fit.open_mouth_warn {limit:g}): it is taken as this head's neutral, so every FAP and expression "
+            "starts from it and opens it further; the MPEG-4 neutral face has the lips closed")
     report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
     return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template,
                             "orientation": orientation, "raw_landmarks": raw}
+
+
+def lip_gap_ratio(points: dict) -> float | None:
+    """The inner lips' midpoints' distance (FDP 2.2 to 2.3) over the mouth's width (8.3 to 8.4),
+    from ``{fdp: (3,)}`` positions (any one unit); None when a point is missing. Closed mouths:
+    the samples 0.02-0.12 (MediaPipe's lips joined by a sheet the most); the MakeHuman sample's
+    surprise frame taken as a neutral 0.28."""
+    import numpy as np
+
+    if not all(k in points for k in ("2.2", "2.3", "8.3", "8.4")):
+        return None
+    width = float(np.linalg.norm(np.subtract(points["8.3"], points["8.4"])))
+    return float(np.linalg.norm(np.subtract(points["2.2"], points["2.3"])) / width) if width > 0 else None
 
 
 def _skin_mirror(lm, vertices, faces, tolerance: float, log):

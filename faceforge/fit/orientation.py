@@ -3,6 +3,13 @@
 ``fit.orientation``: ``auto`` takes the landmark file's ``orientation: {up, forward}`` or, without
 one, the frame its landmarks span, snapped to the nearest axes; or ``UP,FORWARD`` such as
 ``+Z,-Y``. The rotation is a signed permutation (exact); ``animate`` turns the frames back.
+
+A head turned off the axes in its file (a scan's yaw and pitch): with ``auto`` and no
+``orientation`` in the landmark file, when the landmarks' frame lies more than
+``fit.straighten_deg`` from the template's own landmark frame once snapped, the head is turned
+by the landmarks' frame onto the template's (a general rotation, not exact): it is then fitted,
+simulated and drawn upright, its head turns (FAPs 48-50) are about its own axes, and the
+animation is still written back in the file's frame.
 """
 
 from __future__ import annotations
@@ -22,10 +29,14 @@ class HeadOrientation:
         landmarks to tell: faceforge's own frame)
     tilt_deg : largest angle between the landmarks' own up and forward and those used,
         degrees (NaN when the landmarks do not span a frame)
+    straightened_deg : when the head was turned by its landmarks' frame (``fit.straighten_deg``),
+        the angle of that turn beyond the snapped axes, degrees; else None
     """
 
-    def __init__(self, rotation, up: str, forward: str, source: str, tilt_deg: float):
+    def __init__(self, rotation, up: str, forward: str, source: str, tilt_deg: float,
+                 straightened_deg: float | None = None):
         self.rotation, self.up, self.forward, self.source, self.tilt_deg = rotation, up, forward, source, tilt_deg
+        self.straightened_deg = straightened_deg
 
     @property
     def identity(self) -> bool:
@@ -34,12 +45,15 @@ class HeadOrientation:
         return bool(np.array_equal(self.rotation, np.eye(3)))
 
     def describe(self) -> str:
-        return (f"the head is {self.up} up and faces {self.forward} (from the {self.source}); it is fitted "
-                f"and simulated turned to +Y up, facing +Z, and the animation is written back in its own frame")
+        turned = "" if self.straightened_deg is None else \
+            f", turned a further {self.straightened_deg:.1f} degrees by its landmarks' frame (fit.straighten_deg)"
+        return (f"the head is {self.up} up and faces {self.forward} (from the {self.source}{turned}); it is "
+                f"fitted and simulated turned to +Y up, facing +Z, and the animation is written back in its own frame")
 
     def as_dict(self) -> dict:
         return {"up": self.up, "forward": self.forward, "source": self.source,
                 "landmark_tilt_deg": None if self.tilt_deg != self.tilt_deg else round(float(self.tilt_deg), 3),
+                "straightened_deg": None if self.straightened_deg is None else round(float(self.straightened_deg), 3),
                 "rotation": self.rotation.tolist()}
 
 
@@ -58,11 +72,15 @@ def user_rotation(fit_dir):
 MAX_ORIENTATION_TILT_DEG = 50.0
 
 
-def head_orientation(setting: str, raw, vertices) -> HeadOrientation:
+def head_orientation(setting: str, raw, vertices, reference=None, straighten_deg=None) -> HeadOrientation:
     """The orientation of a head (``fit.orientation``; see the module docstring).
 
     ``raw``: :class:`faceforge.io.landmarks.RawLandmarks` read from the file;
-    ``vertices (n, 3)``: the user's mesh (the file's vertex ids refer to it). Raises
+    ``vertices (n, 3)``: the user's mesh (the file's vertex ids refer to it);
+    ``reference``: ``(up (3,), forward (3,))``, the template's landmark frame in head space,
+    and ``straighten_deg`` (degrees, None = never): with ``auto`` and no frame in the file, a
+    head whose snapped landmark frame is further than this from ``reference`` is turned onto it
+    (:func:`faceforge.geometry.orientation.straightening_rotation`). Raises
     LandmarkError when the frame cannot be told, or when the given one contradicts the
     landmarks by more than :data:`MAX_ORIENTATION_TILT_DEG`.
     """
@@ -105,4 +123,12 @@ def head_orientation(setting: str, raw, vertices) -> HeadOrientation:
                             f"{axis_name(up)} up facing {axis_name(forward)}, but its landmarks rise along "
                             f"{np.round(est_up, 2).tolist()} and face {np.round(est_forward, 2).tolist()} "
                             f"({tilt:.0f} degrees apart)", raw.path)
-    return HeadOrientation(frame_rotation(up, forward), axis_name(up), axis_name(forward), source, tilt)
+    rotation = frame_rotation(up, forward)
+    if source == "landmarks" and reference is not None and straighten_deg is not None:
+        off = max(angle_between(rotation @ est_up, reference[0]), angle_between(rotation @ est_forward, reference[1]))
+        if off > straighten_deg:
+            from faceforge.geometry.orientation import straightening_rotation
+
+            return HeadOrientation(straightening_rotation(est_up, est_forward, *reference), axis_name(up),
+                                   axis_name(forward), source, tilt, straightened_deg=off)
+    return HeadOrientation(rotation, axis_name(up), axis_name(forward), source, tilt)

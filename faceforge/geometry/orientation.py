@@ -15,7 +15,9 @@ and simulated to the same bits as the unrotated one.
 
 :func:`estimate_frame` guesses the frame of a head from a few points of known meaning
 (pairs of left/right points, a low and a high point), and :func:`snap_to_axes` rounds it
-to the nearest axis-aligned frame. Pure functions on arrays: no FDP names here
+to the nearest axis-aligned frame; :func:`straightening_rotation` is the (general, not exact)
+rotation that takes a measured frame onto a reference one, for a head turned off the axes in
+its file. Pure functions on arrays: no FDP names here
 (:mod:`faceforge.io.landmarks` chooses the points).
 """
 
@@ -24,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["AXES", "parse_axis", "axis_name", "frame_rotation", "estimate_frame", "snap_to_axes",
-           "angle_between"]
+           "angle_between", "straightening_rotation"]
 
 #: the six signed axes by name
 AXES = {"+x": (1.0, 0.0, 0.0), "-x": (-1.0, 0.0, 0.0), "+y": (0.0, 1.0, 0.0),
@@ -119,3 +121,15 @@ def angle_between(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     c = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def straightening_rotation(up, forward, ref_up, ref_forward) -> np.ndarray:
+    """Rotation ``R (3, 3)`` with ``R @ up = ref_up`` and ``R @ forward = ref_forward``.
+
+    ``up``, ``forward``: a head's frame in the user's coordinates (unit, perpendicular, e.g.
+    from :func:`estimate_frame`); ``ref_up``, ``ref_forward``: where that frame should lie in
+    faceforge's frame (the template's own landmark frame, a few degrees off the axes). Used as
+    ``p_faceforge = R @ p_user`` like :func:`frame_rotation`; a proper rotation, not a signed
+    permutation, so not exact in floating point. Raises ValueError as :func:`frame_rotation`.
+    """
+    return frame_rotation(ref_up, ref_forward).T @ frame_rotation(up, forward)

@@ -164,6 +164,8 @@ _DEFAULT_CACHE: dict[str, tuple[dict, dict[str, int], str]] = {}
 #: (glob over the dotted key, rule); the first match wins, else the default's type decides
 RULES: list[tuple[str, Rule]] = [
     ("fit.orientation", AxesPair()),
+    ("fit.straighten_deg", Number(0.0, 45.0)),
+    ("fit.open_mouth_warn", Number(0.0, 10.0)),       # 0 = off; past 45 the snapped axes are the other ones
     ("skin.carry", Choice(("muscles", "all", "none"))),
     ("skin.carry_radius_mm", Number(0.0, 50.0)),
     ("skin.lid_hold", Number(0.0, 1.0)),              # a stiffness

@@ -167,9 +167,10 @@ def _umask() -> int:
 
 def up_axis_of(rotation) -> str:
     """USD ``upAxis`` of the user's frame from ``fit.npz``'s ``user_rotation (3, 3)`` (its
-    row 1 is the user's up): "Z" for a +Z-up head, else "Y" (USD has no other axes)."""
+    row 1 is the user's up): "Z" for a +Z-up head (nearest axis: a head straightened by
+    ``fit.straighten_deg`` has an up a few degrees off it), else "Y" (USD has no other axes)."""
     up = np.asarray(rotation, dtype=float)[1]
-    return "Z" if np.allclose(up, [0.0, 0.0, 1.0]) else "Y"
+    return "Z" if int(np.argmax(np.abs(up))) == 2 and up[2] > 0 else "Y"
 
 
 def read_usd(path: str | Path) -> tuple[np.ndarray, float, list[int], list[int], str]:

@@ -434,18 +434,25 @@ def landmark_frame(raw: RawLandmarks, vertices: np.ndarray) -> tuple[np.ndarray,
     """Up and forward of the head (unit (3,), the mesh's own coordinates) from its landmarks:
     the mirror pairs give the left, chin -> eyes the up (:func:`faceforge.geometry.orientation.
     estimate_frame`). ``vertices``: the mesh the file's vertex ids refer to. Raises LandmarkError."""
-    from faceforge.geometry.orientation import estimate_frame
-
     v = np.asarray(vertices, dtype=np.float64)
     ok = (raw.vertex >= 0) & (raw.vertex < len(v))
     pos = np.where(ok[:, None], v[np.where(ok, raw.vertex, 0)], raw.position)
     at = {f: pos[i] for i, f in enumerate(raw.ids) if np.isfinite(pos[i]).all()}
+    return points_frame(at, raw.path)
+
+
+def points_frame(at: dict, path=None) -> tuple[np.ndarray, np.ndarray]:
+    """Up and forward (unit (3,)) spanned by FDP points ``{fdp: (3,)}`` (the same points and rule
+    as :func:`landmark_frame`; e.g. the template skull's landmarks). Raises LandmarkError naming
+    ``path``."""
+    from faceforge.geometry.orientation import estimate_frame
+
     pairs = [(a, b) for a, b in LEFT_RIGHT_PAIRS if a in at and b in at]
     low, high = [at[f] for f in LOW_FDPS if f in at], [at[f] for f in HIGH_FDPS if f in at]
     if not pairs or not low or not high:
         raise LandmarkError("cannot tell the head's orientation from its landmarks (need a left/right pair, "
-                            f"one of {', '.join(LOW_FDPS)} and one of {', '.join(HIGH_FDPS)})", raw.path)
+                            f"one of {', '.join(LOW_FDPS)} and one of {', '.join(HIGH_FDPS)})", path)
     try:
         return estimate_frame([at[a] for a, _ in pairs], [at[b] for _, b in pairs], low, high)
     except ValueError as exc:
-        raise LandmarkError(f"cannot tell the head's orientation from its landmarks: {exc}", raw.path) from None
+        raise LandmarkError(f"cannot tell the head's orientation from its landmarks: {exc}", path) from None

@@ -14,7 +14,7 @@ The rule walks the mesh, so each lip keeps its own surface. In each column of th
 either way) it takes the vertices that face forward (normal . forward > 0) between the outer
 upper and outer lower lip points, and spreads over the mesh's edges from the vertex nearest
 the outer upper point (8.1, 8.5, 8.6: on the upper lip, far from the seam) and from the one
-nearest the outer lower point (8.2, 8.7, 8.8). Closed lips that are separate surfaces (a slit
+nearest the outer lower point (8.2, 8.7, 8.8), no further than :data:`DEPTH` behind them. Closed lips that are separate surfaces (a slit
 into a mouth cavity, MakeHuman; lips touching in front of a mouth hole, ICT) give two parts:
 the upper inner point is the vertex of the upper part whose normal turns most downward,
 where the lip rolls under into the mouth (MakeHuman's hand points are those vertices), the
@@ -39,6 +39,10 @@ COLUMNS = (("2.2", "8.1", "2.3", "8.2"), ("2.6", "8.5", "2.8", "8.7"), ("2.7", "
 BAND = 0.06
 #: the chosen vertex's normal must point at least this far down (upper lip) or up (lower lip)
 ROLL = 0.5
+#: the walk stays within this fraction of the mouth's width behind the column's outer lip points
+#: (the hand files' inner points lie 0.02-0.08 behind them; a 2,000-vertex MakeHuman's walk went
+#: on into the mouth cavity and put 2.9 10 cm behind the lips, docs/notes/robust19.md)
+DEPTH = 0.2
 
 
 def _neighbours(faces: np.ndarray, n: int):
@@ -73,7 +77,7 @@ def inner_lips(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, pos
     v = np.asarray(vertices, dtype=np.float64)
     width = abs((pos["8.3"] - pos["8.4"]) @ left)
     start, nbr = _neighbours(np.asarray(faces, dtype=np.int64), len(v))
-    side, height, rolled = v @ left, v @ up, normals @ up
+    side, height, depth, rolled = v @ left, v @ up, v @ fwd, normals @ up
     facing = normals @ fwd > 0.0
     out = {}
     for column in COLUMNS:
@@ -82,7 +86,8 @@ def inner_lips(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, pos
         up_in, up_out, lo_in, lo_out = column
         col = 0.5 * (pos[up_in] + pos[lo_in]) @ left
         top, bottom = pos[up_out] @ up, pos[lo_out] @ up
-        ok = facing & (np.abs(side - col) <= BAND * width) & (height >= bottom) & (height <= top)
+        front = min(pos[up_out] @ fwd, pos[lo_out] @ fwd) - DEPTH * width
+        ok = facing & (np.abs(side - col) <= BAND * width) & (height >= bottom) & (height <= top) & (depth >= front)
         cand = np.flatnonzero(ok)
         if len(cand) == 0:
             continue

@@ -93,3 +93,25 @@ def test_outer_corners_from_the_inner_ones_and_the_canonical_offset():
             assert (out[k] - pos["2.4" if k == "8.3" else "2.5"])[0] * (1 if k == "8.3" else -1) > 0   # outside the inner
         assert outer_corners(RayCaster(v, f), {k: p for k, p in given.items() if k != "3.8"}, FRAME, diag) == {}
         assert set(outer_corners(RayCaster(v, f), {k: p for k, p in given.items() if k != "2.5"}, FRAME, diag)) == {"8.3"}
+
+
+def test_the_walk_stays_at_the_lips_not_in_the_mouth_cavity(monkeypatch):
+    # a decimated MakeHuman (2,000 vertices) walked from the lower lip's outer point on into the
+    # mouth cavity and took a vertex 10 cm behind the lips for 2.9. Here the cavity behind the lower
+    # lip is made to face forward and up (as the decimated one did) on the full sample: the walk
+    # stops within lips.DEPTH of the mouth's width behind the outer lip points
+    import faceforge.landmarks.lips as lips
+
+    v, f, n, hand = _head("samples/makehuman/mh_head_default.obj")
+    pos = {k: v[hand[k]].copy() for k in LIPS}
+    width = abs(pos["8.3"][0] - pos["8.4"][0])
+    behind = v[:, 2] < pos["8.2"][2] - 0.1 * width       # the slit's walls and the cavity
+    n = n.copy()
+    n[behind] = [0.0, 0.99, 0.141]
+    monkeypatch.setattr(lips, "DEPTH", 0.1)                 # the full sample's cavity is shallower than the decimated one's
+    front = {lo: min(pos[a][2], pos[b][2]) - lips.DEPTH * width for _, a, lo, b in lips.COLUMNS}
+    out = inner_lips(v, f, n, pos, FRAME)
+    assert all(v[out[k], 2] >= front[k] for k in front), out          # on the lip, not in the cavity
+    monkeypatch.setattr(lips, "DEPTH", 1e9)                 # no limit: the walk goes on into the cavity
+    out = inner_lips(v, f, n, pos, FRAME)
+    assert any(v[out[k], 2] < front[k] for k in front), out
