@@ -115,6 +115,7 @@ def run(ctx):
                       brow_raisers=tuple(str(n) for n in (ctx.config.get("bind.brow_raisers") or ())),
                       forehead_bone_mm=float(ctx.config.get("bind.forehead_bone_mm")),
                       nose_on_bone=bool(ctx.config.get("bind.nose_on_bone")),
+                      normal_rounds=int(ctx.config.get("bind.normal_rounds")),
                       cheek_mm=float(ctx.config.get("bind.cheek_mm")),
                       cheek_muscles=tuple(str(n) for n in ctx.config.get("bind.cheek_muscles")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
