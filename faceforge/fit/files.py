@@ -50,7 +50,7 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     t_load = time.perf_counter() - t
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)
-    skin = SkinSurface.build(checked.vertices, checked.faces)
+    skin = SkinSurface.build(checked.vertices, checked.faces, normal_rounds=int(fit_config.get("normal_rounds", 0)))
     mirror = _skin_mirror(lm, checked.vertices, checked.faces, float(fit_config.get("symmetric_tolerance", 0.0)),
                           log)
     try:

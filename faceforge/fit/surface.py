@@ -9,7 +9,7 @@ import numpy as np
 
 from faceforge.anatomy import tissue as fit_tissue
 from faceforge.geometry.rays import RayCaster
-from faceforge.geometry.triangles import vertex_normals
+from faceforge.geometry.triangles import smooth_vertex_normals, vertex_normals
 
 
 @dataclass
@@ -29,12 +29,15 @@ class SkinSurface:
     n_real: int = -1                 # vertices [0, n_real) are the skin's own; the rest are fan centres
 
     @classmethod
-    def build(cls, vertices, faces, close_holes: bool = True) -> "SkinSurface":
+    def build(cls, vertices, faces, close_holes: bool = True, normal_rounds: int = 0) -> "SkinSurface":
         """The skin as the fit sees it: outward winding, and with ``close_holes`` every hole
         but the longest (eyes, the mouth behind the lips, not the neck or a mask's rim)
         closed virtually by a fan, as an eyeball or closed lips would. Only the largest
         connected piece is the skin (iris points, eyeballs are left out). Fan centres are
-        appended after the skin's own vertices."""
+        appended after the skin's own vertices. ``normal_rounds`` (``fit.normal_rounds``): the
+        normals averaged over neighbours that many times
+        (:func:`faceforge.geometry.triangles.smooth_vertex_normals`), so a scan's noise does not
+        tilt the tissue depths, the enhancement rays and the inside test."""
         from faceforge.io.mesh_check import edge_face_counts, fill_holes
 
         from faceforge.io.mesh_check import largest_component
@@ -47,8 +50,8 @@ class SkinSurface:
         f = orient_outward(v, f)
         edges, counts = edge_face_counts(f)
         bnd = np.unique(edges[counts == 1])
-        return cls(v, f, vertex_normals(v, f), float(np.linalg.norm(np.ptp(v, axis=0))), RayCaster(v, f), bnd,
-                   n_real)
+        return cls(v, f, smooth_vertex_normals(v, f, normal_rounds), float(np.linalg.norm(np.ptp(v, axis=0))),
+                   RayCaster(v, f), bnd, n_real)
 
     def closest(self, points: np.ndarray):
         """Closest skin points ``(closest (q, 3), distance (q,), face_ids (q,))`` (exact;

@@ -15,6 +15,7 @@ __all__ = [
     "face_normals",
     "face_areas",
     "vertex_normals",
+    "smooth_vertex_normals",
     "barycentric",
     "points_from_barycentric",
     "concatenate_meshes",
@@ -153,6 +154,23 @@ def vertex_components(n_vertices: int, faces) -> np.ndarray:
     used = np.zeros(n_vertices, bool)
     used[faces.ravel()] = True
     return np.where(used, labels, -1).astype(INT)
+
+
+def smooth_vertex_normals(vertices, faces, rounds: int = 0) -> np.ndarray:
+    """(n, 3) unit vertex normals of a surface whose vertices are noisy (a scan): the area-weighted
+    vertex normals (:func:`vertex_normals`) averaged over edge neighbours ``rounds`` times
+    (Jacobi sweeps ``n = (n + A n) / 2`` of :func:`neighbour_average`), renormalised; ``rounds`` 0
+    is :func:`vertex_normals` itself. The vertices are not moved. 0.4 mm of noise on MakeHuman's
+    4.5 mm edges tilts its vertex normals 4 deg (median), 15 deg (90th percentile); three sweeps
+    average each normal over about two rings of neighbours."""
+    n = vertex_normals(vertices, faces)
+    if rounds <= 0:
+        return n
+    A = neighbour_average(len(n), faces)
+    for _ in range(int(rounds)):
+        n = 0.5 * (n + A @ n)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(length > 0.0, length, 1.0)
 
 
 def neighbour_average(n_vertices: int, faces):

@@ -205,6 +205,8 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.vermilion_reach", Number(0.0, 5.0)),
     ("bind.forehead_bone_mm", Number(0.0, 100.0)),                # 0: off (the forehead by its rays)
     ("bind.nose_on_bone", Boolean()),
+    ("bind.normal_rounds", Integer(0, 50)),                       # 0: the vertex normals as they are
+    ("fit.normal_rounds", Integer(0, 50)),
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
     ("animate.calibrate.magnitudes", PathValue()),

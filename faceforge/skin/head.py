@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from faceforge.constants import FLOAT, INT
-from faceforge.geometry.triangles import check_mesh
+from faceforge.geometry.triangles import check_mesh, smooth_vertex_normals
 from faceforge.skin.binding import CRANIUM, MANDIBLE, MUSCLE, Binding, Body, BrowRegion, InsertionRegions, bind_skin
 from faceforge.skin.mouth import AROUND_MOUTH
 from faceforge.skin.regions import bind_report, face_front_mask
@@ -84,7 +84,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
               forehead_bone_mm: float = 0.0,
               cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS,
-              vermilion: float = 0.0, nose_on_bone: bool = False) -> BoundSkin:
+              vermilion: float = 0.0, nose_on_bone: bool = False, normal_rounds: int = 0) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -116,6 +116,10 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ``bind.commissure_radius``: the lip skin within this fraction of MW0 of an inner lip
         corner on the orbicularis oris binds to either lip's arc of it (:func:`commissure_mask`,
         :func:`faceforge.skin.bind_passes.commissure_anchors`; 0: its own lip's arc only).
+    normal_rounds : int
+        ``bind.normal_rounds``: the rays are cast along the skin's normals averaged over neighbours
+        that many times (:func:`faceforge.geometry.triangles.smooth_vertex_normals`; 0: the
+        area-weighted vertex normals), so a scan's noise does not scatter the anchors.
     vermilion : float
         ``bind.vermilion_reach``: the lip skin within this many midline heights of its inner lip
         contour (:func:`vermilion_mask`; 1: the red of the lips), out of the modiolus mask (the
@@ -214,7 +218,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                   for b in bodies]
     face_sides = [ring_face_sides(b.vertices, b.faces, cut, up=up) if s == AROUND_MOUTH else None
                   for b, s in zip(bodies, body_sides)]
-    binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides,
+    normals = smooth_vertex_normals(cut.vertices, cut.faces, normal_rounds) if normal_rounds > 0 else None
+    binding = bind_skin(cut.vertices, cut.faces, bodies, max_ray_fraction * diagonal, lip_sides=sides, normals=normals,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
                         regions=InsertionRegions(modiolus=corner, commissure=commissure, vermilion=verm,

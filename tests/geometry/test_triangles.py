@@ -6,7 +6,7 @@ import trimesh
 
 from faceforge.geometry.triangles import (
     barycentric, check_mesh, concatenate_meshes, face_areas, face_normals, points_from_barycentric,
-    vertex_normals)
+    smooth_vertex_normals, vertex_normals)
 
 
 def ico(sub=2):
@@ -45,6 +45,24 @@ def test_vertex_normals_area_weighted_twin_and_sphere():
     vs, fs = ico(3)
     # on a fine sphere the vertex normal is the radial direction
     assert np.min(np.einsum("ij,ij->i", vertex_normals(vs, fs), vs)) > 0.999
+
+
+def test_smoothed_normals_of_a_noisy_sphere_point_out_again():
+    """A fine sphere with radial noise of 30 % of its edge length: its raw vertex normals tilt; three
+    rounds of neighbour averaging bring them back within a few degrees of the radial direction;
+    0 rounds are the raw normals bit for bit; a clean sphere's normals barely move."""
+    vs, fs = ico(4)
+    edge = np.linalg.norm(vs[fs[:, 0]] - vs[fs[:, 1]], axis=1).mean()
+    noisy = vs * (1.0 + np.random.default_rng(1).normal(0.0, 0.3 * edge, (len(vs), 1)))
+
+    def tilt(n):   # degrees off the radial direction, 90th percentile
+        return np.percentile(np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, vs), -1, 1))), 90)
+
+    raw, smooth = vertex_normals(noisy, fs), smooth_vertex_normals(noisy, fs, 3)
+    assert np.array_equal(smooth_vertex_normals(noisy, fs, 0), raw)
+    assert tilt(raw) > 15.0 and tilt(smooth) < 0.5 * tilt(raw)
+    np.testing.assert_allclose(np.linalg.norm(smooth, axis=1), 1.0, atol=1e-12)
+    assert tilt(smooth_vertex_normals(vs, fs, 3)) < 0.5
 
 
 def test_unreferenced_vertex_gets_zero_normal():

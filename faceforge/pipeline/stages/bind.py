@@ -115,6 +115,7 @@ def run(ctx):
                       brow_raisers=tuple(str(n) for n in (ctx.config.get("bind.brow_raisers") or ())),
                       forehead_bone_mm=float(ctx.config.get("bind.forehead_bone_mm")),
                       nose_on_bone=bool(ctx.config.get("bind.nose_on_bone")),
+                      normal_rounds=int(ctx.config.get("bind.normal_rounds")),
                       cheek_mm=float(ctx.config.get("bind.cheek_mm")),
                       cheek_muscles=tuple(str(n) for n in ctx.config.get("bind.cheek_muscles")))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
@@ -131,7 +132,7 @@ def run(ctx):
 
 STAGE = register_stage(Stage(
     name="bind", deps=("fit",), config_keys=("bind",),
-    outputs=("bind.npz", "report.json", "influence.png"), version="10", run=run,
+    outputs=("bind.npz", "report.json", "influence.png"), version="11", run=run,
     description="bind the skin to muscles and bone, influence map (§8)", background=compile_solver_ahead))
 
 

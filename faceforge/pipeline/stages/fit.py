@@ -42,7 +42,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "9"
+VERSION = "10"
 
 
 def run(ctx) -> None:
