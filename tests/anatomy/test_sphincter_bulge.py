@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from faceforge.anatomy.muscles.sphincter import sphincter_displacement, vertical_share
+from faceforge.anatomy.muscles.sphincter import VERTICAL_RAMP, bulge_share, sphincter_displacement, vertical_share
 
 from tests.anatomy.conftest import chin_mouth_on, icosphere
 
@@ -58,16 +58,26 @@ def test_compiled_bulge_matches_the_numpy_twin(sphere):
         rot = trimesh.transformations.rotation_matrix(rng.uniform(0, 0.6), rng.normal(size=3))[:3, :3]
         now = v @ rot.T * rng.uniform(0.5, 2.0) + rng.normal(size=3) + rng.normal(scale=0.01 * trial, size=v.shape)
         points = {k: line.positions(now, f) for k, line in sph.lines.items()}
-        for c, lift in ((0.3, 0.0), (1.0, 0.4)):
+        for c, lift in ((0.3, 0.1), (1.0, 0.4)):
             fast = sph.targets_from_line_points(c, points, lift)
-            vert = vertical_share(sph.closure_vertical, lift, True)
-            twin = sph._grid_targets(c, points, sph._lift(lift), 0.0, vert)[g[:, 0], g[:, 1]]
+            vert, bul = vertical_share(sph.closure_vertical, lift, True), bulge_share(sph.bulge, lift, True)
+            twin = sph._grid_targets(c, points, sph._lift(lift), 0.0, vert, bul)[g[:, 0], g[:, 1]]
             assert np.allclose(fast, twin, rtol=0.0, atol=1e-12 * scale)
             assert not np.allclose(fast, base.targets_from_line_points(c, points, lift), rtol=0.0,
                                    atol=1e-6 * scale)
-        # relaxed: no bulge
+        # relaxed, or closing without pushing the lips out (a lip press): no bulge
         np.testing.assert_allclose(sph.targets_from_line_points(0.0, points, 0.3),
                                    base.targets_from_line_points(0.0, points, 0.3), rtol=0.0, atol=0.0)
+        np.testing.assert_allclose(sph.targets_from_line_points(0.8, points, 0.0),
+                                   base.targets_from_line_points(0.8, points, 0.0), rtol=0.0, atol=0.0)
+
+
+def test_the_bulge_follows_the_protrusion_drive():
+    """As the closure's vertical share: the closure alone (lips pressed) is the paper's, a ring that
+    pushes its lips out bulges them in full from a drive of VERTICAL_RAMP on."""
+    assert bulge_share(1.5, 0.0, True) == 0.0 and bulge_share(1.5, VERTICAL_RAMP, True) == 1.5
+    assert bulge_share(1.5, 0.5 * VERTICAL_RAMP, True) == pytest.approx(0.75) and bulge_share(1.5, 1.0, False) == 0.0
+    assert bulge_share(0.0, 1.0, True) == 0.0 and bulge_share(1.0, 2.0, True) == 1.0
 
 
 def test_bulge_is_checked(sphere):

@@ -37,8 +37,8 @@ from faceforge.anatomy.muscles.action_line import eval_polyline, sample_position
 from faceforge.anatomy.muscles.hexmesh import HexTopology, hex_topology, morph_hex
 from faceforge.anatomy.muscles.linear import (LINEAR_MAX_CONTRACTION, _row_blend, interior_grid, interior_targets,
                                               row_bases)
-from faceforge.anatomy.muscles.sphincter import (SPHINCTER_MAX_CONTRACTION, _sphincter_grid, lower_raise,
-                                                 sphincter_displacement, vertical_share)
+from faceforge.anatomy.muscles.sphincter import (SPHINCTER_MAX_CONTRACTION, _sphincter_grid, bulge_share,
+                                                 lower_raise, sphincter_displacement, vertical_share)
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
@@ -289,7 +289,7 @@ class Muscle:
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         lift = self._lift(protrude)
         low = lower_raise(lower, self.active, self.max_contraction) if self.kind != "linear" else 0.0
-        vert = vertical_share(self.closure_vertical, protrude, self.active)
+        vert, bul = vertical_share(self.closure_vertical, protrude, self.active), bulge_share(self.bulge, protrude, self.active)
         g = self.bound_grid
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
@@ -298,9 +298,9 @@ class Muscle:
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
                             c * self.max_contraction, grid, r1, r3, carry, lift, self.forward, low,
-                            self.closure_centre, vert, self.eversion_up, self.bulge)
+                            self.closure_centre, vert, self.eversion_up, bul)
         else:
-            grid = self._grid_targets(c, points, lift, low, vert)
+            grid = self._grid_targets(c, points, lift, low, vert, bul)
         return grid[g[:, 0], g[:, 1]]
 
     @property
@@ -359,7 +359,7 @@ class Muscle:
             g = self.__dict__["_cg"] = g
         return g
 
-    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0, vert: float = 1.0) -> np.ndarray:
+    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0, vert: float = 1.0, bulge: float = 0.0) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
         grid = np.empty((h, w, 3))
         if self.kind == "linear":
@@ -389,7 +389,7 @@ class Muscle:
                 s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
             if c > 0 or lift > 0 or low > 0:
                 d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward, low,
-                                           self.closure_centre, vert, self.eversion_up, self.bulge)
+                                           self.closure_centre, vert, self.eversion_up, bulge)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3

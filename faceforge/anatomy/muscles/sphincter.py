@@ -270,6 +270,19 @@ def vertical_share(closure_vertical: float, protrude: float, active: bool) -> fl
     return 1.0 - (1.0 - float(closure_vertical)) * p
 
 
+def bulge_share(bulge: float, protrude: float, active: bool) -> float:
+    """The bulge for :func:`sphincter_displacement` / the compiled targets: ``bulge``
+    (:attr:`Muscle.bulge`) times the protrusion drive over :data:`VERTICAL_RAMP`, clipped to
+    [0, 1] (0 when passive): as :func:`vertical_share`, the closure alone (the lips pressed, the
+    upper lip lowered: FAP 4/51, AU23/24) stays the paper's, bit for bit; a ring that closes while
+    it pushes its lips out (a pucker, the rounded visemes) bulges them forward off the teeth.
+    Taken for every closure, the bulge moved the lowered upper lip forward and cost MakeHuman's
+    calibrated ``lower_t_midlip`` rows (9-11 -> 19-20 %, docs/notes/purse19.md)."""
+    if not (active and bulge):
+        return 0.0
+    return float(bulge) * float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0))
+
+
 #: suffix of a sphincter's lower-part control (:func:`lower_control`)
 LOWER_SUFFIX = ".lower"
 
