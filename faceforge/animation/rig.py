@@ -456,7 +456,7 @@ def muscle_system(fit, cranium, mandible, settings, config, log, cache=None):
 BUILD_KEYS = ("template.muscle_map", "template.skull", "muscle.linear.stiffness", "muscle.sphincter.stiffness",
               "muscle.sphincter.carry_inner", "muscle.sphincter.protrusion", "muscle.sphincter.inner_on_bone",
               "muscle.sphincter.closure_centre", "muscle.sphincter.closure_vertical",
-              "muscle.sphincter.eversion_up")
+              "muscle.sphincter.eversion_up", "muscle.sphincter.bulge")
 
 
 def built_muscles(fit, cranium, mandible, config, cache=None) -> list:
@@ -508,7 +508,8 @@ def _build_muscles(fit, cranium, mandible, config) -> list:
                                    inner_on_bone=bool(config.get("muscle.sphincter.inner_on_bone")),
                                    closure_centre=float(config.get("muscle.sphincter.closure_centre")),
                                    closure_vertical=float(config.get("muscle.sphincter.closure_vertical")),
-                                   eversion_up=bool(config.get("muscle.sphincter.eversion_up")))
+                                   eversion_up=bool(config.get("muscle.sphincter.eversion_up")),
+                                   bulge=float(config.get("muscle.sphincter.bulge")))
     except TemplateError as exc:
         raise StageError(f"fit.npz: {exc.message} (see fit/fit.png; rerun `faceforge fit`, or fit with "
                          "another muscle map)") from None

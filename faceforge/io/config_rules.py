@@ -192,6 +192,7 @@ RULES: list[tuple[str, Rule]] = [
     ("muscle.sphincter.closure_centre", Number(0.0, 1.0)),
     ("muscle.sphincter.closure_vertical", Number(0.0, 1.0)),
     ("muscle.sphincter.eversion_up", Boolean()),
+    ("muscle.sphincter.bulge", Number(0.0)),
     ("muscle.sphincter.lip_ties.lower", ListOf(String())),          # []: off
     ("muscle.sphincter.lip_ties.upper", ListOf(String())),          # []: off
     ("muscle.sphincter.lip_ties.radius", Number(0.0, 1.0)),         # 0: off

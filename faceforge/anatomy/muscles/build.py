@@ -32,7 +32,7 @@ def build_muscles_on(specs, cranium, mandible, skull_diagonal: float, stiffness:
     ``inner_on_bone`` (``muscle.sphincter.inner_on_bone``): a sphincter's inner loop (A1, the
     lips' contact line) lies on the bones it lies on only (:func:`_inner_on_bone`);
     ``closure_centre``: the sphincter's ``closure_centre`` (``muscle.sphincter.closure_centre``);
-    ``shape``: its ``closure_vertical`` and ``eversion_up`` (:func:`build_sphincter_muscle`)
+    ``shape``: its ``closure_vertical``, ``eversion_up`` and ``bulge`` (:func:`build_sphincter_muscle`)
     (:func:`faceforge.anatomy.muscles.mirror.mirror_muscle`). Returns ``[Muscle]`` in build order.
     Raises :class:`~faceforge.exceptions.TemplateError` naming the muscle that cannot be built.
     """

@@ -37,8 +37,8 @@ from faceforge.anatomy.muscles.action_line import eval_polyline, sample_position
 from faceforge.anatomy.muscles.hexmesh import HexTopology, hex_topology, morph_hex
 from faceforge.anatomy.muscles.linear import (LINEAR_MAX_CONTRACTION, _row_blend, interior_grid, interior_targets,
                                               row_bases)
-from faceforge.anatomy.muscles.sphincter import (SPHINCTER_MAX_CONTRACTION, _sphincter_grid, lower_raise,
-                                                 sphincter_displacement, vertical_share)
+from faceforge.anatomy.muscles.sphincter import (SPHINCTER_MAX_CONTRACTION, _sphincter_grid, bulge_share,
+                                                 lower_raise, sphincter_displacement, vertical_share)
 from faceforge.constants import FLOAT, INT
 from faceforge.geometry.triangles import check_mesh, vertex_normals
 
@@ -153,10 +153,10 @@ class Muscle:
         Sphincter: where its closure pulls the inner loop, from the paper's centre (0, the
         ellipse's centre: the mean of both loops) to the inner loop's own mean (1, the mouth
         opening). See :func:`build_sphincter_muscle`.
-    closure_vertical, eversion_up : float, bool
+    closure_vertical, eversion_up, bulge : float, bool, float
         Sphincter: the closure's share along the plane's up direction at a full protrusion
-        drive (1, the paper) and the eversion along it (:func:`~faceforge.anatomy.muscles.
-        sphincter.vertical_share`, :func:`~faceforge.anatomy.muscles.sphincter.sphincter_displacement`).
+        drive (1, the paper), the eversion along it, the lips' forward bulge per unit of their closure's
+        length (0, the paper) (:func:`.sphincter.vertical_share`, :func:`.sphincter.sphincter_displacement`).
     interior : (h-2, w-2, 3) float64 or None
         Linear: the rest offset of each interior bottom particle (rows ``i = 1..h-2``,
         columns ``j = 1..w-2``) from the blend of its row's side samples, in the row's
@@ -185,6 +185,7 @@ class Muscle:
     closure_centre: float = 0.0
     closure_vertical: float = 1.0
     eversion_up: bool = False
+    bulge: float = 0.0
     constraints: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -288,7 +289,7 @@ class Muscle:
         c = float(np.clip(c, 0.0, 1.0)) if self.active else 0.0
         lift = self._lift(protrude)
         low = lower_raise(lower, self.active, self.max_contraction) if self.kind != "linear" else 0.0
-        vert = vertical_share(self.closure_vertical, protrude, self.active)
+        vert, bul = vertical_share(self.closure_vertical, protrude, self.active), bulge_share(self.bulge, protrude, self.active)
         g = self.bound_grid
         if self.kind != "linear" and self.rest_parameters:   # compiled (the numpy twin below)
             grid = np.empty((self.topology.h, self.topology.w, 3))
@@ -297,9 +298,9 @@ class Muscle:
             _sphincter_grid(np.ascontiguousarray(points["A1"], dtype=FLOAT), s1, t1,
                             np.ascontiguousarray(points["A3"], dtype=FLOAT), s3, t3,
                             c * self.max_contraction, grid, r1, r3, carry, lift, self.forward, low,
-                            self.closure_centre, vert, self.eversion_up)
+                            self.closure_centre, vert, self.eversion_up, bul)
         else:
-            grid = self._grid_targets(c, points, lift, low, vert)
+            grid = self._grid_targets(c, points, lift, low, vert, bul)
         return grid[g[:, 0], g[:, 1]]
 
     @property
@@ -358,7 +359,7 @@ class Muscle:
             g = self.__dict__["_cg"] = g
         return g
 
-    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0, vert: float = 1.0) -> np.ndarray:
+    def _grid_targets(self, c, P, lift: float = 0.0, low: float = 0.0, vert: float = 1.0, bulge: float = 0.0) -> np.ndarray:
         h, w = self.topology.h, self.topology.w
         grid = np.empty((h, w, 3))
         if self.kind == "linear":
@@ -388,7 +389,7 @@ class Muscle:
                 s1 = s1 + carry[:, None] * ((s3 - r3) - (s1 - r1))
             if c > 0 or lift > 0 or low > 0:
                 d = sphincter_displacement(s1, s3, c * self.max_contraction, lift, self.forward, low,
-                                           self.closure_centre, vert, self.eversion_up)
+                                           self.closure_centre, vert, self.eversion_up, bulge)
                 s1, s3 = s1 + d, s3 + d
             grid[:, 0] = s1
             grid[:, -1] = s3
@@ -443,9 +444,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
     v, f = check_mesh(vertices, faces)
     material = kw.pop("material_sampling", False)
     carry = kw.pop("carry_inner", None)
-    protrusion = float(kw.pop("protrusion", 0.0))
-    centre = float(kw.pop("closure_centre", 0.0))
-    shape = (float(kw.pop("closure_vertical", 1.0)), bool(kw.pop("eversion_up", False)))
+    shape = {k: kw.pop(k) for k in ("protrusion", "closure_centre", "closure_vertical", "eversion_up", "bulge") if k in kw}
     proto = Muscle(name, kind, topo, np.zeros((topo.n_particles, 3)), topo.faces, lines,
                    tuple(kw.pop("lies_on", ())), stiffness, **kw)   # carry_inner 0: the true rest samples
     kw["material_sampling"] = material
@@ -475,7 +474,7 @@ def _build(name, kind, topo, lines, vertices, faces, thickness, stiffness, **kw)
         pos[: h * w].reshape(h, w, 3)[1:-1, 1:-1] = interior_targets(a0, a2, interior)  # round-off
     return Muscle(name, kind, topo, pos, mfaces, lines, proto.lies_on, proto.stiffness,
                   proto.layer, proto.active, float(thickness), proto.max_contraction, params,
-                  interior, carry, protrusion, centre, *shape)
+                  interior, carry, **shape)
 
 
 def _grid_normals(m: Muscle, v, f, vn) -> np.ndarray:
@@ -527,7 +526,7 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
                            lies_on=(), layer=0, active=True,
                            max_contraction=SPHINCTER_MAX_CONTRACTION, material_sampling=True,
                            carry_inner=0.0, carry_faces=None, protrusion=0.0,
-                           closure_centre=0.0, closure_vertical=1.0, eversion_up=False) -> Muscle:
+                           closure_centre=0.0, closure_vertical=1.0, eversion_up=False, bulge=0.0) -> Muscle:
     """A sphincter (§5.2.2) from its closed inner (A1) and outer (A3) loops.
 
     ``material_sampling`` (default True, a deliberate departure from a literal
@@ -570,9 +569,9 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
     7.1) where a real pucker moves it up and forward. The fibres of the pars marginalis run
     round the mouth opening; their purse-string pulls toward it: the closure's centre is moved
     ``closure_centre`` of the way from the ellipse's centre to the inner loop's own mean.
-    ``closure_vertical`` in [0, 1] (default 1, the paper; ``muscle.sphincter.closure_vertical``) and
-    ``eversion_up`` (``muscle.sphincter.eversion_up``): see
-    :func:`~faceforge.anatomy.muscles.sphincter.sphincter_displacement`.
+    ``closure_vertical`` in [0, 1] (default 1, the paper; ``muscle.sphincter.closure_vertical``),
+    ``eversion_up`` (``muscle.sphincter.eversion_up``) and ``bulge`` >= 0 (default 0, the paper;
+    ``muscle.sphincter.bulge``): see :func:`~faceforge.anatomy.muscles.sphincter.sphincter_displacement`.
 
     The loops must run in the same rotational sense and start at corresponding
     points (the coincident latitudinal lines A0 = A2 join their first points);
@@ -586,8 +585,9 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
         raise ValueError(f"sphincter {name}: max_contraction must lie in (0, 1), got {max_contraction}")
     if not 0.0 <= carry_inner <= 1.0:
         raise ValueError(f"sphincter {name}: carry_inner must lie in [0, 1], got {carry_inner}")
-    if not (np.isfinite(protrusion) and protrusion >= 0.0):
-        raise ValueError(f"sphincter {name}: protrusion must be a finite number >= 0, got {protrusion}")
+    for key, value in (("protrusion", protrusion), ("bulge", bulge)):
+        if not (np.isfinite(value) and value >= 0.0):
+            raise ValueError(f"sphincter {name}: {key} must be a finite number >= 0, got {value}")
     if not 0.0 <= closure_centre <= 1.0:
         raise ValueError(f"sphincter {name}: closure_centre must lie in [0, 1], got {closure_centre}")
     if not 0.0 <= closure_vertical <= 1.0:
@@ -596,5 +596,5 @@ def build_sphincter_muscle(name, inner, outer, vertices, faces, h, w, thickness,
                   lies_on=lies_on, layer=layer, active=active, max_contraction=max_contraction,
                   material_sampling=material_sampling, protrusion=float(protrusion),
                   closure_centre=float(closure_centre), closure_vertical=float(closure_vertical),
-                  eversion_up=bool(eversion_up),
+                  eversion_up=bool(eversion_up), bulge=float(bulge),
                   carry_inner=(float(carry_inner), np.ones(len(faces), bool) if carry_faces is None else carry_faces))

@@ -111,7 +111,7 @@ def _conic_lstsq(x, y):  # pragma: no cover - numba
 
 @numba.njit(**NUMBA_OPTIONS)
 def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fwd, low=0.0, centre=0.0,
-                    vert=1.0, evup=False):  # pragma: no cover - numba
+                    vert=1.0, evup=False, bulge=0.0):  # pragma: no cover - numba
     """Compiled twin of the material-sampling sphincter branch of :meth:`Muscle._grid_targets`:
     fills the columns 0 (A1) and ``w - 1`` (A3) of ``grid (h, w, 3)`` with the loops' samples
     at ``(seg, t)`` of the closed polylines ``p1 (p, 3)``, ``p3 (q, 3)``, moved by
@@ -122,7 +122,8 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
     (:func:`lower_raise`, already times the maximal closure); ``centre``: where the closure pulls
     (:attr:`Muscle.closure_centre`); ``vert``, ``evup``: the closure's vertical share and the
     eversion along the plane's up direction (:attr:`Muscle.closure_vertical`,
-    :attr:`Muscle.eversion_up`). Same values as the numpy code to round-off (LAPACK's,
+    :attr:`Muscle.eversion_up`); ``bulge``: the lips' forward bulge per unit of their closure's
+    length (:attr:`Muscle.bulge`). Same values as the numpy code to round-off (LAPACK's,
     summation order).
 
     Length: one compiled kernel (ellipse fit and the per-sample displacement in one pass); kept
@@ -226,10 +227,11 @@ def _sphincter_grid(p1, seg1, t1, p3, seg3, t3, c, grid, r1, r3, carry, lift, fw
         tu = flat * (ta * ua + tb * ub)      # closure_vertical: less of the pull along u
         ta -= tu * ua
         tb -= tu * ub
+        bl = bulge * c * np.sqrt(ta * ta + tb * tb)   # the bulge: forward by the closure's length
         yu = xo * ua + yo * ub               # the outer sample's height along u
         for j in range(3):
             ev = yu * (ua * da[j] + ub * db[j]) if evup else yo * db[j]
-            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * ev / b)
+            dj = (c * (ta * da[j] + tb * db[j]) + lift * (nrm[j] + EVERSION * ev / b) + bl * nrm[j]
                   + wl * (ua * da[j] + ub * db[j] - LOWER_INWARD * nrm[j])) * fall
             grid[i, 0, j] += dj
             grid[i, w1, j] += dj
@@ -266,6 +268,19 @@ def vertical_share(closure_vertical: float, protrude: float, active: bool) -> fl
     (docs/notes/pucker16.md); taken always, the lowered upper lip of FAP 4/51 was lost."""
     p = float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0)) if active else 0.0
     return 1.0 - (1.0 - float(closure_vertical)) * p
+
+
+def bulge_share(bulge: float, protrude: float, active: bool) -> float:
+    """The bulge for :func:`sphincter_displacement` / the compiled targets: ``bulge``
+    (:attr:`Muscle.bulge`) times the protrusion drive over :data:`VERTICAL_RAMP`, clipped to
+    [0, 1] (0 when passive): as :func:`vertical_share`, the closure alone (the lips pressed, the
+    upper lip lowered: FAP 4/51, AU23/24) stays the paper's, bit for bit; a ring that closes while
+    it pushes its lips out (a pucker, the rounded visemes) bulges them forward off the teeth.
+    Taken for every closure, the bulge moved the lowered upper lip forward and cost MakeHuman's
+    calibrated ``lower_t_midlip`` rows (9-11 -> 19-20 %, docs/notes/purse19.md)."""
+    if not (active and bulge):
+        return 0.0
+    return float(bulge) * float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0))
 
 
 #: suffix of a sphincter's lower-part control (:func:`lower_control`)
@@ -330,7 +345,7 @@ SPHINCTER_MAX_CONTRACTION = 0.5
 #: fraction of the fibre length that c = 1 removes from a linear muscle
 def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=None,
                            low: float = 0.0, centre: float = 0.0, vertical: float = 1.0,
-                           eversion_up: bool = False) -> np.ndarray:
+                           eversion_up: bool = False, bulge: float = 0.0) -> np.ndarray:
     """Displacement ``delta (h, 3)`` of each inner/outer sample pair (§5.2.2, see module doc).
 
     ``inner, outer : (h, 3)`` the current samples of A1 and A3; ``c`` already
@@ -349,6 +364,9 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     by the outer sample's height along ``u`` instead of along ``dir_b`` (the same on a mouth whose
     minor axis is vertical; on one whose fitted ellipse is taller than wide ``dir_b`` runs across
     it and the eversion spread the corners). Without an up direction in the plane both are off.
+    ``bulge`` >= 0 (:attr:`Muscle.bulge`; 0, the paper): each pair also moves ``bulge`` times the
+    length of its own closure (the in-plane part above, mesh units) along ``n`` (``forward``
+    needed): the ring, shortening round the teeth, thickens and pushes the lips forward off them.
     """
     s1 = np.asarray(inner, dtype=FLOAT)
     s3 = np.asarray(outer, dtype=FLOAT)
@@ -363,10 +381,12 @@ def sphincter_displacement(inner, outer, c: float, lift: float = 0.0, forward=No
     if up is not None and vertical != 1.0:
         to = to - (1.0 - float(vertical)) * np.outer(to @ up, up)      # closure_vertical
     d = float(c) * (np.outer(to @ da, da) + np.outer(to @ db, db))      # in the ellipse's plane
-    if lift or low:                                # the plane's normal on the side of forward
+    if lift or low or (bulge and c):               # the plane's normal on the side of forward
         n = np.cross(da, db)
         if n @ np.asarray(forward, dtype=FLOAT) < 0.0:
             n = -n
+    if bulge and c:                                # forward by the closure's own length
+        d = d + float(bulge) * np.outer(np.linalg.norm(d, axis=1), n)
     if lift:                                       # forward, and the lips turned out
         ev = np.outer((s3 - o) @ up, up) if eversion_up and up is not None else np.outer(y, db)
         d = d + lift * (b * n + EVERSION * ev)
