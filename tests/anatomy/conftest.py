@@ -39,6 +39,25 @@ SPHINCTER_STIFFNESS = dict(latitudinal_up=0.2, connection=1.0, shear_up=0.3, she
                            bend=1.0, volume=1.0, position=0.2)
 
 
+def planar_mouth(h=24, tall=1.0):
+    """A planar mouth in z = 0 (+Y up), wider than tall: the inner loop round the opening at the origin,
+    the outer loop reaching twice as far down (the chin) as up; ``tall`` stretches the outer loop's
+    height. (h, 3) inner, (h, 3) outer."""
+    ang = 2 * np.pi * np.arange(h) / h
+    inner = np.stack([np.cos(ang), 0.3 * np.sin(ang), np.zeros(h)], 1)
+    outer = np.stack([2.0 * np.cos(ang), tall * (-0.4 + 1.2 * np.sin(ang)), np.zeros(h)], 1)
+    return inner, outer
+
+
+def jostled(v, rng, trial, turn=0.6):
+    """``v (n, 3)`` turned up to ``turn`` rad about a random axis, scaled 0.5-2x, moved, and noised by
+    ``0.01 trial`` per vertex: the same muscle seen in another frame, for kernel-against-twin checks."""
+    import trimesh
+
+    rot = trimesh.transformations.rotation_matrix(rng.uniform(0, turn), rng.normal(size=3))[:3, :3]
+    return v @ rot.T * rng.uniform(0.5, 2.0) + rng.normal(size=3) + rng.normal(scale=0.01 * trial, size=v.shape)
+
+
 def icosphere(subdivisions=3, radius=1.0):
     import trimesh
 

@@ -4,25 +4,16 @@ pushes the lips forward off them); faceforge.anatomy.muscles.sphincter."""
 
 import numpy as np
 import pytest
-import trimesh
 
 from faceforge.anatomy.muscles.sphincter import VERTICAL_RAMP, bulge_share, sphincter_displacement, vertical_share
 
-from tests.anatomy.conftest import chin_mouth_on, icosphere
+from tests.anatomy.conftest import chin_mouth_on, icosphere, jostled, planar_mouth
 
 FWD = np.array([0.0, 0.0, 1.0])
 
 
-def _ring(h=24):
-    """A planar mouth in z = 0 (+Y up), wider than tall, the outer loop reaching down to the chin."""
-    ang = 2 * np.pi * np.arange(h) / h
-    inner = np.stack([np.cos(ang), 0.3 * np.sin(ang), np.zeros(h)], 1)
-    outer = np.stack([2.0 * np.cos(ang), -0.4 + 1.2 * np.sin(ang), np.zeros(h)], 1)
-    return inner, outer
-
-
 def test_bulge_moves_the_lips_forward_by_their_closure():
-    inner, outer = _ring()
+    inner, outer = planar_mouth()
     c, top, corner = 0.4, 6, 0
     for kw in ({}, {"vertical": 0.0}, {"lift": 0.3, "low": 0.2}):
         lift, low = kw.pop("lift", 0.0), kw.pop("low", 0.0)
@@ -55,8 +46,7 @@ def test_compiled_bulge_matches_the_numpy_twin(sphere):
     g = sph.bound_grid
     rng = np.random.default_rng(9)
     for trial in range(4):
-        rot = trimesh.transformations.rotation_matrix(rng.uniform(0, 0.6), rng.normal(size=3))[:3, :3]
-        now = v @ rot.T * rng.uniform(0.5, 2.0) + rng.normal(size=3) + rng.normal(scale=0.01 * trial, size=v.shape)
+        now = jostled(v, rng, trial)
         points = {k: line.positions(now, f) for k, line in sph.lines.items()}
         for c, lift in ((0.3, 0.1), (1.0, 0.4)):
             fast = sph.targets_from_line_points(c, points, lift)

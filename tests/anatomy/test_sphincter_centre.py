@@ -4,24 +4,14 @@ below the mouth when the outer loop reaches down to the chin (faceforge.anatomy.
 
 import numpy as np
 import pytest
-import trimesh
 
 from faceforge.anatomy.muscles.sphincter import fit_ellipse, sphincter_displacement
 
-from tests.anatomy.conftest import chin_mouth_on, icosphere
-
-
-def _ring(h=24):
-    """A planar mouth (+Y up): the inner loop round the opening at the origin, the outer loop
-    reaching twice as far down (the chin) as up."""
-    ang = 2 * np.pi * np.arange(h) / h
-    inner = np.stack([np.cos(ang), 0.3 * np.sin(ang), np.zeros(h)], 1)
-    outer = np.stack([2.0 * np.cos(ang), -0.4 + 1.2 * np.sin(ang), np.zeros(h)], 1)
-    return inner, outer
+from tests.anatomy.conftest import chin_mouth_on, icosphere, jostled, planar_mouth
 
 
 def test_closure_centre_moves_the_pull_to_the_mouth_opening():
-    inner, outer = _ring()
+    inner, outer = planar_mouth()
     o, da, db, a, b = fit_ellipse(np.concatenate([inner, outer]))
     assert o[1] < -0.1                                  # the paper's centre lies below the mouth
     c = 0.5
@@ -60,8 +50,7 @@ def test_compiled_closure_centre_matches_the_numpy_twin(sphere):
     scale = float(np.ptp(v, axis=0).max())
     rng = np.random.default_rng(3)
     for trial in range(4):
-        rot = trimesh.transformations.rotation_matrix(rng.uniform(0, np.pi), rng.normal(size=3))[:3, :3]
-        now = v @ rot.T * rng.uniform(0.5, 2.0) + rng.normal(size=3) + rng.normal(scale=0.01 * trial, size=v.shape)
+        now = jostled(v, rng, trial, turn=np.pi)
         points = {k: line.positions(now, f) for k, line in sph.lines.items()}
         for c in (0.3, 1.0):
             fast = sph.targets_from_line_points(c, points)

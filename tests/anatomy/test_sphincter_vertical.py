@@ -5,27 +5,17 @@ mouth whose fitted ellipse is taller than wide (faceforge.anatomy.muscles.sphinc
 
 import numpy as np
 import pytest
-import trimesh
 
 from faceforge.anatomy.muscles.sphincter import (VERTICAL_RAMP, fit_ellipse, sphincter_displacement,
                                                  vertical_share)
 
-from tests.anatomy.conftest import chin_mouth_on, icosphere
+from tests.anatomy.conftest import chin_mouth_on, icosphere, jostled, planar_mouth
 
 FWD = np.array([0.0, 0.0, 1.0])
 
 
-def _ring(h=24, tall=1.0):
-    """A planar mouth in z = 0 (+Y up): the inner loop round the opening at the origin, the outer
-    loop reaching twice as far down (the chin) as up; ``tall`` stretches the outer loop's height."""
-    ang = 2 * np.pi * np.arange(h) / h
-    inner = np.stack([np.cos(ang), 0.3 * np.sin(ang), np.zeros(h)], 1)
-    outer = np.stack([2.0 * np.cos(ang), tall * (-0.4 + 1.2 * np.sin(ang)), np.zeros(h)], 1)
-    return inner, outer
-
-
 def test_closure_vertical_narrows_the_ring_and_keeps_its_height():
-    inner, outer = _ring()
+    inner, outer = planar_mouth()
     c, top, corner = 0.5, 6, 0                      # sin = 1: the upper lip's midline; cos = 1: a corner
     paper = sphincter_displacement(inner, outer, c)
     flat = sphincter_displacement(inner, outer, c, vertical=0.0)
@@ -41,7 +31,7 @@ def test_closure_vertical_narrows_the_ring_and_keeps_its_height():
 
 
 def test_eversion_up_turns_the_lips_out_not_the_corners():
-    inner, outer = _ring(tall=2.5)                  # the fitted ellipse is taller than wide
+    inner, outer = planar_mouth(tall=2.5)                  # the fitted ellipse is taller than wide
     o, da, db, a, b = fit_ellipse(np.concatenate([inner, outer]))
     assert abs(db[0]) > 0.99                        # its minor axis runs across the mouth
     top, corner = 6, 0
@@ -51,7 +41,7 @@ def test_eversion_up_turns_the_lips_out_not_the_corners():
     assert abs(new[corner, 0]) < 1e-12 and new[top, 1] > 0.05     # along up: the upper lip goes up
     np.testing.assert_allclose(new[:, 2], old[:, 2], atol=1e-12)  # the same forward push
     # a mouth whose minor axis is vertical: the same eversion either way
-    wide_in, wide_out = _ring()
+    wide_in, wide_out = planar_mouth()
     np.testing.assert_allclose(sphincter_displacement(wide_in, wide_out, 0.0, 0.3, FWD, eversion_up=True),
                                sphincter_displacement(wide_in, wide_out, 0.0, 0.3, FWD), atol=1e-12)
 
@@ -74,8 +64,7 @@ def test_compiled_up_frame_matches_the_numpy_twin(sphere):
         sph = _mouth_on(v, f, **kw)
         g = sph.bound_grid
         for trial in range(4):
-            rot = trimesh.transformations.rotation_matrix(rng.uniform(0, 0.6), rng.normal(size=3))[:3, :3]
-            now = v @ rot.T * rng.uniform(0.5, 2.0) + rng.normal(size=3) + rng.normal(scale=0.01 * trial, size=v.shape)
+            now = jostled(v, rng, trial)
             points = {k: line.positions(now, f) for k, line in sph.lines.items()}
             for c, lift in ((0.3, 0.1), (1.0, 0.4)):
                 fast = sph.targets_from_line_points(c, points, lift)
