@@ -50,24 +50,41 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     t_load = time.perf_counter() - t
     t = time.perf_counter()
     settings = FitSettings.from_config(fit_config)
-    skin = SkinSurface.build(checked.vertices, checked.faces, normal_rounds=int(fit_config.get("normal_rounds", 0)))
     mirror = _skin_mirror(lm, checked.vertices, checked.faces, float(fit_config.get("symmetric_tolerance", 0.0)),
                           log)
-    try:
-        result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles,
-                          mirror=mirror)
-    except ValueError as exc:   # too few usable landmark pairs, degenerate configuration
-        from faceforge.exceptions import LandmarkError
+    mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
 
-        raise LandmarkError(f"cannot fit the template: {exc}", lm_path) from None
-    if result.mirror is not None:   # bind sees the muscles the rig builds (fit.symmetry)
-        from faceforge.fit.symmetry import rebuild_muscles
+    def fit_with(rounds: int):
+        skin = SkinSurface.build(checked.vertices, checked.faces, normal_rounds=rounds)
+        try:
+            result = fit_head(template.fit_template, skin, lm.ids, lm.positions, settings, template.build_muscles,
+                              mirror=mirror)
+        except ValueError as exc:   # too few usable landmark pairs, degenerate configuration
+            from faceforge.exceptions import LandmarkError
 
-        result = rebuild_muscles(result, template.specs)
+            raise LandmarkError(f"cannot fit the template: {exc}", lm_path) from None
+        if result.mirror is not None:   # bind sees the muscles the rig builds (fit.symmetry)
+            from faceforge.fit.symmetry import rebuild_muscles
+
+            result = rebuild_muscles(result, template.specs)
+        return skin, result, build_report(result, skin, lm, mesh_report, settings.front_offset_es0)
+
+    rounds = int(fit_config.get("normal_rounds", 0))
+    skin, result, report = fit_with(rounds)
+    retry = int(fit_config.get("noisy_normal_rounds", 0))
+    failed = [k for k, ok in report["checks"].items() if not ok]
+    if failed and retry > rounds:   # a noisy surface (a scan) tilts its vertex normals: fit once more, smoothed
+        again = fit_with(retry)
+        still = [k for k, ok in again[2]["checks"].items() if not ok]
+        log(f"the fit failed {', '.join(failed)} on the skin's normals; with them averaged over {retry} rounds of "
+            f"neighbours (fit.noisy_normal_rounds: a noisy surface?) it " + ("passes: kept" if not still else
+                                                                            f"fails {', '.join(still)}"))
+        if len(still) < len(failed):
+            skin, result, report = again
+            rounds = retry
+    report["normal_rounds"] = rounds
     t_fit = time.perf_counter() - t
     t = time.perf_counter()
-    mesh_report = {"path": str(mesh_path), **checked.report.as_dict()}
-    report = build_report(result, skin, lm, mesh_report, settings.front_offset_es0)
     report["settings"] = dict(settings.__dict__)
     report["orientation"] = orientation.as_dict()
     report["symmetric_rig"] = {"made_symmetric": mirror is not None,

@@ -208,6 +208,7 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.nose_on_bone", Boolean()),
     ("bind.normal_rounds", Integer(0, 50)),                       # 0: the vertex normals as they are
     ("fit.normal_rounds", Integer(0, 50)),
+    ("fit.noisy_normal_rounds", Integer(0, 50)),                  # 0: a fit that fails its checks is not refitted
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),
     ("animate.calibrate.magnitudes", PathValue()),
