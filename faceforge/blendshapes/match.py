@@ -170,7 +170,7 @@ def match_posed(head, matcher: FieldMatcher, delta: np.ndarray, motion: np.ndarr
     """Match ``delta (n_user, 3)`` (a posed copy of ``head``'s mesh less the mesh, user frame; its
     head motion ``motion (4, 4)``, already taken out when ``rigid``) with ``matcher``; the match and
     its report: the agreement against :data:`GOOD_COSINE` / :data:`GOOD_RATIO`, the residuals, the
-    head motion, the controls used (jaw in degrees and mm), the peaks in mm, the physical checks of
+    head motion, the controls used (jaw in degrees and mm, lids in IRISD), the peaks in mm, the physical checks of
     the settled pose (:func:`faceforge.animation.checks.check_animation`) and the seconds."""
     from faceforge.anatomy.tissue import units_per_mm
     from faceforge.animation.checks import check_animation
@@ -181,7 +181,8 @@ def match_posed(head, matcher: FieldMatcher, delta: np.ndarray, motion: np.ndarr
     if not rigid and (turn > 1.0 or shift / mm > 1.0):
         log(f"the target's head itself moved ({turn:.1f} deg, {shift / mm:.1f} mm): if that is not the face's "
             "motion, match --rigid takes it out first")
-    log(f"{len(matcher.names)} controls (muscles and jaw), one settled pose each")
+    log(f"{len(matcher.names)} controls ({'muscles, jaw and lids' if matcher.lid_faps else 'muscles and jaw'}), "
+        "one settled pose each")
     m = matcher.match(delta)
     head.rig.reset()
     checks = check_animation(head.rest, m.frame[None], head.faces, inside_at_rest=head.inside_at_rest(),
