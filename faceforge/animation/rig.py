@@ -124,8 +124,7 @@ class BoundHead:
                                    self.jaw_glide, config.get("animate.jaw_glide_slope"))
             self.skull = replace(self.skull, jaw=replace(jaw, glide=glide))
         settings = SolverSettings.from_config(config.get("solver"))
-        self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log,
-                                                     cache=cache)
+        self.system = system = muscle_system(fit, self.cranium, self.mandible, settings, config, log, cache=cache)
         self.muscle_names = tuple(system.muscles)
         self.controls = system.controls
         self.skin = self._skin(bind, Path(bind_dir), settings, config, fit)

@@ -266,8 +266,13 @@ def vertical_share(closure_vertical: float, protrude: float, active: bool) -> fl
     ring's height barely shrinks. The paper's closure toward the loops' mean, which lies below the
     mouth where the outer loop reaches the chin, pulled the upper lip 5-7 mm down in a pucker
     (docs/notes/pucker16.md); taken always, the lowered upper lip of FAP 4/51 was lost."""
-    p = float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0)) if active else 0.0
-    return 1.0 - (1.0 - float(closure_vertical)) * p
+    return 1.0 - (1.0 - float(closure_vertical)) * protrusion_ramp(protrude, active)
+
+
+def protrusion_ramp(protrude: float, active: bool) -> float:
+    """``p`` in [0, 1]: the protrusion drive over :data:`VERTICAL_RAMP`, clipped (0 when passive):
+    how far :func:`vertical_share` and :func:`bulge_share` have turned from the paper's closure."""
+    return float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0)) if active else 0.0
 
 
 def bulge_share(bulge: float, protrude: float, active: bool) -> float:
@@ -278,9 +283,7 @@ def bulge_share(bulge: float, protrude: float, active: bool) -> float:
     it pushes its lips out (a pucker, the rounded visemes) bulges them forward off the teeth.
     Taken for every closure, the bulge moved the lowered upper lip forward and cost MakeHuman's
     calibrated ``lower_t_midlip`` rows (9-11 -> 19-20 %, docs/notes/purse19.md)."""
-    if not (active and bulge):
-        return 0.0
-    return float(bulge) * float(np.clip(protrude / VERTICAL_RAMP, 0.0, 1.0))
+    return float(bulge) * protrusion_ramp(protrude, active) if bulge else 0.0
 
 
 #: suffix of a sphincter's lower-part control (:func:`lower_control`)
