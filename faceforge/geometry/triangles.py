@@ -16,6 +16,7 @@ __all__ = [
     "face_areas",
     "vertex_normals",
     "smooth_vertex_normals",
+    "smooth_field",
     "barycentric",
     "points_from_barycentric",
     "concatenate_meshes",
@@ -166,11 +167,22 @@ def smooth_vertex_normals(vertices, faces, rounds: int = 0) -> np.ndarray:
     n = vertex_normals(vertices, faces)
     if rounds <= 0:
         return n
-    A = neighbour_average(len(n), faces)
-    for _ in range(int(rounds)):
-        n = 0.5 * (n + A @ n)
+    n = smooth_field(n, faces, int(rounds))
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return n / np.where(length > 0.0, length, 1.0)
+
+
+def smooth_field(values: np.ndarray, faces, sweeps: int) -> np.ndarray:
+    """``values`` ``(n,)`` or ``(n, k)`` per vertex averaged ``sweeps`` times with their edge
+    neighbours' mean, half each (Jacobi sweeps ``x = (x + A x) / 2`` of :func:`neighbour_average`):
+    a step across one edge becomes a ramp a few edges wide. ``faces`` (m, 3) int. A new array."""
+    out = np.asarray(values, dtype=float)
+    if sweeps <= 0 or len(faces) == 0:
+        return out
+    avg = neighbour_average(len(out), faces)
+    for _ in range(sweeps):
+        out = 0.5 * (out + avg @ out)
+    return out
 
 
 def neighbour_average(n_vertices: int, faces):

@@ -18,7 +18,7 @@ from faceforge.viz.render import LIGHT, view_matrix
 
 #: skin tone at full light; the shade scales it
 SKIN = np.array([0.93, 0.86, 0.78])
-#: passes of :func:`soften_field` over the mouth's cavity field (its edge a ramp 2-3 edges wide)
+#: sweeps of :func:`faceforge.geometry.triangles.smooth_field` over the mouth's cavity field (its edge a ramp 2-3 edges wide)
 SOFTEN = 3
 #: hidden vertices deeper than this (mm behind the inner lip line) stay fully in the cavity: the
 #: softening is for the rolled-in lips, where hidden and seen vertices meet
@@ -90,11 +90,13 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     The tilted rays count only within the outer lip contour (``outer`` (2, 3): FDP 8.1, 8.2)
     +- 2 mm, so that the hollow under the lower lip (a tilted ray meets the lip) stays skin; a
     straight one counts over the whole box (a mouth bag's walls above and below the lips). The
-    field is then softened ``soften`` times over the mesh's edges (:func:`soften_field`): the hidden set is
+    field is then softened ``soften`` times over the mesh's edges (:func:`faceforge.geometry.triangles.smooth_field`): the hidden set is
     decided a vertex at a time, and a fine mesh's rolled-in lips mix hidden and seen vertices,
     whose edge drawn as is traced a ragged outline round an opened mouth; hidden vertices more
     than :data:`DEEP_MM` behind the inner lip line keep their full depth (a coarse mouth bag's
     or head's inside, a band of a row or two, would fade)."""
+    from faceforge.geometry.triangles import smooth_field
+
     rest = np.asarray(rest, dtype=float)
     corners = np.asarray(corners, dtype=float)
     mid_x, half = corners[:, 0].mean(), 0.55 * abs(corners[0, 0] - corners[1, 0])
@@ -124,7 +126,7 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     hidden[cand[votes[cand] >= 0.5 * count[cand]]] = True
     inside = np.flatnonzero(hidden)
     out[inside] = np.clip((z0 - rest[inside, 2]) / (0.5 * mm), 0.0, 1.0)
-    soft = soften_field(out, mesh_faces, soften)
+    soft = smooth_field(out, mesh_faces, soften)
     # deep inside (a bag's walls, the head's inside): whole, with the deep vertices just outside
     # the box that share a triangle with them (a coarse mesh's long triangles cross the box)
     far = rest[:, 2] < z0 - DEEP_MM * mm
@@ -134,17 +136,6 @@ def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, 
     deep[touching[far[touching] & ~box[touching]]] = True
     soft[deep] = 1.0
     return soft
-
-
-def soften_field(values: np.ndarray, faces: np.ndarray, passes: int) -> np.ndarray:
-    """``values`` (n,) averaged ``passes`` times with their edge neighbours' mean (half each,
-    :func:`faceforge.geometry.triangles.neighbour_average`): a step across one edge becomes a
-    ramp a few edges wide. ``faces`` (m, 3) int."""
-    from faceforge.geometry.triangles import neighbour_average
-
-    out = np.asarray(values, dtype=float)
-    if passes <= 0 or len(faces) == 0:
-        return out
     avg = neighbour_average(len(out), faces)
     for _ in range(passes):
         out = 0.5 * (out + avg @ out)
