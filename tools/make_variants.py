@@ -13,7 +13,7 @@ Writes OBJ files (no landmark file beside them) into OUT_DIR:
 - ``mh_px.obj``: MakeHuman facing +X (a quarter turn about +Y);
 - ``mh_open.obj``: with ``--surprise``, that frame (an OBJ of the user's quads) as a new neutral.
 
-numpy only; polygons are kept (the OBJ reader below keeps faces as index lists).
+Polygons are kept (:func:`faceforge.io.mesh.read_obj_polygons`; written by :func:`faceforge.io.export_obj.write_obj`).
 """
 from __future__ import annotations
 
@@ -21,6 +21,9 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+
+from faceforge.io.export_obj import write_obj
+from faceforge.io.mesh import read_obj_polygons
 
 ROOT = Path(__file__).resolve().parents[1]
 MH = ROOT / "samples/makehuman/mh_head_default.obj"
@@ -30,22 +33,9 @@ RNG = np.random.default_rng(19)
 
 
 def read_obj(path):
-    """Vertices (n, 3) float64 and faces as a list of int arrays (0-based) of an OBJ."""
-    verts, faces = [], []
-    for line in Path(path).read_text().splitlines():
-        if line.startswith("v "):
-            verts.append([float(t) for t in line.split()[1:4]])
-        elif line.startswith("f "):
-            faces.append(np.array([int(t.split("/")[0]) - 1 for t in line.split()[1:]]))
-    return np.asarray(verts, float), faces
-
-
-def write_obj(path, verts, faces, comment=""):
-    """Write vertices (n, 3) and polygon faces (list of index arrays, 0-based)."""
-    lines = [f"# {comment}"] if comment else []
-    lines += [f"v {x:.7f} {y:.7f} {z:.7f}" for x, y, z in verts]
-    lines += ["f " + " ".join(str(i + 1) for i in f) for f in faces]
-    Path(path).write_text("\n".join(lines) + "\n")
+    """Vertices (n, 3) float64 and faces as a list of int arrays (0-based, polygons kept) of an OBJ."""
+    verts, polygons = read_obj_polygons(path)
+    return verts, [np.asarray(f) for f in polygons]
 
 
 def compact(verts, faces):

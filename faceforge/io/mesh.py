@@ -125,8 +125,20 @@ def _read_obj_fast(text: str):
 def _read_obj(path: Path):
     text = _read_text(path)
     fast = _read_obj_fast(text)
-    if fast is not None:
-        return fast
+    return fast if fast is not None else _obj_polygons(text, path)
+
+
+def read_obj_polygons(path: str | Path) -> tuple[np.ndarray, list[list[int]]]:
+    """An OBJ's ``vertices (n, 3) float64`` and its polygons as they are in the file (lists of
+    0-based corner indices, not triangulated: quads stay quads), for tools that edit a mesh's
+    polygons; :class:`MeshError` naming the file and line of a malformed one."""
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError("mesh file not found", path)
+    return _obj_polygons(_read_text(path), path)
+
+
+def _obj_polygons(text: str, path: Path):
     vertices, polygons = [], []
     for number, line in enumerate(text.splitlines(), start=1):
         parts = line.split()

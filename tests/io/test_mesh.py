@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from faceforge.exceptions import MeshError
-from faceforge.io.mesh import load_mesh, save_mesh, supported_formats, triangulate_polygons
+from faceforge.io.mesh import load_mesh, read_obj_polygons, save_mesh, supported_formats, triangulate_polygons
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -57,6 +57,18 @@ def test_obj_with_quads_texture_indices_and_negative_indices(tmp_path):
     assert v.shape == (5, 3) and np.array_equal(v[4], [2, 0, 0])   # order as written
     assert f.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 2]]
     assert info.face_source.tolist() == [0, 0, 1] and info.n_polygons == 2 and info.triangulated
+
+
+def test_obj_polygons_are_read_as_in_the_file(tmp_path):
+    path = tmp_path / "q.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\nf 1/1/1 2/2/1 3/1/1 4/2/1\nf -4 5 -3\n")
+    v, polygons = read_obj_polygons(path)
+    assert v.shape == (5, 3) and polygons == [[0, 1, 2, 3], [1, 4, 2]]      # the quad stays a quad
+    with pytest.raises(MeshError) as exc:
+        read_obj_polygons(DATA / "malformed.obj")
+    assert exc.value.line == 3
+    with pytest.raises(MeshError, match="not found"):
+        read_obj_polygons(tmp_path / "none.obj")
 
 
 def test_fan_triangulation_invariants():
