@@ -4,7 +4,7 @@ Each panel is the face seen from the front, Gouraud-shaded: a Lambert intensity 
 the area-weighted vertex normals, interpolated across each triangle (matplotlib ``tripcolor``
 with ``shading="gouraud"``), triangles drawn back to front (painter's algorithm), those facing
 away from the camera left out; a hole one can see through is drawn dark
-(:func:`faceforge.viz.smooth.fill_holes`). All panels share one frame (the ``region``'s extent at rest), so
+(:func:`faceforge.viz.smooth.fill_holes`), and the mouth's inside too when the caller gives it. All panels share one frame (the ``region``'s extent at rest), so
 a shape's motion is visible as motion against the others.
 """
 
@@ -38,9 +38,11 @@ def smooth_shade(vertices: np.ndarray, faces: np.ndarray, view: str = "front", a
 
 def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: np.ndarray | None = None,
                 cols: int = 8, panel: float = 3.0, dpi: int = 110, title: str | None = None,
-                color=(0.88, 0.82, 0.74)) -> Path:
+                color=(0.88, 0.82, 0.74), dim: np.ndarray | None = None) -> Path:
     """Write a grid of smooth-shaded front views of ``frames`` (k, n, 3) (head frame: +Y up, face
-    +Z), one per label; ``region`` (n,) bool: the vertices to frame (default all)."""
+    +Z), one per label; ``region`` (n,) bool: the vertices to frame (default all); ``dim`` (n,) in
+    [0, 1]: vertices drawn darker (the mouth's inside, :func:`faceforge.viz.smooth.mouth_cavity`,
+    which the front light would show lit as the skin; as :func:`faceforge.viz.smooth.draw_smooth`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -76,6 +78,8 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
     loops = boundary_loops(np.asarray(faces, dtype=np.int64))
     for k, (frame, name) in enumerate(zip(frames, labels)):
         xy, tri, shade = smooth_shade(frame, faces)
+        if dim is not None:
+            shade = shade * (1.0 - 0.85 * np.clip(np.asarray(dim, dtype=float), 0.0, 1.0))
         centre = xy[tri].mean(axis=1)        # only the triangles in the panel (speed)
         tri = tri[np.all((centre >= box[0]) & (centre <= box[1]), axis=1)]
         x0, y0 = (k % cols) * cw, -(k // cols) * ch

@@ -79,16 +79,19 @@ def run_bake(ctx):
 
 def _sheet(path, head, frames, names, made) -> None:
     """The neutral face and the shapes made, smooth-shaded, framed on the face (above the lowest
-    bone, the front half of the head)."""
+    bone, the front half of the head), the mouth's inside dark as the expressions sheet draws it."""
     import numpy as np
 
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.viz.head_sheet import cavity
     from faceforge.viz.shape_sheet import shape_sheet
 
     idx = [i for i, m in enumerate(made) if m]
     rest = head.rest
     region = (rest[:, 1] >= head.bone_heights()[0]) & (rest[:, 2] >= np.median(rest[:, 2]))
     shape_sheet(path, np.concatenate([rest[None], frames[idx]]), head.faces, ["neutral"] + [names[i] for i in idx],
-                region=region, title="baked shapes at full weight (faceforge bake)")
+                region=region, title="baked shapes at full weight (faceforge bake)",
+                dim=cavity(head, units_per_mm(head.landmarks)))
 
 
 BAKE = register_stage(Stage(
@@ -103,7 +106,8 @@ BAKE = register_stage(Stage(
                  "animate.jaw_glide_slope", "animate.chin_path"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="13", run=run_bake,
+    # version 14: the sheet draws the mouth's inside dark
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="14", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 
