@@ -246,7 +246,7 @@ def _mirrored(specs, poses, twins, simulate, observe_probes, probes, mirror_fram
         row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
                            for f, t, a in zip(spec.faps, target, got)},
                "error": round(float(np.linalg.norm(got - target) / np.linalg.norm(target)), 3),
-               **_reach(target, got), "mirrored_pose": True, "mirrored_shape": mirror_frame is not None,
+               **fap_reach(target, got), "mirrored_pose": True, "mirrored_shape": mirror_frame is not None,
                "controls": {mirror_name(k) if not k.startswith("jaw.") else k:
                             (-v if k == "jaw.yaw" else v) for k, v in src.get("controls", {}).items()}}
         out[spec.name] = (c[i], jaw[i], frames[i], row)
@@ -312,7 +312,7 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
     row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
                        for f, t, a in zip(spec.faps, target, res.observed)},
            "error": round(float(np.linalg.norm(res.observed - target) / np.linalg.norm(target)), 3),
-           **_reach(target, res.observed), "residuals": [round(r, 3) for r in res.residuals],
+           **fap_reach(target, res.observed), "residuals": [round(r, 3) for r in res.residuals],
            "saturated": _at_limit(space.names, x, space.lower, space.upper),
            "controls": {n: round(float(v), 4) for n, v in zip(space.names, x)}}
     if tied is not None:
@@ -348,7 +348,7 @@ def _at_limit(names, x, lower, upper) -> list:
             if (hi != 0 and v >= hi - 1e-9) or (lo != 0 and v <= lo + 1e-9)]
 
 
-def _reach(target: np.ndarray, got: np.ndarray) -> dict:
+def fap_reach(target: np.ndarray, got: np.ndarray) -> dict:
     """How a shape's FAP motion ``got`` (d,) compares with its ``target`` (d,) (FAPU): ``reach``,
     the part of the target made (``got . target / |target|^2``: 1 the whole, 0.3 a third in its
     direction), and ``form_error``, the error left after the best scaling of ``got``

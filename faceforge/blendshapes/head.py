@@ -18,7 +18,7 @@ from faceforge.animation.calibrate_head import calibration_probes
 from faceforge.animation.checks import check_animation, folded_edges
 from faceforge.animation.controls import controls
 from faceforge.blendshapes.arkit import ARKIT_NAMES, mirror_name
-from faceforge.blendshapes.bake import bake_shapes, mirror_agreement
+from faceforge.blendshapes.bake import bake_shapes, fap_reach, mirror_agreement
 from faceforge.animation.eyeballs import eye_pieces
 from faceforge.blendshapes.rigsolve import probe_observer, settler
 from faceforge.blendshapes.solve import control_space
@@ -36,7 +36,7 @@ class HeadBake:
 
 
 def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, symmetric: bool = False,
-              muscle_probe: float = 1.0, mirror=None, log=lambda m: None) -> HeadBake:
+              muscle_probe: float = 1.0, mirror=None, split=(), log=lambda m: None) -> HeadBake:
     """Bake ``kinds`` (``arkit``, ``visemes``, ``expressions``) on ``head``: ``specs`` the ARKit
     mapping (:func:`faceforge.blendshapes.arkit.load_arkit_mapping`), ``mapping`` the FAP mapping
     (muscles, jaw limits, presets, FAP probes), each pose settled ``settle`` frames at ``fps`` (an int)
@@ -48,7 +48,9 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
     Jacobian column is settled at (1: full, the pose a shape that saturates the muscle reuses);
     ``mirror``: the head's :class:`faceforge.geometry.mirror.Mirror` (working frame) to make each
     right shape the mirror image of its left partner's settled skin instead of settling it (only
-    with ``symmetric`` and a skin with an exact mirror partner per vertex, ``head.symmetric``).
+    with ``symmetric`` and a skin with an exact mirror partner per vertex, ``head.symmetric``);
+    ``split``: ARKit pair stems (``mouthSmile``: ``mouthSmileLeft`` / ``-Right``) made from their
+    bilateral pose cut across the midline (:mod:`faceforge.blendshapes.split`, ``bake.split_pairs``).
     A pose settled once is not settled again (the frame is kept)."""
     from faceforge.blendshapes.symmetric import mirror_columns
 
@@ -71,11 +73,17 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
         eyes = eye_pieces(head.rest, head.faces, head.landmarks)
         if eyes:
             log(f"eyeball pieces: {', '.join(f'{s} ({len(v[0])} vertices)' for s, v in eyes.items())}")
-        baked = bake_shapes(specs, space, calibration_probes(mapping, head), simulate,
+        probes = calibration_probes(mapping, head)
+        pairs = _split_specs(specs, split)
+        solve = {n: s for n, s in specs.items() if not any(n in (p[0].name, p[1].name) for p in pairs.values())}
+        solve.update({stem: p[2] for stem, p in pairs.items()})
+        baked = bake_shapes(solve, space, probes, simulate,
                             lambda probes: probe_observer(head.rest, probes), head.rest, lids, eyes,
                             twins=mirror_columns(head.controls) if symmetric else None,
                             mirror_frame=mirror_frame, log=log,
                             folds=lambda f: int(folded_edges(head.rest, f[None], head.faces).sum()))
+        if pairs:
+            out["split_pairs"] = _split(head, pairs, baked, probes, mirror_frame, log)
         index = {n: i for i, n in enumerate(baked.names)}
         for name in ARKIT_NAMES:
             i = index.get(name)
@@ -86,7 +94,7 @@ def bake_head(head, mapping, specs: dict, kinds, fps: float, settle, lids=None, 
             jaw.append(baked.jaw[i] if i is not None else np.zeros(3))
             lid_faps.append(baked.faps[i] if i is not None else np.zeros(68))
             gaze.append(baked.gaze[i] if i is not None else np.zeros(4))
-        report.update(baked.report)
+        report.update({n: r for n, r in baked.report.items() if n in ARKIT_NAMES})
         out.update(jacobian_seconds=round(baked.jacobian_seconds, 2), solve_seconds=round(baked.solve_seconds, 2))
     for kind in ("visemes", "expressions"):
         if kind in kinds:
@@ -164,6 +172,94 @@ def _mirror(head, user, names, made) -> dict:
     deltas = {n: (user[i + 1] - user[0]) @ R.T for i, n in enumerate(names) if made[i]}
     pairs = [(n, mirror_name(n)) for n in names if mirror_name(n) != n and n.endswith(("Left", "_L"))]
     return mirror_agreement(rest, deltas, pairs)
+
+
+def _split_specs(specs: dict, stems) -> dict:
+    """{stem: (left spec, right spec, bilateral spec)} of the ``stems`` (``bake.split_pairs``) whose two
+    sides are made and move no jaw (:func:`faceforge.blendshapes.split.bilateral_spec`); a stem that is
+    not a splittable ARKit pair is a :class:`faceforge.exceptions.ConfigError`."""
+    from faceforge.blendshapes.split import SPLITTABLE, bilateral_spec
+    from faceforge.exceptions import ConfigError
+
+    unknown = [str(s) for s in stems if s not in SPLITTABLE]
+    if unknown:
+        raise ConfigError(f"bake.split_pairs: {', '.join(unknown)}: not a splittable ARKit pair "
+                          f"(one of {', '.join(SPLITTABLE)})")
+    out = {}
+    for stem in stems:
+        left, right = specs.get(f"{stem}Left"), specs.get(f"{stem}Right")
+        if left is None or right is None or not (left.made and right.made) or left.eye or right.eye \
+                or any(k.startswith("jaw.") for k in left.controls + right.controls):
+            continue
+        out[stem] = (left, right, bilateral_spec(stem, left, right))
+    return out
+
+
+def _split(head, pairs: dict, baked, probes, mirror_frame, log) -> dict:
+    """Each solved bilateral pose of ``pairs`` (:func:`_split_specs`) in ``baked`` cut across the midline
+    into its left and right shapes (:mod:`faceforge.blendshapes.split`), appended to ``baked`` (frames,
+    contractions, lids, report rows measured on the new frames); on a mirror-symmetric skin
+    (``mirror_frame``) the bilateral frame is first made exactly symmetric. Returns what report.json
+    says of it (the bilateral solves' rows)."""
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.blendshapes.split import BLEND_MM, midline_side, side_weights, split_controls, split_frame
+
+    side = midline_side(head.rest, head.landmarks)
+    if side is None:
+        log("bake.split_pairs: no pupils (FDP 3.5 / 3.6) to place the midline: not split")
+        return {"split": [], "reason": "no pupils (FDP 3.5 / 3.6)"}
+    weight = side_weights(side, BLEND_MM * units_per_mm(head.landmarks))
+    names_c = [str(n) for n in head.controls]
+    left_cols = np.array([n.endswith("_L") for n in names_c])
+    right_cols = np.array([n.endswith("_R") for n in names_c])
+    index = {n: i for i, n in enumerate(baked.names)}
+    rows, done = {}, []
+    for stem, (left, right, _) in pairs.items():
+        rows[stem] = baked.report.get(stem)
+        i = index.get(stem)
+        if i is None:
+            for spec in (left, right):
+                baked.report[spec.name] = {"made": False, "reason": f"its bilateral pose {stem}: "
+                                           + str((rows[stem] or {}).get("reason", "not made"))}
+            continue
+        frame = baked.frames[i]
+        if mirror_frame is not None:
+            frame = 0.5 * (frame + mirror_frame(frame))
+        for spec, f, ck in zip((left, right), split_frame(head.rest, frame, weight),
+                               split_controls(baked.contractions[i], left_cols, right_cols)):
+            f68 = np.zeros(68)
+            for fap, v in spec.lids.items():
+                f68[fap - 1] = v
+            baked.names.append(spec.name)
+            baked.frames = np.concatenate([baked.frames, f[None]])
+            baked.contractions = np.concatenate([baked.contractions, ck[None]])
+            baked.jaw = np.concatenate([baked.jaw, np.zeros((1, 3))])
+            baked.faps = np.concatenate([baked.faps, f68[None]])
+            baked.gaze = np.concatenate([baked.gaze, np.zeros((1, 4))])
+            baked.report[spec.name] = _split_row(spec, stem, head, f, ck, names_c, probes)
+        done.append(stem)
+    log(f"split from their bilateral poses ({2 * BLEND_MM:g} mm blend across the midline): {', '.join(done)}")
+    return {"split": done, "blend_mm": 2 * BLEND_MM, "bilateral": rows,
+            "note": "each pair is its bilateral pose (both sides' muscles, solved against both sides' FAP "
+                    "targets) settled once and cut across the midline: left + right = the bilateral pose"}
+
+
+def _split_row(spec, stem, head, frame, contractions, control_names, probes) -> dict:
+    """A split shape's report row: its controls, and its own FAP targets measured on its frame."""
+    row = {"made": True, "split_from": stem, "approximation": spec.approximation or None,
+           "mirror_of": spec.mirror_of or None,
+           "controls": {n: round(float(v), 4) for n, v in zip(control_names, contractions) if v > 1e-4}}
+    if spec.lids:
+        row["lids"] = {str(f): v for f, v in spec.lids.items()}
+    faps = [f for f in spec.faps if f in probes]
+    if faps:
+        got = np.asarray(probe_observer(head.rest, [probes[f] for f in faps])(frame[None]), dtype=float)[0]
+        want = np.array([spec.faps[f] for f in faps], dtype=float)
+        row["targets"] = {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
+                          for f, t, a in zip(faps, want, got)}
+        row["error"] = round(float(np.linalg.norm(got - want) / max(np.linalg.norm(want), 1e-12)), 3)
+        row.update(fap_reach(want, got))
+    return row
 
 
 def _presets(head, mapping, kind, simulate, lids, names, frames, c, jaw, lid_faps, made, report, log):

@@ -173,6 +173,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.commissure_fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the lips' corner contact off
     ("skin.fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the skin's fold limit off
     ("skin.lip_contact_mm", Number(0.0, 20.0)),  # mm; 0 turns the lips' one-sided contact off
+    ("bake.split_pairs", ListOf(String())),           # ARKit pair stems (mouthSmile); [] = off
     ("match.rigid", Boolean()),                       # `faceforge match --rigid`: the target's head motion removed first
     ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
     ("curves.smooth", Number(0.0, 100.0)),            # --curves' smoothness over frames (unitless): 0 = off

@@ -69,7 +69,8 @@ def run_bake(ctx):
     out = bake_head(head, mapping, specs, kinds, float(ctx.config.get("animate.fps")),
                     s, lids if lids is not None and lids.fields else None,
                     symmetric=symmetric, log=ctx.log,
-                    mirror=mirror if ctx.config.get("bake.mirror_shapes") else None)
+                    mirror=mirror if ctx.config.get("bake.mirror_shapes") else None,
+                    split=tuple(ctx.config.get("bake.split_pairs") or ()))
     save_npz(ctx.out_dir / "shapes.npz", **out.arrays)
     save_json(ctx.out_dir / "report.json", {"mapping": mapping_path, **({"arkit_mapping": str(
         ctx.param("arkit_mapping"))} if specs else {}), **out.report})
