@@ -177,7 +177,7 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
     # and stop a probe flipping between two states (animate.calibrate.cycle) instead of waiting out the stall
     settings = replace(sheets, tolerance=float(config.get("animate.calibrate.statics_tolerance")),
                        cycle=int(config.get("animate.calibrate.cycle")))
-    # animate.calibrate.watch_fdps: a pose is settled once the vertices calibration reads (the FDPs) are
+    # animate.calibrate.watch_fdps: a pose is settled once the vertices calibration reads (the FDPs) stop moving
     watch = probe_vertices(head, calibration_probes(template, head)) \
         if bool(config.get("animate.calibrate.watch_fdps", False)) else None
     settings = replace(settings, watch=watch)
