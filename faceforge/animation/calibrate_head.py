@@ -130,6 +130,15 @@ class OneOffPoses:
         return self.done[key]
 
 
+def probe_vertices(head, probes: dict) -> tuple:
+    """The skin vertices calibration reads: each probe's FDP vertex and reference
+    (:func:`calibration_probes`, FAP -> Probe) and the lip opening's FDPs 2.2 / 2.3, sorted, as a
+    tuple of ints."""
+    seen = {int(p.vertex) for p in probes.values()} | {int(p.relative_to) for p in probes.values()
+                                                         if int(p.relative_to) >= 0}
+    return tuple(sorted(seen | {int(head.fdp_vertex[f]) for f in ("2.2", "2.3") if f in head.fdp_vertex}))
+
+
 @dataclass
 class CalibrationResult:
     """What :func:`calibrate_head` measured: the calibrated mapping, the rows
@@ -168,10 +177,14 @@ def calibrate_head(head, template, config, log=lambda m: None, progress=None) ->
     # and stop a probe flipping between two states (animate.calibrate.cycle) instead of waiting out the stall
     settings = replace(sheets, tolerance=float(config.get("animate.calibrate.statics_tolerance")),
                        cycle=int(config.get("animate.calibrate.cycle")))
+    # animate.calibrate.watch_fdps: a pose is settled once the vertices calibration reads (the FDPs) stop moving
+    watch = probe_vertices(head, calibration_probes(template, head)) \
+        if bool(config.get("animate.calibrate.watch_fdps", False)) else None
+    settings = replace(settings, watch=watch)
     # the jaw coupling, the jaw-assisted lips and the lip opening (OneOffPoses: the first from rest) are
     # held to the sheets' tolerance with no stall (a slowly settling lip cut short read 32 % low on the
     # synthetic head)
-    final = replace(sheets, stall=0)
+    final = replace(sheets, stall=0, watch=watch)
     stats = SettleStats()
     held = {}
 

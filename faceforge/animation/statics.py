@@ -65,6 +65,10 @@ class SettleSettings:
         the fixed-point iteration), which ``stall`` waits out for its whole count of frames;
         reported unconverged, the pose returned is the cycle's midpoint. 0: off (the sheets, the
         bake); calibration's probes use ``animate.calibrate.cycle``
+    watch : (k,) int skin vertex indices whose motion alone is the residual (tolerance, stall,
+        cycle, blow-up), or None: every skin vertex. A caller that reads only those vertices
+        (calibration reads its FDPs: ``animate.calibrate.watch_fdps``) stops a pose once they
+        settled, whatever the rest of a dense mesh still does
     """
 
     ramp: int = 10
@@ -74,6 +78,7 @@ class SettleSettings:
     max_frames: int = 150
     stall: int = 0
     cycle: int = 0
+    watch: tuple | None = None
 
     @classmethod
     def from_config(cls, config) -> "SettleSettings":
@@ -153,6 +158,7 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
     (``s.cycle``, :func:`_two_cycle`) or ``s.max_frames``. Returns (raw skin (n, 3), frames, last
     motion)."""
     last, motion, n = None, np.inf, 0
+    watch = None if s.watch is None else np.asarray(s.watch, dtype=np.int64)
     best, since = np.inf, 0
     before, flips = None, 0                      # the skin two frames back; frames in a row back on it
     while n < s.max_frames:
@@ -162,9 +168,10 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
         skin = np.asarray(rig.skin(bones, rig.muscles(c, bones, dt), dt), dtype=float)
         n += 1
         if last is not None:
-            motion = float(np.sqrt(((skin - last) ** 2).sum(axis=1).max()))
+            motion = float(np.sqrt(((_seen(skin, watch) - _seen(last, watch)) ** 2).sum(axis=1).max()))
         if s.cycle:
-            flips = flips + 1 if before is not None and motion > tol and _two_cycle(skin, before, tol) else 0
+            flips = flips + 1 if before is not None and motion > tol and _two_cycle(
+                _seen(skin, watch), _seen(before, watch), tol) else 0
             before = last
         last = skin.copy()
         if n >= ramp + s.min_hold and motion <= tol:
@@ -181,6 +188,11 @@ def _hold(rig, c0, j0, c1, j1, dt, ramp, s: SettleSettings, tol):
             elif s.stall and n - since >= s.stall and n >= ramp + s.min_hold:
                 break                            # the residual stopped changing: unconverged, reported
     return last, n, motion
+
+
+def _seen(skin: np.ndarray, watch) -> np.ndarray:
+    """The rows of ``skin (n, 3)`` the residual watches: ``watch (k,)`` int, or all (None)."""
+    return skin if watch is None else skin[watch]
 
 
 def _two_cycle(skin: np.ndarray, before: np.ndarray, tol: float) -> bool:

@@ -39,17 +39,32 @@ __all__ = ["DihedralLimit", "limit_dihedrals", "rest_limits"]
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _limit(p, quads, limit, below, sweeps, w, touched, tol):  # pragma: no cover - numba
+def _limit(p, quads, limit, below, sweeps, w, touched, tol, vst, qst, clock):  # pragma: no cover - numba
     """In place on ``p (n, 3)``: ``quads (m, 4)`` int64, ``limit (m,)`` radians in (0, pi),
     ``below (m,)`` = -cos(limit + tol), ``sweeps`` >= 1, ``w (n,)`` inverse masses >= 0;
     ``touched (n,)`` bool, set where a particle moved (or ``(0,)``: not recorded); ``tol``
-    radians >= 0: an excess up to it is left. Returns the number of projections made."""
+    radians >= 0: an excess up to it is left. Returns the number of projections made.
+
+    Incremental (``qst`` of length m; ``(0,)``: every quad checked): ``vst (n,)`` int64, the
+    clock at which each particle last moved; ``qst (m,)`` int64, the clock at which each quad
+    was last found with nothing to do (-1: never); ``clock (2,)`` int64, [0] advanced at each
+    move, [1] counting the quads checked.
+    A quad none of whose particles moved since it was found with nothing to do is skipped: its
+    check reads the same bits and would find nothing again (:func:`_mark_changed` stamps what
+    moved between calls), so the result is bit for bit a full pass's."""
     mark = touched.shape[0] > 0
+    inc = qst.shape[0] > 0
     moved = 0
     for _ in range(sweeps):
         before = moved
         for j in range(quads.shape[0]):
             i0, i1, i2, i3 = quads[j, 0], quads[j, 1], quads[j, 2], quads[j, 3]
+            if inc:
+                q = qst[j]
+                if q >= 0 and q >= vst[i0] and q >= vst[i1] and q >= vst[i2] and q >= vst[i3]:
+                    continue
+                qst[j] = clock[0]        # nothing to do unless it projects below
+                clock[1] += 1            # quads checked
             wsum = w[i2] + w[i3]
             if wsum <= 0.0:
                 continue
@@ -104,6 +119,13 @@ def _limit(p, quads, limit, below, sweeps, w, touched, tol):  # pragma: no cover
             if mark:
                 touched[i2] = touched[i2] or w[i2] > 0.0
                 touched[i3] = touched[i3] or w[i3] > 0.0
+            if inc:
+                qst[j] = -1              # projected: checked again at the next visit
+                clock[0] += 1
+                if w[i2] > 0.0:
+                    vst[i2] = clock[0]
+                if w[i3] > 0.0:
+                    vst[i3] = clock[0]
             if w[i3] > 0.0:   # a pinned particle keeps its bits
                 p[i3, 0] = p[i0, 0] + s3 * ax + l3 * (c3 * u3x + n3 * b3x)
                 p[i3, 1] = p[i0, 1] + s3 * ay + l3 * (c3 * u3y + n3 * b3y)
@@ -118,6 +140,23 @@ def _limit(p, quads, limit, below, sweeps, w, touched, tol):  # pragma: no cover
     return moved
 
 
+@numba.njit(**NUMBA_OPTIONS)
+def _mark_changed(bits, snap, vst, clock):  # pragma: no cover - numba
+    """Stamp the particles whose position bits changed since the last call: ``bits (n, 3)`` int64
+    (the positions viewed as integers), ``snap (n, 3)`` int64 (the bits seen last, updated in
+    place), ``vst (n,)`` int64 set to the advanced ``clock[0]`` where they differ. Returns the
+    number of particles that changed."""
+    clock[0] += 1
+    now = clock[0]
+    changed = 0
+    for i in range(bits.shape[0]):
+        if bits[i, 0] != snap[i, 0] or bits[i, 1] != snap[i, 1] or bits[i, 2] != snap[i, 2]:
+            vst[i] = now
+            snap[i, 0], snap[i, 1], snap[i, 2] = bits[i, 0], bits[i, 1], bits[i, 2]
+            changed += 1
+    return changed
+
+
 class DihedralLimit:
     """A dihedral limit over fixed quads, checked once and applied as often as needed (a solver
     applies it after every step: :func:`limit_dihedrals` checks and converts its arguments on
@@ -129,11 +168,13 @@ class DihedralLimit:
     particles' inverse masses (0: pinned; module docstring), None: all 1; tol : radians >= 0, a
     quad past its limit by at most this is left as it is (neighbouring quads projected in turn
     keep nudging each other a hair past; a caller that repeats the pass until it has nothing to
-    do needs a tolerance to stop).
+    do needs a tolerance to stop); incremental : check again only the quads one of whose particles
+    moved since they were last found within their limit (the same bits, the same projections: a
+    caller applying it many times a frame to a mostly still skin pays for what moved).
     """
 
     def __init__(self, quads: np.ndarray, limit, n: int, inv_mass: np.ndarray | None = None,
-                 tol: float = 0.0):
+                 tol: float = 0.0, incremental: bool = False):
         self.quads = np.ascontiguousarray(quads, dtype=np.int64).reshape(-1, 4)
         self.limit = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64),
                                                           (len(self.quads),)))
@@ -146,6 +187,19 @@ class DihedralLimit:
         self.n, self.tol = int(n), float(tol)
         self.inv_mass = inverse_masses(inv_mass, self.n)
         self._below = -np.cos(np.minimum(self.limit + self.tol, math.pi))
+        #: incremental: a quad is checked again only once one of its particles moved (its
+        #: previous check found nothing to do on the same bits; bit for bit a full pass)
+        self.incremental = bool(incremental)
+        none = np.zeros(0, dtype=np.int64)
+        self._clock = np.zeros(2, dtype=np.int64)      # [0] the moves' clock, [1] quads checked
+        self._vst = np.zeros(self.n, dtype=np.int64) if incremental else none
+        self._qst = np.full(len(self.quads), -1, dtype=np.int64) if incremental else none
+        self._snap = np.zeros((self.n, 3), dtype=np.int64) if incremental else none.reshape(0, 3)
+
+    @property
+    def checked(self) -> int:
+        """Quads checked so far by an incremental limit (skipped ones not counted; 0 otherwise)."""
+        return int(self._clock[1])
 
     def __call__(self, positions: np.ndarray, sweeps: int = 2, touched: np.ndarray | None = None) -> int:
         """Keep every quad's unsigned dihedral at most its limit (+ tol), in place on
@@ -156,8 +210,10 @@ class DihedralLimit:
         touched = checked_positions(positions, touched, self.n)
         if not len(self.quads):
             return 0
+        if self.incremental:
+            _mark_changed(positions.view(np.int64), self._snap, self._vst, self._clock)
         return int(_limit(positions, self.quads, self.limit, self._below, int(sweeps), self.inv_mass,
-                          touched, self.tol))
+                          touched, self.tol, self._vst, self._qst, self._clock))
 
 
 def limit_dihedrals(positions: np.ndarray, quads: np.ndarray, limit, sweeps: int = 2,

@@ -397,7 +397,7 @@ class SkinSimulation:
 
             quads = np.asarray(fold_limit[0], INT).reshape(-1, 4)   # never below a quad's rest angle
             self._fold = DihedralLimit(self.layer.first + quads, rest_limits(self.rest, quads, fold_limit[1]),
-                                       self.model.particle_count, tol=FOLD_TOL)
+                                       self.model.particle_count, tol=FOLD_TOL, incremental=True)
         self._contact = None
         if lip_contact is not None and len(lip_contact[0]):
             from faceforge.pbd.triangle_contact import TriangleContact

@@ -172,3 +172,17 @@ def test_the_calibration_one_off_poses_continue_from_the_pose_before_when_warm()
     assert out[True][2][1] < out[False][2][1]                                    # fewer frames for the second
     assert np.abs(out[True][1] - out[False][1]).max() < 10 * 1e-6 * diag         # the same pose
     assert np.array_equal(out[True][0], out[False][0])
+
+
+def test_a_pose_watched_on_some_vertices_settles_once_they_do():
+    """``SettleSettings(watch=...)``: the residual is the watched vertices' motion alone, so a pose
+    whose vertex 0 flips (a dense scan's jittering lid rim) settles once the others do; the
+    skin returned is still every vertex."""
+    whole, seen = SettleStats(), SettleStats()
+    settle(flipping_rig(), [[1.0]], np.zeros((1, 3)), 25.0, SettleSettings(tolerance=1e-6, max_frames=150),
+           stats=whole)
+    out = settle(flipping_rig(), [[1.0]], np.zeros((1, 3)), 25.0,
+                 SettleSettings(tolerance=1e-6, max_frames=150, watch=(1, 2, 3)), stats=seen)
+    assert whole.converged == [False] and whole.frames == [150]
+    assert seen.converged == [True] and seen.frames[0] < 100
+    assert out.shape == (1, 5, 3)

@@ -191,3 +191,39 @@ def test_a_tolerance_leaves_small_excesses_and_matches_the_twin():
     np.testing.assert_allclose(x, twin_limit(p, quads, np.radians(80), 3, tol=0.05), atol=1e-10)
     with pytest.raises(ValueError):
         limit_dihedrals(p, quads, 1.0, tol=-1.0)
+
+
+def test_an_incremental_limit_is_a_full_pass_bit_for_bit_and_checks_only_what_moved():
+    """``DihedralLimit(incremental=True)``, applied again and again to positions of which a few
+    particles move between calls (as the skin's guards do within a frame), gives the full pass's
+    positions, counts and touched particles bit for bit, and checks again only the quads of
+    what moved."""
+    from faceforge.pbd.dihedral_limit import DihedralLimit
+
+    rng = np.random.default_rng(5)
+    g = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0), indexing="ij"), -1).reshape(-1, 2)
+    p = np.c_[g, np.zeros(len(g))] + rng.normal(0, 0.3, (len(g), 3))
+    idx = np.arange(900).reshape(30, 30)
+    quads = np.array([[idx[i + 1, j], idx[i, j + 1], idx[i, j], idx[i + 1, j + 1]]
+                      for i in range(29) for j in range(29)])
+    w = np.ones(len(p))
+    w[::37] = 0.0
+    full = DihedralLimit(quads, np.radians(60), len(p), inv_mass=w, tol=1e-3)
+    inc = DihedralLimit(quads, np.radians(60), len(p), inv_mass=w, tol=1e-3, incremental=True)
+    x, y = p.copy(), p.copy()
+    checked = []
+    for call in range(12):
+        tx, ty = np.zeros(len(p), bool), np.zeros(len(p), bool)
+        before = inc.checked
+        assert full(x, sweeps=2, touched=tx) == inc(y, sweeps=2, touched=ty)
+        checked.append(inc.checked - before)
+        np.testing.assert_array_equal(x.view(np.int64), y.view(np.int64))
+        np.testing.assert_array_equal(tx, ty)
+        some = rng.choice(len(p), 3, replace=False)        # a few particles move between calls
+        kick = rng.normal(0, 0.5, (3, 3))
+        x[some] += kick
+        y[some] += kick
+    assert checked[0] >= len(quads)                        # the first call checks them all
+    assert np.mean(checked[4:]) < len(quads) / 4          # later ones what moved and round it (a full
+    # pass: len(quads) a sweep)
+    assert full.checked == 0
