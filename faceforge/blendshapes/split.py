@@ -2,10 +2,11 @@
 
 An engine mixes ``mouthSmileLeft`` and ``mouthSmileRight`` by adding their displacements. Settled one
 side at a time, each shape also moves the middle of the face (the lip ring, the mentalis, the
-nose's skin are one tissue): the sum of the two counts the middle twice. On the MakeHuman sample a
-Live Link take of ``mouthLowerDownLeft`` and ``-Right`` at 1.0 played through the muscles solves
-back to 0.71 / 0.69 of each (the two sides' lowered lips overlap at the middle), and a replayed joy
-take came back with its lowered lip at half its weight. Split, the pair is the bilateral pose (both
+nose's skin are one tissue): the sum of the two counts the middle twice. On the MakeHuman sample
+``mouthPressLeft`` + ``Right`` peaked at 2.0x the two sides pressed together, ``mouthLowerDown`` at
+1.9x; a Live Link take of ``mouthLowerDownLeft`` and ``-Right`` at 1.0 played through the muscles
+solved back (unregularised) to 0.71 / 0.69 of each, and a replayed joy take came back with its
+lowered lip at half its weight (docs/notes/split20.md). Split, the pair is the bilateral pose (both
 sides' muscles together, solved against both sides' FAP targets at once: :func:`bilateral_spec`)
 settled once and cut across the midsagittal plane by a smooth ramp: the
 left shape is its displacement times :func:`side_weights`, the right the rest, so the two add up to
