@@ -178,7 +178,8 @@ def _split_specs(specs: dict, stems) -> dict:
     """{stem: (left spec, right spec, bilateral spec)} of the ``stems`` (``bake.split_pairs``) whose two
     sides are made and move no jaw (:func:`faceforge.blendshapes.split.bilateral_spec`); a stem that is
     not a splittable ARKit pair is a :class:`faceforge.exceptions.ConfigError`."""
-    from faceforge.blendshapes.split import SPLITTABLE, bilateral_spec
+    from faceforge.blendshapes.arkit import SPLITTABLE
+    from faceforge.blendshapes.split import bilateral_spec
     from faceforge.exceptions import ConfigError
 
     unknown = [str(s) for s in stems if s not in SPLITTABLE]

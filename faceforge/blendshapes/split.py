@@ -22,11 +22,6 @@ from __future__ import annotations
 
 import numpy as np
 
-#: the pairs that may be split: one motion mirrored on each side (not ``jawLeft`` / ``jawRight``,
-#: ``mouthLeft`` / ``mouthRight``, the gaze, whose two are opposite motions)
-SPLITTABLE = ("browDown", "browOuterUp", "cheekSquint", "noseSneer", "mouthSmile", "mouthFrown", "mouthDimple",
-              "mouthStretch", "mouthPress", "mouthLowerDown", "mouthUpperUp", "eyeBlink", "eyeSquint", "eyeWide")
-
 #: the blend's half-width across the midline (mm, an average adult's; scaled by the head's ES0):
 #: the left weight rises from 0 to 1 over twice this, centred on the plane
 BLEND_MM = 8.0

@@ -159,6 +159,12 @@ class Anything(Rule):
         return value
 
 
+#: ``bake.split_pairs``' choices: the ARKit Left / Right pairs that are one motion mirrored on each side
+#: (not ``jawLeft`` / ``jawRight``, ``mouthLeft`` / ``mouthRight``, the gaze: opposite motions), which
+#: the bake may make from their bilateral pose (:mod:`faceforge.blendshapes.split`)
+SPLITTABLE_PAIRS = ("browDown", "browOuterUp", "cheekSquint", "noseSneer", "mouthSmile", "mouthFrown", "mouthDimple",
+                    "mouthStretch", "mouthPress", "mouthLowerDown", "mouthUpperUp", "eyeBlink", "eyeSquint", "eyeWide")
+
 _DEFAULT_CACHE: dict[str, tuple[dict, dict[str, int], str]] = {}
 
 #: (glob over the dotted key, rule); the first match wins, else the default's type decides
@@ -173,7 +179,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.commissure_fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the lips' corner contact off
     ("skin.fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the skin's fold limit off
     ("skin.lip_contact_mm", Number(0.0, 20.0)),  # mm; 0 turns the lips' one-sided contact off
-    ("bake.split_pairs", ListOf(String())),           # ARKit pair stems (mouthSmile); [] = off
+    ("bake.split_pairs", ListOf(Choice(SPLITTABLE_PAIRS))),  # ARKit pair stems (mouthSmile); [] = off
     ("match.rigid", Boolean()),                       # `faceforge match --rigid`: the target's head motion removed first
     ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
     ("curves.smooth", Number(0.0, 100.0)),            # --curves' smoothness over frames (unitless): 0 = off

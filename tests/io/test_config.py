@@ -41,6 +41,15 @@ def test_default_is_a_fixed_point_of_validation():
     assert again.tree == default.tree
 
 
+def test_split_pairs_must_be_splittable_arkit_pairs():
+    """A typo or an opposite pair (jaw) in bake.split_pairs is refused before any stage runs."""
+    for bad in ("[jaw]", "[mouthSmil]"):
+        with pytest.raises(ConfigError, match=r"^--set: bake.split_pairs: expected each item to be one of browDown"):
+            parse_sets([f"bake.split_pairs={bad}"])
+    assert parse_sets(["bake.split_pairs=[mouthSmile, eyeBlink]"]).tree
+    assert parse_sets(["bake.split_pairs=[]"]).tree
+
+
 def test_every_stiffness_in_default_is_checked_against_unit_interval():
     keys = [k for k in _leaf_keys(load_default().tree, leaves_only=True) if ".stiffness." in k]
     assert len(keys) >= 15
