@@ -32,8 +32,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from faceforge.io.config_rules import SPLITTABLE_PAIRS
-
 #: the 52 ARKit blendshape names, in Apple's ``ARFaceAnchor.BlendShapeLocation`` documentation order
 ARKIT_NAMES = (
     "eyeBlinkLeft", "eyeLookDownLeft", "eyeLookInLeft", "eyeLookOutLeft", "eyeLookUpLeft",
@@ -54,10 +52,6 @@ ARKIT_NAMES = (
 )
 
 #: FAP pairs (left, right) swapped by a mirror; FAP 15 (shift_jaw) changes sign
-#: the Left / Right pairs the bake may make from their bilateral pose (``bake.split_pairs``,
-#: :mod:`faceforge.blendshapes.split`; the config's rule lists them, below the blendshapes)
-SPLITTABLE = SPLITTABLE_PAIRS
-
 _FAP_PAIRS = ((6, 7), (8, 9), (10, 11), (12, 13), (19, 20), (21, 22), (23, 24), (25, 26), (27, 28),
               (29, 30), (31, 32), (33, 34), (35, 36), (37, 38), (39, 40), (41, 42), (53, 54), (55, 56),
               (57, 58), (59, 60), (61, 62), (65, 66), (67, 68))

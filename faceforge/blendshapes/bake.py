@@ -243,10 +243,7 @@ def _mirrored(specs, poses, twins, simulate, observe_probes, probes, mirror_fram
         target = np.array(list(spec.faps.values()), dtype=float)
         got = np.asarray(observe_probes([probes[f] for f in spec.faps])(frames[i:i + 1]), dtype=float)[0]
         src = poses[spec.mirror_of][3]
-        row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
-                           for f, t, a in zip(spec.faps, target, got)},
-               "error": round(float(np.linalg.norm(got - target) / np.linalg.norm(target)), 3),
-               **fap_reach(target, got), "mirrored_pose": True, "mirrored_shape": mirror_frame is not None,
+        row = {**fap_row(spec.faps, target, got), "mirrored_pose": True, "mirrored_shape": mirror_frame is not None,
                "controls": {mirror_name(k) if not k.startswith("jaw.") else k:
                             (-v if k == "jaw.yaw" else v) for k, v in src.get("controls", {}).items()}}
         out[spec.name] = (c[i], jaw[i], frames[i], row)
@@ -309,10 +306,7 @@ def _solve_shape(spec, faps, used, sub, J, simulate, observe, passes, ridge, tie
     x = res.x if tied is None else tied.expand(res.x)
     frame, observed, cold = _cold_if_folded(res, warmed, simulate, lambda fr: observe(fr)[:, rows], folds)
     res = replace(res, frame=frame, observed=observed)
-    row = {"targets": {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
-                       for f, t, a in zip(spec.faps, target, res.observed)},
-           "error": round(float(np.linalg.norm(res.observed - target) / np.linalg.norm(target)), 3),
-           **fap_reach(target, res.observed), "residuals": [round(r, 3) for r in res.residuals],
+    row = {**fap_row(spec.faps, target, res.observed), "residuals": [round(r, 3) for r in res.residuals],
            "saturated": _at_limit(space.names, x, space.lower, space.upper),
            "controls": {n: round(float(v), 4) for n, v in zip(space.names, x)}}
     if tied is not None:
@@ -346,6 +340,15 @@ def _at_limit(names, x, lower, upper) -> list:
     """The controls at a nonzero bound (a muscle fully contracted, the jaw at a limit)."""
     return [n for n, v, lo, hi in zip(names, x, lower, upper)
             if (hi != 0 and v >= hi - 1e-9) or (lo != 0 and v <= lo + 1e-9)]
+
+
+def fap_row(faps, target: np.ndarray, got: np.ndarray) -> dict:
+    """A shape's report entries for its FAP targets: ``faps`` the FAP numbers, ``target`` and ``got``
+    (d,) requested and achieved FAPU -> ``targets`` (per FAP), ``error`` (relative) and
+    :func:`fap_reach`'s ``reach``, ``form_error``, ``verdict``."""
+    t, g = np.asarray(target, dtype=float), np.asarray(got, dtype=float)
+    return {"targets": {str(f): {"requested": float(a), "achieved": round(float(b), 1)} for f, a, b in zip(faps, t, g)},
+            "error": round(float(np.linalg.norm(g - t) / np.linalg.norm(t)), 3), **fap_reach(t, g)}
 
 
 def fap_reach(target: np.ndarray, got: np.ndarray) -> dict:

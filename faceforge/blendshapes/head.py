@@ -18,7 +18,7 @@ from faceforge.animation.calibrate_head import calibration_probes
 from faceforge.animation.checks import check_animation, folded_edges
 from faceforge.animation.controls import controls
 from faceforge.blendshapes.arkit import ARKIT_NAMES, mirror_name
-from faceforge.blendshapes.bake import bake_shapes, fap_reach, mirror_agreement
+from faceforge.blendshapes.bake import bake_shapes, fap_row, mirror_agreement
 from faceforge.animation.eyeballs import eye_pieces
 from faceforge.blendshapes.rigsolve import probe_observer, settler
 from faceforge.blendshapes.solve import control_space
@@ -178,14 +178,14 @@ def _split_specs(specs: dict, stems) -> dict:
     """{stem: (left spec, right spec, bilateral spec)} of the ``stems`` (``bake.split_pairs``) whose two
     sides are made and move no jaw (:func:`faceforge.blendshapes.split.bilateral_spec`); a stem that is
     not a splittable ARKit pair is a :class:`faceforge.exceptions.ConfigError`."""
-    from faceforge.blendshapes.arkit import SPLITTABLE
     from faceforge.blendshapes.split import bilateral_spec
     from faceforge.exceptions import ConfigError
+    from faceforge.io.config_rules import SPLITTABLE_PAIRS
 
-    unknown = [str(s) for s in stems if s not in SPLITTABLE]
-    if unknown:
+    unknown = [str(s) for s in stems if s not in SPLITTABLE_PAIRS]
+    if unknown:   # the config's rule refuses these first; a caller of the library may not have read one
         raise ConfigError(f"bake.split_pairs: {', '.join(unknown)}: not a splittable ARKit pair "
-                          f"(one of {', '.join(SPLITTABLE)})")
+                          f"(one of {', '.join(SPLITTABLE_PAIRS)})")
     out = {}
     for stem in stems:
         left, right = specs.get(f"{stem}Left"), specs.get(f"{stem}Right")
@@ -214,7 +214,7 @@ def _split(head, pairs: dict, baked, probes, mirror_frame, log) -> dict:
     left_cols = np.array([n.endswith("_L") for n in names_c])
     right_cols = np.array([n.endswith("_R") for n in names_c])
     index = {n: i for i, n in enumerate(baked.names)}
-    rows, done = {}, []
+    rows, done, new = {}, [], {"frames": [], "contractions": [], "faps": []}
     for stem, (left, right, _) in pairs.items():
         rows[stem] = baked.report.get(stem)
         i = index.get(stem)
@@ -232,13 +232,16 @@ def _split(head, pairs: dict, baked, probes, mirror_frame, log) -> dict:
             for fap, v in spec.lids.items():
                 f68[fap - 1] = v
             baked.names.append(spec.name)
-            baked.frames = np.concatenate([baked.frames, f[None]])
-            baked.contractions = np.concatenate([baked.contractions, ck[None]])
-            baked.jaw = np.concatenate([baked.jaw, np.zeros((1, 3))])
-            baked.faps = np.concatenate([baked.faps, f68[None]])
-            baked.gaze = np.concatenate([baked.gaze, np.zeros((1, 4))])
+            for key, value in zip(new, (f, ck, f68)):
+                new[key].append(value)
             baked.report[spec.name] = _split_row(spec, stem, head, f, ck, names_c, probes)
         done.append(stem)
+    if new["frames"]:             # the split shapes after the solved ones (no jaw, no gaze)
+        k = len(new["frames"])
+        for key, rows_new in new.items():
+            setattr(baked, key, np.concatenate([getattr(baked, key), np.stack(rows_new)]))
+        baked.jaw = np.concatenate([baked.jaw, np.zeros((k, 3))])
+        baked.gaze = np.concatenate([baked.gaze, np.zeros((k, 4))])
     log(f"split from their bilateral poses ({2 * BLEND_MM:g} mm blend across the midline): {', '.join(done)}")
     return {"split": done, "blend_mm": 2 * BLEND_MM, "bilateral": rows,
             "note": "each pair is its bilateral pose (both sides' muscles, solved against both sides' FAP "
@@ -256,10 +259,7 @@ def _split_row(spec, stem, head, frame, contractions, control_names, probes) -> 
     if faps:
         got = np.asarray(probe_observer(head.rest, [probes[f] for f in faps])(frame[None]), dtype=float)[0]
         want = np.array([spec.faps[f] for f in faps], dtype=float)
-        row["targets"] = {str(f): {"requested": float(t), "achieved": round(float(a), 1)}
-                          for f, t, a in zip(faps, want, got)}
-        row["error"] = round(float(np.linalg.norm(got - want) / max(np.linalg.norm(want), 1e-12)), 3)
-        row.update(fap_reach(want, got))
+        row.update(fap_row(faps, want, got))
     return row
 
 
