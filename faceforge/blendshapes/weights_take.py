@@ -5,6 +5,12 @@ Each frame's controls are the baked shapes' controls mixed by the frame's weight
 limits, eyelid FAPs ``w @ L`` (the kinematic lids) and eye turns ``w @ G`` (eyeball pieces, when
 the mesh has them). The frames are simulated like any take
 (:func:`faceforge.animation.take.play_take`: a block at a time, real time or converged).
+
+The rig is not additive: shapes played together move less (or more) than their sum, and a take's
+frames read back against the baked shapes (``--curves``) give other weights than were played
+(MakeHuman, a joy take's curves replayed: RMS 0.045, ``mouthLowerDown`` 0.86 -> 0.57).
+:func:`refine_drive` corrects the drive a round at a time (``animate.arkit_rounds``) so that the
+played face reads back as the take's weights.
 """
 
 from __future__ import annotations
@@ -19,6 +25,9 @@ from faceforge.animation.take import play_take
 
 #: frames simulated per block of a weight track
 BLOCK = 1024
+#: the largest drive :func:`refine_drive` gives a shape (a weight of 1 is the baked pose; the
+#: controls are clipped to their ranges after mixing, whatever the drive)
+DRIVE_MAX = 1.5
 
 
 def mixed_controls(w: np.ndarray, baked, rows, mapping, levers_pitch: float) -> tuple[np.ndarray, np.ndarray]:
@@ -82,3 +91,56 @@ def _eye_turns(head, weights: np.ndarray, gaze: np.ndarray):
 
     eyes = eye_pieces(head.rest, head.faces, head.landmarks)
     return lambda frames, first: apply_gaze(frames, weights[first:first + len(frames)] @ gaze, eyes)
+
+
+def refine_drive(play_back, target: np.ndarray, rounds: int, upper: float = DRIVE_MAX,
+                 log=print) -> tuple[np.ndarray, list]:
+    """The drive whose played take reads back as ``target``: a fixed-point correction in weight
+    space, ``drive <- clip(drive - (back - target), 0, upper)`` per round, from ``drive = target``.
+
+    play_back
+        ``play_back(drive (F, k)) -> back (F, k)``: the take played with that drive and its
+        frames' weights solved against the baked shapes (as ``--curves`` solves them).
+    target
+        ``(F, k)`` the take's weights in [0, 1], one column per made shape (0 where the take
+        has none).
+    rounds
+        corrections (each one playback and one solve); 0 returns the target itself.
+
+    Returns ``(drive (F, k), errors)``, ``errors`` a dict per round of the read-back error of the
+    drive played in it: ``{"rms", "max"}`` (weights).
+    """
+    target = np.asarray(target, float)
+    drive = target.copy()
+    errors = []
+    for r in range(rounds):
+        err = np.asarray(play_back(drive), float) - target
+        errors.append({"rms": float(np.sqrt(np.mean(err ** 2))), "max": float(np.abs(err).max(initial=0.0))})
+        log(f"round {r + 1}: the played take reads back {errors[-1]['rms']:.4f} RMS, "
+            f"{errors[-1]['max']:.3f} at most, off its weights")
+        drive = np.clip(drive - err, 0.0, upper)
+    return drive, errors
+
+
+def played_readback(head, fps: float, baked, rows, mapping, scratch, *, ridge: float, smooth: float,
+                    lids=None, offline=None, log=print):
+    """``play_back(drive)`` for :func:`refine_drive`: plays ``drive (F, len(rows))`` through the
+    baked shapes ``rows`` into the ``.npz`` at ``scratch`` (overwritten each call; the caller
+    removes it) and solves the frames' weights against the same shapes
+    (:func:`faceforge.blendshapes.curves.solve_weights` with ``ridge`` and ``smooth``, as
+    ``--curves`` does) -> ``(F, len(rows))``."""
+    from faceforge.blendshapes.curves import solve_weights
+    from faceforge.io.frame_stream import FrameNpzWriter, open_frames, release
+
+    def play_back(drive: np.ndarray) -> np.ndarray:
+        with FrameNpzWriter(scratch, len(drive), len(head.user_index)) as writer:
+            play_weights(head, drive, fps, baked, rows, mapping, writer, lids=lids, offline=offline,
+                         log=lambda *_: None)
+            writer.close()
+        frames = open_frames(scratch)
+        try:
+            return solve_weights(frames, baked["neutral"], baked["shapes"][rows], ridge=ridge, smooth=smooth)
+        finally:
+            release(frames)
+            del frames
+    return play_back

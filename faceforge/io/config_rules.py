@@ -181,6 +181,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.lip_contact_mm", Number(0.0, 20.0)),  # mm; 0 turns the lips' one-sided contact off
     ("bake.split_pairs", ListOf(Choice(SPLITTABLE_PAIRS))),  # ARKit pair stems (mouthSmile); [] = off
     ("match.rigid", Boolean()),                       # `faceforge match --rigid`: the target's head motion removed first
+    ("animate.arkit_rounds", Integer(0, 20)),          # 0: the ARKit take's weights played as given
     ("curves.ridge", Number(0.0, 1.0)),               # --curves' ridge (unitless): 0 = plain bounded least squares
     ("curves.smooth", Number(0.0, 100.0)),            # --curves' smoothness over frames (unitless): 0 = off
     ("muscle.damping", Number(0.0, 0.99)),

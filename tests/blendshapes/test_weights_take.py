@@ -39,3 +39,22 @@ def test_weight_blocks_cover_the_take_in_blocks_with_the_lid_faps(monkeypatch):
     faps = np.concatenate([b.faps for b in blocks])
     assert np.allclose(faps, w @ baked["lids"][[1, 2]])
     assert all(not np.any(b.angles) for b in blocks)                   # the head does not turn
+
+
+def _not_additive(drive):
+    """A stand-in rig read back: each shape alone reads 0.8 of its drive, and shape 0 pulls shape
+    1 back by 0.3 of its own drive (two muscles playing together move less than their sum)."""
+    back = 0.8 * drive.copy()
+    back[:, 1] -= 0.3 * drive[:, 0]
+    return np.clip(back, 0.0, 1.0)
+
+
+def test_refine_drive_makes_a_non_additive_take_read_back_as_its_weights():
+    target = np.array([[0.0, 0.0], [0.5, 0.2], [0.9, 0.6], [0.3, 0.0]])
+    drive, errors = weights_take.refine_drive(_not_additive, target, rounds=8, log=lambda *_: None)
+    assert len(errors) == 8 and errors[0]["max"] > 0.2                  # played as given, it misses
+    assert all(b["rms"] < a["rms"] for a, b in zip(errors, errors[1:]))
+    assert np.abs(_not_additive(drive) - target).max() < 0.01            # corrected, it reads back
+    assert drive.min() >= 0.0 and drive.max() <= weights_take.DRIVE_MAX
+    same, none = weights_take.refine_drive(_not_additive, target, rounds=0)
+    assert np.array_equal(same, target) and none == []

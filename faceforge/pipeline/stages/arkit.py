@@ -4,8 +4,12 @@
 CSV, a plain CSV or JSON of name -> weight per frame: :func:`faceforge.blendshapes.curves.read_weights`)
 on the bound head: each frame's controls are the weighted sum of the baked shapes' controls
 (contractions, jaw DOFs, eyelid FAPs; ``faceforge bake``, brought up to date first), clipped to
-their ranges, and simulated like any track. Writes ``<workdir>/arkit/animation.npz`` (the animate
-stage's format, plus ``weights (F, k)`` and ``names``) and ``report.json``.
+their ranges, and simulated like any track. The rig is not additive, so the drive is corrected
+``animate.arkit_rounds`` times first (:func:`faceforge.blendshapes.weights_take.refine_drive`: each
+round plays the take and reads its frames back against the baked shapes as ``--curves`` does) until
+the played face reads back as the take's weights. Writes ``<workdir>/arkit/animation.npz`` (the
+animate stage's format, plus ``weights (F, k)`` and ``names``, and the corrected ``drive (F, j)``
+over the made shapes ``drive_shapes``) and ``report.json`` (``rounds``: each round's read-back error).
 
 ``animate ... --curves out.csv|json`` solves per-frame ARKit weights of the track just played
 against the baked shapes (:func:`faceforge.blendshapes.curves.solve_weights`, bounded least
@@ -34,7 +38,7 @@ def run_arkit(ctx):
     from faceforge.animation.rig import BoundHead
     from faceforge.animation.statics import SettleSettings
     from faceforge.blendshapes.curves import read_weights
-    from faceforge.blendshapes.weights_take import play_weights
+    from faceforge.blendshapes.weights_take import play_weights, played_readback, refine_drive
     from faceforge.exceptions import StageError
     from faceforge.io.frame_stream import FrameNpzWriter, open_frames
     from faceforge.io.stagefiles import load_npz, save_json
@@ -56,31 +60,45 @@ def run_arkit(ctx):
     ctx.log(f"{len(weights)} frames at {fps:g} fps, {len(cols)} shapes")
     timings = Timings()
     offline = SettleSettings.from_config(ctx.config) if ctx.config.get("animate.quality") == "offline" else None
+    lids = head.eyelids(ctx.config)
+    drive, rows = weights[:, cols], [index[names[j]] for j in cols]
+    rounds, errors = int(ctx.config.get("animate.arkit_rounds")), []
+    if rounds:               # every made shape a column: the correction may drive any of them
+        rows = [int(i) for i in np.flatnonzero(made)]
+        target = np.zeros((len(weights), len(rows)))
+        target[:, [rows.index(index[names[j]]) for j in cols]] = weights[:, cols]
+        scratch = ctx.out_dir / "round.npz"
+        play_back = played_readback(head, fps, baked, rows, mapping, scratch, lids=lids, offline=offline,
+                                    ridge=float(ctx.config.get("curves.ridge")),
+                                    smooth=float(ctx.config.get("curves.smooth")))
+        drive, errors = refine_drive(play_back, target, rounds, log=ctx.log)
+        scratch.unlink(missing_ok=True)
     bar = ctx.progress(None, total=len(weights), desc="frames")
     with FrameNpzWriter(ctx.out_dir / "animation.npz", len(weights), len(head.user_index)) as writer:
         try:
-            checker = play_weights(head, weights[:, cols], fps, baked, [index[names[j]] for j in cols], mapping,
-                                   writer, lids=head.eyelids(ctx.config), timings=timings, offline=offline,
-                                   bar=bar, log=ctx.log)
+            checker = play_weights(head, drive, fps, baked, rows, mapping, writer, lids=lids, timings=timings,
+                                   offline=offline, bar=bar, log=ctx.log)
         finally:
             bar.close()
         writer.close(fps=np.float64(fps), contractions=writer.SPOOLED, controls=np.asarray(head.controls, dtype=str),
-                     jaw=writer.SPOOLED, weights=weights, names=np.asarray(names))
+                     jaw=writer.SPOOLED, weights=weights, names=np.asarray(names),
+                     **({"drive": drive, "drive_shapes": baked["names"][rows]} if rounds else {}))
     jaws = open_frames(ctx.out_dir / "animation.npz", "jaw")   # a map: the few frames the skull test reads
     checks = checker.report(skull=lambda i: head.skull_at(np.asarray(jaws[i]) if i >= 0 else np.zeros(3)))
     save_json(ctx.out_dir / "report.json", {
         "take": str(take), "frames": len(weights), "fps": fps, "shapes": [names[j] for j in cols],
-        "ignored": ignored, "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict()})
+        "ignored": ignored, "rounds": errors, "per_frame_ms": timings.per_frame_ms(), "checks": checks.as_dict()})
     ctx.log(f"{timings.per_frame_ms()['total']:.1f} ms/frame; checks: {'ok' if checks.ok else checks.as_dict()}")
 
 
 ARKIT = register_stage(Stage(
     name="arkit", deps=("fit", "bind", "calibrate", "bake"),
     config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm", "skin.join_insertions", "skin.cheek_tether",
-                 "skin.lid_hold", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template"),
+                 "skin.lid_hold", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template",
+                 "curves"),
     inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="9", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
+    version="10", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
 
 
 def write_curves(app, stage: str, curves: str | None, output: str | None) -> bool:
