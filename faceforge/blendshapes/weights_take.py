@@ -25,9 +25,9 @@ from faceforge.animation.take import play_take
 
 #: frames simulated per block of a weight track
 BLOCK = 1024
-#: the largest drive :func:`refine_drive` gives a shape (a weight of 1 is the baked pose; the
-#: controls are clipped to their ranges after mixing, whatever the drive)
-DRIVE_MAX = 1.5
+#: the largest drive :func:`refine_drive` gives a shape: its baked pose (driven past it, the lagging start of
+#: a take overshot into other shapes: ICT, noseSneer read 0.40 where none was played, at a cap of 1.5)
+DRIVE_MAX = 1.0
 
 
 def mixed_controls(w: np.ndarray, baked, rows, mapping, levers_pitch: float) -> tuple[np.ndarray, np.ndarray]:

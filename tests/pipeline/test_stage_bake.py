@@ -79,4 +79,14 @@ def test_bake_then_play_the_baked_shape_back(workdir, patched, tmp_path):  # noq
     assert np.allclose(a["jaw"][-1], d["jaw"][j])
     peak = np.linalg.norm(d["shapes"][j] - d["neutral"], axis=1).max()
     assert np.linalg.norm(a["frames"][-1] - d["shapes"][j], axis=1).max() <= 0.1 * peak
+    assert not undeclared_reads("arkit", READS["arkit"])
+
+    # corrected for a round (animate.arkit_rounds): the take played once, read back against every made
+    # shape, and its drive over them stored beside the take's weights
+    out3 = _run("arkit", workdir, {**params, "arkit_take": str(tmp_path / "take.json")}, ("fit", "bind", "bake"),
+                sets=("animate.arkit_rounds=1", *glide))
+    a3, report3 = load_npz(out3 / "animation.npz"), json.loads((out3 / "report.json").read_text())
+    assert len(report3["rounds"]) == 1 and report3["rounds"][0]["max"] > 0
+    assert list(a3["drive_shapes"]) == [n for n, m in zip(names, d["made"]) if m]
+    assert a3["drive"].shape == (4, int(np.count_nonzero(d["made"]))) and 0 <= a3["drive"].min() <= a3["drive"].max() <= 1
     assert not undeclared_reads("bake", READS["bake"]) and not undeclared_reads("arkit", READS["arkit"])
