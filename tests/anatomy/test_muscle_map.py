@@ -240,4 +240,17 @@ def test_max_contraction_is_kept_and_mirrored(tmp_path, skull, by_name):
     specs = load_muscle_map(write(tmp_path, GOOD.replace("    w: 2\n", "    w: 2\n    max_contraction: 0.7\n", 1)),
                             skull)
     assert [s.max_contraction for s in specs] == [None, 0.7, 0.7, None]
-    assert by_name["depressor_anguli_L"].max_contraction == by_name["depressor_anguli_R"].max_contraction == 0.7
+    assert by_name["depressor_anguli_L"].max_contraction == by_name["depressor_anguli_R"].max_contraction == 0.75
+
+
+def test_depressor_anguli_draws_the_corner_down_and_out(by_name):
+    """The depressor anguli runs from the mandible's lower border (below the oblique line, lateral
+    of the corner) up to the modiolus: both edges of its sheet lean out as they go down, at least 5
+    degrees from the vertical in the frontal plane, so it draws the corner down and out (FACS AU15).
+    The first map's origin (1.8 / 3.7 cm from the chin FDP) gave a medial edge within 2 degrees of
+    vertical, and on ICT's fit a muscle that pulled the corner in (docs/notes/sad20.md, dao21.md)."""
+    dao = by_name["depressor_anguli_L"]
+    for origin, insertion in zip(dao.origin, dao.insertion):
+        fibre = origin - insertion
+        assert fibre[1] < 0
+        assert np.degrees(np.arctan2(fibre[0], -fibre[1])) >= 5.0
