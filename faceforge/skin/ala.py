@@ -27,7 +27,7 @@ from faceforge.constants import FLOAT, INT
 ALA_MM = 5.0
 
 #: the nearest muscle point counts distance along ``up`` this many times (1: the closest point)
-ALA_STRETCH = 4.0
+ALA_STRETCH = 10.0
 
 #: the alar creases (the nose's widest points) and the alar bases, subject's left and right
 ALA_FDPS = ("9.1", "9.2", "9.4", "9.5")
