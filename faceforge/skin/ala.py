@@ -10,10 +10,12 @@ of the nose to the cranium: on the MakeHuman sample 64 of the 86 vertices of one
 nostril rim sat on the bone, and the unit's ala moved 0.35 of its field (docs/notes/nose21.md).
 
 The ala's skin that lies on the bone binds instead to the muscle, at the muscle's point nearest
-in a metric that counts the distance along ``up`` :data:`ALA_STRETCH` times: the point beside
-the ala at its own height. The plain closest point was the muscle's lowest, most medial corner
-under the columella (for 17 of 23 vertices of an ala), which the contracting muscle draws up
-and 12 mm back into the nasal aperture: the ala went into the face.
+in a metric that counts the distance along ``up`` :data:`ALA_STRETCH` times (the point at the
+ala's own height), among the muscle's faces beside the ala (:data:`ALA_LATERAL`). The plain
+closest point was the muscle's lowest, most medial corner under the columella (for 17 of 23
+vertices of an ala), which the contracting muscle draws up and 12 mm back into the nasal
+aperture: the ala went into the face (nose-left-elevation 0.394); at the ala's height but on
+the muscle's medial edge it still went 3-9 mm back (0.645); beside the ala, 1.4-3.8 (0.778).
 """
 
 from __future__ import annotations
@@ -28,6 +30,11 @@ ALA_MM = 5.0
 
 #: the nearest muscle point counts distance along ``up`` this many times (1: the closest point)
 ALA_STRETCH = 10.0
+
+#: the ala binds to the muscle's faces at least this fraction of the alar base's distance from the
+#: midline away from it (:func:`beside_ala`): the part beside the ala, not the slip under the
+#: nostril's floor, which the contracting muscle draws back into the nasal aperture
+ALA_LATERAL = 0.75
 
 #: the alar creases (the nose's widest points) and the alar bases, subject's left and right
 ALA_FDPS = ("9.1", "9.2", "9.4", "9.5")
@@ -76,13 +83,29 @@ def stretched_closest(points, vertices, faces, up=(0.0, 1.0, 0.0), stretch: floa
     return tri, bary, on, d
 
 
+def beside_ala(vertices, faces, landmarks: dict, lateral: float = ALA_LATERAL) -> np.ndarray:
+    """(l,) bool: the triangles ``faces`` of ``vertices (m, 3)`` whose centroid lies at least
+    ``lateral`` times the alar bases' half distance (FDPs 9.4, 9.5) from the midline (the plane
+    through their middle across them); all of them without the two FDPs or for ``lateral <= 0``."""
+    f = np.asarray(faces, INT)
+    if lateral <= 0 or "9.4" not in landmarks or "9.5" not in landmarks:
+        return np.ones(len(f), bool)
+    a, b = np.asarray(landmarks["9.4"], FLOAT), np.asarray(landmarks["9.5"], FLOAT)
+    half = 0.5 * float(np.linalg.norm(b - a))
+    if half <= 0.0:
+        return np.ones(len(f), bool)
+    c = np.asarray(vertices, FLOAT)[f].mean(axis=1)
+    return np.abs((c - 0.5 * (a + b)) @ ((b - a) / (2.0 * half))) >= lateral * half
+
+
 def ala_binding(binding, vertices, bodies, muscles, mask, max_distance: float, up=(0.0, 1.0, 0.0),
-                stretch: float = ALA_STRETCH):
+                stretch: float = ALA_STRETCH, landmarks=None, lateral: float = ALA_LATERAL):
     """``binding`` (:class:`faceforge.skin.binding.Binding`) with the vertices of ``mask`` (n,)
     bool whose only anchor is on the bone rebound to the point of the bodies ``muscles`` (indices
     into ``bodies``) nearest in the stretched metric of :func:`stretched_closest`, within
-    ``max_distance`` (skin units, stretched); a vertex with none in reach keeps its anchor.
-    Returns ``(binding, count rebound)``."""
+    ``max_distance`` (skin units, stretched), on the muscles' faces beside the ala
+    (:func:`beside_ala` with ``landmarks``; None: all faces); a vertex with none in reach keeps
+    its anchor. Returns ``(binding, count rebound)``."""
     from dataclasses import replace
 
     from faceforge.skin.casting import MUSCLE
@@ -103,7 +126,12 @@ def ala_binding(binding, vertices, bodies, muscles, mask, max_distance: float, u
     bary = np.zeros((len(todo), 3))
     pts = np.zeros((len(todo), 3))
     for i in muscles:
-        tri, b, on, d = stretched_closest(v[todo], bodies[i].vertices, bodies[i].faces, up, stretch)
+        keep = np.flatnonzero(beside_ala(bodies[i].vertices, bodies[i].faces, landmarks or {}, lateral))
+        if not len(keep):
+            continue
+        tri, b, on, d = stretched_closest(v[todo], bodies[i].vertices, np.asarray(bodies[i].faces, INT)[keep], up,
+                                          stretch)
+        tri = keep[tri]
         take = (d < best) & (d <= max_distance)
         best[take], body[take], face[take], bary[take], pts[take] = d[take], i, tri[take], b[take], on[take]
     ok = np.isfinite(best)

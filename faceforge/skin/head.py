@@ -258,7 +258,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         from faceforge.skin.ala import ala_binding, ala_mask
 
         binding, ala = ala_binding(binding, cut.vertices, bodies, ala_ids, ala_mask(cut.vertices, pts, ala_mm),
-                                   max_ray_fraction * diagonal, up=up)
+                                   max_ray_fraction * diagonal, up=up, landmarks=pts)
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding

@@ -69,3 +69,25 @@ def test_ala_skin_on_bone_moves_to_the_levator_at_its_height():
     assert binding.body.tolist() == [1, 0, 1, 1]   # the input is not changed
     same, none = ala_binding(binding, v, bodies, [0], mask, 1.0)   # nothing in reach
     assert none == 0 and same is binding
+
+
+def test_the_ala_binds_beside_itself_not_under_the_nostril():
+    """Only the muscle's faces at least ALA_LATERAL of the alar base's distance from the midline
+    (12 mm here: 9 mm) take the ala: the strip's half nearer the midline is left out."""
+    from faceforge.skin.ala import beside_ala
+
+    v = np.array([[0.0, 0.0, -10.0], [6.0, 0.0, -10.0], [6.0, 10.0, -10.0], [0.0, 10.0, -10.0],
+                  [20.0, 0.0, -10.0], [20.0, 10.0, -10.0]])
+    f = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]])
+    assert beside_ala(v, f, LANDMARKS).tolist() == [False, False, True, True]
+    assert beside_ala(v, f, LANDMARKS, 0.0).all() and beside_ala(v, f, {}).all()
+    bodies = [Body("levator_labii_inner_L", "muscle", v, f)]
+    binding = Binding(body_names=("levator_labii_inner_L", "cranium"), status=np.array([CRANIUM], np.int8),
+                      vertex_ids=np.arange(1), body=np.array([1]), face_ids=np.zeros(1, np.int64),
+                      bary=np.full((1, 3), 1 / 3), points=np.array([[2.0, 5.0, -30.0]]), distance=np.array([30.0]),
+                      outward=np.zeros(1, bool), normals=np.array([[0.0, 0.0, 1.0]]), closest=np.zeros(1, bool))
+    near = np.array([[2.0, 5.0, 0.0]])   # in front of the strip's medial half
+    out, _ = ala_binding(binding, near, bodies, [0], np.array([True]), 200.0, landmarks=LANDMARKS)
+    assert out.points[0, 0] >= 6.0 - 1e-9 and out.face_ids[0] in (2, 3)   # on the lateral faces
+    out, _ = ala_binding(binding, near, bodies, [0], np.array([True]), 200.0)   # no landmarks: the closest
+    np.testing.assert_allclose(out.points[0, :2], [2.0, 5.0])
