@@ -155,11 +155,12 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         their rays these bound to it: a pucker or a rounded viseme, which lifts and pushes the
         ring, carried the nose with the lip (docs/notes/tent17.md). False: by the rays.
     ala_mm, ala_muscles : float, sequence of str
-        ``bind.ala_mm``, ``bind.ala_muscles``: the ala's skin (:func:`ala_mask`: within this many
-        mm of the alar base-to-crease line) that its rays (or ``nose_on_bone``) bound to the bone
-        binds to the closest of these muscles instead (the levator labii superioris alaeque nasi,
-        whose medial slip inserts into the alar cartilage and its skin), at the muscle's
-        point nearest the ala's own height (:func:`faceforge.skin.ala.ala_binding`); 0 or none: off.
+        ``bind.ala_mm``, ``bind.ala_muscles``: the ala's skin (:func:`faceforge.skin.ala.ala_mask`:
+        within this many mm of the alar base-to-crease line) that its rays (or ``nose_on_bone``)
+        bound to the bone binds to these muscles instead (the levator labii superioris alaeque
+        nasi, whose medial slip inserts into the alar cartilage and its skin), at the point of
+        their part beside the ala nearest the ala's own height
+        (:func:`faceforge.skin.ala.ala_binding`); 0 or none: off.
     mirror : faceforge.geometry.mirror.Mirror or None
         A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
         image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
