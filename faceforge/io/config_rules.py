@@ -214,6 +214,8 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.vermilion_reach", Number(0.0, 5.0)),
     ("bind.forehead_bone_mm", Number(0.0, 100.0)),                # 0: off (the forehead by its rays)
     ("bind.nose_on_bone", Boolean()),
+    ("bind.ala_mm", Number(0.0, 30.0)),                           # 0: off (the ala by its rays)
+    ("bind.ala_muscles", ListOf(String())),
     ("bind.normal_rounds", Integer(0, 50)),                       # 0: the vertex normals as they are
     ("fit.normal_rounds", Integer(0, 50)),
     ("fit.noisy_normal_rounds", Integer(0, 50)),                  # 0: a fit that fails its checks is not refitted

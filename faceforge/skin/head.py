@@ -84,7 +84,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               brow_muscles=(), brow_shared_mm: float = 0.0, brow_raisers=(), cheek_mm: float = 0.0,
               forehead_bone_mm: float = 0.0,
               cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS,
-              vermilion: float = 0.0, nose_on_bone: bool = False, normal_rounds: int = 0) -> BoundSkin:
+              vermilion: float = 0.0, nose_on_bone: bool = False, normal_rounds: int = 0,
+              ala_mm: float = 0.0, ala_muscles=()) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -153,6 +154,13 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         pars peripheralis, at the nasal sill) lie behind the nostrils and the columella, and by
         their rays these bound to it: a pucker or a rounded viseme, which lifts and pushes the
         ring, carried the nose with the lip (docs/notes/tent17.md). False: by the rays.
+    ala_mm, ala_muscles : float, sequence of str
+        ``bind.ala_mm``, ``bind.ala_muscles``: the ala's skin (:func:`faceforge.skin.ala.ala_mask`:
+        within this many mm of the alar base-to-crease line) that its rays (or ``nose_on_bone``)
+        bound to the bone binds to these muscles instead (the levator labii superioris alaeque
+        nasi, whose medial slip inserts into the alar cartilage and its skin), at the point of
+        their part beside the ala nearest the ala's own height
+        (:func:`faceforge.skin.ala.ala_binding`); 0 or none: off.
     mirror : faceforge.geometry.mirror.Mirror or None
         A symmetric rig's plane (fit.npz): each right skin vertex is bound as the mirror
         image of its left partner (:func:`faceforge.skin.mirror.mirror_binding`).
@@ -245,6 +253,13 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         ring = [i for i, s in enumerate(body_sides) if s == AROUND_MOUTH]
         binding, nose = onto_cranium(binding, cut.vertices, bodies, ring, nose_mask(cut.vertices, pts, up),
                                      max_ray_fraction * diagonal)
+    ala = 0
+    ala_ids, _ = match_insertions(ala_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
+    if ala_ids and ala_mm > 0:   # the ala on the levator labii alaeque nasi's medial slip, off the bone
+        from faceforge.skin.ala import ala_binding, ala_mask
+
+        binding, ala = ala_binding(binding, cut.vertices, bodies, ala_ids, ala_mask(cut.vertices, pts, ala_mm),
+                                   max_ray_fraction * diagonal, up=up, landmarks=pts)
     mirrored = 0
     if mirror is not None:
         from faceforge.skin.mirror import MIRROR_TOLERANCE, mirror_binding
@@ -263,6 +278,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         report["forehead_on_bone"] = forehead
     if nose_on_bone:   # (off, the report as before)
         report["nose_on_bone"] = nose
+    if ala_ids and ala_mm > 0:   # (off, the report as before)
+        report["ala_on_muscle"] = ala
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
     kind = binding.status[corner]   # the kind of each corner vertex's (first) anchor

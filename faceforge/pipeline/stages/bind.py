@@ -96,7 +96,8 @@ def run(ctx):
     head = load_fit(ctx.input("fit"))
     insertions = tuple(str(n) for n in ctx.config.get("bind.insertions"))
     names = [str(m[0]) for m in head["muscles"]]
-    for key in ("bind.insertions", "bind.brow_muscles", "bind.brow_raisers", "bind.cheek_muscles"):
+    for key in ("bind.insertions", "bind.brow_muscles", "bind.brow_raisers", "bind.cheek_muscles",
+                "bind.ala_muscles"):
         _, unknown = match_insertions(tuple(str(n) for n in (ctx.config.get(key) or ())), names)
         if unknown:   # a map of one's own may lack the template's brow depressors (or a typo): say so, go on
             ctx.log(f"warning: {key}: no muscle {', '.join(unknown)} in the fitted map; "
@@ -117,7 +118,9 @@ def run(ctx):
                       nose_on_bone=bool(ctx.config.get("bind.nose_on_bone")),
                       normal_rounds=int(ctx.config.get("bind.normal_rounds")),
                       cheek_mm=float(ctx.config.get("bind.cheek_mm")),
-                      cheek_muscles=tuple(str(n) for n in ctx.config.get("bind.cheek_muscles")))
+                      cheek_muscles=tuple(str(n) for n in ctx.config.get("bind.cheek_muscles")),
+                      ala_mm=float(ctx.config.get("bind.ala_mm")),
+                      ala_muscles=tuple(str(n) for n in (ctx.config.get("bind.ala_muscles") or ())))
     front = bound.report["regions"]["face_front"]["fraction"]["bound"]
     ctx.log(f"mouth: {bound.report['mouth']['action']}; face front bound: {100 * front:.1f}%")
     rigid = bound.report.get("rigid_parts", {})
