@@ -212,6 +212,7 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.modiolus_radius", Number(0.0, 0.5)),
     ("bind.commissure_radius", Number(0.0, 0.5)),
     ("bind.vermilion_reach", Number(0.0, 5.0)),
+    ("bind.vermilion_depth_mm", Number(0.0, 100.0)),               # 0: off (the red of the lips by its rays)
     ("bind.forehead_bone_mm", Number(0.0, 100.0)),                # 0: off (the forehead by its rays)
     ("bind.nose_on_bone", Boolean()),
     ("bind.ala_mm", Number(0.0, 30.0)),                           # 0: off (the ala by its rays)

@@ -205,3 +205,26 @@ def vermilion_anchors(v, rules: Rules, hits: tuple, mask) -> np.ndarray:
                               rules.allowed, body, face, pts, dist, rules.side_of, rules.face_sides)
     outward[moved] = False
     return moved
+
+
+def deep_vermilion_anchors(v, rules: Rules, hits: tuple, mask, depth: float) -> np.ndarray:
+    """The vermilion (``mask`` (n,) bool, :func:`faceforge.skin.rules.vermilion_mask`) that the
+    passes before bound deeper than ``depth`` (skin units, > 0) to a muscle not around the mouth
+    (ICT's lower lip near the corners: the depressor labii inferioris, 21-24 mm under it) binds to
+    the closest point of its own lip's arc of the muscles around the mouth
+    (``casting._modiolus_anchors``), as the red of the lips beside it does.
+
+    The lip's red is the orbicularis oris' own skin; anchored under it to a muscle 2 cm deep, it
+    stays back while its neighbours on the ring come forward with the pucker, and the lower lip
+    folds at the corners (docs/notes/purse21.md). Updates ``hits`` (the arrays of
+    :func:`ray_passes`) in place; returns the (n,) bool mask moved."""
+    body, face, pts, dist, outward = hits
+    if rules.around is None or not depth > 0.0:
+        return np.zeros(len(v), bool)
+    b = np.maximum(body, 0)
+    todo = (np.asarray(mask, bool) & (body >= 0) & (rules.kinds[b] == MUSCLE) & ~rules.around[b]
+            & (dist > float(depth)) & (rules.sides != 0))
+    moved = _modiolus_anchors(v, rules.bodies, rules.around, rules.sides, todo, rules.max_distance,
+                              rules.allowed, body, face, pts, dist, rules.side_of, rules.face_sides)
+    outward[moved] = False
+    return moved

@@ -138,12 +138,16 @@ class InsertionRegions:
     (:func:`faceforge.skin.bind_passes` ``fallbacks``); commissure : the lip skin at the inner
     lip corners, onto either lip's arc (:func:`faceforge.skin.bind_passes.commissure_anchors`);
     vermilion : the red of the lips on the bone, onto its own lip's arc
-    (:func:`faceforge.skin.bind_passes.vermilion_anchors`); brow : :class:`BrowRegion`.
+    (:func:`faceforge.skin.bind_passes.vermilion_anchors`); deep : the red of the lips, where
+    bound deeper than ``deep_depth`` (skin units) to a muscle not around the mouth, onto its own
+    lip's arc (:func:`faceforge.skin.bind_passes.deep_vermilion_anchors`); brow : :class:`BrowRegion`.
     """
 
     modiolus: np.ndarray | None = None
     commissure: np.ndarray | None = None
     vermilion: np.ndarray | None = None
+    deep: np.ndarray | None = None
+    deep_depth: float = 0.0
     brow: BrowRegion | None = None
 
 
@@ -329,9 +333,9 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         raise ValueError(f"lip_sides {sides.shape} must have one entry per vertex ({n})")
     rules = bind_rules(bodies, sides, max_distance, depth_rank, side_of, body_sides, face_sides)
     regions = InsertionRegions() if regions is None else regions
-    corner, comm, verm = (None if m is None else _vertex_mask(m, n, name) for m, name in
-                          ((regions.modiolus, "modiolus"), (regions.commissure, "commissure"),
-                           (regions.vermilion, "vermilion")))
+    corner, comm, verm, deep = (None if m is None else _vertex_mask(m, n, name) for m, name in
+                                ((regions.modiolus, "modiolus"), (regions.commissure, "commissure"),
+                                 (regions.vermilion, "vermilion"), (regions.deep, "deep")))
     corner = np.zeros(n, bool) if corner is None else corner
     hits = ray_passes(v, nrm, rules)
     closest = fallbacks(v, rules, hits, np.broadcast_to(np.asarray(fallback, bool), (n,)),
@@ -342,6 +346,10 @@ def bind_skin(vertices, faces, bodies, max_distance: float, lip_sides=None,
         from faceforge.skin.bind_passes import vermilion_anchors
 
         closest[vermilion_anchors(v, rules, hits, verm)] = False
+    if deep is not None and regions.deep_depth > 0:   # the red of the lips on a deep muscle: onto its arc
+        from faceforge.skin.bind_passes import deep_vermilion_anchors
+
+        closest[deep_vermilion_anchors(v, rules, hits, deep, regions.deep_depth)] = False
     body, face, pts, dist, outward = hits
     brow = regions.brow
     if brow is not None:   # the brow's insertion: brow skin on the bone moves to the brow muscles

@@ -85,7 +85,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
               forehead_bone_mm: float = 0.0,
               cheek_muscles=(), commissure_radius: float = COMMISSURE_RADIUS,
               vermilion: float = 0.0, nose_on_bone: bool = False, normal_rounds: int = 0,
-              ala_mm: float = 0.0, ala_muscles=()) -> BoundSkin:
+              ala_mm: float = 0.0, ala_muscles=(), vermilion_depth_mm: float = 0.0) -> BoundSkin:
     """Cut the lips, bind the skin (§8) and compute the influence map (Fig. 9).
 
     Parameters
@@ -127,6 +127,11 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         corners keep their rule), that its rays bound to the skull binds to its own lip's arc of
         the orbicularis oris
         (:func:`faceforge.skin.bind_passes.vermilion_anchors`; 0: by its rays).
+    vermilion_depth_mm : float
+        ``bind.vermilion_depth_mm``: the red of the lips (:func:`vermilion_mask` at 1, out of the
+        modiolus mask) that its rays bound deeper than this many mm (scaled by ES0) to a muscle
+        not around the mouth binds to its own lip's arc of the orbicularis oris
+        (:func:`faceforge.skin.bind_passes.deep_vermilion_anchors`; 0: by its rays).
     brow_band_mm, brow_muscles : float, sequence of str
         ``bind.brow_band_mm``, ``bind.brow_muscles`` (names or pair names as ``insertions``):
         brow skin that its rays bound to the bone binds to the closest brow muscle
@@ -213,6 +218,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
     corner = modiolus_mask(cut.vertices, pts, modiolus_radius)
     commissure = commissure_mask(cut.vertices, pts, commissure_radius)
     verm = vermilion_mask(cut, sides, pts, vermilion) & ~corner if vermilion > 0 else None   # the corners: the modiolus'
+    deep = vermilion_mask(cut, sides, pts, 1.0) & ~corner if vermilion_depth_mm > 0 else None
     brow_ids, _ = match_insertions(brow_muscles, [b.name if b.kind == "muscle" else None for b in bodies])
     brow = brow_mask(cut.vertices, pts, brow_band_mm, up=up) if brow_ids else np.zeros(len(cut.vertices), bool)
     eye_ids, _ = match_insertions(tuple(brow_muscles) + ("orbicularis_oculi",) if brow_ids else (),
@@ -231,6 +237,8 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
                         depth_rank=rank, side_of=side_of, fallback=front, body_sides=body_sides,
                         insertions=ins, face_sides=face_sides, lips_to_ring=lips_to_ring,
                         regions=InsertionRegions(modiolus=corner, commissure=commissure, vermilion=verm,
+                                                 deep=deep, deep_depth=vermilion_depth_mm * units_per_mm(pts)
+                                                 if deep is not None else 0.0,
                                                  brow=BrowRegion(brow, tuple(brow_ids), ((eye, eye_ids),),
                                                                  shared, tuple(raiser_ids))))
     cheek_ids, _ = match_insertions(cheek_muscles, [b.name if b.kind == "muscle" else None for b in bodies])

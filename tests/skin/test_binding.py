@@ -497,3 +497,40 @@ def test_vermilion_mask_is_each_lip_within_its_midline_height_of_its_inner_conto
     assert not vermilion_mask(cut, sides, lm, 0.0).any()
     wide = vermilion_mask(cut, sides, lm, 2.0)     # reach 2.2 upper, 4.2 lower
     np.testing.assert_array_equal(wide, np.isin(np.round(v[:, 1], 6), [0.5, 1.5, 2.5, -0.5, -1.5, -2.5, -3.5]))
+
+
+def test_vermilion_on_a_deep_muscle_binds_to_its_own_arc_of_the_ring(skin):
+    """Lip skin in the ``deep`` mask whose rays met a muscle not around the mouth deeper than
+    ``deep_depth`` (here through a gap of the ring, as ICT's lower lip meets the depressor labii
+    inferioris 2 cm down) binds to its own lip's arc of the ring; with a depth past theirs, or
+    without the mask, it keeps the deep muscle; the rest keeps its anchors."""
+    from faceforge.skin.mouth import AROUND_MOUTH
+
+    v, f = skin
+    rv, rf = _cap(0.85, 0.9, 4)
+    ring = Body("ring", "muscle", rv, rf[~(np.abs(rv[rf][:, :, 0]) < 0.2).all(axis=1)])   # a gap in front
+    deep = Body("depressor", "muscle", *sphere(0.6, 3))
+    skull = Body("cranium", "cranium", *sphere(0.5, 3))
+    labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0.0, 1, -1).astype(np.int8)
+    sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] >= 0.0, 1, -1), 0)
+
+    def side_of(points):
+        return np.where(points[:, 1] >= 0, 1, -1)
+
+    verm = (sides != 0) & (v[:, 2] > 0.9)
+    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0, 0], face_sides=[labels, None, None])
+    bodies = [ring, deep, skull]
+    before = bind_skin(v, f, bodies, max_distance=0.5, **kw)
+    after = bind_skin(v, f, bodies, max_distance=0.5, regions=InsertionRegions(deep=verm, deep_depth=0.2), **kw)
+    too_deep = bind_skin(v, f, bodies, max_distance=0.5, regions=InsertionRegions(deep=verm, deep_depth=0.5), **kw)
+    off = bind_skin(v, f, bodies, max_distance=0.5, regions=InsertionRegions(deep=verm), **kw)
+    on_deep = np.isin(before.vertex_ids, np.flatnonzero(verm)) & (before.body == 1)
+    assert on_deep.sum() >= 1 and np.all(before.distance[on_deep] > 0.2)   # the gap: vermilion on the deep muscle
+    moved = np.isin(after.vertex_ids, before.vertex_ids[on_deep])
+    assert np.all(after.body[moved] == 0) and not after.closest[moved].any()
+    assert np.all(labels[after.face_ids[moved]] == sides[after.vertex_ids[moved]])   # its own arc
+    np.testing.assert_array_equal(before.body[~on_deep], after.body[~moved])
+    np.testing.assert_array_equal(before.points[~on_deep], after.points[~moved])
+    for same in (too_deep, off):                                   # deeper than theirs, or 0: as before
+        np.testing.assert_array_equal(before.body, same.body)
+        np.testing.assert_array_equal(before.points, same.points)

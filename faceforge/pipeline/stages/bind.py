@@ -110,6 +110,7 @@ def run(ctx):
                       modiolus_radius=float(ctx.config.get("bind.modiolus_radius")), mirror=head["mirror"],
                       commissure_radius=float(ctx.config.get("bind.commissure_radius")),
                       vermilion=float(ctx.config.get("bind.vermilion_reach")),
+                      vermilion_depth_mm=float(ctx.config.get("bind.vermilion_depth_mm")),
                       brow_band_mm=float(ctx.config.get("bind.brow_band_mm")),
                       brow_muscles=tuple(str(n) for n in ctx.config.get("bind.brow_muscles")),
                       brow_shared_mm=float(ctx.config.get("bind.brow_shared_mm")),
