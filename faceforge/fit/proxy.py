@@ -1,0 +1,123 @@
+"""The simulation mesh of a dense scan (``fit.simulation_vertices``, issues 25/26).
+
+A skin with more internal vertices than the key is fitted, bound, calibrated and simulated on
+a decimated copy (:func:`faceforge.geometry.decimate.decimate_pieces`); each of the user's
+vertices rides it (:mod:`faceforge.geometry.embed`), and every frame a stage writes in the
+user's vertex order is carried back to the dense mesh (``BoundHead.to_user``). ``fit.npz`` then
+holds the proxy as ``skin_vertices``/``skin_faces`` and, in addition,
+
+``skin_embed_face (n_user,)``, ``skin_embed_bary (n_user, 3)``, ``skin_embed_offset (n_user,)``,
+``skin_embed_residual (n_user, 3)``: each user vertex on the proxy (head space);
+``skin_user_faces (t, 3)``: the user's triangles (user vertex ids), for the carried mesh's checks.
+
+``skin_user_to_internal`` is then the proxy vertex nearest each user vertex (its triangle's
+corner of largest weight): what older readers of the array get is a coarse but valid copy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from faceforge.constants import INT
+
+#: npz prefix of the user vertices' embedding
+PREFIX = "skin_embed_"
+
+
+@dataclass
+class SimulationMesh:
+    """A dense skin's proxy: ``embedding`` (:class:`faceforge.geometry.embed.Embedding`, one
+    row per user vertex), ``user_faces (t, 3)`` the user's triangles, ``report`` (dict)."""
+
+    embedding: object
+    user_faces: np.ndarray
+    report: dict
+
+    def arrays(self) -> dict:
+        """The extra arrays of ``fit.npz``."""
+        return {**self.embedding.arrays(PREFIX), "skin_user_faces": np.asarray(self.user_faces, INT)}
+
+
+def needs_proxy(n_vertices: int, limit: int) -> bool:
+    """True when a skin of ``n_vertices`` internal vertices is simulated on a proxy (``limit``
+    ``fit.simulation_vertices``; 0: never)."""
+    return int(limit) > 0 and int(n_vertices) > int(limit)
+
+
+def make_proxy(checked, user_faces, limit: int, keep_below: int = 2000):
+    """The proxy of a checked dense skin.
+
+    checked
+        :class:`faceforge.io.mesh_check.CheckedMesh` in head space (outward winding).
+    user_faces
+        ``(t, 3)`` the user's triangles (user vertex ids; :func:`faceforge.io.mesh.load_mesh`).
+    limit
+        the proxy's vertex budget (``fit.simulation_vertices``).
+
+    Returns ``(proxy CheckedMesh, SimulationMesh)``: the proxy's ``user_to_internal`` maps each
+    user vertex to its nearest proxy corner, ``internal_to_user`` each proxy vertex to the user
+    vertex nearest it; its report is the dense mesh's.
+    """
+    from scipy.spatial import cKDTree
+
+    from faceforge.geometry.decimate import border_vertices, decimate_pieces
+    from faceforge.geometry.embed import carry, embed_points
+    from faceforge.geometry.triangles import vertex_components
+
+    v, f = checked.vertices, checked.faces
+    pv, pf, piece = decimate_pieces(v, f, int(limit), keep_below=keep_below)
+    labels = vertex_components(len(v), f)
+    internal = embed_points(v, pv, pf, labels, piece[pf[:, 0]])
+    embedding = internal.take(checked.user_to_internal)
+    corner = pf[embedding.face, np.argmax(embedding.bary, axis=1)]
+    nearest = cKDTree(v).query(pv)[1]
+    proxy = replace(checked, vertices=pv, faces=pf, user_to_internal=corner.astype(INT),
+                    internal_to_user=np.asarray(checked.internal_to_user)[nearest].astype(INT))
+    diag = float(np.linalg.norm(v.max(0) - v.min(0)))
+    back = carry(pv, pf, internal)
+    report = {"user_vertices": int(len(checked.user_to_internal)), "dense_vertices": int(len(v)),
+              "dense_faces": int(len(f)), "proxy_vertices": int(len(pv)), "proxy_faces": int(len(pf)),
+              "limit": int(limit), "pieces": int(labels.max() + 1) if len(labels) else 0,
+              "border_vertices_dense": int(border_vertices(len(v), f).sum()),
+              "border_vertices_proxy": int(border_vertices(len(pv), pf).sum()),
+              "offset_max": float(np.abs(internal.offset).max() / diag),
+              "offset_median": float(np.median(np.abs(internal.offset)) / diag),
+              "rest_error_max": float(np.abs(back - v).max() / diag)}
+    return proxy, SimulationMesh(embedding, np.asarray(user_faces, INT), report)
+
+
+def landmarks_by_position(raw, user_vertices):
+    """``raw`` (:class:`faceforge.io.landmarks.RawLandmarks`) with every vertex id given as
+    that user vertex's position ``user_vertices (n, 3)`` (user frame) instead: the ids of the
+    dense mesh mean nothing on its proxy, their places do (snapped onto it). Ids out of range
+    are left for :func:`faceforge.io.landmarks.load_landmarks` to report."""
+    if raw is None:
+        return None
+    uv = np.asarray(user_vertices, dtype=float)
+    has = (raw.vertex >= 0) & (raw.vertex < len(uv))
+    position = np.where(has[:, None], uv[np.where(has, raw.vertex, 0)], raw.position)
+    return replace(raw, vertex=np.where(has, -1, raw.vertex).astype(np.int64), position=position)
+
+
+def working_corners(fit_faces, working_faces, n_fit: int, duplicate_source) -> np.ndarray:
+    """``(l, 3)`` the corners, in the working mesh's vertex ids, of each proxy triangle of
+    ``fit_faces (l, 3)``: bind's lip cut appends copies of lip vertices (``duplicate_source
+    (c,)``: the fit vertex that working vertex ``n_fit + i`` copies) and rewires the lower
+    lip's triangles to them, so a user vertex on the lower lip rides the copies, not the upper
+    lip. A triangle bind removed (a bridge across the lips) keeps its fit corners. With no
+    copies this is ``fit_faces`` itself."""
+    ff = np.asarray(fit_faces, INT).reshape(-1, 3)
+    src = np.asarray(duplicate_source, INT).reshape(-1)
+    if not len(src):
+        return ff
+    wf = np.asarray(working_faces, INT).reshape(-1, 3)
+    as_fit = np.concatenate([np.arange(int(n_fit), dtype=INT), src])[wf]
+    key = {tuple(sorted(t)): i for i, t in enumerate(as_fit.tolist())}
+    out = ff.copy()
+    for k, t in enumerate(ff.tolist()):
+        i = key.get(tuple(sorted(t)))
+        if i is not None:   # the same corners in the working triangle's order (winding kept)
+            out[k] = [wf[i][list(as_fit[i]).index(c)] for c in t]
+    return out

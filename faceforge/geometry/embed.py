@@ -1,0 +1,174 @@
+"""Points carried by a coarser mesh: a dense scan's vertices ride its simulation proxy.
+
+Each point is tied to one proxy triangle (of its own piece): barycentric coordinates ``b``
+of its foot, an offset ``d`` along the triangle's interpolated vertex normal and a small
+rest residual ``r`` in the triangle's own frame (edge, normal x edge, normal), so that
+
+    x = sum_k b_k p_k + d * unit(sum_k b_k n_k) + R(p) r
+
+reproduces every point at rest (to rounding) and moves with the proxy: exactly under any
+rigid motion, and a point on a flat proxy patch under any affine map of it. The foot is
+found along the interpolated normal (a few fixed-point rounds from the closest point), so
+``r`` is ~0 and a curved proxy carries a smooth surface, not its facets.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from faceforge.constants import FLOAT, INT
+
+__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames"]
+
+#: fixed-point rounds of the foot along the interpolated normal
+FOOT_ROUNDS = 8
+
+
+@dataclass
+class Embedding:
+    """``face (n,) int64`` proxy triangle, ``bary (n, 3)``, ``offset (n,)`` mesh units along
+    the interpolated normal, ``residual (n, 3)`` in the triangle's frame (mesh units)."""
+
+    face: np.ndarray
+    bary: np.ndarray
+    offset: np.ndarray
+    residual: np.ndarray
+
+    def arrays(self, prefix: str) -> dict:
+        """``{prefix + name: array}`` for an npz."""
+        return {f"{prefix}face": self.face, f"{prefix}bary": self.bary, f"{prefix}offset": self.offset,
+                f"{prefix}residual": self.residual}
+
+    @classmethod
+    def from_arrays(cls, data, prefix: str) -> "Embedding | None":
+        """The embedding saved by :meth:`arrays`, or None when ``data`` has none."""
+        if f"{prefix}face" not in data:
+            return None
+        return cls(np.asarray(data[f"{prefix}face"], INT), np.asarray(data[f"{prefix}bary"], FLOAT),
+                   np.asarray(data[f"{prefix}offset"], FLOAT), np.asarray(data[f"{prefix}residual"], FLOAT))
+
+    def take(self, index) -> "Embedding":
+        """The embedding of the points ``index`` (e.g. the user's vertex order)."""
+        return Embedding(self.face[index], self.bary[index], self.offset[index], self.residual[index])
+
+
+def area_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``(..., n, 3)`` unit area-weighted vertex normals of ``vertices (..., n, 3)`` (a stack of
+    frames allowed) over ``faces (m, 3)``; 0 for a vertex no face uses."""
+    v = np.asarray(vertices, dtype=FLOAT)
+    f = np.asarray(faces, dtype=INT)
+    t = v[..., f, :]
+    cross = np.cross(t[..., 1, :] - t[..., 0, :], t[..., 2, :] - t[..., 0, :])
+    n = v.shape[-2]
+    cr = cross.reshape(-1, len(f), 3)
+    corner = f.T.ravel()   # each face's cross product added to its three corners
+    acc = np.stack([np.stack([np.bincount(corner, np.tile(c[:, axis], 3), minlength=n) for axis in range(3)],
+                             axis=1) for c in cr]).reshape(v.shape)
+    length = np.linalg.norm(acc, axis=-1, keepdims=True)
+    return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
+
+
+def triangle_frames(tri: np.ndarray) -> np.ndarray:
+    """``(..., 3, 3)`` orthonormal frames (rows: first edge, normal x edge, normal) of
+    triangles ``tri (..., 3, 3)`` (corners); degenerate triangles give the identity."""
+    e = tri[..., 1, :] - tri[..., 0, :]
+    n = np.cross(e, tri[..., 2, :] - tri[..., 0, :])
+    le, ln = np.linalg.norm(e, axis=-1, keepdims=True), np.linalg.norm(n, axis=-1, keepdims=True)
+    ok = (le > 0) & (ln > 0)
+    e = np.where(ok, e / np.where(ok, le, 1.0), [1.0, 0.0, 0.0])
+    n = np.where(ok, n / np.where(ok, ln, 1.0), [0.0, 0.0, 1.0])
+    return np.stack([e, np.cross(n, e), n], axis=-2)
+
+
+def _interpolated_normals(normals: np.ndarray, faces: np.ndarray, face: np.ndarray,
+                          bary: np.ndarray) -> np.ndarray:
+    """``(..., k, 3)`` unit normals interpolated at ``bary (k, 3)`` on ``face (k,)``."""
+    n = np.einsum("kj,...kjc->...kc", bary, normals[..., faces[face], :])
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def _bary_in_plane(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """``(k, 3)`` barycentric coordinates of the feet of ``points (k, 3)`` on the planes of
+    ``tri (k, 3, 3)`` (unbounded: a foot outside its triangle gets a negative one)."""
+    a = tri[:, 0]
+    e0, e1, d = tri[:, 1] - a, tri[:, 2] - a, points - a
+    d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((e0, e0), (e0, e1), (e1, e1)))
+    d20, d21 = np.einsum("ij,ij->i", d, e0), np.einsum("ij,ij->i", d, e1)
+    den = d00 * d11 - d01 * d01
+    ok = den > 1e-300
+    safe = np.where(ok, den, 1.0)
+    b1 = np.where(ok, (d11 * d20 - d01 * d21) / safe, 1.0 / 3.0)
+    b2 = np.where(ok, (d00 * d21 - d01 * d20) / safe, 1.0 / 3.0)
+    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+
+
+def embed_points(points, proxy_vertices, proxy_faces, point_piece=None, face_piece=None) -> Embedding:
+    """Tie ``points (n, 3)`` to the proxy ``(proxy_vertices (k, 3), proxy_faces (l, 3))``.
+
+    ``point_piece (n,)`` and ``face_piece (l,)`` (piece labels, or None: one piece) restrict
+    each point to the triangles of its own piece; a point whose piece has no triangle (or
+    label -1) searches them all. The triangle is the closest one; the foot then slides, on
+    that triangle's plane, to where the interpolated normal through the point meets it.
+    Returns the :class:`Embedding`; :func:`carry` of the proxy's own vertices gives
+    ``points`` back to rounding.
+    """
+    from faceforge.geometry.closest import TriangleGrid
+
+    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+    v = np.asarray(proxy_vertices, dtype=FLOAT).reshape(-1, 3)
+    f = np.asarray(proxy_faces, dtype=INT).reshape(-1, 3)
+    pp = np.zeros(len(p), INT) if point_piece is None else np.asarray(point_piece, INT)
+    fp = np.zeros(len(f), INT) if face_piece is None else np.asarray(face_piece, INT)
+    face = np.full(len(p), -1, INT)
+    for piece in np.unique(pp):
+        mine = np.flatnonzero(fp == piece)
+        if piece < 0 or not len(mine):
+            continue
+        at = np.flatnonzero(pp == piece)
+        face[at] = mine[TriangleGrid(v[f[mine]]).closest(p[at])[1]]
+    rest = face < 0
+    if rest.any():
+        face[rest] = TriangleGrid(v[f]).closest(p[rest])[1]
+    tri = v[f[face]]
+    normals = area_vertex_normals(v, f)
+    bary = _clamp_to_triangle(_bary_in_plane(p, tri))   # the start: about the closest point's
+    plane_n = triangle_frames(tri)[:, 2]
+    a = tri[:, 0]
+    for _ in range(FOOT_ROUNDS):
+        n = _interpolated_normals(normals, f, face, bary)
+        along = np.einsum("ij,ij->i", n, plane_n)
+        t = np.where(np.abs(along) > 0.2, np.einsum("ij,ij->i", p - a, plane_n) / np.where(
+            np.abs(along) > 0.2, along, 1.0), 0.0)
+        bary = _clamp_to_triangle(_bary_in_plane(p - t[:, None] * n, tri))
+    n = _interpolated_normals(normals, f, face, bary)
+    foot = np.einsum("kj,kjc->kc", bary, tri)
+    offset = np.einsum("ij,ij->i", p - foot, n)
+    left = p - foot - offset[:, None] * n
+    residual = np.einsum("kij,kj->ki", triangle_frames(tri), left)
+    return Embedding(face, bary, offset, residual)
+
+
+def _clamp_to_triangle(bary: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates pulled into the triangle (negatives to 0, renormalised)."""
+    b = np.maximum(bary, 0.0)
+    s = b.sum(axis=1, keepdims=True)
+    return np.divide(b, s, out=np.full_like(b, 1.0 / 3.0), where=s > 0)
+
+
+def carry(frames, proxy_faces, embedding: Embedding) -> np.ndarray:
+    """The carried points ``(F, n, 3)`` (or ``(n, 3)`` for one frame) of proxy ``frames
+    (F, k, 3)`` (or ``(k, 3)``), ``proxy_faces (l, 3)`` the ones :func:`embed_points` saw."""
+    x = np.asarray(frames, dtype=FLOAT)
+    one = x.ndim == 2
+    x = x[None] if one else x
+    f = np.asarray(proxy_faces, dtype=INT)
+    e = embedding
+    tri = x[:, f[e.face]]                                   # (F, n, 3, 3)
+    normals = area_vertex_normals(x, f)
+    n = _interpolated_normals(normals, f, e.face, e.bary)  # (F, n, 3)
+    out = np.einsum("kj,Fkjc->Fkc", e.bary, tri) + e.offset[:, None] * n
+    out += np.einsum("Fkic,ki->Fkc", triangle_frames(tri), e.residual)
+    return out[0] if one else out
