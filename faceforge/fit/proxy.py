@@ -46,7 +46,7 @@ def needs_proxy(n_vertices: int, limit: int) -> bool:
     return int(limit) > 0 and int(n_vertices) > int(limit)
 
 
-def make_proxy(checked, user_faces, limit: int, keep_below: int = 2000):
+def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None):
     """The proxy of a checked dense skin.
 
     checked
@@ -54,7 +54,8 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int = 2000):
     user_faces
         ``(t, 3)`` the user's triangles (user vertex ids; :func:`faceforge.io.mesh.load_mesh`).
     limit
-        the proxy's vertex budget (``fit.simulation_vertices``).
+        the proxy's vertex budget (``fit.simulation_vertices``); pieces of at most ``keep_below``
+        vertices (default: a twentieth of it) are kept whole.
 
     Returns ``(proxy CheckedMesh, SimulationMesh)``: the proxy's ``user_to_internal`` maps each
     user vertex to its nearest proxy corner, ``internal_to_user`` each proxy vertex to the user
@@ -67,6 +68,7 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int = 2000):
     from faceforge.geometry.triangles import vertex_components
 
     v, f = checked.vertices, checked.faces
+    keep_below = int(limit) // 20 if keep_below is None else int(keep_below)
     pv, pf, piece = decimate_pieces(v, f, int(limit), keep_below=keep_below)
     labels = vertex_components(len(v), f)
     internal = embed_points(v, pv, pf, labels, piece[pf[:, 0]])
