@@ -172,15 +172,14 @@ class BoundHead:
         n_internal = int(bind["n_user"])
         u2i = fit["skin_user_to_internal"] if "skin_user_to_internal" in fit else np.arange(n_internal)
         self.user_index = np.asarray(u2i, dtype=np.int64)
-        from faceforge.fit.proxy import PREFIX
-        from faceforge.geometry.embed import Embedding
+        from faceforge.geometry.embed import NPZ_PREFIX, Embedding
 
         #: a dense skin's vertices on this proxy (fit.simulation_vertices), or None: the user's own mesh
-        self.embedding = Embedding.from_arrays(fit, PREFIX)
+        self.embedding = Embedding.from_arrays(fit, NPZ_PREFIX)
         #: (t, 3) the user's triangles (user vertex ids) when :attr:`embedding` is set
         self.user_faces = np.asarray(fit["skin_user_faces"], np.int64) if self.embedding is not None else None
         if self.embedding is not None:   # the proxy's triangles on the working mesh (bind's lip cut)
-            from faceforge.fit.proxy import working_corners
+            from faceforge.geometry.embed import working_corners
 
             self._carry_faces = working_corners(fit["skin_faces"], self.faces, len(fit["skin_vertices"]),
                                                 bind.get("duplicate_source", np.zeros(0, np.int64)))

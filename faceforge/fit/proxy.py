@@ -21,9 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from faceforge.constants import INT
-
-#: npz prefix of the user vertices' embedding
-PREFIX = "skin_embed_"
+from faceforge.geometry.embed import NPZ_PREFIX as PREFIX   # the npz arrays' prefix
 
 
 @dataclass
@@ -102,24 +100,3 @@ def landmarks_by_position(raw, user_vertices):
     position = np.where(has[:, None], uv[np.where(has, raw.vertex, 0)], raw.position)
     return replace(raw, vertex=np.where(has, -1, raw.vertex).astype(np.int64), position=position)
 
-
-def working_corners(fit_faces, working_faces, n_fit: int, duplicate_source) -> np.ndarray:
-    """``(l, 3)`` the corners, in the working mesh's vertex ids, of each proxy triangle of
-    ``fit_faces (l, 3)``: bind's lip cut appends copies of lip vertices (``duplicate_source
-    (c,)``: the fit vertex that working vertex ``n_fit + i`` copies) and rewires the lower
-    lip's triangles to them, so a user vertex on the lower lip rides the copies, not the upper
-    lip. A triangle bind removed (a bridge across the lips) keeps its fit corners. With no
-    copies this is ``fit_faces`` itself."""
-    ff = np.asarray(fit_faces, INT).reshape(-1, 3)
-    src = np.asarray(duplicate_source, INT).reshape(-1)
-    if not len(src):
-        return ff
-    wf = np.asarray(working_faces, INT).reshape(-1, 3)
-    as_fit = np.concatenate([np.arange(int(n_fit), dtype=INT), src])[wf]
-    key = {tuple(sorted(t)): i for i, t in enumerate(as_fit.tolist())}
-    out = ff.copy()
-    for k, t in enumerate(ff.tolist()):
-        i = key.get(tuple(sorted(t)))
-        if i is not None:   # the same corners in the working triangle's order (winding kept)
-            out[k] = [wf[i][list(as_fit[i]).index(c)] for c in t]
-    return out

@@ -20,7 +20,10 @@ import numpy as np
 
 from faceforge.constants import FLOAT, INT
 
-__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames"]
+__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners"]
+
+#: prefix of a skin's embedding arrays in fit.npz (faceforge.fit.proxy)
+NPZ_PREFIX = "skin_embed_"
 
 #: fixed-point rounds of the foot along the interpolated normal
 FOOT_ROUNDS = 8
@@ -172,3 +175,25 @@ def carry(frames, proxy_faces, embedding: Embedding) -> np.ndarray:
     out = np.einsum("kj,Fkjc->Fkc", e.bary, tri) + e.offset[:, None] * n
     out += np.einsum("Fkic,ki->Fkc", triangle_frames(tri), e.residual)
     return out[0] if one else out
+
+
+def working_corners(fit_faces, working_faces, n_fit: int, duplicate_source) -> np.ndarray:
+    """``(l, 3)`` the corners, in the working mesh's vertex ids, of each proxy triangle of
+    ``fit_faces (l, 3)``: bind's lip cut appends copies of lip vertices (``duplicate_source
+    (c,)``: the fit vertex that working vertex ``n_fit + i`` copies) and rewires the lower
+    lip's triangles to them, so a user vertex on the lower lip rides the copies, not the upper
+    lip. A triangle bind removed (a bridge across the lips) keeps its fit corners. With no
+    copies this is ``fit_faces`` itself."""
+    ff = np.asarray(fit_faces, INT).reshape(-1, 3)
+    src = np.asarray(duplicate_source, INT).reshape(-1)
+    if not len(src):
+        return ff
+    wf = np.asarray(working_faces, INT).reshape(-1, 3)
+    as_fit = np.concatenate([np.arange(int(n_fit), dtype=INT), src])[wf]
+    key = {tuple(sorted(t)): i for i, t in enumerate(as_fit.tolist())}
+    out = ff.copy()
+    for k, t in enumerate(ff.tolist()):
+        i = key.get(tuple(sorted(t)))
+        if i is not None:   # the same corners in the working triangle's order (winding kept)
+            out[k] = [wf[i][list(as_fit[i]).index(c)] for c in t]
+    return out

@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from faceforge.fit.proxy import landmarks_by_position, needs_proxy, working_corners
+from faceforge.fit.proxy import landmarks_by_position, needs_proxy
+from faceforge.geometry.embed import working_corners
 
 ROOT = Path(__file__).resolve().parents[2]
 MEDIAPIPE = ROOT / "samples" / "mediapipe" / "face_model_with_iris.obj"
