@@ -16,11 +16,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from faceforge.constants import FLOAT, INT
+from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 
-__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners"]
+__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners", "carry_plain"]
 
 #: prefix of a skin's embedding arrays in fit.npz (faceforge.fit.proxy)
 NPZ_PREFIX = "skin_embed_"
@@ -163,7 +164,71 @@ def _clamp_to_triangle(bary: np.ndarray) -> np.ndarray:
 
 def carry(frames, proxy_faces, embedding: Embedding) -> np.ndarray:
     """The carried points ``(F, n, 3)`` (or ``(n, 3)`` for one frame) of proxy ``frames
-    (F, k, 3)`` (or ``(k, 3)``), ``proxy_faces (l, 3)`` the ones :func:`embed_points` saw."""
+    (F, k, 3)`` (or ``(k, 3)``), ``proxy_faces (l, 3)`` the ones :func:`embed_points` saw.
+    Compiled (:func:`_carry_frame`, a frame at a time); :func:`carry_plain` is its numpy twin."""
+    x = np.asarray(frames, dtype=FLOAT)
+    one = x.ndim == 2
+    x = x[None] if one else x
+    f = np.ascontiguousarray(proxy_faces, dtype=INT)
+    e = embedding
+    out = np.empty((len(x), len(e.face), 3), FLOAT)
+    normals = np.empty((x.shape[1], 3), FLOAT)
+    face, bary = np.ascontiguousarray(e.face, INT), np.ascontiguousarray(e.bary, FLOAT)
+    offset, residual = np.ascontiguousarray(e.offset, FLOAT), np.ascontiguousarray(e.residual, FLOAT)
+    for i in range(len(x)):
+        _carry_frame(np.ascontiguousarray(x[i]), f, face, bary, offset, residual, normals, out[i])
+    return out[0] if one else out
+
+
+@numba.njit(**NUMBA_OPTIONS)
+def _carry_frame(x, f, face, bary, offset, residual, normals, out):  # pragma: no cover - numba
+    """One frame of :func:`carry_plain`: area-weighted vertex normals of ``x (k, 3)`` over ``f``
+    into ``normals (k, 3)``, then each point ``out[i]`` from its triangle ``face[i]`` (scalars
+    only: no array is made in the loops)."""
+    normals[:] = 0.0
+    for t in range(f.shape[0]):
+        a, b, c = f[t, 0], f[t, 1], f[t, 2]
+        ex, ey, ez = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+        gx, gy, gz = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+        cx, cy, cz = ey * gz - ez * gy, ez * gx - ex * gz, ex * gy - ey * gx
+        for k in range(3):
+            normals[f[t, k], 0] += cx
+            normals[f[t, k], 1] += cy
+            normals[f[t, k], 2] += cz
+    for v in range(normals.shape[0]):
+        ln = np.sqrt(normals[v, 0] ** 2 + normals[v, 1] ** 2 + normals[v, 2] ** 2)
+        if ln > 0.0:
+            for k in range(3):
+                normals[v, k] /= ln
+    for i in range(face.shape[0]):
+        a, b, c = f[face[i], 0], f[face[i], 1], f[face[i], 2]
+        w0, w1, w2 = bary[i, 0], bary[i, 1], bary[i, 2]
+        nx = w0 * normals[a, 0] + w1 * normals[b, 0] + w2 * normals[c, 0]
+        ny = w0 * normals[a, 1] + w1 * normals[b, 1] + w2 * normals[c, 1]
+        nz = w0 * normals[a, 2] + w1 * normals[b, 2] + w2 * normals[c, 2]
+        ln = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if ln > 0.0:
+            nx, ny, nz = nx / ln, ny / ln, nz / ln
+        else:
+            nx, ny, nz = 0.0, 0.0, 0.0
+        ex, ey, ez = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+        gx, gy, gz = x[c, 0] - x[a, 0], x[c, 1] - x[a, 1], x[c, 2] - x[a, 2]
+        fx, fy, fz = ey * gz - ez * gy, ez * gx - ex * gz, ex * gy - ey * gx
+        le = np.sqrt(ex * ex + ey * ey + ez * ez)
+        lf = np.sqrt(fx * fx + fy * fy + fz * fz)
+        if le > 0.0 and lf > 0.0:
+            ex, ey, ez, fx, fy, fz = ex / le, ey / le, ez / le, fx / lf, fy / lf, fz / lf
+        else:
+            ex, ey, ez, fx, fy, fz = 1.0, 0.0, 0.0, 0.0, 0.0, 1.0
+        sx, sy, sz = fy * ez - fz * ey, fz * ex - fx * ez, fx * ey - fy * ex
+        r0, r1, r2, d = residual[i, 0], residual[i, 1], residual[i, 2], offset[i]
+        out[i, 0] = w0 * x[a, 0] + w1 * x[b, 0] + w2 * x[c, 0] + d * nx + r0 * ex + r1 * sx + r2 * fx
+        out[i, 1] = w0 * x[a, 1] + w1 * x[b, 1] + w2 * x[c, 1] + d * ny + r0 * ey + r1 * sy + r2 * fy
+        out[i, 2] = w0 * x[a, 2] + w1 * x[b, 2] + w2 * x[c, 2] + d * nz + r0 * ez + r1 * sz + r2 * fz
+
+
+def carry_plain(frames, proxy_faces, embedding: Embedding) -> np.ndarray:
+    """The numpy twin of :func:`carry` (the tests compare them)."""
     x = np.asarray(frames, dtype=FLOAT)
     one = x.ndim == 2
     x = x[None] if one else x

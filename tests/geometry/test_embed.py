@@ -96,3 +96,15 @@ def test_the_decimator_keeps_pieces_apart_and_open_borders_whole():
     gap = np.min(np.linalg.norm(border[:, None] - kept[None], axis=2), axis=1)
     assert gap.max() < 1e-12
     assert border_vertices(len(pv), pf).sum() == len(border)
+
+
+def test_the_compiled_carry_is_its_numpy_twin():
+    from faceforge.geometry.embed import carry_plain
+
+    dense_v, _ = sphere(3)
+    v, f = sphere(1)
+    e = embed_points(dense_v * 1.02, v, f)
+    rng = np.random.default_rng(1)
+    frames = v[None] + 0.05 * rng.normal(size=(3,) + v.shape)
+    np.testing.assert_allclose(carry(frames, f, e), carry_plain(frames, f, e), atol=1e-12)
+    np.testing.assert_allclose(carry(frames[0], f, e), carry_plain(frames[0], f, e), atol=1e-12)
