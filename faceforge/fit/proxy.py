@@ -44,7 +44,7 @@ def needs_proxy(n_vertices: int, limit: int) -> bool:
     return int(limit) > 0 and int(n_vertices) > int(limit)
 
 
-def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None):
+def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, keep_borders: bool = True):
     """The proxy of a checked dense skin.
 
     checked
@@ -53,7 +53,8 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None):
         ``(t, 3)`` the user's triangles (user vertex ids; :func:`faceforge.io.mesh.load_mesh`).
     limit
         the proxy's vertex budget (``fit.simulation_vertices``); pieces of at most ``keep_below``
-        vertices (default: a twentieth of it) are kept whole.
+        vertices (default: a twentieth of it) are kept whole; ``keep_borders``: the open borders
+        keep every vertex (``fit.simulation_borders``).
 
     Returns ``(proxy CheckedMesh, SimulationMesh)``: the proxy's ``user_to_internal`` maps each
     user vertex to its nearest proxy corner, ``internal_to_user`` each proxy vertex to the user
@@ -67,9 +68,9 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None):
 
     v, f = checked.vertices, checked.faces
     keep_below = int(limit) // 20 if keep_below is None else int(keep_below)
-    pv, pf, piece = decimate_pieces(v, f, int(limit), keep_below=keep_below)
+    pv, pf, piece, merged = decimate_pieces(v, f, int(limit), keep_below=keep_below, keep_borders=keep_borders)
     labels = vertex_components(len(v), f)
-    internal = embed_points(v, pv, pf, labels, piece[pf[:, 0]])
+    internal = embed_points(v, pv, pf, labels, piece[pf[:, 0]], point_vertex=merged)
     embedding = internal.take(checked.user_to_internal)
     corner = pf[embedding.face, np.argmax(embedding.bary, axis=1)]
     nearest = cKDTree(v).query(pv)[1]

@@ -28,27 +28,34 @@ def border_vertices(n_vertices: int, faces) -> np.ndarray:
     return out
 
 
-def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The used vertices only, faces renumbered; faces with a repeated corner dropped."""
+def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The used vertices only, faces renumbered (faces with a repeated corner dropped), and
+    ``(n,)`` the new id of each old vertex (-1: unused)."""
     f = np.asarray(faces, dtype=INT).reshape(-1, 3)
     f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]
     used, inverse = np.unique(f.ravel(), return_inverse=True)
-    return np.asarray(vertices, dtype=FLOAT)[used], inverse.reshape(-1, 3).astype(INT)
+    new = np.full(len(vertices), -1, INT)
+    new[used] = np.arange(len(used))
+    return np.asarray(vertices, dtype=FLOAT)[used], inverse.reshape(-1, 3).astype(INT), new
 
 
 def decimate_pieces(vertices, faces, target_vertices: int, keep_below: int = 2000,
-                    aggressiveness: float = 7.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    aggressiveness: float = 7.0, keep_borders: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Decimate each connected piece of ``(vertices (n, 3), faces (m, 3))`` to about
     ``target_vertices`` vertices in all.
 
     Pieces of at most ``keep_below`` vertices are copied unchanged; the others share what
     is left of the budget in proportion to their triangles (each keeps at least 8
-    triangles). Open borders are kept whole (see the module's docstring).
+    triangles). Open borders are kept whole (see the module's docstring), or with
+    ``keep_borders`` False collapsed along themselves like the rest (the library's border
+    quadrics hold them in place; two rims that share no edge still cannot be welded).
 
     Returns ``(proxy_vertices (k, 3) float64, proxy_faces (l, 3) int64, proxy_piece (k,)
-    int64)``: ``proxy_piece`` is the label of the input piece
-    (:func:`faceforge.geometry.triangles.vertex_components`) each proxy vertex comes from.
-    Vertices no face uses are dropped. The input's winding is kept.
+    int64, merged_into (n,) int64)``: ``proxy_piece`` is the label of the input piece
+    (:func:`faceforge.geometry.triangles.vertex_components`) each proxy vertex comes from;
+    ``merged_into`` the proxy vertex each input vertex was collapsed into (the library's
+    collapses, replayed; -1 for a vertex no face uses, which is dropped). The winding is kept.
     """
     import fast_simplification
 
@@ -66,17 +73,24 @@ def decimate_pieces(vertices, faces, target_vertices: int, keep_below: int = 200
     big_total = sum(counts[p] for p in big)
     ratio = min(1.0, budget / big_total) if big_total else 1.0
     out_v, out_f, out_p, offset = [], [], [], 0
+    merged = np.full(len(v), -1, INT)
     for p in (int(p) for p in pieces):
-        pv, pf = _compact(v, f[face_piece == p])
+        pv, pf, new = _compact(v, f[face_piece == p])
+        mine = np.flatnonzero(new >= 0)
+        into = new[mine]
         if p in big and ratio < 1.0:
             target = max(8, int(round(len(pf) * ratio)))
-            dv, df = fast_simplification.simplify(pv, pf.astype(np.int32), target_count=target,
-                                                  agg=aggressiveness, preserve_border=True)
-            pv, pf = _compact(dv, df)
+            _, _, collapses = fast_simplification.simplify(
+                pv, pf.astype(np.int32), target_count=target, agg=aggressiveness, preserve_border=keep_borders,
+                return_collapses=True)
+            dv, df, mapping = fast_simplification.replay_simplification(pv, pf.astype(np.int32), collapses)
+            pv, pf, again = _compact(dv, df)
+            into = again[np.asarray(mapping, INT)[into]]
+        merged[mine] = np.where(into >= 0, into + offset, -1)
         out_v.append(pv)
         out_f.append(pf + offset)
         out_p.append(np.full(len(pv), p, INT))
         offset += len(pv)
     if not out_v:
-        return np.zeros((0, 3), FLOAT), np.zeros((0, 3), INT), np.zeros(0, INT)
-    return np.concatenate(out_v), np.concatenate(out_f), np.concatenate(out_p)
+        return np.zeros((0, 3), FLOAT), np.zeros((0, 3), INT), np.zeros(0, INT), merged
+    return np.concatenate(out_v), np.concatenate(out_f), np.concatenate(out_p), merged

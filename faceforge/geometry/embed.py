@@ -109,15 +109,49 @@ def _bary_in_plane(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
     return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
 
 
-def embed_points(points, proxy_vertices, proxy_faces, point_piece=None, face_piece=None) -> Embedding:
+def ring_choice(points, proxy_vertices, proxy_faces, point_vertex) -> np.ndarray:
+    """``(n,) int64``: for each point the triangle, among those around its proxy vertex
+    ``point_vertex (n,)`` (the vertex it was collapsed into), whose nearest point (barycentric
+    coordinates of the foot, clamped into it) is closest; -1 where ``point_vertex`` is -1."""
+    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+    v = np.asarray(proxy_vertices, dtype=FLOAT)
+    f = np.asarray(proxy_faces, dtype=INT)
+    pv = np.asarray(point_vertex, INT)
+    corner = f.ravel()
+    order = np.argsort(corner, kind="stable")
+    start = np.searchsorted(corner[order], np.arange(len(v) + 1))
+    count = np.diff(start)
+    out = np.full(len(p), -1, INT)
+    has = np.flatnonzero((pv >= 0) & (count[np.maximum(pv, 0)] > 0))
+    if not len(has):
+        return out
+    width = int(count[pv[has]].max())
+    best = np.full(len(has), np.inf)
+    for j in range(width):
+        ok = count[pv[has]] > j
+        cand = np.where(ok, order[np.minimum(start[pv[has]] + j, len(order) - 1)] // 3, 0)
+        tri = v[f[cand]]
+        b = _clamp_to_triangle(_bary_in_plane(p[has], tri))
+        d = np.linalg.norm(np.einsum("kj,kjc->kc", b, tri) - p[has], axis=1)
+        better = ok & (d < best)
+        best[better] = d[better]
+        out[has[better]] = cand[better]
+    return out
+
+
+def embed_points(points, proxy_vertices, proxy_faces, point_piece=None, face_piece=None,
+                 point_vertex=None) -> Embedding:
     """Tie ``points (n, 3)`` to the proxy ``(proxy_vertices (k, 3), proxy_faces (l, 3))``.
 
     ``point_piece (n,)`` and ``face_piece (l,)`` (piece labels, or None: one piece) restrict
     each point to the triangles of its own piece; a point whose piece has no triangle (or
     label -1) searches them all. The triangle is the closest one; the foot then slides, on
     that triangle's plane, to where the interpolated normal through the point meets it.
-    Returns the :class:`Embedding`; :func:`carry` of the proxy's own vertices gives
-    ``points`` back to rounding.
+    ``point_vertex (n,)`` (or None): the proxy vertex each point was collapsed into
+    (:func:`faceforge.geometry.decimate.decimate_pieces`); a point with one takes a triangle
+    around it (:func:`ring_choice`), not the nearest anywhere: a lip's vertex stays on its own
+    lip where the other lip touches it. Returns the :class:`Embedding`; :func:`carry` of the
+    proxy's own vertices gives ``points`` back to rounding.
     """
     from faceforge.geometry.closest import TriangleGrid
 
@@ -126,13 +160,14 @@ def embed_points(points, proxy_vertices, proxy_faces, point_piece=None, face_pie
     f = np.asarray(proxy_faces, dtype=INT).reshape(-1, 3)
     pp = np.zeros(len(p), INT) if point_piece is None else np.asarray(point_piece, INT)
     fp = np.zeros(len(f), INT) if face_piece is None else np.asarray(face_piece, INT)
-    face = np.full(len(p), -1, INT)
+    face = np.full(len(p), -1, INT) if point_vertex is None else ring_choice(p, v, f, point_vertex)
     for piece in np.unique(pp):
         mine = np.flatnonzero(fp == piece)
         if piece < 0 or not len(mine):
             continue
-        at = np.flatnonzero(pp == piece)
-        face[at] = mine[TriangleGrid(v[f[mine]]).closest(p[at])[1]]
+        at = np.flatnonzero((pp == piece) & (face < 0))
+        if len(at):
+            face[at] = mine[TriangleGrid(v[f[mine]]).closest(p[at])[1]]
     rest = face < 0
     if rest.any():
         face[rest] = TriangleGrid(v[f]).closest(p[rest])[1]

@@ -84,7 +84,7 @@ def test_the_decimator_keeps_pieces_apart_and_open_borders_whole():
     small_v = 0.05 * small_v + [0.5, 0.5, 1.0]
     v = np.concatenate([big_v, small_v])
     f = np.concatenate([big_f, small_f + len(big_v)])
-    pv, pf, piece = decimate_pieces(v, f, 600, keep_below=100)
+    pv, pf, piece, merged = decimate_pieces(v, f, 600, keep_below=100)
     assert 400 < len(pv) < 800
     assert set(np.unique(piece)) == {0, 1}
     # the small piece (42 vertices) is copied whole; the two pieces share no triangle
@@ -94,8 +94,33 @@ def test_the_decimator_keeps_pieces_apart_and_open_borders_whole():
     border = big_v[border_vertices(len(big_v), big_f)]
     kept = pv[piece == 0]
     gap = np.min(np.linalg.norm(border[:, None] - kept[None], axis=2), axis=1)
-    assert gap.max() < 1e-12
+    assert gap.max() < 1e-6   # (the replay rounds through float32)
     assert border_vertices(len(pv), pf).sum() == len(border)
+    # each input vertex was merged into a proxy vertex of its own piece; the small piece's into itself
+    assert np.all(piece[merged] == np.r_[np.zeros(len(big_v), int), np.ones(len(small_v), int)])
+    np.testing.assert_array_equal(pv[merged[len(big_v):]], small_v)
+
+
+def test_a_lip_vertex_rides_its_own_lip_where_the_other_touches_it():
+    # two sheets, the lower one's top row under the upper one's bottom row, 1e-3 apart (touching
+    # lips); the point on the lower sheet is nearer to the upper one's triangles in space
+    from faceforge.geometry.embed import ring_choice
+
+    up_v, up_f = grid(4)
+    low_v = up_v.copy()
+    low_v[:, 1] -= 1.0 - 1e-3
+    low_v[:, 2] = 0.0
+    v = np.concatenate([up_v, low_v])
+    f = np.concatenate([up_f, up_f + len(up_v)])
+    point = low_v[np.argmax(low_v[:, 1])][None] + [0.1, 2e-3, 0.0]   # just above the lower lip's top row
+    mine = len(up_v) + int(np.argmax(low_v[:, 1]))
+    nearest = embed_points(point, v, f).face[0]
+    assert nearest < len(up_f)   # the nearest triangle in space: the upper lip's
+    ring = ring_choice(point, v, f, [mine])[0]
+    assert ring >= len(up_f)    # the collapse's vertex: the lower lip's
+    e = embed_points(point, v, f, point_vertex=[mine])
+    assert e.face[0] >= len(up_f)
+    np.testing.assert_allclose(carry(v, f, e), point, atol=1e-12)
 
 
 def test_the_compiled_carry_is_its_numpy_twin():
