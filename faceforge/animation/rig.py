@@ -179,7 +179,10 @@ class BoundHead:
         #: (t, 3) the user's triangles (user vertex ids) when :attr:`embedding` is set
         self.user_faces = np.asarray(fit["skin_user_faces"], np.int64) if self.embedding is not None else None
         if self.embedding is not None:   # the proxy's triangles on the working mesh (bind's lip cut)
-            from faceforge.geometry.embed import working_corners
+            from faceforge.geometry.embed import embed_off, working_corners
+
+            self.embedding = embed_off(self.embedding, fit["skin_vertices"], fit["skin_faces"],
+                                       bind.get("removed_faces", np.zeros(0, np.int64)), self.user_index)
 
             self._carry_faces = working_corners(fit["skin_faces"], self.faces, len(fit["skin_vertices"]),
                                                 bind.get("duplicate_source", np.zeros(0, np.int64)))

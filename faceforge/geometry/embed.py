@@ -21,7 +21,7 @@ import numpy as np
 
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 
-__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners", "carry_plain"]
+__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners", "carry_plain", "embed_off"]
 
 #: prefix of a skin's embedding arrays in fit.npz (faceforge.fit.proxy)
 NPZ_PREFIX = "skin_embed_"
@@ -296,4 +296,26 @@ def working_corners(fit_faces, working_faces, n_fit: int, duplicate_source) -> n
         i = key.get(tuple(sorted(t)))
         if i is not None:   # the same corners in the working triangle's order (winding kept)
             out[k] = [wf[i][list(as_fit[i]).index(c)] for c in t]
+    return out
+
+
+def embed_off(embedding: Embedding, proxy_vertices, proxy_faces, removed_faces, anchor) -> Embedding:
+    """``embedding`` with the points on any of ``removed_faces`` (proxy triangle ids: bind
+    deletes a triangle bridging the lips) tied again to a kept triangle around their
+    ``anchor (n,)`` proxy vertex (:func:`ring_choice`; the nearest kept one where none is
+    around it), at their carried rest places: a bridge's points then move with one lip, not
+    stretched across the opening mouth. Unchanged when no point is on a removed triangle."""
+    removed = np.asarray(removed_faces, INT).reshape(-1)
+    off = np.isin(embedding.face, removed)
+    if not off.any():
+        return embedding
+    v = np.asarray(proxy_vertices, dtype=FLOAT)
+    f = np.asarray(proxy_faces, dtype=INT)
+    kept = np.setdiff1d(np.arange(len(f)), removed)
+    points = carry(v, f, embedding.take(np.flatnonzero(off)))
+    again = embed_points(points, v, f[kept], point_vertex=np.asarray(anchor, INT)[off])
+    out = Embedding(embedding.face.copy(), embedding.bary.copy(), embedding.offset.copy(), embedding.residual.copy())
+    at = np.flatnonzero(off)
+    out.face[at], out.bary[at], out.offset[at], out.residual[at] = kept[again.face], again.bary, again.offset, \
+        again.residual
     return out

@@ -133,3 +133,17 @@ def test_the_compiled_carry_is_its_numpy_twin():
     frames = v[None] + 0.05 * rng.normal(size=(3,) + v.shape)
     np.testing.assert_allclose(carry(frames, f, e), carry_plain(frames, f, e), atol=1e-12)
     np.testing.assert_allclose(carry(frames[0], f, e), carry_plain(frames[0], f, e), atol=1e-12)
+
+
+def test_points_on_a_triangle_bind_removed_ride_a_kept_one_around_their_vertex():
+    from faceforge.geometry.embed import embed_off
+
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [0.5, 2, 0]])
+    f = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4]])
+    points = np.array([[0.7, 0.6, 0.0], [0.2, 0.2, 0.0]])
+    e = embed_points(points, v, f)
+    assert e.face[0] == 1 and e.face[1] == 0
+    out = embed_off(e, v, f, [1], anchor=[3, 0])   # triangle 1 removed (a bridge): point 0 around vertex 3
+    assert out.face[0] == 2 and out.face[1] == 0
+    np.testing.assert_allclose(carry(v, f, out), points, atol=1e-12)
+    assert embed_off(e, v, f, [], anchor=[3, 0]) is e
