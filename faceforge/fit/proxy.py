@@ -44,7 +44,8 @@ def needs_proxy(n_vertices: int, limit: int) -> bool:
     return int(limit) > 0 and int(n_vertices) > int(limit)
 
 
-def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, keep_borders: bool = True):
+def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, keep_borders: bool = True,
+               locked=None):
     """The proxy of a checked dense skin.
 
     checked
@@ -54,7 +55,8 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, k
     limit
         the proxy's vertex budget (``fit.simulation_vertices``); pieces of at most ``keep_below``
         vertices (default: a twentieth of it) are kept whole; ``keep_borders``: the open borders
-        keep every vertex (``fit.simulation_borders``).
+        keep every vertex (``fit.simulation_borders``); ``locked (k,) bool``: internal vertices
+        no collapse may touch (:func:`lip_lock`).
 
     Returns ``(proxy CheckedMesh, SimulationMesh)``: the proxy's ``user_to_internal`` maps each
     user vertex to its nearest proxy corner, ``internal_to_user`` each proxy vertex to the user
@@ -68,7 +70,8 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, k
 
     v, f = checked.vertices, checked.faces
     keep_below = int(limit) // 20 if keep_below is None else int(keep_below)
-    pv, pf, piece, merged = decimate_pieces(v, f, int(limit), keep_below=keep_below, keep_borders=keep_borders)
+    pv, pf, piece, merged = decimate_pieces(v, f, int(limit), keep_below=keep_below, keep_borders=keep_borders,
+                                            locked=locked)
     labels = vertex_components(len(v), f)
     internal = embed_points(v, pv, pf, labels, piece[pf[:, 0]], point_vertex=merged)
     embedding = internal.take(checked.user_to_internal)
@@ -85,7 +88,8 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, k
               "border_vertices_proxy": int(border_vertices(len(pv), pf).sum()),
               "offset_max": float(np.abs(internal.offset).max() / diag),
               "offset_median": float(np.median(np.abs(internal.offset)) / diag),
-              "rest_error_max": float(np.abs(back - v).max() / diag)}
+              "rest_error_max": float(np.abs(back - v).max() / diag),
+              "locked_vertices": 0 if locked is None else int(np.count_nonzero(locked))}
     return proxy, SimulationMesh(embedding, np.asarray(user_faces, INT), report)
 
 
@@ -101,3 +105,37 @@ def landmarks_by_position(raw, user_vertices):
     position = np.where(has[:, None], uv[np.where(has, raw.vertex, 0)], raw.position)
     return replace(raw, vertex=np.where(has, -1, raw.vertex).astype(np.int64), position=position)
 
+
+#: the inner lips' contours, corner to corner (as skin.mouth's)
+LIP_PATHS = (("2.4", "2.6", "2.2", "2.7", "2.5"), ("2.4", "2.8", "2.3", "2.9", "2.5"))
+
+
+def lip_lock(vertices, faces, points: dict, rings: int = 1) -> np.ndarray:
+    """``(n,) bool``: the vertices of the inner lips' contours (shortest edge paths through the
+    FDPs of :data:`LIP_PATHS` found in ``points {fdp: (3,)}``, each at its nearest vertex) and
+    ``rings`` rings of neighbours: the decimation may not collapse them (where the lips touch
+    a collapse zips them shut from the corners). None locked without 2.2-2.5."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=float)
+    f = np.asarray(faces, INT)
+    lock = np.zeros(len(v), bool)
+    if not all(k in points for k in ("2.2", "2.3", "2.4", "2.5")):
+        return lock
+    e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+    graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(v), len(v))).tocsr()
+    tree = cKDTree(v)
+    for path in LIP_PATHS:
+        stops = [int(tree.query(points[k])[1]) for k in path if k in points]
+        for a, b in zip(stops[:-1], stops[1:]):
+            _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
+            at = b
+            while at >= 0:
+                lock[at] = True
+                at = pred[at] if at != a else -1
+    for _ in range(int(rings)):
+        lock[np.unique(f[lock[f].any(axis=1)])] = True
+    return lock

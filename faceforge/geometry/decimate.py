@@ -39,15 +39,30 @@ def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.asarray(vertices, dtype=FLOAT)[used], inverse.reshape(-1, 3).astype(INT), new
 
 
+def _with_lock_flags(vertices: np.ndarray, faces: np.ndarray, lock: np.ndarray):
+    """``(vertices, faces)`` with a small loose triangle hung on each vertex of ``lock``: two new
+    vertices (appended last) and a triangle whose edges only it uses, so the vertex is on a
+    border and the collapse (``preserve_border``) leaves it and its edges alone."""
+    if not len(lock):
+        return vertices, faces
+    n, k = len(vertices), len(lock)
+    scale = 1e-6 * float(np.ptp(vertices, axis=0).max())
+    extra = np.concatenate([vertices[lock] + [scale, 0.0, 0.0], vertices[lock] + [0.0, scale, 0.0]])
+    tri = np.stack([lock, n + np.arange(k), n + k + np.arange(k)], axis=1)
+    return np.concatenate([vertices, extra]), np.concatenate([faces, tri])
+
+
 def decimate_pieces(vertices, faces, target_vertices: int, keep_below: int = 2000,
-                    aggressiveness: float = 7.0, keep_borders: bool = True
+                    aggressiveness: float = 7.0, keep_borders: bool = True, locked=None
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Decimate each connected piece of ``(vertices (n, 3), faces (m, 3))`` to about
     ``target_vertices`` vertices in all.
 
     Pieces of at most ``keep_below`` vertices are copied unchanged; the others share what
     is left of the budget in proportion to their triangles (each keeps at least 8
-    triangles). Open borders are kept whole (see the module's docstring), or with
+    triangles). ``locked (n,) bool`` (or None): vertices no collapse may touch (they and their
+    edges are kept: the lips' contours, which a collapse would otherwise zip shut from the
+    corners where they meet). Open borders are kept whole (see the module's docstring), or with
     ``keep_borders`` False collapsed along themselves like the rest (the library's border
     quadrics hold them in place; two rims that share no edge still cannot be welded).
 
@@ -80,12 +95,17 @@ def decimate_pieces(vertices, faces, target_vertices: int, keep_below: int = 200
         into = new[mine]
         if p in big and ratio < 1.0:
             target = max(8, int(round(len(pf) * ratio)))
+            lock = np.zeros(len(pv), bool) if locked is None else np.asarray(locked, bool)[mine]
+            sv, sf = _with_lock_flags(pv, pf, np.flatnonzero(lock))
             _, _, collapses = fast_simplification.simplify(
-                pv, pf.astype(np.int32), target_count=target, agg=aggressiveness, preserve_border=keep_borders,
-                return_collapses=True)
-            dv, df, mapping = fast_simplification.replay_simplification(pv, pf.astype(np.int32), collapses)
+                sv, sf.astype(np.int32), target_count=target + (len(sf) - len(pf)), agg=aggressiveness,
+                preserve_border=keep_borders or bool(lock.any()), return_collapses=True)
+            dv, df, mapping = fast_simplification.replay_simplification(sv, sf.astype(np.int32), collapses)
+            mapping = np.asarray(mapping, INT)
+            df = np.asarray(df, INT)
+            df = df[~np.isin(df, mapping[len(pv):]).any(axis=1)]   # the lock flags go
             pv, pf, again = _compact(dv, df)
-            into = again[np.asarray(mapping, INT)[into]]
+            into = again[mapping[into]]
         merged[mine] = np.where(into >= 0, into + offset, -1)
         out_v.append(pv)
         out_f.append(pf + offset)

@@ -147,3 +147,16 @@ def test_points_on_a_triangle_bind_removed_ride_a_kept_one_around_their_vertex()
     assert out.face[0] == 2 and out.face[1] == 0
     np.testing.assert_allclose(carry(v, f, out), points, atol=1e-12)
     assert embed_off(e, v, f, [], anchor=[3, 0]) is e
+
+
+def test_locked_vertices_survive_the_decimation_in_place():
+    pytest.importorskip("fast_simplification")
+    v, f = grid(30)
+    v[:, 2] = 0.05 * np.sin(4 * v[:, 0])
+    locked = np.zeros(len(v), bool)
+    locked[np.flatnonzero(np.isclose(v[:, 1], v[15 * 30, 1]))] = True   # one interior row: a lip line
+    pv, pf, piece, merged = decimate_pieces(v, f, 300, keep_below=10, keep_borders=False, locked=locked)
+    assert len(pv) < 450
+    np.testing.assert_allclose(pv[merged[locked]], v[locked], atol=1e-6)
+    assert len(np.unique(merged[locked])) == locked.sum()   # none merged into another
+    assert not np.isin(np.arange(len(pv)), pf).sum() < len(pv)   # no loose flag vertex left
