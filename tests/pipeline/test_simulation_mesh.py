@@ -107,3 +107,16 @@ def test_below_the_threshold_fit_writes_the_same_bytes(tmp_path):
         assert result.exit_code == 0, result.output
         npz.append((work / "fit" / "fit.npz").read_bytes())
     assert npz[0] == npz[1]
+
+
+def test_the_lip_contours_are_locked_from_corner_to_corner():
+    from faceforge.fit.proxy import lip_lock
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(11, 10.0)   # 1-unit spacing; the lip line along y = 5
+    points = {"2.4": [0.0, 5.0, 0.0], "2.5": [10.0, 5.0, 0.0], "2.2": [5.0, 5.0, 0.0], "2.3": [5.0, 5.0, 0.0]}
+    row = np.isclose(v[:, 1], 5.0)
+    lock = lip_lock(v, f, points, rings=0)
+    np.testing.assert_array_equal(lock, row)
+    assert lip_lock(v, f, points, rings=1).sum() > row.sum()
+    assert not lip_lock(v, f, {"2.4": [0.0, 5.0, 0.0]}).any()
