@@ -140,7 +140,7 @@ def ring_choice(points, proxy_vertices, proxy_faces, point_vertex) -> np.ndarray
 
 
 def embed_points(points, proxy_vertices, proxy_faces, point_piece=None, face_piece=None,
-                 point_vertex=None) -> Embedding:
+                 point_vertex=None, normal_faces=None) -> Embedding:
     """Tie ``points (n, 3)`` to the proxy ``(proxy_vertices (k, 3), proxy_faces (l, 3))``.
 
     ``point_piece (n,)`` and ``face_piece (l,)`` (piece labels, or None: one piece) restrict
@@ -150,8 +150,10 @@ def embed_points(points, proxy_vertices, proxy_faces, point_piece=None, face_pie
     ``point_vertex (n,)`` (or None): the proxy vertex each point was collapsed into
     (:func:`faceforge.geometry.decimate.decimate_pieces`); a point with one takes a triangle
     around it (:func:`ring_choice`), not the nearest anywhere: a lip's vertex stays on its own
-    lip where the other lip touches it. Returns the :class:`Embedding`; :func:`carry` of the
-    proxy's own vertices gives ``points`` back to rounding.
+    lip where the other lip touches it. ``normal_faces``: the triangles the vertex normals are
+    averaged over when :func:`carry` will see more than ``proxy_faces`` (default: these).
+    Returns the :class:`Embedding`; :func:`carry` of the proxy's own vertices gives ``points``
+    back to rounding.
     """
     from faceforge.geometry.closest import TriangleGrid
 
@@ -172,7 +174,7 @@ def embed_points(points, proxy_vertices, proxy_faces, point_piece=None, face_pie
     if rest.any():
         face[rest] = TriangleGrid(v[f]).closest(p[rest])[1]
     tri = v[f[face]]
-    normals = area_vertex_normals(v, f)
+    normals = area_vertex_normals(v, f if normal_faces is None else np.asarray(normal_faces, INT))
     bary = _clamp_to_triangle(_bary_in_plane(p, tri))   # the start: about the closest point's
     plane_n = triangle_frames(tri)[:, 2]
     a = tri[:, 0]
@@ -313,7 +315,7 @@ def embed_off(embedding: Embedding, proxy_vertices, proxy_faces, removed_faces, 
     f = np.asarray(proxy_faces, dtype=INT)
     kept = np.setdiff1d(np.arange(len(f)), removed)
     points = carry(v, f, embedding.take(np.flatnonzero(off)))
-    again = embed_points(points, v, f[kept], point_vertex=np.asarray(anchor, INT)[off])
+    again = embed_points(points, v, f[kept], point_vertex=np.asarray(anchor, INT)[off], normal_faces=f)
     out = Embedding(embedding.face.copy(), embedding.bary.copy(), embedding.offset.copy(), embedding.residual.copy())
     at = np.flatnonzero(off)
     out.face[at], out.bary[at], out.offset[at], out.residual[at] = kept[again.face], again.bary, again.offset, \
