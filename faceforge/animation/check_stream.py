@@ -47,6 +47,8 @@ class StreamChecker:
         self.folded_max = 0
         self.n_edges = 0
         self.where: dict = {}
+        #: a :class:`~faceforge.animation.checks.CarriedInversions` fed by the caller, or None
+        self.carried = None
 
     def add(self, frames: np.ndarray) -> None:
         """The next ``frames (k, n, 3)`` of the animation (copied where kept)."""
@@ -103,4 +105,5 @@ class StreamChecker:
                            inverted_max_per_frame=self.inverted_max,
                            folded_edges=int(self.folded_any.sum()) if self.folded_any is not None else 0,
                            folded_max_per_frame=self.folded_max,
-                           fold_limit=fold_limit(self.n_edges), where=where)
+                           fold_limit=fold_limit(self.n_edges), where=where,
+                           carried=None if self.carried is None else self.carried.as_dict())

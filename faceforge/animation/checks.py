@@ -169,6 +169,10 @@ class FrameReport:
     #: "folded": the frame folding the most edges, "inside_skull": {frame: vertices}}`` (only
     #: the checks that found something; the skull is tested on the sampled frames only)
     where: dict = field(default_factory=dict)
+    #: a proxy-simulated head's (fit.simulation_vertices) user mesh carried on the frames:
+    #: ``{"inverted_faces": distinct user triangles turned over, "inverted_max_per_frame",
+    #: "inverted_triangles": the sum over frames, "inverted": first frame}``; None: no proxy
+    carried: dict | None = None
 
     @property
     def ok(self) -> bool:
@@ -176,7 +180,8 @@ class FrameReport:
         than ``fold_limit`` edges (a few new creases are a soft face; hundreds are a crumpled one:
         a FAP of 1e9 folded 408 edges and still said ok)."""
         return (self.non_finite == 0 and self.inverted_triangles == 0 and self.skin_inside_skull == 0
-                and self.folded_max_per_frame <= self.fold_limit)
+                and self.folded_max_per_frame <= self.fold_limit
+                and (self.carried is None or self.carried["inverted_triangles"] == 0))
 
     def as_dict(self) -> dict:
         return {"frames": self.frames, "non_finite": self.non_finite,
@@ -187,7 +192,34 @@ class FrameReport:
                 "fold_limit": self.fold_limit,
                 "skin_inside_skull": self.skin_inside_skull,
                 "max_displacement": self.max_displacement, "worst_frame": self.worst_frame,
-                "ok": self.ok, "notes": list(self.notes), "where": dict(self.where)}
+                "ok": self.ok, "notes": list(self.notes), "where": dict(self.where),
+                **({} if self.carried is None else {"carried": dict(self.carried)})}
+
+
+class CarriedInversions:
+    """Turned-over triangles of a dense mesh carried on a proxy's frames (fit.simulation_vertices),
+    counted a chunk at a time: ``rest (n, 3)`` and ``faces (t, 3)`` of the carried mesh."""
+
+    def __init__(self, rest: np.ndarray, faces: np.ndarray):
+        self.rest, self.faces = np.asarray(rest, dtype=float), np.asarray(faces, dtype=np.int64)
+        self.any = np.zeros(len(self.faces), bool)
+        self.total, self.max, self.first, self.seen = 0, 0, None, 0
+
+    def add(self, frames: np.ndarray) -> None:
+        """The next carried ``frames (k, n, 3)``."""
+        flips = inverted_faces(self.rest, np.nan_to_num(np.asarray(frames, dtype=float)), self.faces)
+        per = flips.sum(axis=1)
+        self.any |= flips.any(axis=0)
+        self.total += int(per.sum())
+        self.max = max(self.max, int(per.max()) if len(per) else 0)
+        if self.first is None and per.any():
+            self.first = self.seen + int(np.argmax(per > 0))
+        self.seen += len(flips)
+
+    def as_dict(self) -> dict:
+        """The :attr:`FrameReport.carried` mapping."""
+        return {"inverted_faces": int(self.any.sum()), "inverted_max_per_frame": self.max,
+                "inverted_triangles": self.total, "inverted": self.first}
 
 
 def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,

@@ -172,6 +172,20 @@ class BoundHead:
         n_internal = int(bind["n_user"])
         u2i = fit["skin_user_to_internal"] if "skin_user_to_internal" in fit else np.arange(n_internal)
         self.user_index = np.asarray(u2i, dtype=np.int64)
+        from faceforge.geometry.embed import NPZ_PREFIX, Embedding
+
+        #: a dense skin's vertices on this proxy (fit.simulation_vertices), or None: the user's own mesh
+        self.embedding = Embedding.from_arrays(fit, NPZ_PREFIX)
+        #: (t, 3) the user's triangles (user vertex ids) when :attr:`embedding` is set
+        self.user_faces = np.asarray(fit["skin_user_faces"], np.int64) if self.embedding is not None else None
+        if self.embedding is not None:   # the proxy's triangles on the working mesh (bind's lip cut)
+            from faceforge.geometry.embed import embed_off, working_corners
+
+            self.embedding = embed_off(self.embedding, fit["skin_vertices"], fit["skin_faces"],
+                                       bind.get("removed_faces", np.zeros(0, np.int64)), self.user_index)
+
+            self._carry_faces = working_corners(fit["skin_faces"], self.faces, len(fit["skin_vertices"]),
+                                                bind.get("duplicate_source", np.zeros(0, np.int64)))
         self.user_rotation = np.asarray(fit["user_rotation"], dtype=float) if "user_rotation" in fit else np.eye(3)
         try:
             axes = JawAxes(*(np.asarray(fit[f"jaw_{k}"], dtype=float) for k in (
@@ -344,9 +358,37 @@ class BoundHead:
         v, f = self.mandible
         return [self.cranium, (v @ t[:3, :3].T + t[:3, 3], f)]
 
+    def carried(self, frames):
+        """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order, head space: a proxy's
+        frames carried to the dense mesh (:attr:`embedding`), else the user's vertices picked."""
+        if self.embedding is None:
+            return frames[:, self.user_index]
+        from faceforge.geometry.embed import carry
+
+        frames = np.asarray(frames)
+        return carry(frames, self._carry_faces, self.embedding).astype(frames.dtype, copy=False)
+
+    def carried_check(self):
+        """A :class:`~faceforge.animation.checks.CarriedInversions` of the user's mesh on this
+        proxy (fed :meth:`carried` frames), or None without a proxy."""
+        if self.embedding is None:
+            return None
+        from faceforge.animation.checks import CarriedInversions
+
+        return CarriedInversions(self.carried(self.rest[None])[0], self.user_faces)
+
+    def check_carried(self, report, frames):
+        """``report`` (a FrameReport of working ``frames (k, n, 3)``) with the carried mesh's
+        turned triangles (:attr:`FrameReport.carried`) on a proxy; unchanged without one."""
+        check = self.carried_check()
+        if check is not None:
+            check.add(self.carried(np.asarray(frames)))
+            report.carried = check.as_dict()
+        return report
+
     def to_user(self, frames):
         """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order and frame."""
-        out = frames[:, self.user_index]
+        out = self.carried(frames)
         return out if np.array_equal(self.user_rotation, np.eye(3)) else out @ self.user_rotation
 
 

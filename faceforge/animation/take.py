@@ -52,6 +52,7 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
     included, before the head turn). A diverging simulation raises ``FloatingPointError``.
     """
     checker = StreamChecker(head.rest, head.faces, source.n_frames, inside_at_rest=head.inside_at_rest())
+    checker.carried = head.carried_check()   # a proxy-simulated head: its user mesh's turned triangles too
 
     def per_frame(frames, **_):   # one progress bar over the blocks
         for i in frames:
@@ -72,6 +73,8 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
             if overlay is not None:
                 frames = overlay(frames, block.start + start)
             checker.add(frames)
+            if checker.carried is not None:
+                checker.carried.add(head.carried(frames))
             if weights is not None:
                 frames = turn_head(frames, block.angles[start:stop], head.skull.jaw.yaw_point, weights)
             writer.write(head.to_user(frames))

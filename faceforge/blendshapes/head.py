@@ -295,5 +295,6 @@ def _check_shapes(head, frames, jaw, names, made, report) -> None:
             continue
         checks = check_animation(head.rest, frames[i:i + 1], head.faces, inside_at_rest=base,
                                  skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
+        head.check_carried(checks, frames[i:i + 1])
         report[name]["peak_displacement"] = float(np.linalg.norm(frames[i] - head.rest, axis=1).max())
         report[name]["checks"] = checks.as_dict()

@@ -40,8 +40,25 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     checked.faces = orient_outward(checked.vertices, checked.faces)   # stage files: outward winding
     for w in checked.report.warnings:
         log(f"{mesh_path}: {w}")
-    lm = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
-                        rotation=None if orientation.identity else orientation.rotation, raw=raw)
+    simulation, lm_raw = None, raw
+    limit = int(fit_config.get("simulation_vertices", 0) or 0)
+    from faceforge.fit.proxy import landmarks_by_position, make_proxy, needs_proxy
+
+    if needs_proxy(len(checked.vertices), limit):   # a dense scan: fitted and simulated on a coarser copy
+        from faceforge.fit.proxy import lip_lock
+
+        dense = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
+                               rotation=None if orientation.identity else orientation.rotation, raw=raw)
+        locked = lip_lock(checked.vertices, checked.faces, dict(zip(dense.ids, dense.positions)))
+        checked, simulation = make_proxy(checked, f, limit, keep_borders=bool(fit_config.get("simulation_borders", True)),
+                                         locked=locked)
+        checked.faces = orient_outward(checked.vertices, checked.faces)
+        lm_raw = landmarks_by_position(raw, v)
+        log(f"{mesh_path}: {simulation.report['dense_vertices']} vertices, more than fit.simulation_vertices "
+            f"{limit}: simulated on a copy of {len(checked.vertices)} vertices (the mesh's carried on it)")
+    lm = load_landmarks(lm_path, checked.vertices, checked.faces,
+                        user_to_internal=None if simulation is not None else checked.user_to_internal,
+                        rotation=None if orientation.identity else orientation.rotation, raw=lm_raw)
     # animate measures the FAP units on these landmarks (pupils, eyelids, nose, mouth): a file
     # without them must fail here, not after fit and bind ran (issue 28)
     from faceforge.mpeg4 import fapu_from_landmarks
@@ -97,8 +114,10 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
             f"fit.open_mouth_warn {limit:g}): it is taken as this head's neutral, so every FAP and expression "
             "starts from it and opens it further; the MPEG-4 neutral face has the lips closed")
     report["timings"] = {"load_s": t_load, "fit_s": t_fit, "report_s": time.perf_counter() - t}
+    if simulation is not None:
+        report["simulation_mesh"] = simulation.report
     return result, report, {"checked": checked, "landmarks": lm, "skin": skin, "template": template,
-                            "orientation": orientation, "raw_landmarks": raw}
+                            "orientation": orientation, "raw_landmarks": raw, "simulation": simulation}
 
 
 def lip_gap_ratio(points: dict) -> float | None:

@@ -219,6 +219,8 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.ala_muscles", ListOf(String())),
     ("bind.normal_rounds", Integer(0, 50)),                       # 0: the vertex normals as they are
     ("fit.normal_rounds", Integer(0, 50)),
+    ("fit.simulation_vertices", Integer(0)),                       # 0: never a proxy
+    ("fit.simulation_borders", Boolean()),
     ("fit.noisy_normal_rounds", Integer(0, 50)),                  # 0: a fit that fails its checks is not refitted
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),

@@ -65,6 +65,11 @@ def describe(checks: dict) -> list[str]:
     if limit is not None and checks.get("folded_max_per_frame", 0) > limit:
         out.append(f"folded_edges ({checks['folded_max_per_frame']} skin edges folded in one frame"
                    f"{_frame(where, 'folded')}, limit {limit})")
+    carried = checks.get("carried") or {}
+    if carried.get("inverted_triangles"):
+        out.append(f"carried_inverted ({carried.get('inverted_faces', '?')} triangles of the user's mesh turned over "
+                   f"on its simulation mesh, at most {carried.get('inverted_max_per_frame', '?')} in one frame, the "
+                   f"first at frame {carried.get('inverted')})")
     if not out and checks.get("ok") is False:
         out.append("checks failed (see report.json)")
     return out

@@ -24,9 +24,13 @@ def head_sheet(path, head, poses: np.ndarray, labels, title: str, cols: int) -> 
     from faceforge.viz.contact_sheet import contact_sheet
 
     mm = units_per_mm(head.landmarks)
-    return contact_sheet(path, poses, head.faces, range(len(poses)), 1.0, cols=cols, panel=3.2, dpi=120,
-                         labels=list(labels), title=f"{title}, heat map 0-{HEAT_MM:g} mm", region=face_framing(head),
-                         heat=HEAT_MM * mm, heat_label=f"0-{HEAT_MM:g} mm", dim=cavity(head, mm))
+    faces, region, dim = head.faces, face_framing(head), cavity(head, mm)
+    if getattr(head, "embedding", None) is not None:   # a proxy-simulated head: the user's mesh is drawn
+        poses, faces, region = head.carried(poses), head.user_faces, region[head.user_index]
+        dim = None if dim is None else dim[head.user_index]
+    return contact_sheet(path, poses, faces, range(len(poses)), 1.0, cols=cols, panel=3.2, dpi=120,
+                         labels=list(labels), title=f"{title}, heat map 0-{HEAT_MM:g} mm", region=region,
+                         heat=HEAT_MM * mm, heat_label=f"0-{HEAT_MM:g} mm", dim=dim)
 
 
 def cavity(head, mm: float):

@@ -101,6 +101,7 @@ def _preset_sheet(ctx, stem: str, rows, cols: int, title: str) -> None:
     for i, name in enumerate(names):
         checks = check_animation(head.rest, poses[i:i + 1], head.faces, inside_at_rest=head.inside_at_rest(),
                                  skull=lambda k, j=jaw[i]: head.skull_at(j if k >= 0 else np.zeros(3)))
+        head.check_carried(checks, poses[i:i + 1])
         report[stem][name] = {"checks": checks.as_dict(), "max_contraction": float(c[i].max(initial=0.0)),
                               "jaw": jaw[i].tolist(), "frames": settled.frames[i],
                               "residual": settled.residual[i], "converged": settled.converged[i]}

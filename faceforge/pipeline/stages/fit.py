@@ -17,7 +17,9 @@ fit.npz (no pickle; head space, mesh units)
     ``muscle_map_names (r,)``, ``muscle_map_points (sum,3)``, ``muscle_map_start (r+1,)``:
     every point of the morphed muscle map; ``similarity (4,4)``: the initial alignment;
     ``user_rotation (3,3)``: ``R`` of :func:`faceforge.geometry.orientation.frame_rotation`,
-    head space = the user's coordinates ``@ R.T`` (identity for a +Y-up head facing +Z).
+    head space = the user's coordinates ``@ R.T`` (identity for a +Y-up head facing +Z);
+    a skin of more vertices than ``fit.simulation_vertices``: the ``skin_*`` arrays are its
+    simulation proxy, plus ``skin_embed_*`` and ``skin_user_faces`` (:mod:`faceforge.fit.proxy`).
 
 Head space is faceforge's frame (+Y up, face along +Z, subject's left +X). A head in
 another frame is turned into it first (``fit.orientation``: ``auto`` takes the landmark
@@ -89,7 +91,8 @@ def write_outputs(out_dir, result, report, extra) -> None:
              given_landmark_ids=np.asarray(list(given), dtype=str),
              given_landmark_positions=np.asarray(list(given.values()), dtype=float).reshape(-1, 3),
              **npz_arrays(result, checked.vertices, checked.faces, checked.user_to_internal, lm,
-                          extra["template"].layers))
+                          extra["template"].layers),
+             **({} if extra.get("simulation") is None else extra["simulation"].arrays()))
     save_json(out_dir / "report.json", report)
     from faceforge.fit.muscles import fitted_muscle_map
     from faceforge.io.stagefiles import save_yaml

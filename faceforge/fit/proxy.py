@@ -1,0 +1,141 @@
+"""The simulation mesh of a dense scan (``fit.simulation_vertices``, issues 25/26).
+
+A skin with more internal vertices than the key is fitted, bound, calibrated and simulated on
+a decimated copy (:func:`faceforge.geometry.decimate.decimate_pieces`); each of the user's
+vertices rides it (:mod:`faceforge.geometry.embed`), and every frame a stage writes in the
+user's vertex order is carried back to the dense mesh (``BoundHead.to_user``). ``fit.npz`` then
+holds the proxy as ``skin_vertices``/``skin_faces`` and, in addition,
+
+``skin_embed_face (n_user,)``, ``skin_embed_bary (n_user, 3)``, ``skin_embed_offset (n_user,)``,
+``skin_embed_residual (n_user, 3)``: each user vertex on the proxy (head space);
+``skin_user_faces (t, 3)``: the user's triangles (user vertex ids), for the carried mesh's checks.
+
+``skin_user_to_internal`` is then the proxy vertex nearest each user vertex (its triangle's
+corner of largest weight): what older readers of the array get is a coarse but valid copy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from faceforge.constants import INT
+from faceforge.geometry.embed import NPZ_PREFIX as PREFIX   # the npz arrays' prefix
+
+
+@dataclass
+class SimulationMesh:
+    """A dense skin's proxy: ``embedding`` (:class:`faceforge.geometry.embed.Embedding`, one
+    row per user vertex), ``user_faces (t, 3)`` the user's triangles, ``report`` (dict)."""
+
+    embedding: object
+    user_faces: np.ndarray
+    report: dict
+
+    def arrays(self) -> dict:
+        """The extra arrays of ``fit.npz``."""
+        return {**self.embedding.arrays(PREFIX), "skin_user_faces": np.asarray(self.user_faces, INT)}
+
+
+def needs_proxy(n_vertices: int, limit: int) -> bool:
+    """True when a skin of ``n_vertices`` internal vertices is simulated on a proxy (``limit``
+    ``fit.simulation_vertices``; 0: never)."""
+    return int(limit) > 0 and int(n_vertices) > int(limit)
+
+
+def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, keep_borders: bool = True,
+               locked=None):
+    """The proxy of a checked dense skin.
+
+    checked
+        :class:`faceforge.io.mesh_check.CheckedMesh` in head space (outward winding).
+    user_faces
+        ``(t, 3)`` the user's triangles (user vertex ids; :func:`faceforge.io.mesh.load_mesh`).
+    limit
+        the proxy's vertex budget (``fit.simulation_vertices``); pieces of at most ``keep_below``
+        vertices (default: a twentieth of it) are kept whole; ``keep_borders``: the open borders
+        keep every vertex (``fit.simulation_borders``); ``locked (k,) bool``: internal vertices
+        no collapse may touch (:func:`lip_lock`).
+
+    Returns ``(proxy CheckedMesh, SimulationMesh)``: the proxy's ``user_to_internal`` maps each
+    user vertex to its nearest proxy corner, ``internal_to_user`` each proxy vertex to the user
+    vertex nearest it; its report is the dense mesh's.
+    """
+    from scipy.spatial import cKDTree
+
+    from faceforge.geometry.decimate import border_vertices, decimate_pieces
+    from faceforge.geometry.embed import carry, embed_points
+    from faceforge.geometry.triangles import vertex_components
+
+    v, f = checked.vertices, checked.faces
+    keep_below = int(limit) // 20 if keep_below is None else int(keep_below)
+    pv, pf, piece, merged = decimate_pieces(v, f, int(limit), keep_below=keep_below, keep_borders=keep_borders,
+                                            locked=locked)
+    labels = vertex_components(len(v), f)
+    internal = embed_points(v, pv, pf, labels, piece[pf[:, 0]], point_vertex=merged)
+    embedding = internal.take(checked.user_to_internal)
+    corner = pf[embedding.face, np.argmax(embedding.bary, axis=1)]
+    nearest = cKDTree(v).query(pv)[1]
+    proxy = replace(checked, vertices=pv, faces=pf, user_to_internal=corner.astype(INT),
+                    internal_to_user=np.asarray(checked.internal_to_user)[nearest].astype(INT))
+    diag = float(np.linalg.norm(v.max(0) - v.min(0)))
+    back = carry(pv, pf, internal)
+    report = {"user_vertices": int(len(checked.user_to_internal)), "dense_vertices": int(len(v)),
+              "dense_faces": int(len(f)), "proxy_vertices": int(len(pv)), "proxy_faces": int(len(pf)),
+              "limit": int(limit), "pieces": int(labels.max() + 1) if len(labels) else 0,
+              "border_vertices_dense": int(border_vertices(len(v), f).sum()),
+              "border_vertices_proxy": int(border_vertices(len(pv), pf).sum()),
+              "offset_max": float(np.abs(internal.offset).max() / diag),
+              "offset_median": float(np.median(np.abs(internal.offset)) / diag),
+              "rest_error_max": float(np.abs(back - v).max() / diag),
+              "locked_vertices": 0 if locked is None else int(np.count_nonzero(locked))}
+    return proxy, SimulationMesh(embedding, np.asarray(user_faces, INT), report)
+
+
+def landmarks_by_position(raw, user_vertices):
+    """``raw`` (:class:`faceforge.io.landmarks.RawLandmarks`) with every vertex id given as
+    that user vertex's position ``user_vertices (n, 3)`` (user frame) instead: the ids of the
+    dense mesh mean nothing on its proxy, their places do (snapped onto it). Ids out of range
+    are left for :func:`faceforge.io.landmarks.load_landmarks` to report."""
+    if raw is None:
+        return None
+    uv = np.asarray(user_vertices, dtype=float)
+    has = (raw.vertex >= 0) & (raw.vertex < len(uv))
+    position = np.where(has[:, None], uv[np.where(has, raw.vertex, 0)], raw.position)
+    return replace(raw, vertex=np.where(has, -1, raw.vertex).astype(np.int64), position=position)
+
+
+#: the inner lips' contours, corner to corner (as skin.mouth's)
+LIP_PATHS = (("2.4", "2.6", "2.2", "2.7", "2.5"), ("2.4", "2.8", "2.3", "2.9", "2.5"))
+
+
+def lip_lock(vertices, faces, points: dict, rings: int = 1) -> np.ndarray:
+    """``(n,) bool``: the vertices of the inner lips' contours (shortest edge paths through the
+    FDPs of :data:`LIP_PATHS` found in ``points {fdp: (3,)}``, each at its nearest vertex) and
+    ``rings`` rings of neighbours: the decimation may not collapse them (where the lips touch
+    a collapse zips them shut from the corners). None locked without 2.2-2.5."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import dijkstra
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=float)
+    f = np.asarray(faces, INT)
+    lock = np.zeros(len(v), bool)
+    if not all(k in points for k in ("2.2", "2.3", "2.4", "2.5")):
+        return lock
+    e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+    graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(v), len(v))).tocsr()
+    tree = cKDTree(v)
+    for path in LIP_PATHS:
+        stops = [int(tree.query(points[k])[1]) for k in path if k in points]
+        for a, b in zip(stops[:-1], stops[1:]):
+            _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
+            at = b
+            while at >= 0:
+                lock[at] = True
+                at = pred[at] if at != a else -1
+    for _ in range(int(rings)):
+        lock[np.unique(f[lock[f].any(axis=1)])] = True
+    return lock

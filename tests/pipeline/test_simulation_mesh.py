@@ -1,0 +1,122 @@
+"""fit.simulation_vertices: a head with more vertices than the key is fitted, bound and simulated on a
+decimated copy, and every written frame is the user's mesh (its vertex count and order)."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from faceforge.fit.proxy import landmarks_by_position, needs_proxy
+from faceforge.geometry.embed import working_corners
+
+ROOT = Path(__file__).resolve().parents[2]
+MEDIAPIPE = ROOT / "samples" / "mediapipe" / "face_model_with_iris.obj"
+
+
+def test_the_threshold_and_zero_for_never():
+    assert not needs_proxy(45_000, 0)
+    assert not needs_proxy(20_000, 20_000)
+    assert needs_proxy(20_001, 20_000)
+
+
+def test_the_lip_cut_copies_carry_the_lower_lip():
+    fit_faces = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4]])
+    # bind copied vertex 2 (-> 5) and rewired the lower triangle [2, 3, 4] to it; removed none
+    working = np.array([[0, 1, 2], [1, 3, 2], [5, 3, 4]])
+    out = working_corners(fit_faces, working, 5, [2])
+    np.testing.assert_array_equal(out, working)
+    np.testing.assert_array_equal(working_corners(fit_faces, fit_faces, 5, []), fit_faces)
+
+
+def test_landmark_vertex_ids_become_their_places():
+    from faceforge.io.landmarks import RawLandmarks
+
+    uv = np.array([[0.0, 0, 0], [1, 2, 3], [4, 5, 6]])
+    raw = RawLandmarks("x", ("2.1", "9.3"), np.array([1, -1]), np.array([[np.nan] * 3, [7.0, 8, 9]]))
+    out = landmarks_by_position(raw, uv)
+    np.testing.assert_array_equal(out.vertex, [-1, -1])
+    np.testing.assert_array_equal(out.position, [[1, 2, 3], [7, 8, 9]])
+
+
+@pytest.fixture(scope="module")
+def proxy_workdir(tmp_path_factory):
+    """MediaPipe's head (478 vertices) fitted and bound on a copy of about 350."""
+    from click.testing import CliRunner
+
+    from faceforge.cli import cli
+
+    folder = tmp_path_factory.mktemp("proxy")
+    shutil.copy(MEDIAPIPE, folder / MEDIAPIPE.name)
+    shutil.copy(MEDIAPIPE.with_suffix(".fdp.yaml"), folder / "face_model_with_iris.fdp.yaml")
+    work = folder / "w"
+    for args in (["fit", str(folder / MEDIAPIPE.name)], ["bind"]):
+        result = CliRunner().invoke(cli, ["-q", "-w", str(work), "--set", "fit.simulation_vertices=350", *args])
+        assert result.exit_code == 0, result.output
+    return folder, work
+
+
+def test_a_head_over_the_threshold_is_simulated_on_a_proxy_and_written_in_the_users_order(proxy_workdir,
+                                                                                          short_fap):
+    from click.testing import CliRunner
+
+    from faceforge.animation.rig import BoundHead
+    from faceforge.cli import cli
+    from faceforge.io.config import load_config
+    from faceforge.io.frame_stream import open_frames
+    from faceforge.io.mesh import load_mesh
+    from faceforge.io.stagefiles import load_npz
+
+    folder, work = proxy_workdir
+    fit = load_npz(work / "fit" / "fit.npz")
+    user, _, _ = load_mesh(folder / MEDIAPIPE.name)
+    assert len(fit["skin_vertices"]) < len(user) and len(fit["skin_embed_face"]) == len(user)
+    head = BoundHead(work / "fit", work / "bind", load_config())
+    diag = float(np.linalg.norm(np.ptp(user, axis=0)))
+    # the rest pose carried back is the user's mesh, vertex for vertex
+    assert np.abs(head.to_user(head.rest[None])[0] - user).max() < 1e-9 * diag
+    out = folder / "joy.pc2"
+    result = CliRunner().invoke(cli, ["-q", "-w", str(work), "--set", "fit.simulation_vertices=350", "--set",
+                                      "animate.calibrate.enabled=false", "animate", "--fap", str(short_fap),
+                                      "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    frames = open_frames(work / "animate" / "animation.npz")
+    assert frames.shape[1:] == (len(user), 3)
+    assert np.abs(np.asarray(frames[0]) - user).max() < 0.05 * diag   # the first frame: near rest, same order
+    assert out.stat().st_size > len(user) * 12 * len(frames)
+    import json
+
+    checks = json.loads((work / "animate" / "report.json").read_text())["checks"]
+    assert "carried" in checks and checks["carried"]["inverted_triangles"] == 0
+
+
+def test_below_the_threshold_fit_writes_the_same_bytes(tmp_path):
+    from click.testing import CliRunner
+
+    from faceforge.cli import cli
+
+    shutil.copy(MEDIAPIPE, tmp_path / MEDIAPIPE.name)
+    shutil.copy(MEDIAPIPE.with_suffix(".fdp.yaml"), tmp_path / "face_model_with_iris.fdp.yaml")
+    npz = []
+    for key in (0, 100_000):
+        work = tmp_path / f"w{key}"
+        result = CliRunner().invoke(cli, ["-q", "-w", str(work), "--set", f"fit.simulation_vertices={key}", "fit",
+                                          str(tmp_path / MEDIAPIPE.name)])
+        assert result.exit_code == 0, result.output
+        npz.append((work / "fit" / "fit.npz").read_bytes())
+    assert npz[0] == npz[1]
+
+
+def test_the_lip_contours_are_locked_from_corner_to_corner():
+    from faceforge.fit.proxy import lip_lock
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(11, 10.0)   # 1-unit spacing; the lip line along y = 5
+    points = {"2.4": [0.0, 5.0, 0.0], "2.5": [10.0, 5.0, 0.0], "2.2": [5.0, 5.0, 0.0], "2.3": [5.0, 5.0, 0.0]}
+    row = np.isclose(v[:, 1], 5.0)
+    lock = lip_lock(v, f, points, rings=0)
+    np.testing.assert_array_equal(lock, row)
+    assert lip_lock(v, f, points, rings=1).sum() > row.sum()
+    assert not lip_lock(v, f, {"2.4": [0.0, 5.0, 0.0]}).any()
