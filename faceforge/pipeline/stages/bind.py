@@ -136,7 +136,7 @@ def run(ctx):
 
 STAGE = register_stage(Stage(
     name="bind", deps=("fit",), config_keys=("bind",),
-    outputs=("bind.npz", "report.json", "influence.png"), version="11", run=run,
+    outputs=("bind.npz", "report.json", "influence.png"), version="12", run=run,
     description="bind the skin to muscles and bone, influence map (§8)", background=compile_solver_ahead))
 
 
