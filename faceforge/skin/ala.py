@@ -111,13 +111,7 @@ def ala_binding(binding, vertices, bodies, muscles, mask, max_distance: float, u
     from faceforge.skin.casting import MUSCLE
 
     v = np.asarray(vertices, FLOAT)
-    ids = np.asarray(binding.vertex_ids, INT)
-    n = len(binding.status)
-    counts = np.bincount(ids, minlength=n)
-    row = np.full(n, -1, INT)
-    row[ids] = np.arange(len(ids))        # with one anchor per vertex, that anchor's row
-    on_bone = (binding.status != MUSCLE) & (binding.status != 0) & (counts == 1)
-    todo = np.flatnonzero(np.asarray(mask, bool) & on_bone)
+    todo, row = binding.sole_bone_anchors(mask)
     if not len(todo) or not len(muscles):
         return binding, 0
     best = np.full(len(todo), np.inf)

@@ -236,6 +236,19 @@ class Binding:
             closest=np.asarray(get("closest"), bool) if ("closest" in arrays or prefix + "closest" in arrays)
             else None)
 
+    def sole_bone_anchors(self, mask) -> tuple[np.ndarray, np.ndarray]:
+        """The vertices of ``mask`` (n,) bool whose one anchor is on a bone, and where each vertex's
+        anchor row is: ``(todo (j,) vertex ids, row (n,) int)`` (``row[v]`` the row of ``v``'s
+        anchor when it has exactly one, else another of its rows or -1): what the rebinding passes
+        (cheek, ala) move onto a muscle."""
+        ids = np.asarray(self.vertex_ids, INT)
+        n = len(self.status)
+        counts = np.bincount(ids, minlength=n)
+        row = np.full(n, -1, INT)
+        row[ids] = np.arange(len(ids))        # with one anchor per vertex, that anchor's row
+        on_bone = (self.status != MUSCLE) & (self.status != UNBOUND) & (counts == 1)
+        return np.flatnonzero(np.asarray(mask, bool) & on_bone), row
+
     def as_arrays(self) -> dict:
         """Flat arrays for an npz stage file (no pickle)."""
         return {

@@ -59,13 +59,8 @@ def cheek_binding(binding, vertices, bodies, muscles, mask, max_distance: float)
     from faceforge.skin.brow import _rebind
     from faceforge.skin.casting import MUSCLE
 
-    ids = np.asarray(binding.vertex_ids, INT)
+    todo, row = binding.sole_bone_anchors(mask)
     n = len(binding.status)
-    counts = np.bincount(ids, minlength=n)
-    row = np.full(n, -1, INT)
-    row[ids] = np.arange(len(ids))        # with one anchor per vertex, that anchor's row
-    on_bone = (binding.status != MUSCLE) & (binding.status != 0) & (counts == 1)
-    todo = np.flatnonzero(np.asarray(mask, bool) & on_bone)
     if not len(todo) or not len(muscles):
         return binding, 0
     body = np.full(n, -1, INT)
