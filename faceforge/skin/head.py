@@ -286,7 +286,7 @@ def bind_head(vertices, faces, landmarks: dict, cranium, mandible, muscles,
         report["forehead_on_bone"] = forehead
     if nose_on_bone:   # (off, the report as before)
         report["nose_on_bone"] = nose
-    if ala_ids and ala_mm > 0:   # (off, the report as before)
+    if ala_ids and ala_mm > 0:   # (named only when on: the report as before with bind.ala_mm 0)
         report["ala_on_muscle"] = ala
     report["max_ray_distance"] = max_ray_fraction * diagonal
     report["lip_band_width"] = band_width
