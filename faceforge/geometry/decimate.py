@@ -93,8 +93,8 @@ def decimate_pieces(vertices, faces, target_vertices: int, keep_below: int = 200
         pv, pf, new = _compact(v, f[face_piece == p])
         mine = np.flatnonzero(new >= 0)
         into = new[mine]
-        if p in big and ratio < 1.0:
-            target = max(8, int(round(len(pf) * ratio)))
+        target = max(8, int(round(len(pf) * ratio)))
+        if p in big and ratio < 1.0 and target < len(pf):   # (a piece already that small is kept)
             lock = np.zeros(len(pv), bool) if locked is None else np.asarray(locked, bool)[mine]
             sv, sf = _with_lock_flags(pv, pf, np.flatnonzero(lock))
             _, _, collapses = fast_simplification.simplify(

@@ -77,6 +77,25 @@ class Integer(Rule):
 
 
 @dataclass(frozen=True)
+class OffOrInteger(Rule):
+    """0 (off), or an integer >= ``low``: a size below which the feature makes no sense."""
+
+    low: int = 1
+
+    def describe(self) -> str:
+        return f"0 (off) or an integer >= {self.low}"
+
+    def check(self, value, base):
+        try:
+            value = Integer(0).check(value, base)
+        except ValueError:
+            raise ValueError(self.describe()) from None
+        if 0 < value < self.low:
+            raise ValueError(self.describe())
+        return value
+
+
+@dataclass(frozen=True)
 class Boolean(Rule):
     def check(self, value, base):
         if not isinstance(value, bool):
@@ -219,7 +238,8 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.ala_muscles", ListOf(String())),
     ("bind.normal_rounds", Integer(0, 50)),                       # 0: the vertex normals as they are
     ("fit.normal_rounds", Integer(0, 50)),
-    ("fit.simulation_vertices", Integer(0)),                       # 0: never a proxy
+    ("fit.simulation_vertices", OffOrInteger(300)),                # 0: never a proxy (under a few hundred the
+                                                                   # decimated copy loses the landmarks' places)
     ("fit.simulation_borders", Boolean()),
     ("fit.noisy_normal_rounds", Integer(0, 50)),                  # 0: a fit that fails its checks is not refitted
     ("template.*", PathValue()),

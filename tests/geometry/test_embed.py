@@ -76,6 +76,18 @@ def test_a_point_stays_on_its_own_piece():
     np.testing.assert_allclose(carry(v, f, e), points, atol=1e-12)
 
 
+def test_a_piece_with_no_more_triangles_than_its_share_is_kept_whole():
+    # a tetrahedron over keep_below with a budget of 8 triangles: the library refused the target
+    # ("target_count must be less than the number of faces") and the fit ended in a traceback
+    pytest.importorskip("fast_simplification")
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    pv, pf, piece, merged = decimate_pieces(v, f, 2, keep_below=1)
+    np.testing.assert_array_equal(pv, v)
+    np.testing.assert_array_equal(pf, f)
+    np.testing.assert_array_equal(merged, np.arange(4))
+
+
 def test_the_decimator_keeps_pieces_apart_and_open_borders_whole():
     pytest.importorskip("fast_simplification")
     big_v, big_f = grid(40)

@@ -92,6 +92,9 @@ def test_unknown_top_level_key_without_near_match(tmp_path):
     # a stiffness of 5 was accepted and played
     ("skin:\n  cheek_tether: 5\n", "skin.cheek_tether: expected a number in [0, 1], got 5"),
     ("curves:\n  ridge: -0.1\n", "curves.ridge: expected a number in [0, 1], got -0.1"),
+    # a proxy of 50 vertices crashed inside the decimation library with a traceback
+    ("fit:\n  simulation_vertices: 50\n", "fit.simulation_vertices: expected 0 (off) or an integer >= 300, got 50"),
+    ("fit:\n  simulation_vertices: -1\n", "fit.simulation_vertices: expected 0 (off) or an integer >= 300, got -1"),
     ("skin:\n  stiffness:\n    bending: [1]\n", "skin.stiffness.bending: expected a number in [0, 1], got [1]"),
     # no fraction, no probe: the calibration wrote an empty mapping and said nothing
     ("animate:\n  calibrate:\n    fractions: []\n",
