@@ -5,6 +5,7 @@ import numpy as np
 from faceforge.skin.ala import ala_binding, ala_mask, stretched_closest
 from faceforge.skin.binding import Binding, Body
 from faceforge.skin.casting import CRANIUM, MUSCLE
+from tests.skin.test_cheek import one_anchor_binding
 
 # a face looking along +z, y up, eyes 63 units apart (1 unit = 1 mm): the alar bases 12 mm to each
 # side of the midline at 1 mm up, the alar creases 18 mm to each side at 8 mm up
@@ -53,10 +54,7 @@ def test_ala_skin_on_bone_moves_to_the_levator_at_its_height():
     status = np.array([CRANIUM, MUSCLE, CRANIUM, CRANIUM], np.int8)
     body = np.array([1, 0, 1, 1])
     pts = v * [1.0, 1.0, 0.0] + [0.0, 0.0, -30.0]
-    binding = Binding(body_names=tuple(b.name for b in bodies), status=status, vertex_ids=np.arange(4),
-                      body=body, face_ids=np.zeros(4, np.int64), bary=np.full((4, 3), 1 / 3),
-                      points=pts, distance=np.abs(pts[:, 2]), outward=np.zeros(4, bool),
-                      normals=np.tile([0.0, 0.0, 1.0], (4, 1)), closest=np.zeros(4, bool))
+    binding = one_anchor_binding(bodies, status, body, pts)
     mask = np.array([True, True, False, True])
     out, moved = ala_binding(binding, v, bodies, [0], mask, 200.0)
     # on the bone and in the ala: to the levator, at its own height; on a muscle or outside the mask: unchanged

@@ -13,6 +13,16 @@ LANDMARKS = {"3.5": (31.5, 0.0, 0.0), "3.6": (-31.5, 0.0, 0.0), "5.3": (35.0, -2
              "3.8": (-44.0, 0.0, 0.0), "3.4": (-31.5, -4.0, 0.0), "3.2": (-31.5, 5.0, 0.0)}
 
 
+def one_anchor_binding(bodies, status, body, points):
+    """A :class:`Binding` of ``len(status)`` skin vertices, one anchor each on ``body`` at ``points``
+    (depth along z, normals +z): the rebinding passes' input."""
+    n = len(status)
+    return Binding(body_names=tuple(b.name for b in bodies), status=status, vertex_ids=np.arange(n),
+                   body=body, face_ids=np.zeros(n, np.int64), bary=np.full((n, 3), 1 / 3),
+                   points=points, distance=np.abs(points[:, 2]), outward=np.zeros(n, bool),
+                   normals=np.tile([0.0, 0.0, 1.0], (n, 1)), closest=np.zeros(n, bool))
+
+
 def test_mask_is_the_skin_around_the_cheek_bones_outside_the_lids():
     pts = np.array([[35.0, -20.0, 0.0],    # on 5.3
                     [35.0, -32.0, 0.0],    # 12 mm below it
@@ -39,10 +49,7 @@ def test_cheek_skin_on_bone_moves_to_the_cheek_raiser_within_reach():
     body = np.array([2, 1, 2, 2])
     pts = v * [1.0, 1.0, 0.0] + [0.0, 0.0, -20.0]
     pts[1, 2] = -2.0
-    binding = Binding(body_names=tuple(b.name for b in bodies), status=status, vertex_ids=np.arange(4),
-                      body=body, face_ids=np.zeros(4, np.int64), bary=np.full((4, 3), 1 / 3),
-                      points=pts, distance=np.abs(pts[:, 2]), outward=np.zeros(4, bool),
-                      normals=np.tile([0.0, 0.0, 1.0], (4, 1)), closest=np.zeros(4, bool))
+    binding = one_anchor_binding(bodies, status, body, pts)
     mask = np.array([True, True, False, True])
     out, moved = cheek_binding(binding, v, bodies, [0], mask, 10.0)
     # on the bone and in the cheek: to the cheek raiser; on a muscle, outside the mask, or with
