@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
+from faceforge.geometry.triangles import barycentric_in, vertex_normals
 
 __all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners", "carry_plain", "embed_off"]
 
@@ -60,18 +61,11 @@ class Embedding:
 
 def area_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``(..., n, 3)`` unit area-weighted vertex normals of ``vertices (..., n, 3)`` (a stack of
-    frames allowed) over ``faces (m, 3)``; 0 for a vertex no face uses."""
+    frames allowed) over ``faces (m, 3)``; 0 for a vertex no face uses
+    (:func:`faceforge.geometry.triangles.vertex_normals` a frame at a time)."""
     v = np.asarray(vertices, dtype=FLOAT)
-    f = np.asarray(faces, dtype=INT)
-    t = v[..., f, :]
-    cross = np.cross(t[..., 1, :] - t[..., 0, :], t[..., 2, :] - t[..., 0, :])
-    n = v.shape[-2]
-    cr = cross.reshape(-1, len(f), 3)
-    corner = f.T.ravel()   # each face's cross product added to its three corners
-    acc = np.stack([np.stack([np.bincount(corner, np.tile(c[:, axis], 3), minlength=n) for axis in range(3)],
-                             axis=1) for c in cr]).reshape(v.shape)
-    length = np.linalg.norm(acc, axis=-1, keepdims=True)
-    return np.divide(acc, length, out=np.zeros_like(acc), where=length > 0)
+    flat = v.reshape(-1, *v.shape[-2:])
+    return np.stack([vertex_normals(x, faces) for x in flat]).reshape(v.shape)
 
 
 def triangle_frames(tri: np.ndarray) -> np.ndarray:
@@ -96,17 +90,9 @@ def _interpolated_normals(normals: np.ndarray, faces: np.ndarray, face: np.ndarr
 
 def _bary_in_plane(points: np.ndarray, tri: np.ndarray) -> np.ndarray:
     """``(k, 3)`` barycentric coordinates of the feet of ``points (k, 3)`` on the planes of
-    ``tri (k, 3, 3)`` (unbounded: a foot outside its triangle gets a negative one)."""
-    a = tri[:, 0]
-    e0, e1, d = tri[:, 1] - a, tri[:, 2] - a, points - a
-    d00, d01, d11 = (np.einsum("ij,ij->i", x, y) for x, y in ((e0, e0), (e0, e1), (e1, e1)))
-    d20, d21 = np.einsum("ij,ij->i", d, e0), np.einsum("ij,ij->i", d, e1)
-    den = d00 * d11 - d01 * d01
-    ok = den > 1e-300
-    safe = np.where(ok, den, 1.0)
-    b1 = np.where(ok, (d11 * d20 - d01 * d21) / safe, 1.0 / 3.0)
-    b2 = np.where(ok, (d00 * d21 - d01 * d20) / safe, 1.0 / 3.0)
-    return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
+    ``tri (k, 3, 3)`` (unbounded: a foot outside its triangle gets a negative one; a degenerate
+    triangle its centroid)."""
+    return barycentric_in(points, tri, degenerate=(1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0))
 
 
 def ring_choice(points, proxy_vertices, proxy_faces, point_vertex) -> np.ndarray:

@@ -92,7 +92,14 @@ def barycentric(points, vertices, faces, face_ids) -> np.ndarray:
     ids = np.asarray(face_ids, dtype=INT).reshape(-1)
     if len(ids) != len(p):
         raise ValueError(f"points {p.shape} and face_ids {ids.shape} differ in length")
-    tri = v[f[ids]]
+    return barycentric_in(p, v[f[ids]])
+
+
+def barycentric_in(points, tri, degenerate=(1.0, 0.0, 0.0)) -> np.ndarray:
+    """Barycentric coordinates of the feet of ``points (k, 3)`` on the planes of the triangles
+    ``tri (k, 3, 3)`` (corners), unbounded (a foot outside its triangle has a negative one),
+    summing to 1; a degenerate triangle gives ``degenerate``. The core of :func:`barycentric`."""
+    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
     a = tri[:, 0]
     e0 = tri[:, 1] - a
     e1 = tri[:, 2] - a
@@ -105,8 +112,8 @@ def barycentric(points, vertices, faces, face_ids) -> np.ndarray:
     den = d00 * d11 - d01 * d01
     ok = den > 1e-300
     safe = np.where(ok, den, 1.0)
-    b1 = np.where(ok, (d11 * d20 - d01 * d21) / safe, 0.0)
-    b2 = np.where(ok, (d00 * d21 - d01 * d20) / safe, 0.0)
+    b1 = np.where(ok, (d11 * d20 - d01 * d21) / safe, degenerate[1])
+    b2 = np.where(ok, (d00 * d21 - d01 * d20) / safe, degenerate[2])
     return np.stack([1.0 - b1 - b2, b1, b2], axis=1)
 
 
