@@ -115,27 +115,21 @@ def lip_lock(vertices, faces, points: dict, rings: int = 1) -> np.ndarray:
     FDPs of :data:`LIP_PATHS` found in ``points {fdp: (3,)}``, each at its nearest vertex) and
     ``rings`` rings of neighbours: the decimation may not collapse them (where the lips touch
     a collapse zips them shut from the corners). None locked without 2.2-2.5."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import dijkstra
     from scipy.spatial import cKDTree
+
+    from faceforge.geometry.triangles import edge_graph, edge_path
 
     v = np.asarray(vertices, dtype=float)
     f = np.asarray(faces, INT)
     lock = np.zeros(len(v), bool)
     if not all(k in points for k in ("2.2", "2.3", "2.4", "2.5")):
         return lock
-    e = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
-    w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
-    graph = coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(v), len(v))).tocsr()
+    graph = edge_graph(v, f)
     tree = cKDTree(v)
     for path in LIP_PATHS:
         stops = [int(tree.query(points[k])[1]) for k in path if k in points]
         for a, b in zip(stops[:-1], stops[1:]):
-            _, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
-            at = b
-            while at >= 0:
-                lock[at] = True
-                at = pred[at] if at != a else -1
+            lock[edge_path(graph, a, b)] = True
     for _ in range(int(rings)):
         lock[np.unique(f[lock[f].any(axis=1)])] = True
     return lock

@@ -205,3 +205,44 @@ def neighbour_average(n_vertices: int, faces):
     adj = adj + adj.T
     adj.data[:] = 1.0
     return diags(1.0 / np.maximum(np.asarray(adj.sum(axis=1)).ravel(), 1.0)) @ adj
+
+
+def edge_graph(vertices: np.ndarray, faces: np.ndarray):
+    """The mesh's edges as a symmetric sparse ``(n, n)`` CSR matrix of their lengths (a
+    zero-length edge kept at 1e-300): the graph of shortest edge paths (scipy's ``dijkstra``)."""
+    from scipy.sparse import coo_matrix
+
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    w = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
+    w = np.maximum(w, 1e-300)  # zero-length edges must still be edges
+    n = len(vertices)
+    g = coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
+    return g.tocsr()
+
+
+def edge_path(graph, a: int, b: int, banned=()) -> list[int]:
+    """The shortest edge path ``a -> b`` (vertex ids) over ``graph`` (:func:`edge_graph`) avoiding
+    ``banned`` vertices; [] if none."""
+    from scipy.sparse.csgraph import dijkstra
+
+    if a == b:
+        return [a]
+    g = graph
+    banned = [x for x in banned if x not in (a, b)]
+    if banned:
+        g = graph.tolil(copy=True)
+        for x in banned:
+            g.rows[x] = []
+            g.data[x] = []
+        g = g.tocsr()
+        keep = np.ones(g.shape[0], bool)
+        keep[banned] = False
+        g = g.multiply(keep[None, :]).tocsr()
+    dist, pred = dijkstra(g, indices=a, return_predecessors=True)
+    if not np.isfinite(dist[b]):
+        return []
+    out = [b]
+    while out[-1] != a:
+        out.append(int(pred[out[-1]]))
+    return out[::-1]

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from faceforge.constants import FLOAT, INT
+from faceforge.geometry.triangles import edge_graph, edge_path
 
 __all__ = ["MouthCut", "LIP_FDPS", "lip_contours", "cut_mouth", "lip_side", "side_of_points",
            "muscle_lip_side", "ring_face_sides", "AROUND_MOUTH"]
@@ -102,48 +103,10 @@ class MouthCut:
         }
 
 
-def _graph(vertices: np.ndarray, faces: np.ndarray):
-    from scipy.sparse import coo_matrix
-
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    e = np.unique(np.sort(e, axis=1), axis=0)
-    w = np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1)
-    w = np.maximum(w, 1e-300)  # zero-length edges must still be edges
-    n = len(vertices)
-    g = coo_matrix((np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
-    return g.tocsr()
-
-
-def _path(graph, a: int, b: int, banned=()) -> list[int]:
-    """Shortest edge path a -> b avoiding ``banned`` vertices; [] if none."""
-    from scipy.sparse.csgraph import dijkstra
-
-    if a == b:
-        return [a]
-    g = graph
-    banned = [x for x in banned if x not in (a, b)]
-    if banned:
-        g = graph.tolil(copy=True)
-        for x in banned:
-            g.rows[x] = []
-            g.data[x] = []
-        g = g.tocsr()
-        keep = np.ones(g.shape[0], bool)
-        keep[banned] = False
-        g = g.multiply(keep[None, :]).tocsr()
-    dist, pred = dijkstra(g, indices=a, return_predecessors=True)
-    if not np.isfinite(dist[b]):
-        return []
-    out = [b]
-    while out[-1] != a:
-        out.append(int(pred[out[-1]]))
-    return out[::-1]
-
-
 def _chain(graph, ids: list[int], banned=()) -> list[int]:
     out = [ids[0]]
     for a, b in zip(ids[:-1], ids[1:]):
-        p = _path(graph, a, b, banned)
+        p = edge_path(graph, a, b, banned)
         if not p:
             return []
         out += p[1:]
@@ -168,7 +131,7 @@ def lip_contours(vertices, faces, lip_vertices: dict) -> tuple[np.ndarray, np.nd
     """
     v = np.asarray(vertices, FLOAT)
     f = np.asarray(faces, INT)
-    g = _graph(v, f)
+    g = edge_graph(v, f)
     up = [int(lip_vertices[k]) for k in UPPER_FDPS if k in lip_vertices]
     lo = [int(lip_vertices[k]) for k in LOWER_FDPS if k in lip_vertices]
     upper = _chain(g, up)
@@ -410,7 +373,7 @@ def _surface_side(cut: MouthCut, side: np.ndarray) -> np.ndarray:
     from scipy.sparse.csgraph import dijkstra
 
     v = np.asarray(cut.vertices, FLOAT)
-    g = _graph(v, np.asarray(cut.faces, INT))
+    g = edge_graph(v, np.asarray(cut.faces, INT))
     corners = np.unique([cut.upper[0], cut.upper[-1], cut.lower[0], cut.lower[-1]])
     d_up = dijkstra(g, indices=np.asarray(cut.upper[1:-1], INT), min_only=True)
     d_low = dijkstra(g, indices=np.asarray(cut.lower[1:-1], INT), min_only=True)

@@ -38,14 +38,14 @@ def lip_band(cut, width: float | None, forward=(0.0, 0.0, 1.0)) -> np.ndarray:
     lips touch each other and roll into the mouth. None, or no contours: no vertex."""
     from scipy.sparse.csgraph import dijkstra
 
-    from faceforge.skin.mouth import _graph
+    from faceforge.geometry.triangles import edge_graph
 
     n = len(cut.vertices)
     if width is None or len(cut.upper) < 2 or len(cut.lower) < 2:
         return np.zeros(n, bool)
     v, f = np.asarray(cut.vertices, FLOAT), np.asarray(cut.faces, INT)
     seeds = np.unique(np.r_[cut.upper, cut.lower]).astype(INT)
-    d = dijkstra(_graph(v, f), indices=seeds, min_only=True, limit=float(width) * (1.0 + 1e-9))
+    d = dijkstra(edge_graph(v, f), indices=seeds, min_only=True, limit=float(width) * (1.0 + 1e-9))
     fwd = np.asarray(forward, FLOAT) / np.linalg.norm(forward)
     return (d <= width) & (vertex_normals(v, f) @ fwd < INNER_LIP_COS)
 
@@ -118,7 +118,7 @@ def vermilion_mask(cut, sides, landmarks: dict, scale: float = 1.0) -> np.ndarra
     or its contour, or ``scale`` 0: no vertex."""
     from scipy.sparse.csgraph import dijkstra
 
-    from faceforge.skin.mouth import _graph
+    from faceforge.geometry.triangles import edge_graph
 
     v, f = np.asarray(cut.vertices, FLOAT), np.asarray(cut.faces, INT)
     sides = np.asarray(sides).reshape(-1)
@@ -128,7 +128,7 @@ def vermilion_mask(cut, sides, landmarks: dict, scale: float = 1.0) -> np.ndarra
         if inner not in landmarks or outer not in landmarks or len(seeds) < 2 or scale <= 0.0:
             continue
         reach = scale * float(np.linalg.norm(np.subtract(landmarks[inner], landmarks[outer])))
-        d = dijkstra(_graph(v, f), indices=np.unique(np.asarray(seeds, INT)), min_only=True,
+        d = dijkstra(edge_graph(v, f), indices=np.unique(np.asarray(seeds, INT)), min_only=True,
                      limit=reach * (1.0 + 1e-9))
         out |= (sides == side) & (d <= reach)
     return out
