@@ -38,6 +38,14 @@ class SimulationMesh:
         return {**self.embedding.arrays(PREFIX), "skin_user_faces": np.asarray(self.user_faces, INT)}
 
 
+def border_vertices(faces) -> np.ndarray:
+    """Vertex ids ``(b,)`` on an edge only one of ``faces (m, 3)`` uses (an open border)."""
+    from faceforge.io.mesh_check import edge_face_counts
+
+    edges, counts = edge_face_counts(np.asarray(faces, INT).reshape(-1, 3))
+    return np.unique(edges[counts == 1])
+
+
 def needs_proxy(n_vertices: int, limit: int) -> bool:
     """True when a skin of ``n_vertices`` internal vertices is simulated on a proxy (``limit``
     ``fit.simulation_vertices``; 0: never)."""
@@ -64,7 +72,7 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, k
     """
     from scipy.spatial import cKDTree
 
-    from faceforge.geometry.decimate import border_vertices, decimate_pieces
+    from faceforge.geometry.decimate import decimate_pieces
     from faceforge.geometry.embed import carry, embed_points
     from faceforge.geometry.triangles import vertex_components
 
@@ -84,8 +92,7 @@ def make_proxy(checked, user_faces, limit: int, keep_below: int | None = None, k
     report = {"user_vertices": int(len(checked.user_to_internal)), "dense_vertices": int(len(v)),
               "dense_faces": int(len(f)), "proxy_vertices": int(len(pv)), "proxy_faces": int(len(pf)),
               "limit": int(limit), "pieces": int(labels.max() + 1) if len(labels) else 0,
-              "border_vertices_dense": int(border_vertices(len(v), f).sum()),
-              "border_vertices_proxy": int(border_vertices(len(pv), pf).sum()),
+              "border_vertices_dense": len(border_vertices(f)), "border_vertices_proxy": len(border_vertices(pf)),
               "offset_max": float(np.abs(internal.offset).max() / diag),
               "offset_median": float(np.median(np.abs(internal.offset)) / diag),
               "rest_error_max": float(np.abs(back - v).max() / diag),

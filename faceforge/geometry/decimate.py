@@ -15,17 +15,7 @@ import numpy as np
 
 from faceforge.constants import FLOAT, INT
 
-__all__ = ["decimate_pieces", "border_vertices"]
-
-
-def border_vertices(n_vertices: int, faces) -> np.ndarray:
-    """``(n,) bool``: vertices on an edge that only one face uses (an open boundary)."""
-    f = np.asarray(faces, dtype=INT).reshape(-1, 3)
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    edges, count = np.unique(e, axis=0, return_counts=True)
-    out = np.zeros(n_vertices, bool)
-    out[edges[count == 1].ravel()] = True
-    return out
+__all__ = ["decimate_pieces"]
 
 
 def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
