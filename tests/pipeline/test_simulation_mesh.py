@@ -120,3 +120,49 @@ def test_the_lip_contours_are_locked_from_corner_to_corner():
     np.testing.assert_array_equal(lock, row)
     assert lip_lock(v, f, points, rings=1).sum() > row.sum()
     assert not lip_lock(v, f, {"2.4": [0.0, 5.0, 0.0]}).any()
+
+
+def slit_grid():
+    """``grid(11, 10.0)`` cut along y = 5 between x = 2 and 8 (the lower side's triangles
+    rewired to copies of the row's interior vertices, as bind cuts lips): ``(vertices,
+    faces, upper, lower)``, the contours corner to corner."""
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(11, 10.0)
+    row = [int(np.flatnonzero(np.isclose(v[:, 0], x) & np.isclose(v[:, 1], 5.0))[0]) for x in range(2, 9)]
+    inner = row[1:-1]
+    copies = len(v) + np.arange(len(inner))
+    below = v[f].mean(axis=1)[:, 1] < 5.0
+    g = f.copy()
+    for a, b in zip(inner, copies):
+        g[below & (f == a).any(axis=1)] = np.where(g[below & (f == a).any(axis=1)] == a, b, g[below & (f == a).any(axis=1)])
+    return np.concatenate([v, v[inner]]), g, np.asarray(row), np.asarray([row[0], *copies, row[-1]])
+
+
+def test_a_vertex_is_on_the_lip_its_edge_paths_reach_first():
+    from faceforge.fit.proxy import lip_sides
+
+    v, f, upper, lower = slit_grid()
+    side = lip_sides(v, f, upper, lower)
+    at = {tuple(p): s for p, s in zip(v[:len(v) - 5].round(3).tolist(), side.tolist())}
+    assert at[(5.0, 7.0, 0.0)] == 1 and at[(5.0, 3.0, 0.0)] == -1      # above / below the slit
+    assert at[(0.0, 5.0, 0.0)] == 0                                     # beside the corner: the cheek
+    assert at[(5.0, 10.0, 0.0)] == 1                                    # within the mouth's width (6)
+    far = lip_sides(v, f, upper, lower, reach=4.0)
+    assert far[np.flatnonzero(np.isclose(v[:, 0], 5) & np.isclose(v[:, 1], 10))[0]] == 0   # beyond the reach
+    np.testing.assert_array_equal(side[upper[1:-1]], 1)
+    np.testing.assert_array_equal(side[lower[1:-1]], -1)
+    np.testing.assert_array_equal(side[[upper[0], upper[-1]]], 0)
+
+
+def test_the_lip_contours_run_corner_to_corner_through_the_fdps():
+    from faceforge.fit.proxy import lip_contours
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(11, 10.0)
+    points = {"2.4": [0.0, 5.0, 0.0], "2.5": [10.0, 5.0, 0.0], "2.2": [5.0, 6.0, 0.0], "2.3": [5.0, 4.0, 0.0]}
+    upper, lower = lip_contours(v, f, points)
+    assert upper[0] == lower[0] and upper[-1] == lower[-1]
+    np.testing.assert_allclose(v[upper[[0, -1]]], [[0, 5, 0], [10, 5, 0]])
+    assert (v[upper, 1] >= 5).all() and (v[lower, 1] <= 5).all() and v[upper, 1].max() == 6
+    assert lip_contours(v, f, {"2.4": [0.0, 5.0, 0.0]}) is None
