@@ -50,7 +50,8 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
         dense = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
                                rotation=None if orientation.identity else orientation.rotation, raw=raw)
         points = dict(zip(dense.ids, dense.positions))
-        locked = lip_lock(checked.vertices, checked.faces, points)
+        locked = lip_lock(checked.vertices, checked.faces, points,
+                          corner_reach=float(fit_config.get("simulation_corner_lock", 0.0) or 0.0))
         contours = lip_contours(checked.vertices, checked.faces, points) if bool(
             fit_config.get("simulation_lip_sides", True)) and locked.any() else None
         checked, simulation = make_proxy(checked, f, limit, keep_borders=bool(fit_config.get("simulation_borders", True)),

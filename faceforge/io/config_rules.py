@@ -242,6 +242,7 @@ RULES: list[tuple[str, Rule]] = [
                                                                    # decimated copy loses the landmarks' places)
     ("fit.simulation_borders", Boolean()),
     ("fit.simulation_lip_sides", Boolean()),
+    ("fit.simulation_corner_lock", Number(0.0, 1.0)),
     ("fit.noisy_normal_rounds", Integer(0, 50)),                  # 0: a fit that fails its checks is not refitted
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),

@@ -166,3 +166,18 @@ def test_the_lip_contours_run_corner_to_corner_through_the_fdps():
     np.testing.assert_allclose(v[upper[[0, -1]]], [[0, 5, 0], [10, 5, 0]])
     assert (v[upper, 1] >= 5).all() and (v[lower, 1] <= 5).all() and v[upper, 1].max() == 6
     assert lip_contours(v, f, {"2.4": [0.0, 5.0, 0.0]}) is None
+
+
+def test_the_corner_lock_keeps_the_commissure_whole():
+    from faceforge.fit.proxy import lip_lock
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(21, 20.0)   # 1-unit spacing; the lip line along y = 10 from x = 5 to 15 (a mouth 10 wide)
+    points = {"2.4": [5.0, 10.0, 0.0], "2.5": [15.0, 10.0, 0.0], "2.2": [10.0, 10.0, 0.0], "2.3": [10.0, 10.0, 0.0]}
+    plain = lip_lock(v, f, points)
+    lock = lip_lock(v, f, points, corner_reach=0.25)   # 2.5 units along the edges from either corner
+    assert (lock >= plain).all() and lock.sum() > plain.sum()
+    near = np.minimum(np.linalg.norm(v[:, :2] - [5.0, 10.0], axis=1), np.linalg.norm(v[:, :2] - [15.0, 10.0], axis=1))
+    assert lock[near <= 1.5].all()                          # the corners' fans, two rings deep
+    assert not lock[(near > 3.6) & (np.abs(v[:, 1] - 10) > 1.5)].any()   # nothing beyond the reach but the lip band
+    np.testing.assert_array_equal(lip_lock(v, f, points, corner_reach=0.0), plain)
