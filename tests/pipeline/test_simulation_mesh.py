@@ -92,6 +92,36 @@ def test_a_head_over_the_threshold_is_simulated_on_a_proxy_and_written_in_the_us
     assert "carried" in checks and checks["carried"]["inverted_triangles"] == 0
 
 
+def test_a_frame_is_carried_once_for_its_check_and_its_output(proxy_workdir, short_fap, monkeypatch):
+    """Without a head turn (which comes after the checks: those frames are carried again)."""
+    from click.testing import CliRunner
+
+    from faceforge.animation.rig import BoundHead
+    from faceforge.cli import cli
+    from faceforge.io.frame_stream import open_frames
+    from faceforge.mpeg4 import read_fap, write_fap
+
+    folder, work = proxy_workdir
+    track = read_fap(short_fap)
+    track.mask[:, 47:50] = False   # FAPs 48-50: the head's pitch, yaw, roll
+    still = folder / "still.fap"
+    write_fap(still, track)
+    seen = []
+    plain = BoundHead.carried
+
+    def counted(self, frames):
+        seen.append(len(frames))
+        return plain(self, frames)
+
+    monkeypatch.setattr(BoundHead, "carried", counted)
+    result = CliRunner().invoke(cli, ["-q", "-w", str(work), "--set", "fit.simulation_vertices=350", "--set",
+                                      "animate.calibrate.enabled=false", "animate", "--fap", str(still),
+                                      "--force"])
+    assert result.exit_code == 0, result.output
+    n = len(open_frames(work / "animate" / "animation.npz"))
+    assert sum(seen) == n + 1   # each frame once, and the rest for the check's reference
+
+
 def test_below_the_threshold_fit_writes_the_same_bytes(tmp_path):
     from click.testing import CliRunner
 
