@@ -51,7 +51,9 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
                                rotation=None if orientation.identity else orientation.rotation, raw=raw)
         points = dict(zip(dense.ids, dense.positions))
         locked = lip_lock(checked.vertices, checked.faces, points,
-                          corner_reach=float(fit_config.get("simulation_corner_lock", 0.0) or 0.0))
+                          corner_reach=float(fit_config.get("simulation_corner_lock", 0.0) or 0.0),
+                          rings=int(fit_config.get("simulation_lock_rings", 1)),
+                          contours=bool(fit_config.get("simulation_contour_lock", True)))
         contours = lip_contours(checked.vertices, checked.faces, points) if bool(
             fit_config.get("simulation_lip_sides", True)) and locked.any() else None
         checked, simulation = make_proxy(checked, f, limit, keep_borders=bool(fit_config.get("simulation_borders", True)),

@@ -151,20 +151,24 @@ def lip_contours(vertices, faces, points: dict):
     return out[0], out[1]
 
 
-def lip_lock(vertices, faces, points: dict, rings: int = 1, corner_reach: float = 0.0) -> np.ndarray:
+def lip_lock(vertices, faces, points: dict, rings: int = 1, corner_reach: float = 0.0,
+             contours: bool = True) -> np.ndarray:
     """``(n,) bool``: the vertices of the inner lips' contours (:func:`lip_contours`) and
     ``rings`` rings of neighbours: the decimation may not collapse them (where the lips touch
     a collapse zips them shut from the corners). ``corner_reach`` (a fraction of the mouth's
     width, corner to corner; 0: none) also locks every vertex that near either corner along
     the surface (edge paths): the commissure, which stretches most as the lips part, stays
-    the dense mesh itself. None locked without 2.2-2.5."""
+    the dense mesh itself. ``contours`` False locks the two corners (and their ``rings``) in
+    place of the whole contours: a collapse can only weld the lips through an edge joining
+    them, which an open mouth has in the corners' fans only, so the contours may coarsen to
+    the proxy's spacing. None locked without 2.2-2.5."""
     f = np.asarray(faces, INT)
     lock = np.zeros(len(vertices), bool)
-    contours = lip_contours(vertices, faces, points)
-    if contours is None:
+    found = lip_contours(vertices, faces, points)
+    if found is None:
         return lock
-    for c in contours:
-        lock[c] = True
+    for c in found:
+        lock[c if contours else [c[0], c[-1]]] = True
     for _ in range(int(rings)):
         lock[np.unique(f[lock[f].any(axis=1)])] = True
     if corner_reach > 0:
@@ -173,7 +177,7 @@ def lip_lock(vertices, faces, points: dict, rings: int = 1, corner_reach: float 
         from faceforge.geometry.triangles import edge_graph
 
         v = np.asarray(vertices, dtype=float)
-        ends = [int(contours[0][0]), int(contours[0][-1])]
+        ends = [int(found[0][0]), int(found[0][-1])]
         reach = float(corner_reach) * float(np.linalg.norm(v[ends[0]] - v[ends[1]]))
         lock |= np.isfinite(dijkstra(edge_graph(v, f), indices=ends, min_only=True, limit=reach))
     return lock
