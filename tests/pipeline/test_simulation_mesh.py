@@ -211,3 +211,21 @@ def test_the_corner_lock_keeps_the_commissure_whole():
     assert lock[near <= 1.5].all()                          # the corners' fans, two rings deep
     assert not lock[(near > 3.6) & (np.abs(v[:, 1] - 10) > 1.5)].any()   # nothing beyond the reach but the lip band
     np.testing.assert_array_equal(lip_lock(v, f, points, corner_reach=0.0), plain)
+
+
+def test_a_proxy_heads_sheet_darkens_the_mouth_on_the_users_own_triangles(proxy_workdir):
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.rig import BoundHead
+    from faceforge.io.config import load_config
+    from faceforge.viz.head_sheet import cavity
+    from faceforge.viz.smooth import mouth_cavity
+
+    folder, work = proxy_workdir
+    head = BoundHead(work / "fit", work / "bind", load_config())
+    mm = units_per_mm(head.landmarks)
+    user = head.carried(head.rest[None])[0]
+    dim = cavity(head, mm, user, head.user_faces)
+    assert dim.shape == (len(user),) and dim.max() > 0.5   # the user's mouth inside, dark
+    fv, r = head.fdp_vertex, head.rest
+    np.testing.assert_array_equal(dim, mouth_cavity(user, head.user_faces, r[fv["2.2"]], r[fv["2.3"]],
+                                                    r[[fv["8.3"], fv["8.4"]]], r[[fv["8.1"], fv["8.2"]]], mm))
