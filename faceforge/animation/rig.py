@@ -388,8 +388,11 @@ class BoundHead:
 
     def to_user(self, frames):
         """(F, n_working, 3) -> (F, n_user, 3) in the user's vertex order and frame."""
-        out = self.carried(frames)
-        return out if np.array_equal(self.user_rotation, np.eye(3)) else out @ self.user_rotation
+        return self.user_frame(self.carried(frames))
+
+    def user_frame(self, carried):
+        """:meth:`carried` frames ``(F, n_user, 3)`` (head space) in the user's frame."""
+        return carried if np.array_equal(self.user_rotation, np.eye(3)) else carried @ self.user_rotation
 
 
 #: the jaw's range the bone collision guards against (rad): the template's limits (jaw.yaml),

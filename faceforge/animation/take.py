@@ -73,11 +73,13 @@ def play_take(head, source, writer, *, weights=None, lids=None, timings=None, of
             if overlay is not None:
                 frames = overlay(frames, block.start + start)
             checker.add(frames)
-            if checker.carried is not None:
-                checker.carried.add(head.carried(frames))
-            if weights is not None:
-                frames = turn_head(frames, block.angles[start:stop], head.skull.jaw.yaw_point, weights)
-            writer.write(head.to_user(frames))
+            carried = None
+            if checker.carried is not None:   # carried once: the check's frames are the written ones
+                carried = head.carried(frames)
+                checker.carried.add(carried)
+            if weights is not None:   # (a head turn after the checks: those frames are carried again)
+                frames, carried = turn_head(frames, block.angles[start:stop], head.skull.jaw.yaw_point, weights), None
+            writer.write(head.to_user(frames) if carried is None else head.user_frame(carried))
 
         if not block.start:   # leaves the rig at rest
             warm_up(head.rig, block.c, block.jaw, source.fps, log, guards=(head.orientation,))

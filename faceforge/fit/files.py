@@ -45,13 +45,19 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
     from faceforge.fit.proxy import landmarks_by_position, make_proxy, needs_proxy
 
     if needs_proxy(len(checked.vertices), limit):   # a dense scan: fitted and simulated on a coarser copy
-        from faceforge.fit.proxy import lip_lock
+        from faceforge.fit.proxy import lip_contours, lip_lock
 
         dense = load_landmarks(lm_path, checked.vertices, checked.faces, user_to_internal=checked.user_to_internal,
                                rotation=None if orientation.identity else orientation.rotation, raw=raw)
-        locked = lip_lock(checked.vertices, checked.faces, dict(zip(dense.ids, dense.positions)))
+        points = dict(zip(dense.ids, dense.positions))
+        locked = lip_lock(checked.vertices, checked.faces, points,
+                          corner_reach=float(fit_config.get("simulation_corner_lock", 0.0) or 0.0),
+                          rings=int(fit_config.get("simulation_lock_rings", 1)),
+                          contours=bool(fit_config.get("simulation_contour_lock", True)))
+        contours = lip_contours(checked.vertices, checked.faces, points) if bool(
+            fit_config.get("simulation_lip_sides", True)) and locked.any() else None
         checked, simulation = make_proxy(checked, f, limit, keep_borders=bool(fit_config.get("simulation_borders", True)),
-                                         locked=locked)
+                                         locked=locked, contours=contours)
         checked.faces = orient_outward(checked.vertices, checked.faces)
         lm_raw = landmarks_by_position(raw, v)
         log(f"{mesh_path}: {simulation.report['dense_vertices']} vertices, more than fit.simulation_vertices "

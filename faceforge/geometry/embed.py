@@ -22,7 +22,8 @@ import numpy as np
 from faceforge.constants import FLOAT, INT, NUMBA_OPTIONS
 from faceforge.geometry.triangles import barycentric_in, vertex_normals
 
-__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners", "carry_plain", "embed_off"]
+__all__ = ["Embedding", "embed_points", "carry", "area_vertex_normals", "triangle_frames", "working_corners", "carry_plain", "embed_off",
+           "embed_apart"]
 
 #: prefix of a skin's embedding arrays in fit.npz (faceforge.fit.proxy)
 NPZ_PREFIX = "skin_embed_"
@@ -307,3 +308,40 @@ def embed_off(embedding: Embedding, proxy_vertices, proxy_faces, removed_faces, 
     out.face[at], out.bary[at], out.offset[at], out.residual[at] = kept[again.face], again.bary, again.offset, \
         again.residual
     return out
+
+
+def embed_apart(embedding: Embedding, points, proxy_vertices, proxy_faces, point_side, vertex_side,
+                point_vertex=None, point_piece=None, face_piece=None) -> tuple[Embedding, int]:
+    """``embedding`` of ``points (n, 3)`` (their rest places) with two sides kept apart.
+
+    ``point_side (n,)`` and ``vertex_side (k,)`` (the proxy's vertices) label two regions
+    that part in motion (+1 / -1; 0: neither, e.g. the lips and the cheeks around them): a
+    point of side ``s`` whose triangle has a corner of side ``-s`` is tied again to a
+    triangle with none (around its ``point_vertex`` first, :func:`ring_choice`, else the
+    nearest such of its piece, :func:`embed_points`), so it moves with its own side only
+    and not half with the other where they part. Returns ``(embedding, points re-tied)``;
+    unchanged (the same object) when no point needs it.
+    """
+    p = np.asarray(points, dtype=FLOAT).reshape(-1, 3)
+    v = np.asarray(proxy_vertices, dtype=FLOAT)
+    f = np.asarray(proxy_faces, dtype=INT)
+    ps = np.asarray(point_side).reshape(-1)
+    vs = np.asarray(vertex_side)[f]
+    out, moved = None, 0
+    for s in (1, -1):
+        banned = (vs == -s).any(axis=1)
+        at = np.flatnonzero((ps == s) & banned[embedding.face])
+        ok = np.flatnonzero(~banned)
+        if not len(at) or not len(ok):
+            continue
+        if out is None:
+            out = Embedding(embedding.face.copy(), embedding.bary.copy(), embedding.offset.copy(),
+                            embedding.residual.copy())
+        again = embed_points(p[at], v, f[ok], None if point_piece is None else np.asarray(point_piece)[at],
+                             None if face_piece is None else np.asarray(face_piece)[ok],
+                             point_vertex=None if point_vertex is None else np.asarray(point_vertex, INT)[at],
+                             normal_faces=f)
+        out.face[at], out.bary[at], out.offset[at], out.residual[at] = ok[again.face], again.bary, again.offset, \
+            again.residual
+        moved += len(at)
+    return (embedding if out is None else out), moved

@@ -241,6 +241,10 @@ RULES: list[tuple[str, Rule]] = [
     ("fit.simulation_vertices", OffOrInteger(300)),                # 0: never a proxy (under a few hundred the
                                                                    # decimated copy loses the landmarks' places)
     ("fit.simulation_borders", Boolean()),
+    ("fit.simulation_lip_sides", Boolean()),
+    ("fit.simulation_contour_lock", Boolean()),
+    ("fit.simulation_lock_rings", Integer(0, 10)),
+    ("fit.simulation_corner_lock", Number(0.0, 1.0)),
     ("fit.noisy_normal_rounds", Integer(0, 50)),                  # 0: a fit that fails its checks is not refitted
     ("template.*", PathValue()),
     ("animate.fap_mapping", PathValue()),

@@ -173,3 +173,28 @@ def test_locked_vertices_survive_the_decimation_in_place():
     np.testing.assert_allclose(pv[merged[locked]], v[locked], atol=1e-6)
     assert len(np.unique(merged[locked])) == locked.sum()   # none merged into another
     assert not np.isin(np.arange(len(pv)), pf).sum() < len(pv)   # no loose flag vertex left
+
+
+def test_a_point_of_one_side_leaves_a_triangle_with_a_corner_on_the_other():
+    from faceforge.geometry.embed import embed_apart
+
+    # a strip of rows y = 1, 0 (side +1: the upper lip) and y = -1, -2 (side -1: the lower lip)
+    x = np.arange(4.0)
+    v = np.array([[a, b, 0.0] for b in (1.0, 0.0, -1.0, -2.0) for a in x])
+    i = np.arange(16).reshape(4, 4)
+    a, b, c, d = i[:-1, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel()
+    f = np.concatenate([np.stack([a, d, b], 1), np.stack([a, c, d], 1)])
+    side = np.repeat([1, 1, -1, -1], 4)
+    points = np.array([[1.5, -0.2, 0.01], [1.5, -0.8, 0.0], [1.5, 0.5, 0.0]])
+    point_side = np.array([1, -1, 1])
+    e = embed_points(points, v, f)
+    assert (side[f[e.face[:2]]] == 1).any(axis=1).all() and (side[f[e.face[:2]]] == -1).any(axis=1).all()
+    out, moved = embed_apart(e, points, v, f, point_side, side)
+    assert moved == 2
+    assert not (side[f[out.face]] == -point_side[:, None]).any()
+    np.testing.assert_allclose(carry(v, f, out), points, atol=1e-12)
+    parted = v + np.where(side[:, None] < 0, [0.0, -1.0, 0.0], 0.0)   # the lower lip drops 1
+    np.testing.assert_allclose(carry(parted, f, out)[[0, 2]], points[[0, 2]], atol=1e-12)   # the upper's stay
+    np.testing.assert_allclose(carry(parted, f, out)[1], points[1] + [0, -1, 0], atol=1e-12)
+    assert abs(carry(parted, f, e)[0, 1] - points[0, 1]) > 0.1   # without: dragged half down
+    assert embed_apart(out, points, v, f, point_side, side) == (out, 0)

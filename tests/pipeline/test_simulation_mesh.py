@@ -92,6 +92,36 @@ def test_a_head_over_the_threshold_is_simulated_on_a_proxy_and_written_in_the_us
     assert "carried" in checks and checks["carried"]["inverted_triangles"] == 0
 
 
+def test_a_frame_is_carried_once_for_its_check_and_its_output(proxy_workdir, short_fap, monkeypatch):
+    """Without a head turn (which comes after the checks: those frames are carried again)."""
+    from click.testing import CliRunner
+
+    from faceforge.animation.rig import BoundHead
+    from faceforge.cli import cli
+    from faceforge.io.frame_stream import open_frames
+    from faceforge.mpeg4 import read_fap, write_fap
+
+    folder, work = proxy_workdir
+    track = read_fap(short_fap)
+    track.mask[:, 47:50] = False   # FAPs 48-50: the head's pitch, yaw, roll
+    still = folder / "still.fap"
+    write_fap(still, track)
+    seen = []
+    plain = BoundHead.carried
+
+    def counted(self, frames):
+        seen.append(len(frames))
+        return plain(self, frames)
+
+    monkeypatch.setattr(BoundHead, "carried", counted)
+    result = CliRunner().invoke(cli, ["-q", "-w", str(work), "--set", "fit.simulation_vertices=350", "--set",
+                                      "animate.calibrate.enabled=false", "animate", "--fap", str(still),
+                                      "--force"])
+    assert result.exit_code == 0, result.output
+    n = len(open_frames(work / "animate" / "animation.npz"))
+    assert sum(seen) == n + 1   # each frame once, and the rest for the check's reference
+
+
 def test_below_the_threshold_fit_writes_the_same_bytes(tmp_path):
     from click.testing import CliRunner
 
@@ -120,3 +150,82 @@ def test_the_lip_contours_are_locked_from_corner_to_corner():
     np.testing.assert_array_equal(lock, row)
     assert lip_lock(v, f, points, rings=1).sum() > row.sum()
     assert not lip_lock(v, f, {"2.4": [0.0, 5.0, 0.0]}).any()
+
+
+def slit_grid():
+    """``grid(11, 10.0)`` cut along y = 5 between x = 2 and 8 (the lower side's triangles
+    rewired to copies of the row's interior vertices, as bind cuts lips): ``(vertices,
+    faces, upper, lower)``, the contours corner to corner."""
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(11, 10.0)
+    row = [int(np.flatnonzero(np.isclose(v[:, 0], x) & np.isclose(v[:, 1], 5.0))[0]) for x in range(2, 9)]
+    inner = row[1:-1]
+    copies = len(v) + np.arange(len(inner))
+    below = v[f].mean(axis=1)[:, 1] < 5.0
+    g = f.copy()
+    for a, b in zip(inner, copies):
+        g[below & (f == a).any(axis=1)] = np.where(g[below & (f == a).any(axis=1)] == a, b, g[below & (f == a).any(axis=1)])
+    return np.concatenate([v, v[inner]]), g, np.asarray(row), np.asarray([row[0], *copies, row[-1]])
+
+
+def test_a_vertex_is_on_the_lip_its_edge_paths_reach_first():
+    from faceforge.fit.proxy import lip_sides
+
+    v, f, upper, lower = slit_grid()
+    side = lip_sides(v, f, upper, lower)
+    at = {tuple(p): s for p, s in zip(v[:len(v) - 5].round(3).tolist(), side.tolist())}
+    assert at[(5.0, 7.0, 0.0)] == 1 and at[(5.0, 3.0, 0.0)] == -1      # above / below the slit
+    assert at[(0.0, 5.0, 0.0)] == 0                                     # beside the corner: the cheek
+    assert at[(5.0, 10.0, 0.0)] == 1                                    # within the mouth's width (6)
+    far = lip_sides(v, f, upper, lower, reach=4.0)
+    assert far[np.flatnonzero(np.isclose(v[:, 0], 5) & np.isclose(v[:, 1], 10))[0]] == 0   # beyond the reach
+    np.testing.assert_array_equal(side[upper[1:-1]], 1)
+    np.testing.assert_array_equal(side[lower[1:-1]], -1)
+    np.testing.assert_array_equal(side[[upper[0], upper[-1]]], 0)
+
+
+def test_the_lip_contours_run_corner_to_corner_through_the_fdps():
+    from faceforge.fit.proxy import lip_contours
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(11, 10.0)
+    points = {"2.4": [0.0, 5.0, 0.0], "2.5": [10.0, 5.0, 0.0], "2.2": [5.0, 6.0, 0.0], "2.3": [5.0, 4.0, 0.0]}
+    upper, lower = lip_contours(v, f, points)
+    assert upper[0] == lower[0] and upper[-1] == lower[-1]
+    np.testing.assert_allclose(v[upper[[0, -1]]], [[0, 5, 0], [10, 5, 0]])
+    assert (v[upper, 1] >= 5).all() and (v[lower, 1] <= 5).all() and v[upper, 1].max() == 6
+    assert lip_contours(v, f, {"2.4": [0.0, 5.0, 0.0]}) is None
+
+
+def test_the_corner_lock_keeps_the_commissure_whole():
+    from faceforge.fit.proxy import lip_lock
+    from tests.geometry.test_embed import grid
+
+    v, f = grid(21, 20.0)   # 1-unit spacing; the lip line along y = 10 from x = 5 to 15 (a mouth 10 wide)
+    points = {"2.4": [5.0, 10.0, 0.0], "2.5": [15.0, 10.0, 0.0], "2.2": [10.0, 10.0, 0.0], "2.3": [10.0, 10.0, 0.0]}
+    plain = lip_lock(v, f, points)
+    lock = lip_lock(v, f, points, corner_reach=0.25)   # 2.5 units along the edges from either corner
+    assert (lock >= plain).all() and lock.sum() > plain.sum()
+    near = np.minimum(np.linalg.norm(v[:, :2] - [5.0, 10.0], axis=1), np.linalg.norm(v[:, :2] - [15.0, 10.0], axis=1))
+    assert lock[near <= 1.5].all()                          # the corners' fans, two rings deep
+    assert not lock[(near > 3.6) & (np.abs(v[:, 1] - 10) > 1.5)].any()   # nothing beyond the reach but the lip band
+    np.testing.assert_array_equal(lip_lock(v, f, points, corner_reach=0.0), plain)
+
+
+def test_a_proxy_heads_sheet_darkens_the_mouth_on_the_users_own_triangles(proxy_workdir):
+    from faceforge.anatomy.tissue import units_per_mm
+    from faceforge.animation.rig import BoundHead
+    from faceforge.io.config import load_config
+    from faceforge.viz.head_sheet import cavity
+    from faceforge.viz.smooth import mouth_cavity
+
+    folder, work = proxy_workdir
+    head = BoundHead(work / "fit", work / "bind", load_config())
+    mm = units_per_mm(head.landmarks)
+    user = head.carried(head.rest[None])[0]
+    dim = cavity(head, mm, user, head.user_faces)
+    assert dim.shape == (len(user),) and dim.max() > 0.5   # the user's mouth inside, dark
+    fv, r = head.fdp_vertex, head.rest
+    np.testing.assert_array_equal(dim, mouth_cavity(user, head.user_faces, r[fv["2.2"]], r[fv["2.3"]],
+                                                    r[[fv["8.3"], fv["8.4"]]], r[[fv["8.1"], fv["8.2"]]], mm))
