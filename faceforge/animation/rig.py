@@ -245,7 +245,17 @@ class BoundHead:
                               mirror=partner, join=bool(config.get("skin.join_insertions")),
                               tether=tether,
                               carry_radius=carry_radius(config, self.landmarks),
-                              fold_limit=self._folds, lip_contact=self._lip_contact(bind, config))
+                              fold_limit=self._folds, lip_contact=self._lip_contact(bind, config),
+                              sink=self._lid_sink(binding, held, config) if lids is not None else None)
+
+    def _lid_sink(self, binding, held, config):
+        """``skin.lid_hold_sink``: the held lid rows, the share, up (+Y) and each row's way toward
+        the nose (:func:`faceforge.skin.brow.toward_nose`) for :class:`SkinSimulation`'s ``sink``."""
+        from faceforge.skin.brow import toward_nose
+
+        rows = np.flatnonzero(held)
+        medial = toward_nose(self.rest, self.landmarks)[np.asarray(binding.vertex_ids)[rows]]
+        return rows, float(config.get("skin.lid_hold_sink") or 0.0), (0.0, 1.0, 0.0), medial
 
     def _lip_contact(self, bind: dict, config):
         """The lips' one-sided contact (``skin.lip_contact_mm``, the radius in mm within which a lip's

@@ -194,6 +194,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.carry", Choice(("muscles", "all", "none"))),
     ("skin.carry_radius_mm", Number(0.0, 50.0)),
     ("skin.lid_hold", Number(0.0, 1.0)),              # a stiffness
+    ("skin.lid_hold_sink", Number(0.0, 1.0)),         # a share of the sinking followed
     ("skin.cheek_tether", Number(0.0, 1.0)),          # a stiffness: past 1 a projection overshoots
     ("skin.commissure_fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the lips' corner contact off
     ("skin.fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the skin's fold limit off

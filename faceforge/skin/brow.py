@@ -298,6 +298,30 @@ def lid_hold(binding, vertices, landmarks: dict, stiffness: float, up=(0.0, 1.0,
     return (np.where(held, float(stiffness), 0.0) if held.any() else None), held
 
 
+def toward_nose(vertices, landmarks: dict) -> np.ndarray:
+    """(n, 3) float: per vertex the unit direction from its nearer eye's outer canthus to its inner
+    one (:data:`EYES`; the nearer canthi segment), the way the corrugator draws the brow and the
+    lid's skin under it (``skin.lid_hold_sink``, :mod:`faceforge.skin.sink`); zeros without the
+    canthi FDPs. MPEG-4 names the corners by the image's left and right: of ``(3.11, 3.7)`` and
+    ``(3.12, 3.8)`` the inner corner of each eye is the one nearer the other eye."""
+    v = np.asarray(vertices, FLOAT)
+    out = np.zeros((len(v), 3), FLOAT)
+    if not all(c in landmarks for eye in EYES for c in eye[:2]):
+        return out
+    a = [np.asarray(landmarks[c], FLOAT) for eye in EYES for c in eye[:2]]   # (3.11, 3.7, 3.12, 3.8)
+    eyes = [(a[0], a[1]), (a[2], a[3])]
+    best = np.full(len(v), np.inf)
+    for k, (p, q) in enumerate(eyes):
+        other = sum(eyes[1 - k]) / 2.0
+        inner, outer = (p, q) if np.linalg.norm(p - other) < np.linalg.norm(q - other) else (q, p)
+        d = _segment_distance(v, inner, outer)
+        m = inner - outer
+        take = d < best
+        best[take] = d[take]
+        out[take] = m / max(float(np.linalg.norm(m)), 1e-300)
+    return out
+
+
 def forehead_mask(vertices, landmarks: dict, above_mm: float, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     """(n,) bool: the forehead above the brow (``bind.forehead_bone_mm``): the vertices farther
     than ``above_mm`` (scaled by ES0, :func:`faceforge.anatomy.tissue.units_per_mm`) from both

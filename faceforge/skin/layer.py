@@ -362,11 +362,16 @@ class SkinSimulation:
         behind; ``margin`` the barycentric slack of "over a face"), not cross them (``skin.lip_contact_mm``:
         :func:`faceforge.skin.lip_contact.lip_contacts`), enforced after each solver step, before the
         fold limit (:meth:`touch_lips`, :class:`faceforge.pbd.triangle_contact.TriangleContact`).
+    sink : (rows (h,) int, share float[, up (3,) float[, medial (h, 3) float]]), optional
+        Carried anchor rows whose target follows its skin vertex by ``share`` of its sinking
+        below its rest place along ``up`` (default +Y) and of its motion toward ``medial`` (per
+        row; default none), read at each step's start: a hold the skin may sink and draw toward
+        the nose from, not rise (``skin.lid_hold_sink``, :mod:`faceforge.skin.sink`).
     """
 
     def __init__(self, vertices, faces, binding, stiffness: SkinStiffness, settings=None, weights=None,
                  carried=None, mirror=None, join=False, tether=None, carry_radius=0.0, fold_limit=None,
-                 lip_contact=None):
+                 lip_contact=None, sink=None):
         from faceforge.pbd import ModelBuilder, Solver, SolverSettings
 
         self.rest = np.array(vertices, dtype=FLOAT)
@@ -391,6 +396,14 @@ class SkinSimulation:
         builder = ModelBuilder()
         self.layer = add_skin(builder, self.rest, self.faces, stiffness, binding.vertex_ids, q_rest, tether=tether)
         self.model = builder.finalize()
+        self._sink = None
+        if sink is not None and len(sink[0]) and float(sink[1]) > 0:   # skin.lid_hold_sink
+            from faceforge.skin.sink import sink_args
+
+            rows, vid, p0, up, medial = sink_args(self.rest, binding.vertex_ids, sink[0], *sink[2:])
+            if not self.carried[rows].all():
+                raise ValueError("sink rows must be carried anchors")
+            self._sink = (rows, (self.layer.first + vid).astype(INT), p0, up, medial, float(sink[1]))
         self._fold = None
         if fold_limit is not None and len(fold_limit[0]):
             from faceforge.pbd.dihedral_limit import DihedralLimit, rest_limits
@@ -480,6 +493,11 @@ class SkinSimulation:
                     _carry(t, self._carried_rows, s0, p0)
                 else:
                     carry_smoothed(t, self._carried_rows, s0, p0, *self._smooth)
+                if self._sink is not None:   # held skin may sink (skin.lid_hold_sink)
+                    from faceforge.skin.sink import sink
+
+                    rows, vid, q0, up, medial, share = self._sink
+                    sink(t, rows, vid, q0, up, medial, self.state.positions, share)
                 if self._joined is not None:   # a vertex on several muscles follows the one that pulls
                     from faceforge.skin.joined import join
 
