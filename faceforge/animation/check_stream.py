@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from faceforge.animation.checks import (FrameReport, _where, fold_limit, folded_edges, inside_skull,
-                                        inverted_faces)
+from faceforge.animation.checks import (FrameReport, _thrown, _where, displacement_limit, fold_limit, folded_edges,
+                                        inside_skull, inverted_faces)
 
 
 class StreamChecker:
@@ -86,7 +86,7 @@ class StreamChecker:
         ``frame_index -> [(vertices, faces)]`` as for ``check_animation``."""
         if self.seen != self.n_frames:
             raise ValueError(f"{self.seen} frames added, {self.n_frames} announced")
-        where, inside = dict(self.where), {}
+        where, inside = _thrown(self.where, self.disp, self.rest), {}
         if skull is not None and self.n_frames:
             frames = dict(self.kept)
             frames[self.worst] = self.worst_frame
@@ -106,4 +106,5 @@ class StreamChecker:
                            folded_edges=int(self.folded_any.sum()) if self.folded_any is not None else 0,
                            folded_max_per_frame=self.folded_max,
                            fold_limit=fold_limit(self.n_edges), where=where,
+                           displacement_limit=displacement_limit(self.rest),
                            carried=None if self.carried is None else self.carried.as_dict())

@@ -140,6 +140,19 @@ def _depth_below(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray) ->
     return closest_points(np.asarray(points, float), vertices, faces)[1]
 
 
+#: a skin vertex moved farther than this fraction of the skin's bounding-box diagonal fails the
+#: checks: no muscle or jaw pose moves skin that far (the samples' presets 4-8 %, the ARKit shapes
+#: at most 12 %, MediaPipe's jawOpen on a face mask), a vertex thrown by the solver does (a dense
+#: scan's proxy threw a mouth-corner vertex 30-36 % in disgust, and the checks said ok)
+THROWN = 0.25
+
+
+def displacement_limit(rest: np.ndarray) -> float:
+    """The farthest a skin vertex of ``rest (n, 3)`` may move and pass the checks (skin units):
+    :data:`THROWN` of its bounding-box diagonal."""
+    return THROWN * float(np.linalg.norm(np.ptp(np.asarray(rest, dtype=float), axis=0))) if len(rest) else np.inf
+
+
 def fold_limit(n_edges: int) -> int:
     """Most skin edges one frame may fold and still pass the checks: 0.5 % of the ``n_edges``
     interior edges checked, at least 32 (the sample heads fold at most 12 on their tracks)."""
@@ -165,6 +178,8 @@ class FrameReport:
     folded_edges: int = 0
     folded_max_per_frame: int = 0
     fold_limit: int = 1 << 62
+    #: :func:`displacement_limit`: :attr:`ok` fails when a vertex moves farther (thrown)
+    displacement_limit: float = float("inf")
     #: where each check failed: ``{"non_finite": first frame, "inverted": first frame,
     #: "folded": the frame folding the most edges, "inside_skull": {frame: vertices}}`` (only
     #: the checks that found something; the skull is tested on the sampled frames only)
@@ -176,11 +191,13 @@ class FrameReport:
 
     @property
     def ok(self) -> bool:
-        """No NaN, no triangle turned over, no skin inside the bone, and no frame folding more
+        """No NaN, no triangle turned over, no skin inside the bone, no frame folding more
         than ``fold_limit`` edges (a few new creases are a soft face; hundreds are a crumpled one:
-        a FAP of 1e9 folded 408 edges and still said ok)."""
+        a FAP of 1e9 folded 408 edges and still said ok) and no vertex thrown farther than
+        ``displacement_limit``."""
         return (self.non_finite == 0 and self.inverted_triangles == 0 and self.skin_inside_skull == 0
                 and self.folded_max_per_frame <= self.fold_limit
+                and self.max_displacement <= self.displacement_limit
                 and (self.carried is None or self.carried["inverted_triangles"] == 0))
 
     def as_dict(self) -> dict:
@@ -189,7 +206,7 @@ class FrameReport:
                 "inverted_faces": self.inverted_faces,
                 "inverted_max_per_frame": self.inverted_max_per_frame,
                 "folded_edges": self.folded_edges, "folded_max_per_frame": self.folded_max_per_frame,
-                "fold_limit": self.fold_limit,
+                "fold_limit": self.fold_limit, "displacement_limit": self.displacement_limit,
                 "skin_inside_skull": self.skin_inside_skull,
                 "max_displacement": self.max_displacement, "worst_frame": self.worst_frame,
                 "ok": self.ok, "notes": list(self.notes), "where": dict(self.where),
@@ -264,7 +281,8 @@ def check_animation(rest: np.ndarray, frames: np.ndarray, faces: np.ndarray,
                        inverted_max_per_frame=int(inv.max()) if len(inv) else 0,
                        folded_edges=int(folds.any(axis=0).sum()),
                        folded_max_per_frame=int(folds.sum(axis=1).max()) if len(folds) else 0,
-                       fold_limit=fold_limit(folds.shape[1]), where=where)
+                       fold_limit=fold_limit(folds.shape[1]), where=_thrown(where, disp, rest),
+                       displacement_limit=displacement_limit(rest))
 
 
 def inside_skull(rest: np.ndarray, frames, idx, skull, tolerance: float,
@@ -289,6 +307,13 @@ def inside_skull(rest: np.ndarray, frames, idx, skull, tolerance: float,
         if count:
             out[str(int(i))] = count
     return out
+
+
+def _thrown(where: dict, disp: np.ndarray, rest: np.ndarray) -> dict:
+    """``where`` with ``"thrown": first frame`` when a frame's largest displacement (``disp (F,)``)
+    passes :func:`displacement_limit` of ``rest``."""
+    over = np.flatnonzero(np.asarray(disp) > displacement_limit(rest))
+    return {**where, "thrown": int(over[0])} if len(over) else where
 
 
 def _where(finite: np.ndarray, inverted: np.ndarray, folded: np.ndarray, start: int = 0) -> dict:

@@ -23,6 +23,7 @@ from typing import Any, Callable, Iterator
 
 import click
 
+from faceforge.animation.checks import THROWN
 from faceforge.exceptions import ChecksFailed
 
 
@@ -65,6 +66,10 @@ def describe(checks: dict) -> list[str]:
     if limit is not None and checks.get("folded_max_per_frame", 0) > limit:
         out.append(f"folded_edges ({checks['folded_max_per_frame']} skin edges folded in one frame"
                    f"{_frame(where, 'folded')}, limit {limit})")
+    most = checks.get("displacement_limit")
+    if most is not None and checks.get("max_displacement", 0.0) > most:
+        out.append(f"thrown_vertex (a skin vertex moved {checks['max_displacement']:.4g} units"
+                   f"{_frame(where, 'thrown')}, past the limit {most:.4g}: {THROWN:g} of the skin's diagonal)")
     carried = checks.get("carried") or {}
     if carried.get("inverted_triangles"):
         out.append(f"carried_inverted ({carried.get('inverted_faces', '?')} triangles of the user's mesh turned over "

@@ -109,3 +109,24 @@ def test_commands_with_checked_results_take_keep_going():
     for name in ("animate", "expressions", "visemes", "bake", "batch"):
         assert "keep_going" in [p.name for p in registry.COMMANDS[name].params], name
     assert "keep_going" in [p.name for p in cli.commands["run"].params]
+
+
+def test_a_thrown_vertex_fails_the_checks_whole_and_streamed():
+    from faceforge.animation.check_stream import StreamChecker
+    from faceforge.animation.checks import check_animation
+    from faceforge.pipeline.result_checks import describe
+
+    rest, faces = _grid()                 # 3 x 3 units: diagonal 4.24, displacement limit 1.06
+    frames = np.repeat(rest[None], 3, axis=0)
+    frames[1] += [0.3, 0.0, 0.9]          # the whole sheet moves 0.95: nothing fails
+    frames[2, 15] = [6.0, 6.0, 0.0]       # a corner vertex thrown 4.2 in the plane: no fold, no turn
+    assert check_animation(rest, frames[:2], faces).ok
+    whole = check_animation(rest, frames, faces)
+    assert whole.inverted_triangles == 0 and whole.folded_max_per_frame == 0
+    assert not whole.ok and whole.where["thrown"] == 2
+    stream = StreamChecker(rest, faces, 3)
+    stream.add(frames[:2])
+    stream.add(frames[2:])
+    assert stream.report() == whole
+    (phrase,) = describe(whole.as_dict())
+    assert phrase.startswith("thrown_vertex (a skin vertex moved 4.243 units at frame 2, past the limit 1.061")
