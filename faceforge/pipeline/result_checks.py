@@ -23,7 +23,6 @@ from typing import Any, Callable, Iterator
 
 import click
 
-from faceforge.animation.checks import THROWN
 from faceforge.exceptions import ChecksFailed
 
 
@@ -68,6 +67,8 @@ def describe(checks: dict) -> list[str]:
                    f"{_frame(where, 'folded')}, limit {limit})")
     most = checks.get("displacement_limit")
     if most is not None and checks.get("max_displacement", 0.0) > most:
+        from faceforge.animation.checks import THROWN
+
         out.append(f"thrown_vertex (a skin vertex moved {checks['max_displacement']:.4g} units"
                    f"{_frame(where, 'thrown')}, past the limit {most:.4g}: {THROWN:g} of the skin's diagonal)")
     carried = checks.get("carried") or {}
