@@ -86,7 +86,12 @@ def fit_files(mesh_path, lm_path, template: Template, fit_config: dict, log=lamb
             from faceforge.exceptions import LandmarkError
 
             raise LandmarkError(f"cannot fit the template: {exc}", lm_path) from None
-        if result.mirror is not None:   # bind sees the muscles the rig builds (fit.symmetry)
+        level = list(fit_config.get("level_muscles") or [])
+        if level:   # soft-tissue origins keep the template's line of pull (fit.level)
+            from faceforge.fit.level import level_map
+
+            result = level_map(result, template.specs, level)
+        if result.mirror is not None or level:   # bind sees the muscles the rig builds (fit.symmetry)
             from faceforge.fit.symmetry import rebuild_muscles
 
             result = rebuild_muscles(result, template.specs)

@@ -239,6 +239,7 @@ RULES: list[tuple[str, Rule]] = [
     ("bind.ala_muscles", ListOf(String())),
     ("bind.normal_rounds", Integer(0, 50)),                       # 0: the vertex normals as they are
     ("fit.normal_rounds", Integer(0, 50)),
+    ("fit.level_muscles", ListOf(String())),
     ("fit.simulation_vertices", OffOrInteger(300)),                # 0: never a proxy (under a few hundred the
                                                                    # decimated copy loses the landmarks' places)
     ("fit.simulation_borders", Boolean()),
