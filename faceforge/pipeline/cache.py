@@ -94,6 +94,47 @@ def _leaf_diff(old: Any, new: Any, prefix: str) -> list[str]:
     return [] if old == new else [prefix]
 
 
+def _without_new_defaults(value: Any, old: Any, default: Any) -> Any:
+    """``value`` (a config subtree) less the leaves ``old`` (the stored subtree) lacks and that
+    equal ``default`` (the packaged default subtree) there."""
+    if not (isinstance(value, Mapping) and isinstance(old, Mapping)):
+        return value
+    out = {}
+    for k, v in value.items():
+        d = default.get(k, _ABSENT) if isinstance(default, Mapping) else _ABSENT
+        if k not in old:
+            if d is _ABSENT or d != v:
+                out[k] = v
+        else:
+            out[k] = _without_new_defaults(v, old[k], None if d is _ABSENT else d)
+    return out
+
+
+_ABSENT = object()
+
+
+def settled_record(current: Mapping, previous: Mapping | None, default) -> dict:
+    """``current`` (a stage's record) less the config its stored ``previous`` record predates
+    and that is at its packaged ``default`` (``default.get(dotted key, None)``: the default
+    :class:`~faceforge.io.config.Config`): a config key a newer faceforge added (off, as new
+    behaviours come) does not make an existing workdir's stages stale, while a key set to
+    anything else, or a changed default of a key the record has, does (a changed output
+    comes with a stage-version bump, which the record holds). ``current`` itself when there
+    is no ``previous``."""
+    if previous is None:
+        return dict(current)
+    old = previous.get("config", {})
+    config = {}
+    for key, value in current["config"].items():
+        d = default.get(key, _ABSENT)
+        if key not in old:
+            if d is _ABSENT or d != value:
+                config[key] = value
+        else:
+            config[key] = _without_new_defaults(value, old[key], None if d is _ABSENT else d)
+    return {**current, "config": config}
+
+
 def stale_reasons(current: Mapping, previous: Mapping | None) -> list[str]:
     """Why a stage whose record is ``current`` differs from its stored ``previous`` record.
 

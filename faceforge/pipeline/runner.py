@@ -28,7 +28,7 @@ from typing import Any, Callable, Iterable, Mapping
 
 from faceforge.exceptions import StageError
 from faceforge.pipeline.cache import (file_digest, folder_digests, outputs_digest, read_stage_json, record_key,
-                                      stale_reasons)
+                                      settled_record, stale_reasons)
 from faceforge.pipeline.lock import WorkdirLock
 from faceforge.pipeline.stage import COMMANDS, STAGES, Stage, StageContext, broken_stages, stage_order
 
@@ -176,8 +176,11 @@ def plan(workspace: Workspace, config, params: Mapping,
     digests: dict[str, str | None] = {}
     order = stage_order(targets)
     read = {dep for stage in order for dep in stage.deps}   # a leaf's files (a long take) are not hashed
+    default = _default_config()
     for stage in order:
         record, missing = current_record(stage, config, params, digests)
+        # config keys newer than the stored record, at their defaults, change nothing (cache.settled_record)
+        record = settled_record(record, read_stage_json(workspace.stage_dir(stage.name)), default)
         status = StageStatus(stage, record, None, [], missing=tuple(m.split(" (")[0] for m in missing))
         _judge(workspace, status, [f"needs input {', '.join(missing)}"] if missing else None)
         if stage.name in read:
@@ -186,6 +189,14 @@ def plan(workspace: Workspace, config, params: Mapping,
     if targets is None:
         statuses += [StageStatus(STAGES[n], None, None, [r]) for n, r in broken_stages().items()]
     return statuses
+
+
+def _default_config():
+    """The packaged default configuration (:func:`faceforge.io.config.load_default`) as a
+    :class:`~faceforge.io.config.Config`."""
+    from faceforge.io.config import Config, load_default
+
+    return Config(load_default().tree)
 
 
 def _judge(workspace: Workspace, status: StageStatus, reasons: list[str] | None = None) -> None:

@@ -95,6 +95,40 @@ def test_changed_input_content_reruns_all_but_a_moved_identical_input_does_not(c
     assert "t_a: running (input moved.txt changed)" in lines
 
 
+def _as_if_written_before(ws, stage, drop):
+    """Rewrite ``stage``'s stage.json as a faceforge that had no config ``drop`` (a dotted leaf
+    under one of its config keys, or a whole config key) would have written it."""
+    path = ws.stage_dir(stage) / "stage.json"
+    record = json.loads(path.read_text())
+    if drop in record["config"]:
+        record["config"].pop(drop)
+    else:
+        top = next(k for k in record["config"] if drop.startswith(k + "."))
+        tree = record["config"][top]
+        keys = drop[len(top) + 1:].split(".")
+        for k in keys[:-1]:
+            tree = tree[k]
+        tree.pop(keys[-1])
+    record["key"] = record_key({k: record[k] for k in ("stage", "version", "config", "inputs", "upstream")})
+    path.write_text(json.dumps(record))
+
+
+def test_a_config_key_newer_than_the_workdir_at_its_default_reruns_nothing(chain):
+    calls, ws, params = chain
+    run_chain(ws, params)
+    _as_if_written_before(ws, "t_b", "skin.stiffness.bending")     # a leaf a newer faceforge added
+    _as_if_written_before(ws, "t_c", "animate")                    # a key a stage newly reads
+    calls.clear()
+    assert run_chain(ws, params) == ["t_a: up to date", "t_b: up to date", "t_c: up to date"]
+    assert calls == []
+    lines = run_chain(ws, params, sets=["skin.stiffness.bending=0.5"])   # set to anything else: it reruns
+    assert calls == ["t_b", "t_c"] and "t_b: running (`skin.stiffness.bending` changed)" in lines
+    calls.clear()
+    assert run_chain(ws, params, sets=["skin.stiffness.bending=0.5"])[1] == "t_b: up to date"
+    lines = run_chain(ws, params)                                  # back to the default: written with it now
+    assert calls == ["t_b", "t_c"] and "t_b: running (`skin.stiffness.bending` changed)" in lines
+
+
 def test_status_reasons_without_running(chain):
     calls, ws, params = chain
     run_chain(ws, params)
