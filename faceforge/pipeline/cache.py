@@ -94,6 +94,10 @@ def _leaf_diff(old: Any, new: Any, prefix: str) -> list[str]:
     return [] if old == new else [prefix]
 
 
+#: a key the packaged defaults do not have
+_ABSENT = object()
+
+
 def _without_new_defaults(value: Any, old: Any, default: Any) -> Any:
     """``value`` (a config subtree) less the leaves ``old`` (the stored subtree) lacks and that
     equal ``default`` (the packaged default subtree) there."""
@@ -110,13 +114,10 @@ def _without_new_defaults(value: Any, old: Any, default: Any) -> Any:
     return out
 
 
-_ABSENT = object()
-
-
 def settled_record(current: Mapping, previous: Mapping | None, default) -> dict:
     """``current`` (a stage's record) less the config its stored ``previous`` record predates
-    and that is at its packaged ``default`` (``default.get(dotted key, None)``: the default
-    :class:`~faceforge.io.config.Config`): a config key a newer faceforge added (off, as new
+    and that is at its packaged ``default`` (the default :class:`~faceforge.io.config.Config`,
+    read with ``get(dotted key, missing)``): a config key a newer faceforge added (off, as new
     behaviours come) does not make an existing workdir's stages stale, while a key set to
     anything else, or a changed default of a key the record has, does (a changed output
     comes with a stage-version bump, which the record holds). ``current`` itself when there
