@@ -253,6 +253,11 @@ def _lip_line_side(points):
     return np.where(np.abs(y) > 0.5, 0, np.where(y >= 0.0, 1, -1))
 
 
+def _above_or_below(points):
+    """+1 at or above y = 0, -1 below (the lips' side of a point, for ``bind_skin``'s ``side_of``)."""
+    return np.where(points[:, 1] >= 0, 1, -1)
+
+
 def test_a_lip_never_binds_to_the_other_lips_muscle_or_to_one_far_away(skin):
     """A lower-lip "depressor" whose end crosses the lip line (y = 0) by a little no longer
     takes the upper lip's rays that meet that end; a muscle far up ("brow") keeps no lip
@@ -298,10 +303,7 @@ def test_lips_to_ring_puts_a_missed_lip_on_its_arc_before_the_teeth(skin):
     ring = Body("ring", "muscle", rv, rf[(rv[rf][:, :, 1] > 0.6).all(axis=1)])          # its arc, high up
     sides = np.where(v[:, 1] >= 0, 1, -1)
 
-    def side_of(points):
-        return np.where(points[:, 1] >= 0, 1, -1)
-
-    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0],
+    kw = dict(lip_sides=sides, side_of=_above_or_below, body_sides=[AROUND_MOUTH, 0],
               face_sides=[np.ones(len(ring.faces), np.int8), None])
     lip = np.flatnonzero((v[:, 2] > 0.9) & (v[:, 1] >= 0) & (v[:, 1] < 0.15))
     assert len(lip)
@@ -334,11 +336,8 @@ def test_modiolus_moves_corner_skin_from_another_muscle_to_its_arc_of_the_ring(s
     labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0, 1, -1).astype(np.int8)
     sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] > 0.1, 1, np.where(v[:, 1] < -0.1, -1, 0)), 0)
 
-    def side_of(points):
-        return np.where(points[:, 1] >= 0, 1, -1)
-
     corner = v[:, 2] > 0.75
-    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[0, AROUND_MOUTH, 0],
+    kw = dict(lip_sides=sides, side_of=_above_or_below, body_sides=[0, AROUND_MOUTH, 0],
               face_sides=[None, labels, None], insertions=[0])
     rays = bind_skin(v, f, [over, ring, skull], max_distance=0.5, **kw)
     b = bind_skin(v, f, [over, ring, skull], max_distance=0.5, regions=InsertionRegions(modiolus=corner), **kw)
@@ -403,11 +402,8 @@ def test_commissure_binds_both_lips_at_the_corner_to_either_arc_of_the_ring(skin
     labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0.15, 1, -1).astype(np.int8)
     sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] >= 0.0, 1, -1), 0)
 
-    def side_of(points):
-        return np.where(points[:, 1] >= 0, 1, -1)
-
     comm = (v[:, 2] > 0.9) & (np.abs(v[:, 1]) < 0.2)
-    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
+    kw = dict(lip_sides=sides, side_of=_above_or_below, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
     own = bind_skin(v, f, [ring, skull], max_distance=0.5, **kw)
     both = bind_skin(v, f, [ring, skull], max_distance=0.5, regions=InsertionRegions(commissure=comm), **kw)
     on_ring = (both.body == 0) & np.isin(both.vertex_ids, np.flatnonzero(comm & (sides != 0)))
@@ -442,6 +438,17 @@ def test_commissure_mask_is_the_skin_near_the_inner_lip_corners():
     assert not commissure_mask(pts, {k: lm[k] for k in ("8.3", "8.4")}, 0.05).any()
 
 
+def _gapped_ring_lips(v):
+    """A ring cap with a gap in front at the midline (as ICT's upper lip meets the teeth there), its
+    faces' lip labels (+1 upper, -1 lower), the skin's lip sides (``v`` (n, 3) front of z 0.6) and the
+    vermilion (front of z 0.9): ``(ring Body, labels (m,) int8, sides (n,) int, vermilion (n,) bool)``."""
+    rv, rf = _cap(0.85, 0.9, 4)
+    ring = Body("ring", "muscle", rv, rf[~(np.abs(rv[rf][:, :, 0]) < 0.2).all(axis=1)])
+    labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0.0, 1, -1).astype(np.int8)
+    sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] >= 0.0, 1, -1), 0)
+    return ring, labels, sides, (sides != 0) & (v[:, 2] > 0.9)
+
+
 def test_vermilion_on_the_skull_binds_to_its_own_arc_of_the_ring(skin):
     """Lip skin in the ``vermilion`` mask whose rays met the skull (here through a gap of the ring at
     the midline, as ICT's upper lip meets the teeth) binds to its own lip's arc of the ring; without
@@ -449,17 +456,9 @@ def test_vermilion_on_the_skull_binds_to_its_own_arc_of_the_ring(skin):
     from faceforge.skin.mouth import AROUND_MOUTH
 
     v, f = skin
-    rv, rf = _cap(0.85, 0.9, 4)
-    ring = Body("ring", "muscle", rv, rf[~(np.abs(rv[rf][:, :, 0]) < 0.2).all(axis=1)])   # a gap in front
+    ring, labels, sides, verm = _gapped_ring_lips(v)
     skull = Body("cranium", "cranium", *sphere(0.8, 3))
-    labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0.0, 1, -1).astype(np.int8)
-    sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] >= 0.0, 1, -1), 0)
-
-    def side_of(points):
-        return np.where(points[:, 1] >= 0, 1, -1)
-
-    verm = (sides != 0) & (v[:, 2] > 0.9)
-    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
+    kw = dict(lip_sides=sides, side_of=_above_or_below, body_sides=[AROUND_MOUTH, 0], face_sides=[labels, None])
     before = bind_skin(v, f, [ring, skull], max_distance=0.5, **kw)
     after = bind_skin(v, f, [ring, skull], max_distance=0.5, regions=InsertionRegions(vermilion=verm), **kw)
     in_mask = np.isin(before.vertex_ids, np.flatnonzero(verm))
@@ -507,18 +506,10 @@ def test_vermilion_on_a_deep_muscle_binds_to_its_own_arc_of_the_ring(skin):
     from faceforge.skin.mouth import AROUND_MOUTH
 
     v, f = skin
-    rv, rf = _cap(0.85, 0.9, 4)
-    ring = Body("ring", "muscle", rv, rf[~(np.abs(rv[rf][:, :, 0]) < 0.2).all(axis=1)])   # a gap in front
+    ring, labels, sides, verm = _gapped_ring_lips(v)
     deep = Body("depressor", "muscle", *sphere(0.6, 3))
     skull = Body("cranium", "cranium", *sphere(0.5, 3))
-    labels = np.where(ring.vertices[ring.faces].mean(axis=1)[:, 1] >= 0.0, 1, -1).astype(np.int8)
-    sides = np.where(v[:, 2] > 0.6, np.where(v[:, 1] >= 0.0, 1, -1), 0)
-
-    def side_of(points):
-        return np.where(points[:, 1] >= 0, 1, -1)
-
-    verm = (sides != 0) & (v[:, 2] > 0.9)
-    kw = dict(lip_sides=sides, side_of=side_of, body_sides=[AROUND_MOUTH, 0, 0], face_sides=[labels, None, None])
+    kw = dict(lip_sides=sides, side_of=_above_or_below, body_sides=[AROUND_MOUTH, 0, 0], face_sides=[labels, None, None])
     bodies = [ring, deep, skull]
     before = bind_skin(v, f, bodies, max_distance=0.5, **kw)
     after = bind_skin(v, f, bodies, max_distance=0.5, regions=InsertionRegions(deep=verm, deep_depth=0.2), **kw)
