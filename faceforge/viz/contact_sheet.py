@@ -67,8 +67,9 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
     panels is visible as motion. ``focus`` zooms on the vertices that move (>= 35 % of the
     largest displacement between the first drawn frame and the others), padded by 30 %;
     ``region`` ((n,) bool) frames those vertices instead (e.g. the head without its neck).
-    ``labels``: one title per panel instead of its frame and time. ``smooth``: Gouraud shading
-    with vertex normals (:mod:`faceforge.viz.smooth`); else one flat colour a triangle. ``heat``
+    ``labels``: one title per panel instead of its frame and time. ``smooth``: smooth shading
+    with vertex normals through a z-buffer (:mod:`faceforge.viz.smooth`); else one flat colour a
+    triangle, painted back to front. ``heat``
     (units of the frames, e.g. 5 mm): each panel after the first gets a displacement heat map
     of that scale beside it (distance from the first drawn frame; ``heat_label`` names the
     scale in its title, e.g. "0-8 mm"). ``dim`` ((n,) in [0, 1]): vertices drawn darker in the
@@ -107,19 +108,20 @@ def contact_sheet(out_png, frames: np.ndarray, faces: np.ndarray, indices, fps: 
         ax.axis("off")
     names = list(labels) if labels is not None else [f"frame {i}  ({i / fps:.2f} s)" for i in indices]
     flat = axes.ravel()
+    box, px = (lo - pad, hi + pad), int(round(2 * panel * dpi))   # a panel's view, rasterised at twice its pixels
     for k, (i, name) in enumerate(zip(indices, names)):
         pair = flat[per * k:per * k + per]
         if smooth:
-            draw_smooth(pair[0], frames[i], faces, view, dim=dim)
+            draw_smooth(pair[0], frames[i], faces, view, dim=dim, box=box, px=px)
         else:
             draw_layers(pair[0], [Layer(frames[i], faces)], view, labels=False)
         pair[0].set_title(name, fontsize=8)
         if heat is not None:
-            draw_heat(pair[1], frames[i], frames[indices[0]], faces, heat, view)
+            draw_heat(pair[1], frames[i], frames[indices[0]], faces, heat, view, box=box, px=px)
             pair[1].set_title(f"{name}: moved ({heat_label or f'0-{heat:.3g}'})", fontsize=7)
         for ax in pair:
-            ax.set_xlim(lo[0] - pad, hi[0] + pad)
-            ax.set_ylim(lo[1] - pad, hi[1] + pad)
+            ax.set_xlim(box[0][0], box[1][0])
+            ax.set_ylim(box[0][1], box[1][1])
             ax.set_aspect("equal")
     top = 1.0
     if title:

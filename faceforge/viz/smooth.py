@@ -1,12 +1,12 @@
-"""Smooth-shaded (Gouraud) renders and displacement heat maps for the contact sheets.
+"""Smooth-shaded renders and displacement heat maps for the contact sheets.
 
 The flat painter's renderer (:mod:`faceforge.viz.render`) gives each triangle one colour, so
-a dense face reads as facets and a crease is hard to tell from a triangle edge. Here each
-vertex is lit with its area-weighted normal (:func:`faceforge.geometry.triangles.vertex_normals`)
-and matplotlib interpolates across the triangle (``tripcolor(shading="gouraud")``), triangles
-drawn back to front by centroid depth. A heat map colours each vertex by its displacement from
-a reference pose instead. Where the mesh has a hole one can see through (a face mask's mouth, a
-mesh without a mouth bag), the hole is drawn dark as a cavity would look
+a dense face reads as facets and a crease is hard to tell from a triangle edge. Here the mesh is
+drawn through a z-buffer (:mod:`faceforge.viz.zbuffer`): each pixel shows the nearest surface,
+lit with the area-weighted vertex normals (:func:`faceforge.geometry.triangles.vertex_normals`)
+interpolated across the triangle. A heat map colours each pixel by the interpolated displacement
+from a reference pose instead. Where the mesh has a hole one can see through (a face mask's
+mouth, a mesh without a mouth bag), the hole is drawn dark as a cavity would look
 (:func:`fill_holes`), not the page's white.
 """
 
@@ -28,15 +28,12 @@ HOLE = tuple(0.15 * SKIN)
 
 
 def _project(vertices, faces, view: str):
-    """Camera coordinates (n, 3) and the triangles (k, 3) facing the camera, back to front."""
+    """Camera coordinates (n, 3) and the triangles (k, 3) of non-zero area."""
     v = np.asarray(vertices, dtype=float) @ view_matrix(view).T
     f = np.asarray(faces, dtype=np.int64)
     t = v[f]
     n = np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
-    keep = np.linalg.norm(n, axis=1) > 0.0
-    f = f[keep]
-    order = np.argsort(v[f][:, :, 2].mean(axis=1), kind="stable")
-    return v, f[order]
+    return v, f[np.linalg.norm(n, axis=1) > 0.0]
 
 
 def fill_holes(ax, xy: np.ndarray, faces: np.ndarray, colour=HOLE, clip=None, loops=None) -> None:
@@ -56,26 +53,28 @@ def fill_holes(ax, xy: np.ndarray, faces: np.ndarray, colour=HOLE, clip=None, lo
 
 
 def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front",
-                ambient: float = 0.3, dim: np.ndarray | None = None) -> None:
-    """Draw the mesh ``vertices (n, 3)``, ``faces (m, 3)`` smooth-shaded into ``ax``; ``dim``
-    (n,) in [0, 1] darkens vertices (the mouth's cavity, :func:`mouth_cavity`, which a lamp in
-    front would light like the skin): the light times ``1 - 0.85 dim``, interpolated like the
-    light (darkening whole triangles, as this did, traced their edges round an opened mouth;
-    :func:`mouth_cavity` marks a coarse mouth's long triangles dark at every vertex)."""
-    from matplotlib.colors import LinearSegmentedColormap
-
-    from faceforge.geometry.triangles import vertex_normals
+                ambient: float = 0.3, dim: np.ndarray | None = None, box=None, px: int | None = None) -> None:
+    """Draw the mesh ``vertices (n, 3)``, ``faces (m, 3)`` smooth-shaded into ``ax`` through a
+    z-buffer (:mod:`faceforge.viz.zbuffer`: the vertex normals interpolated and lit at each pixel);
+    ``dim`` (n,) in [0, 1] darkens vertices (the mouth's cavity, :func:`mouth_cavity`, which a lamp
+    in front would light like the skin): the light times ``1 - 0.85 dim``, interpolated like the
+    normals. ``box = (lo (2,), hi (2,))``: the part of the view to draw (camera x, y; default the
+    whole mesh), ``px`` its pixels a side (default :data:`faceforge.viz.zbuffer.PX`)."""
+    from faceforge.viz.zbuffer import PX, interpolate, lit, panel_buffers, show
 
     v, f = _project(vertices, faces, view)
     fill_holes(ax, v, faces)
-    n = vertex_normals(v, np.asarray(faces, dtype=np.int64))
-    n = n * np.where(n[:, 2:3] < 0.0, -1.0, 1.0)
-    light = ambient + (1.0 - ambient) * np.clip(n @ LIGHT, 0.0, 1.0)
+    face_id, bary, extent = panel_buffers(v, f, _box(v, box), px or PX)
+    light = lit(v, f, face_id, bary, LIGHT, ambient)
     if dim is not None:
-        light = light * (1.0 - 0.85 * np.clip(np.asarray(dim, dtype=float), 0.0, 1.0))
-    cmap = LinearSegmentedColormap.from_list("skin", [(0, 0, 0), tuple(SKIN)])
-    ax.tripcolor(v[:, 0], v[:, 1], f, light, shading="gouraud", cmap=cmap, vmin=0.0, vmax=1.0,
-                 rasterized=True)
+        d = np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)
+        light = light * (1.0 - 0.85 * interpolate(d[:, None], f, face_id, bary)[:, :, 0])
+    show(ax, light[:, :, None] * SKIN, face_id, extent)
+
+
+def _box(v: np.ndarray, box):
+    """The part of the view to draw: ``box`` as given, else the projected mesh's extent."""
+    return (v[:, :2].min(axis=0), v[:, :2].max(axis=0)) if box is None else box
 
 
 def mouth_cavity(rest: np.ndarray, faces: np.ndarray, inner_upper, inner_lower, corners, outer,
@@ -162,11 +161,20 @@ def _hidden(p: np.ndarray, faces: np.ndarray, cand: np.ndarray, eps: float) -> n
 
 
 def draw_heat(ax, vertices: np.ndarray, rest: np.ndarray, faces: np.ndarray, scale: float,
-              view: str = "front", cmap: str = "inferno"):
+              view: str = "front", cmap: str = "inferno", box=None, px: int | None = None):
     """Draw the mesh at ``vertices`` coloured by each vertex's distance from ``rest`` (n, 3),
-    ``scale`` (same units) the top of the colour scale. Returns the mappable (for a colour bar)."""
+    ``scale`` (same units) the top of the colour scale, through a z-buffer as :func:`draw_smooth`
+    (``box``, ``px`` as there). Returns a mappable of the scale (for a colour bar)."""
+    import matplotlib.cm
+    from matplotlib.colors import Normalize
+
+    from faceforge.viz.zbuffer import PX, interpolate, panel_buffers, show
+
     v, f = _project(vertices, faces, view)
     d = np.linalg.norm(np.asarray(vertices, float) - np.asarray(rest, float), axis=1)
     fill_holes(ax, v, faces)
-    return ax.tripcolor(v[:, 0], v[:, 1], f, d, shading="gouraud", cmap=cmap, vmin=0.0,
-                        vmax=max(float(scale), 1e-30), rasterized=True)
+    face_id, bary, extent = panel_buffers(v, f, _box(v, box), px or PX)
+    mappable = matplotlib.cm.ScalarMappable(Normalize(0.0, max(float(scale), 1e-30)), cmap)
+    heat = interpolate(d[:, None], f, face_id, bary)[:, :, 0]
+    show(ax, mappable.to_rgba(heat)[:, :, :3], face_id, extent)
+    return mappable
