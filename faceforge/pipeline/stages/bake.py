@@ -107,8 +107,8 @@ BAKE = register_stage(Stage(
                  "animate.jaw_glide_slope", "animate.chin_path"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
-    # version 14: the sheet draws the mouth's inside dark
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="14", run=run_bake,
+    # version 14: the sheet draws the mouth's inside dark; 15: through a z-buffer (viz.zbuffer)
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="15", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 

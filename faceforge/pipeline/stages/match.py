@@ -117,8 +117,9 @@ MATCH_STAGE = register_stage(Stage(
                  "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg",
                  "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template"),
     inputs=("match_target", "animate.fap_mapping", "template.skull", "template.muscle_map"),
+    # version 4: the sheet through a z-buffer (viz.zbuffer)
     outputs=("match.npz", "match.png", "report.json"),
-    version="3", run=run_match, description="the muscle pose of a posed copy of the head"))
+    version="4", run=run_match, description="the muscle pose of a posed copy of the head"))
 
 
 @click.command("match", help="Find the muscle contractions and jaw pose that reproduce a posed copy of the head.")
