@@ -27,7 +27,10 @@ LEFT_BROW = (276, 283, 282, 295, 285, 300, 293, 334, 296, 336)
 RIGHT_BROW = (46, 53, 52, 65, 55, 70, 63, 105, 66, 107)
 #: the points taken from the second look: both eye contours, the ten iris points, both brows
 REPAINTED = np.array(sorted(set(LEFT_EYE + RIGHT_EYE + LEFT_BROW + RIGHT_BROW) | set(range(468, 478))))
-#: the drawing, in fractions of the outer eye corners' distance (263 - 33) and 8-bit greys
+#: the drawing, in fractions of the outer eye corners' distance (263 - 33) and 8-bit greys. The dark
+#: disc is about twice an iris (0.065) and is not clipped to the opening: the first look's opening on
+#: the mask is a slit, and a disc clipped to it (radius 0.065-0.11) left the mask at 0.98 / 2.28 / 3.31 %
+#: (median / p90 / max of the diagonal) against 0.92 / 1.96 / 3.13; unclipped 0.065: 0.98 / 1.89 / 3.15
 IRIS_RADIUS = 0.11
 LID_LINE = 0.015
 SCLERA, IRIS, LID = 235, 60, 35
@@ -86,7 +89,7 @@ def paint_eyes(image: np.ndarray, points: np.ndarray) -> np.ndarray:
         poly = points[list(contour)]
         out[polygon_mask(poly, (h, w))] = SCLERA
         c = points[iris]
-        out[np.hypot(cols - c[0], rows - c[1]) <= IRIS_RADIUS * span] = IRIS
+        out[np.hypot(cols - c[0], rows - c[1]) <= IRIS_RADIUS * span] = IRIS    # over the lids too
         line = max(1.0, LID_LINE * span)
         for a, b in zip(poly, np.roll(poly, -1, axis=0)):
             out[_segment_mask(a, b, line, (h, w))] = LID
