@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from faceforge.exceptions import LandmarkError
-from faceforge.landmarks.paint import REPAINTED
+from faceforge.landmarks.paint import REPAINTED, eye_open
 
 #: FDPs on the midline of the face (put on the mirror plane of a symmetric mesh)
 #: FDPs whose detector point is only a rule's start (the jaw contour, 4-5 % of the diagonal in front
@@ -108,9 +108,10 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
                      symmetrise: bool = True, paint_eyes: bool = True) -> Detection:
     """Find the FDPs of :func:`fdp_table` on ``(vertices (n, 3), faces (m, 3))``.
 
-    ``paint_eyes``: where the mesh has no eye opening the rules can find (no boundary loop, no
-    recessed socket: eyes triangulated shut), look again at each view with the eyes drawn where
-    the first look put them, and take the eyes, irises and brows from that look
+    ``paint_eyes``: where the eyes are no opening (the frontal render sees neither a hole nor a
+    recess inside the detected eye contours, :func:`faceforge.landmarks.paint.eye_open`, and the eye
+    rules find no loop or socket: eyes triangulated shut), look again at each view with the eyes
+    drawn where the first look put them, and take the eyes, irises and brows from that look
     (:mod:`faceforge.landmarks.paint`; config ``landmarks.paint_eyes``).
     Raises LandmarkError ``no face found in PATH (tried N views)`` when no view shows a face.
     """
@@ -150,7 +151,9 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
             stack.append(pts)
             names.append(label)
             sights.append(s)
-        painted = bool(paint_eyes and stack and front is not None
+        front_sight = next((s for s in sights if s.label == "front"), None)
+        painted = bool(paint_eyes and front_sight is not None
+                       and not eye_open(front.depth, front_sight.points, front.view.scale)
                        and not eyes_in_mesh(_consensus(np.array(stack), diagonal)[0], v, f, front, (left, up, forward)))
         if painted:
             stack = [_second_look(s, det, v, f, diagonal, radius_px, pts) for s, pts in zip(sights, stack)]

@@ -34,6 +34,12 @@ REPAINTED = np.array(sorted(set(LEFT_EYE + RIGHT_EYE + LEFT_BROW + RIGHT_BROW) |
 IRIS_RADIUS = 0.11
 LID_LINE = 0.015
 SCLERA, IRIS, LID = 235, 60, 35
+#: an eye is open in a render when this share of the pixels inside its contour is background (a hole
+#: seen through: ICT cut to a mask's extent, 0.93) or their median depth lies this far (fraction of the
+#: eye's width, corner to corner) behind the contour's (a socket or a hole: the sample heads
+#: 0.077-0.147, cut to a mask 0.10-0.66; the MediaPipe mask's shut eyes -0.005 / -0.003)
+OPEN_BACKGROUND = 0.1
+OPEN_RECESS = 0.03
 
 
 def polygon_mask(polygon: np.ndarray, shape: tuple) -> np.ndarray:
@@ -58,6 +64,30 @@ def polygon_mask(polygon: np.ndarray, shape: tuple) -> np.ndarray:
         inside ^= crosses & (px < xc)
     out[lo[1]:hi[1], lo[0]:hi[0]] = inside
     return out
+
+
+def eye_open(depth: np.ndarray, points: np.ndarray, scale: float) -> bool:
+    """Whether either eye the detection ``points (478, 2)`` outlines is an opening in the render
+    whose ``depth (h, w)`` buffer (mesh units along the view, inf: background) it was found on
+    (``scale``: pixels per mesh unit): :data:`OPEN_BACKGROUND` of the pixels inside the contour see
+    the background, or their median depth lies :data:`OPEN_RECESS` of the eye's width behind the
+    contour's median depth."""
+    h, w = depth.shape
+    for contour in (LEFT_EYE, RIGHT_EYE):
+        poly = points[list(contour)]
+        inside = depth[polygon_mask(poly, (h, w))]
+        if len(inside) == 0:
+            continue
+        cols = np.clip(poly[:, 0].astype(int), 0, w - 1)
+        rows = np.clip(poly[:, 1].astype(int), 0, h - 1)
+        rim = depth[rows, cols]
+        seen = np.isfinite(inside)
+        if np.mean(~seen) >= OPEN_BACKGROUND:
+            return True
+        width = float(np.linalg.norm(poly[0] - poly[8])) / scale    # outer to inner corner
+        if np.isfinite(rim).any() and np.median(inside[seen]) - np.median(rim[np.isfinite(rim)]) > OPEN_RECESS * width:
+            return True
+    return False
 
 
 def _segment_mask(a: np.ndarray, b: np.ndarray, width: float, shape: tuple) -> np.ndarray:

@@ -62,3 +62,23 @@ def test_paint_eyes_draws_opening_iris_and_lid_line_where_the_points_are():
 def test_the_second_look_replaces_the_eyes_irises_and_brows_only():
     assert {33, 133, 263, 362, 468, 473, 70, 105, 107, 300, 334, 336} <= set(REPAINTED.tolist())
     assert not {0, 13, 14, 17, 61, 152, 291, 2, 4} & set(REPAINTED.tolist())
+
+
+def test_an_eye_is_open_where_the_render_sees_through_it_or_into_a_recess():
+    from faceforge.landmarks.paint import eye_open
+
+    pts = _face_points()                      # eyes 40 px wide: 0.4 mesh units at 100 px per unit
+    flush = np.full((256, 256), 5.0)
+    assert not eye_open(flush, pts, 100.0)
+    bulge = flush.copy()
+    bulge[90:111, 60:101] -= 0.05             # an eyeball standing out of the lids: still no opening
+    assert not eye_open(bulge, pts, 100.0)
+    socket = flush.copy()
+    socket[92:109, 65:96] += 0.02             # 0.05 of the eye's width behind its contour: a socket
+    assert eye_open(socket, pts, 100.0)
+    shallow = flush.copy()
+    shallow[92:109, 65:96] += 0.008           # 0.02 of the width: within OPEN_RECESS, flush
+    assert not eye_open(shallow, pts, 100.0)
+    hole = flush.copy()
+    hole[95:106, 70:91] = np.inf              # the background seen through the eye
+    assert eye_open(hole, pts, 100.0)
