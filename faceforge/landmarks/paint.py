@@ -6,9 +6,10 @@ it nothing there, and it guesses the eyes and the brows from the rest of the fac
 the eyes where its first pass put them (a light eye opening, a dark iris, a dark lid margin)
 and detecting again moves its eye, iris and brow points towards the mesh's eyes: on the
 MediaPipe mask, whose vertex i is MediaPipe point i, the median error of the eye contours
-fell from 1.29-1.34 to 0.77-0.89 % of the diagonal, of the irises from 1.32 to 0.46 %, of the
-brows from 1.90-2.12 to 1.69-2.00 % (branch mask23). The other points are the first pass's:
-with the eyes drawn the face's outline and the lower lip moved away.
+fell from 1.29-1.34 to 0.69-1.01 % of the diagonal, of the irises from 1.32 to 0.51 %, of the
+brows from 1.90-2.12 to 1.61-1.93 % (branch mask23). The other points are the first look's:
+taken from the second look too, the face's outline and the lower lip moved away (the lower inner
+lip 1.0 -> 2.0 %). Drawing brows as well (a dark band) made them worse.
 
 Pure functions on pixel arrays: ``points (478, 2)`` are the detector's pixel column, row.
 """
