@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from faceforge.exceptions import LandmarkError
+from faceforge.landmarks.paint import REPAINTED, eye_open
 
 #: FDPs on the midline of the face (put on the mirror plane of a symmetric mesh)
 #: FDPs whose detector point is only a rule's start (the jaw contour, 4-5 % of the diagonal in front
@@ -104,9 +105,14 @@ def _consensus(stack: np.ndarray, diagonal: float):
 
 
 def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh>",
-                     symmetrise: bool = True) -> Detection:
+                     symmetrise: bool = True, paint_eyes: bool = True) -> Detection:
     """Find the FDPs of :func:`fdp_table` on ``(vertices (n, 3), faces (m, 3))``.
 
+    ``paint_eyes``: where the eyes are no opening (the frontal render sees neither a hole nor a
+    recess inside the detected eye contours, :func:`faceforge.landmarks.paint.eye_open`, and the eye
+    rules find no loop or socket: eyes triangulated shut), look again at each view with the eyes
+    drawn where the first look put them, and take the eyes, irises and brows from that look
+    (:mod:`faceforge.landmarks.paint`; config ``landmarks.paint_eyes``).
     Raises LandmarkError ``no face found in PATH (tried N views)`` when no view shows a face.
     """
     import time
@@ -134,15 +140,23 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
         width = float(np.nanmax(np.ptp(local[np.isfinite(local[:, 0])], axis=0)))
         mid = np.nanmean(search_pts, axis=0)
         labels = view_labels()
-        stack, names, front = [], [], None
+        stack, names, front, sights = [], [], None, []
+        radius_px = 0.12 * FACE_SHARE * VIEW_SIZE
         for view, label in zip(consensus_views(left, up, forward, mid, width), labels):
             s = sight(v, f, normals, det, view, label)
             if s is None:
                 continue
             front = s.render if label == "front" else front
-            pts, _ = _lift_view(s, v, f, diagonal, 0.12 * FACE_SHARE * VIEW_SIZE)
+            pts, _ = _lift_view(s, v, f, diagonal, radius_px)
             stack.append(pts)
             names.append(label)
+            sights.append(s)
+        front_sight = next((s for s in sights if s.label == "front"), None)
+        painted = bool(paint_eyes and front_sight is not None
+                       and not eye_open(front.depth, front_sight.points, front.view.scale)
+                       and not eyes_in_mesh(_consensus(np.array(stack), diagonal)[0], v, f, front, (left, up, forward)))
+        if painted:
+            stack = [_second_look(s, det, v, f, diagonal, radius_px, pts) for s, pts in zip(sights, stack)]
     if not stack:
         raise LandmarkError(f"no face found in {path} (tried {tried + len(labels)} views)", path)
     agreed, spread, seen = _consensus(np.array(stack), diagonal)
@@ -153,7 +167,8 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
     on_skin = np.array([k not in PUPILS for k in ids])
     snapped, gap, _ = closest_points(pos, v, f)
     pos = np.where(on_skin[:, None], snapped, pos)
-    method = ["MediaPipe point %d, median of %d views" % (table[k], int(seen[:, table[k]].sum())) for k in ids]
+    method = ["MediaPipe point %d, median of %d views" % (table[k], int(seen[:, table[k]].sum()))
+              + (", eyes drawn in" if painted and table[k] in REPAINTED else "") for k in ids]
     for i in np.flatnonzero(~on_skin & (gap > 1e-3 * diagonal)):
         method[i] += ", in the eye opening at the depth of its lids"
     det = Detection(ids, pos, np.full(len(ids), -1, np.int64), method,
@@ -161,6 +176,7 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
                     [[names[j] for j in np.flatnonzero(seen[:, table[k]])] for k in ids], spread[idx],
                     {"search": best.label, "search_score": round(best.score, 4), "views_tried": tried + len(labels),
                      "frame": {"left": left.tolist(), "up": up.tolist(), "forward": forward.tolist()},
+                     "eyes_drawn": painted,
                      "timings": {"search_s": t_search}})
     plane = _mirror(det, v, diagonal)
     det.info["rule_scale"] = {"length": rule_scale(det, diagonal), "diagonal": diagonal}
@@ -171,6 +187,42 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
     _choose_vertices(det, v, diagonal, plane if det.info["symmetry"]["symmetric"] else None)
     det.info["timings"]["total_s"] = time.perf_counter() - t0
     return det
+
+
+def eyes_in_mesh(agreed: np.ndarray, v, f, front, frame) -> bool:
+    """Whether the eye rules find all four eye corners in the mesh (boundary loops or recessed
+    sockets, :func:`faceforge.landmarks.rules.eye_loops` / ``eye_openings``) from the detected
+    MediaPipe points ``agreed (478, 3)`` (NaN where unseen); ``front``: the frontal render."""
+    from faceforge.geometry.surface_points import closest_points
+    from faceforge.landmarks import rules
+    from faceforge.landmarks.brows import EYE_CORNERS
+
+    table = fdp_table()
+    keys = [k for k in ("3.5", "3.6", "3.7", "3.8", "3.11", "3.12") if np.isfinite(agreed[table[k]]).all()]
+    if not keys:
+        return False
+    pts = agreed[[table[k] for k in keys]]
+    on_skin = np.array([k not in PUPILS for k in keys])
+    pts[on_skin] = closest_points(pts[on_skin], v, f)[0]
+    pos = dict(zip(keys, pts))
+    found = set(rules.eye_openings(front, v, f, pos)) | set(rules.eye_loops(v, f, pos, frame))
+    return all(k in found for k in EYE_CORNERS)
+
+
+def _second_look(s, detector, v, f, diagonal, radius_px, first):
+    """(478, 3) lifted points of sighting ``s`` looked at again with the eyes drawn where it put
+    them (:func:`faceforge.landmarks.paint.paint_eyes`): the points of
+    :data:`~faceforge.landmarks.paint.REPAINTED` from the second look, the rest the first's
+    (``first (478, 3)``, also the answer when the second look finds no face)."""
+    from faceforge.landmarks.paint import paint_eyes
+    from faceforge.landmarks.views import Sighting
+
+    face = detector.detect(paint_eyes(s.render.image, s.points))
+    if face is None:
+        return first
+    points = s.points.copy()
+    points[REPAINTED] = face.points[REPAINTED]
+    return _lift_view(Sighting(s.render, points, s.score, s.label), v, f, diagonal, radius_px)[0]
 
 
 def _drop(det: Detection, ids) -> Detection:

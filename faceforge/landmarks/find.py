@@ -33,7 +33,7 @@ class Found:
     faces: np.ndarray
 
 
-def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True) -> Found:
+def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True, paint_eyes: bool = True) -> Found:
     """See the module docstring. ``landmark_path`` None: the default path next to the mesh."""
     from faceforge.io.landmarks import default_landmark_path, read_landmarks
     from faceforge.io.mesh import load_mesh
@@ -52,7 +52,7 @@ def find_landmarks(mesh_path, landmark_path=None, symmetrise: bool = True) -> Fo
             return Found("given", None, str(path), v, f)
     # a broken mesh says what is wrong with it, not "no face"; with two heads, which one to find?
     check_mesh(v, f, str(mesh_path), one_head=True)
-    det = detect_landmarks(v, f, str(mesh_path), symmetrise=symmetrise)
+    det = detect_landmarks(v, f, str(mesh_path), symmetrise=symmetrise, paint_eyes=paint_eyes)
     if raw is None:
         return Found("detected", det, None, v, f)
     _check_ids(raw, len(v))

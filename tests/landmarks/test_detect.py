@@ -19,9 +19,10 @@ SAMPLES = {
 }
 #: (median, p90, max) error bounds, fraction of the diagonal: the measured values (benchmarks/
 #: results/landmarks.json) plus a margin; the MediaPipe mask is a face without a head, whose
-#: diagonal is a third of the others'; its max is the cheek 5.1 (4.04 %), whose hand vertex 427 is
-#: the vertex nearest its file's construction point but 2.2 % of the diagonal from it (notes/land10)
-BOUNDS = {"makehuman": (0.0055, 0.0115, 0.02), "ict": (0.004, 0.012, 0.015), "mediapipe": (0.014, 0.028, 0.042)}
+#: diagonal is a third of the others'; its max is the cheek 5.1 (3.13 %; 4.04 % before its eyes were
+#: drawn in, notes/mask23), whose hand vertex 427 is the vertex nearest its file's construction point
+#: but 2.2 % of the diagonal from it (notes/land10)
+BOUNDS = {"makehuman": (0.0055, 0.0115, 0.02), "ict": (0.004, 0.012, 0.015), "mediapipe": (0.011, 0.023, 0.034)}
 
 
 def _mesh(name):
@@ -86,6 +87,20 @@ def test_detected_points_agree_with_the_hand_files(detected, name):
     assert np.median(err) <= med and np.percentile(err, 90) <= p90 and err.max() <= worst, \
         (np.median(err), np.percentile(err, 90), err.max())
     assert det.info["search"].startswith("looking along -Z")     # the samples face +Z
+
+
+def test_eyes_the_mesh_does_not_open_are_looked_at_again_drawn_in(detected):
+    """The mask's eyes are triangulated shut: no loop, no socket, the detector guessed them (irises
+    1.13 %, lower lids 1.64 %, inner corners 2.46 % of the diagonal from the hand points). Drawn in
+    where that first look put them, a second look finds them: measured 0.29 / 0.25 / 1.95 %. Heads
+    whose eyes are openings (ICT's holes, MakeHuman's sockets) are not drawn on."""
+    det, hand, at, off = _against_hand(detected, "mediapipe")
+    assert det.info["eyes_drawn"]
+    assert off("3.5") < 0.004 and off("3.3") < 0.006 and off("3.11") < 0.021
+    assert "eyes drawn in" in det.method[at["3.5"]] and "eyes drawn in" not in det.method[at["2.2"]]
+    for name in ("makehuman", "ict"):
+        det = detected[name][2]
+        assert not det.info["eyes_drawn"] and not any("eyes drawn in" in m for m in det.method)
 
 
 def test_pairs_are_mirror_images_on_a_symmetric_head(detected):

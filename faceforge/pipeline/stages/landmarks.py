@@ -31,7 +31,8 @@ from faceforge.pipeline.workdir_guard import check_outside_workdir
 #: 3: the inner and middle brows keep the detector's side position less its outward bias, and the nose's
 #: lower edge 9.4/9.5 the detector's point less its bias, both measured on MediaPipe's canonical face
 #: 4: lips joined in front (a bridged mask) are told apart by height; a lip that does not roll in gives its edge
-VERSION = "4"
+#: 5: eyes the mesh does not open (no loop, no socket) are looked at again drawn in (``landmarks.paint_eyes``)
+VERSION = "5"
 
 
 def run(ctx) -> None:
@@ -44,7 +45,8 @@ def run(ctx) -> None:
     from faceforge.landmarks.output import landmark_yaml, report, save_png
 
     mesh = ctx.param("mesh")
-    found = find_landmarks(mesh, ctx.params.get("landmarks"))
+    found = find_landmarks(mesh, ctx.params.get("landmarks"),
+                           paint_eyes=bool(ctx.config.get("landmarks.paint_eyes", True)))
     out = Path(ctx.out_dir)
     if found.source == "given":
         shutil.copyfile(found.given_path, out / "landmarks.fdp.yaml")
@@ -74,7 +76,7 @@ def landmark_file(workdir_stage_dir) -> tuple[str, str]:
 
 
 STAGE = register_stage(Stage(
-    name="landmarks", deps=(), config_keys=(), inputs=("mesh", "landmarks?"),
+    name="landmarks", deps=(), config_keys=("landmarks",), inputs=("mesh", "landmarks?"),
     outputs=("landmarks.fdp.yaml", "report.json"), version=VERSION, run=run,
     description="find the FDP landmarks of the head (automatic where none are given)"))
 
