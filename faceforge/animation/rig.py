@@ -275,15 +275,19 @@ class BoundHead:
 
     def _fold_limit(self, bind: dict, config):
         """(quads (m, 4), limits (m,) radians) the skin may not bend past: ``skin.fold_deg`` on
-        the quads flat at rest, ``skin.commissure_fold_deg`` on the lips' corners
-        (:func:`faceforge.skin.fold_limit.fold_limits`); None when both are 0."""
+        the quads flat at rest (not on a proxy head unless ``skin.proxy_fold_limit``),
+        ``skin.commissure_fold_deg`` on the lips' corners (:func:`faceforge.skin.fold_limit.fold_limits`);
+        None when both are 0."""
         from faceforge.skin.fold_limit import fold_limits
         from faceforge.skin.lip_contact import commissure_quads
 
         corner = float(config.get("skin.commissure_fold_deg") or 0.0)
         quads = commissure_quads(self.rest, self.faces, bind.get("lip_sides"), self.landmarks) \
             if corner > 0 else None
-        return fold_limits(self.rest, self.faces, float(config.get("skin.fold_deg") or 0.0), quads, corner)
+        fold = float(config.get("skin.fold_deg") or 0.0)
+        if self.embedding is not None and not config.get("skin.proxy_fold_limit"):   # a proxy: corners only
+            fold = 0.0
+        return fold_limits(self.rest, self.faces, fold, quads, corner)
 
     def _blend_limit(self, bind: dict):
         """The influence blend kept within the skin's fold limit

@@ -198,6 +198,7 @@ RULES: list[tuple[str, Rule]] = [
     ("skin.cheek_tether", Number(0.0, 1.0)),          # a stiffness: past 1 a projection overshoots
     ("skin.commissure_fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the lips' corner contact off
     ("skin.fold_deg", Number(0.0, 179.0)),  # degrees; 0 turns the skin's fold limit off
+    ("skin.proxy_fold_limit", Boolean()),
     ("skin.lip_contact_mm", Number(0.0, 20.0)),  # mm; 0 turns the lips' one-sided contact off
     ("bake.split_pairs", ListOf(Choice(SPLITTABLE_PAIRS))),  # ARKit pair stems (mouthSmile); [] = off
     ("match.rigid", Boolean()),                       # `faceforge match --rigid`: the target's head motion removed first

@@ -229,3 +229,16 @@ def test_a_proxy_heads_sheet_darkens_the_mouth_on_the_users_own_triangles(proxy_
     fv, r = head.fdp_vertex, head.rest
     np.testing.assert_array_equal(dim, mouth_cavity(user, head.user_faces, r[fv["2.2"]], r[fv["2.3"]],
                                                     r[[fv["8.3"], fv["8.4"]]], r[[fv["8.1"], fv["8.2"]]], mm))
+
+
+def test_a_proxy_head_has_no_skin_fold_limit_unless_asked(proxy_workdir):
+    """skin.proxy_fold_limit false (the default): a proxy head's skin keeps only the commissure's
+    fold limit (the skin's limit threw the locked mouth corner's vertices, docs/notes/dense23.md);
+    true: skin.fold_deg on every flat quad as on any head."""
+    from faceforge.animation.rig import BoundHead
+    from faceforge.io.config import load_config
+
+    _, work = proxy_workdir
+    off = BoundHead(work / "fit", work / "bind", load_config(sets=["skin.proxy_fold_limit=false"]))._folds
+    on = BoundHead(work / "fit", work / "bind", load_config(sets=["skin.proxy_fold_limit=true"]))._folds
+    assert on is not None and (off is None or len(off[0]) < len(on[0]) / 10)

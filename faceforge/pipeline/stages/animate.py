@@ -119,7 +119,7 @@ ANIMATE = register_stage(Stage(
     # (faceforge.animation.rig.muscle_system): both template files are inputs
     name="animate", deps=("fit", "bind", "calibrate"), config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
                                                                     "skin.join_insertions", "skin.cheek_tether",
-                                                                    "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm", "bind.cheek_muscles", "muscle",
+                                                                    "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit", "skin.lip_contact_mm", "bind.cheek_muscles", "muscle",
                                                 "animate", "template"),
     inputs=("fap", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),

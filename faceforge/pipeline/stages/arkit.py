@@ -94,7 +94,7 @@ def run_arkit(ctx):
 ARKIT = register_stage(Stage(
     name="arkit", deps=("fit", "bind", "calibrate", "bake"),
     config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm", "skin.join_insertions", "skin.cheek_tether",
-                 "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template",
+                 "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit", "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template",
                  "curves"),
     inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),

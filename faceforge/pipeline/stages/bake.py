@@ -100,7 +100,7 @@ BAKE = register_stage(Stage(
     # the bound head rebuilds the muscles from the template (faceforge.animation.rig.muscle_system)
     # not the playback-only keys (head rotation, previews, presets' timing): they cost no rebake
     config_keys=("bake", "solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
-                 "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm",
+                 "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit", "skin.lip_contact_mm",
                  "bind.cheek_muscles", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.statics",
                  "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.eyelid_fold_deg", "animate.eyelid_jaw_hold", "animate.jaw_glide",

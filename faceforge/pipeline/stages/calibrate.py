@@ -105,7 +105,7 @@ CALIBRATE = register_stage(Stage(
     # :func:`without_lip_contact`)
     name="calibrate", deps=("fit", "bind"), config_keys=(
         "solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
-        "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg",
+        "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit",
         "bind.cheek_muscles", "muscle", "animate.fap_mapping", "animate.fps",
         "animate.skull_guard", "animate.orientation_guard", "animate.calibrate", "animate.jaw_glide",
         "animate.jaw_glide_slope", "animate.chin_path", "animate.statics", "template"),

@@ -129,7 +129,7 @@ def settled_poses(head, c, jaw, config):
 
 _SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),
                     config_keys=("solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm",
-                                 "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.lip_contact_mm",
+                                 "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit", "skin.lip_contact_mm",
                                  "bind.cheek_muscles", "muscle", "animate", "template"),
                     inputs=("animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"))
 

@@ -114,7 +114,7 @@ def run_match(ctx):
 MATCH_STAGE = register_stage(Stage(
     name="match", deps=("fit", "bind"),
     config_keys=("match", "solver", "skin.stiffness", "skin.carry", "skin.carry_radius_mm", "skin.join_insertions",
-                 "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg",
+                 "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit",
                  "skin.lip_contact_mm", "bind.cheek_muscles", "muscle", "animate", "template"),
     inputs=("match_target", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     # version 4: the sheet through a z-buffer (viz.zbuffer)
