@@ -10,10 +10,12 @@ from faceforge.animation.guards.orientation import OrientationGuard, _project_si
 from .test_playback import grid
 
 
-def _twin(x, tris, nref, floor, aim, iterations, hit, w=None):
+def _twin(x, tris, nref, floor, aim, iterations, hit, w=None, reach=None):
     """Plain-Python twin of the numba kernel (same order, same updates); ``w (n,)`` the vertices'
-    inverse masses (None: all 1)."""
+    inverse masses (None: all 1); ``reach (k,)`` the farthest a projection moves a vertex (None:
+    unbounded)."""
     w = np.ones(len(x)) if w is None else w
+    reach = np.full(len(tris), np.inf) if reach is None else reach
     moved = 0
     for _ in range(iterations):
         changed = 0
@@ -27,6 +29,9 @@ def _twin(x, tris, nref, floor, aim, iterations, hit, w=None):
             if denom <= 1e-300:
                 continue
             lam = -(s - floor[t] - aim * floor[t]) / denom
+            step = max(w[tris[t, k]] * abs(lam) * np.linalg.norm(g[k]) for k in range(3))
+            if step > reach[t]:
+                lam *= reach[t] / step
             for k in range(3):
                 if w[tris[t, k]] > 0:
                     x[tris[t, k]] += w[tris[t, k]] * lam * g[k]
@@ -53,7 +58,7 @@ def test_kernel_matches_its_python_twin():
     x, tris, n, floor = _random_triangles(rng)
     a, b = x.copy(), x.copy()
     ha, hb = np.zeros(40, np.uint8), np.zeros(40, np.uint8)
-    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha, np.ones(30))
+    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha, np.ones(30), np.full(40, np.inf))
     kb = _twin(b, tris, n, floor, 0.25, 7, hb)
     assert ka == kb > 0
     assert np.allclose(a, b, rtol=0, atol=1e-12)
@@ -73,16 +78,35 @@ def test_weighted_kernel_matches_its_python_twin_and_keeps_pinned_vertices():
     w[pinned] = 0.0
     a, b = x.copy(), x.copy()
     ha, hb = np.zeros(40, np.uint8), np.zeros(40, np.uint8)
-    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha, w)
+    ka = _project_signed_areas(a, tris, n, floor, 0.25, 7, ha, w, np.full(40, np.inf))
     kb = _twin(b, tris, n, floor, 0.25, 7, hb, w)
     assert ka == kb > 0
     assert np.allclose(a, b, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(a[pinned], x[pinned])
     assert not np.array_equal(a, x)
     c, d = x.copy(), x.copy()
-    _project_signed_areas(c, tris, n, floor, 0.25, 7, np.zeros(40, np.uint8), np.ones(30))
+    _project_signed_areas(c, tris, n, floor, 0.25, 7, np.zeros(40, np.uint8), np.ones(30), np.full(40, np.inf))
     _twin(d, tris, n, floor, 0.25, 7, np.zeros(40, np.uint8))
     assert np.allclose(c, d, rtol=0, atol=1e-12)
+
+
+def test_a_projection_moves_no_vertex_farther_than_its_reach():
+    """A triangle seen nearly edge-on along its rest normal has gradients near 0: the linearised
+    step threw a vertex across the face (MakeHuman's pride.fap on a levelled risorius: a lid-corner
+    vertex 6 units, frame 45). With ``reach`` no vertex moves farther than it in one projection,
+    the twin agrees, and an unbounded reach is the old step."""
+    x = np.array([[0.0, 0.0, 0.0], [1e-3, 0.0, 1.0], [0.0, 1e-3, -1.0]])   # nearly edge-on along +z
+    tris = np.array([[0, 1, 2]], dtype=np.int64)
+    n = np.array([[0.0, 0.0, 1.0]])
+    floor = np.array([0.1])
+    free = x.copy()
+    _project_signed_areas(free, tris, n, floor, 0.25, 1, np.zeros(1, np.uint8), np.ones(3), np.full(1, np.inf))
+    assert np.abs(free - x).max() > 50.0                                   # thrown
+    a, b = x.copy(), x.copy()
+    _project_signed_areas(a, tris, n, floor, 0.25, 1, np.zeros(1, np.uint8), np.ones(3), np.array([0.5]))
+    _twin(b, tris, n, floor, 0.25, 1, np.zeros(1, np.uint8), reach=np.array([0.5]))
+    assert np.linalg.norm(a - x, axis=1).max() == pytest.approx(0.5)
+    assert np.allclose(a, b, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("watch_angle, min_area", [(60.0, 0.2), (30.0, 0.0), (120.0, 0.0), (90.0, 0.1)])

@@ -131,11 +131,14 @@ def _rewatched(x, faces, normal0, floor, cos_watch, active, rows, moved, vstart,
 
 
 @numba.njit(**NUMBA_OPTIONS)
-def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit, w):  # pragma: no cover - numba
+def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit, w, reach):  # pragma: no cover - numba
     """Gauss-Seidel over the triangles ``tris (k, 3)``: signed area along ``nref (k, 3)``
     (unit) at least ``floor (k,)``; a triangle below its floor is projected (linearised) to
     ``(1 + aim) floor``, so that the next small push of a neighbour does not bring it back
-    below. ``w (n,)``: the vertices' inverse masses (>= 0; 0 pinned).
+    below. ``w (n,)``: the vertices' inverse masses (>= 0; 0 pinned). ``reach (k,)``: no vertex
+    moves farther than this in one projection (the step is scaled down to it: a triangle seen
+    edge-on along its rest normal has gradients near 0, and the linearised step threw a vertex
+    across the face).
     ``x (n, 3)`` in place; ``hit (k,)`` uint8 is set to 1 for each triangle projected
     at least once (its three vertices may have moved; the others' did not, unless shared).
     Returns how many projections moved a vertex."""
@@ -167,6 +170,12 @@ def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit, w):  # pra
             if denom <= 1e-300:
                 continue
             lam = -(cval - aim * floor[t]) / denom
+            step = 0.0
+            for k in range(3):
+                m = w[tris[t, k]] * abs(lam) * np.sqrt(g[k, 0] * g[k, 0] + g[k, 1] * g[k, 1] + g[k, 2] * g[k, 2])
+                step = max(step, m)
+            if step > reach[t]:
+                lam *= reach[t] / step
             for k in range(3):
                 v = tris[t, k]
                 if w[v] > 0.0:
@@ -184,7 +193,7 @@ def _project_signed_areas(x, tris, nref, floor, aim, iterations, hit, w):  # pra
 
 @numba.njit(**NUMBA_OPTIONS)
 def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds, iterations, vstart,
-                  vtris, mark, w):  # pragma: no cover - numba
+                  vtris, mark, w, reach):  # pragma: no cover - numba
     """The rounds of :meth:`OrientationGuard.apply` from ``rows``, the :func:`_watched` rows of
     ``x (n, 3)`` (in place): project them (:func:`_project_signed_areas`), test again around
     the projected triangles (:func:`_rewatched`), until a test finds nothing, a projection
@@ -200,14 +209,16 @@ def _guard_rounds(x, faces, normal0, floor, cos_watch, active, rows, aim, rounds
         tris = np.empty((k, 3), np.int64)
         nref = np.empty((k, 3))
         fl = np.empty(k)
+        rc = np.empty(k)
         for i in range(k):
             t = rows[i]
             for d in range(3):
                 tris[i, d] = faces[t, d]
                 nref[i, d] = normal0[t, d]
             fl[i] = floor[t]
+            rc[i] = reach[t]
         hit = np.zeros(k, np.uint8)
-        done = _project_signed_areas(x, tris, nref, fl, aim, iterations, hit, w)
+        done = _project_signed_areas(x, tris, nref, fl, aim, iterations, hit, w, rc)
         moved += done
         if done == 0:
             break
@@ -271,6 +282,8 @@ class OrientationGuard:
         self.normal0[self.active] = n0[self.active] / two_a0[self.active, None]
         self.area0 = 0.5 * two_a0
         self.floor = min_area * self.area0
+        #: (m,) a projection moves no vertex farther than its triangle's longest rest edge
+        self.reach = np.linalg.norm(r - np.roll(r, 1, axis=1), axis=2).max(axis=1)
         self.cos_watch = float(np.cos(np.radians(watch_angle)))
         self.rounds = int(rounds)
         self.iterations = int(iterations)
@@ -318,7 +331,7 @@ class OrientationGuard:
             return 0
         done, rows, known, touched = _guard_rounds(
             positions, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows, AIM,
-            self.rounds, self.iterations, self._vstart, self._vtris, self._mark, self.inv_mass)
+            self.rounds, self.iterations, self._vstart, self._vtris, self._mark, self.inv_mass, self.reach)
         if known:
             self._last = (positions, rows)
         self.touched = np.concatenate(touched)
@@ -334,7 +347,7 @@ class OrientationGuard:
         _rewatched(x, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows,
                    np.zeros(0, INT), self._vstart, self._vtris, self._mark)
         _guard_rounds(x, self.faces, self.normal0, self.floor, self.cos_watch, self.active, rows, AIM,
-                      1, 1, self._vstart, self._vtris, self._mark, self.inv_mass)
+                      1, 1, self._vstart, self._vtris, self._mark, self.inv_mass, self.reach)
         self._mark[:] = 0
 
     def _rewatched(self, positions, rows, moved) -> np.ndarray:
