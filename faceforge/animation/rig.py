@@ -326,8 +326,10 @@ class BoundHead:
         else:
             self.collision = None
         rounds = int(config.get("animate.orientation_guard.rounds"))
+        # a projection moves a vertex at most its triangle's longest rest edge (MakeHuman's pride.fap on a
+        # levelled risorius threw a lid-corner vertex 0.74 units for a frame: docs/notes/ris23.md)
         self.orientation = OrientationGuard(
-            self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area"))) \
+            self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area")), reach=1.0) \
             if rounds > 0 else None
 
     def _skin_step(self, jaw: JawDrive, rounds: int):

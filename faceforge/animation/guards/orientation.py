@@ -261,13 +261,19 @@ class OrientationGuard:
     inv_mass : (n,) float >= 0, optional
         The vertices' inverse masses (0: pinned, the pass bends the skin around it; module
         docstring); None: all 1.
+    reach : float, optional
+        A projection moves no vertex farther than this many times its triangle's longest rest
+        edge (the step is scaled down): on a triangle seen nearly edge-on along its rest normal
+        the gradients are near 0 and the linearised step threw a vertex across the face. None:
+        unbounded (a kinematic field that moves the skin far in one frame, the eyelids', needs
+        its whole step).
 
     Triangles of zero rest area (numerically degenerate, area <= 1e-12 of the squared
     bounding-box diagonal) have no orientation and are left alone.
     """
 
     def __init__(self, rest, faces, min_area: float = 0.1, watch_angle: float = 60.0,
-                 rounds: int = 32, iterations: int = 50, inv_mass=None):
+                 rounds: int = 32, iterations: int = 50, inv_mass=None, reach: float | None = None):
         if not 0.0 <= min_area < 1.0:
             raise ValueError(f"min_area must be in [0, 1), got {min_area}")
         self.rest = np.array(rest, dtype=FLOAT)
@@ -282,8 +288,9 @@ class OrientationGuard:
         self.normal0[self.active] = n0[self.active] / two_a0[self.active, None]
         self.area0 = 0.5 * two_a0
         self.floor = min_area * self.area0
-        #: (m,) a projection moves no vertex farther than its triangle's longest rest edge
-        self.reach = np.linalg.norm(r - np.roll(r, 1, axis=1), axis=2).max(axis=1)
+        #: (m,) how far a projection may move a vertex of each triangle (inf: unbounded)
+        self.reach = (np.full(len(self.faces), np.inf) if reach is None
+                      else float(reach) * np.linalg.norm(r - np.roll(r, 1, axis=1), axis=2).max(axis=1))
         self.cos_watch = float(np.cos(np.radians(watch_angle)))
         self.rounds = int(rounds)
         self.iterations = int(iterations)
