@@ -140,18 +140,18 @@ def detect_landmarks(vertices: np.ndarray, faces: np.ndarray, path: str = "<mesh
         width = float(np.nanmax(np.ptp(local[np.isfinite(local[:, 0])], axis=0)))
         mid = np.nanmean(search_pts, axis=0)
         labels = view_labels()
-        stack, names, front, sights = [], [], None, []
+        stack, names, sights = [], [], []
         radius_px = 0.12 * FACE_SHARE * VIEW_SIZE
         for view, label in zip(consensus_views(left, up, forward, mid, width), labels):
             s = sight(v, f, normals, det, view, label)
             if s is None:
                 continue
-            front = s.render if label == "front" else front
             pts, _ = _lift_view(s, v, f, diagonal, radius_px)
             stack.append(pts)
             names.append(label)
             sights.append(s)
         front_sight = next((s for s in sights if s.label == "front"), None)
+        front = None if front_sight is None else front_sight.render
         painted = bool(paint_eyes and front_sight is not None
                        and not eye_open(front.depth, front_sight.points, front.view.scale)
                        and not eyes_in_mesh(_consensus(np.array(stack), diagonal)[0], v, f, front, (left, up, forward)))

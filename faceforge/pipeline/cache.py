@@ -124,16 +124,9 @@ def settled_record(current: Mapping, previous: Mapping | None, default) -> dict:
     is no ``previous``."""
     if previous is None:
         return dict(current)
-    old = previous.get("config", {})
-    config = {}
-    for key, value in current["config"].items():
-        d = default.get(key, _ABSENT)
-        if key not in old:
-            if d is _ABSENT or d != value:
-                config[key] = value
-        else:
-            config[key] = _without_new_defaults(value, old[key], None if d is _ABSENT else d)
-    return {**current, "config": config}
+    # the record's top-level keys are dotted paths into the default config, read with its get()
+    tops = {key: d for key in current["config"] if (d := default.get(key, _ABSENT)) is not _ABSENT}
+    return {**current, "config": _without_new_defaults(current["config"], previous.get("config", {}), tops)}
 
 
 def stale_reasons(current: Mapping, previous: Mapping | None) -> list[str]:

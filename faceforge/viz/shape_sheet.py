@@ -32,7 +32,7 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
 
     from faceforge.io.mesh_check import boundary_loops
     from faceforge.viz.smooth import fill_holes
-    from faceforge.viz.zbuffer import interpolate, lit, panel_buffers, show
+    from faceforge.viz.zbuffer import shade, show
 
     frames = np.asarray(frames, dtype=float)
     labels = list(labels)
@@ -54,15 +54,11 @@ def shape_sheet(out_png, frames: np.ndarray, faces: np.ndarray, labels, region: 
     ax = fig.add_axes((0.0, 0.0, 1.0, top))
     ax.axis("off")
     px = int(round(2 * panel * dpi))                # rasterised at twice a panel's pixels
-    loops = boundary_loops(np.asarray(faces, dtype=np.int64))
     faces = np.asarray(faces, dtype=np.int64)
-    shade_dim = None if dim is None else 1.0 - 0.85 * np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)
+    loops = boundary_loops(faces)
     for k, (frame, name) in enumerate(zip(frames, labels)):
         cam = frame @ r.T
-        face_id, bary, extent = panel_buffers(cam, faces, (lo, hi), px)
-        light = lit(cam, faces, face_id, bary, LIGHT, 0.3)
-        if shade_dim is not None:
-            light = light * interpolate(shade_dim[:, None], faces, face_id, bary)[:, :, 0]
+        light, face_id, extent = shade(cam, faces, (lo, hi), px, LIGHT, 0.3, dim)
         x0, y0 = (k % cols) * cw, -(k // cols) * ch
         cell = Rectangle((x0, y0), w, h, transform=ax.transData)
         shift = np.array([x0 - lo[0], x0 - lo[0], y0 - lo[1], y0 - lo[1]])

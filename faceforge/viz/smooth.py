@@ -60,15 +60,11 @@ def draw_smooth(ax, vertices: np.ndarray, faces: np.ndarray, view: str = "front"
     in front would light like the skin): the light times ``1 - 0.85 dim``, interpolated like the
     normals. ``box = (lo (2,), hi (2,))``: the part of the view to draw (camera x, y; default the
     whole mesh), ``px`` its pixels a side (default :data:`faceforge.viz.zbuffer.PX`)."""
-    from faceforge.viz.zbuffer import PX, interpolate, lit, panel_buffers, show
+    from faceforge.viz.zbuffer import PX, shade, show
 
     v, f = _project(vertices, faces, view)
     fill_holes(ax, v, faces)
-    face_id, bary, extent = panel_buffers(v, f, _box(v, box), px or PX)
-    light = lit(v, f, face_id, bary, LIGHT, ambient)
-    if dim is not None:
-        d = np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)
-        light = light * (1.0 - 0.85 * interpolate(d[:, None], f, face_id, bary)[:, :, 0])
+    light, face_id, extent = shade(v, f, _box(v, box), px or PX, LIGHT, ambient, dim)
     show(ax, light[:, :, None] * SKIN, face_id, extent)
 
 

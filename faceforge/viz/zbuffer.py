@@ -53,6 +53,20 @@ def lit(cam: np.ndarray, faces: np.ndarray, face_id: np.ndarray, bary: np.ndarra
     return ambient + (1.0 - ambient) * np.clip(cos, 0.0, 1.0)
 
 
+def shade(cam: np.ndarray, faces: np.ndarray, box, px: int, light: np.ndarray, ambient: float,
+          dim: np.ndarray | None = None):
+    """The skin's light over a panel: :func:`panel_buffers` of ``cam (n, 3)``, ``faces (m, 3)``,
+    ``box``, ``px``, then :func:`lit`, times ``1 - 0.85 dim`` interpolated where ``dim (n,)`` in
+    [0, 1] darkens vertices (the mouth's inside). Returns ``(light (px, px), face_id (px, px),
+    extent)``."""
+    face_id, bary, extent = panel_buffers(cam, faces, box, px)
+    out = lit(cam, faces, face_id, bary, light, ambient)
+    if dim is not None:
+        d = np.clip(np.asarray(dim, dtype=float), 0.0, 1.0)
+        out = out * (1.0 - 0.85 * interpolate(d[:, None], faces, face_id, bary)[:, :, 0])
+    return out, face_id, extent
+
+
 def show(ax, rgb: np.ndarray, face_id: np.ndarray, extent, clip=None):
     """Draw ``rgb (px, px, 3)`` in [0, 1] into ``ax`` at ``extent``, transparent where
     ``face_id`` is -1, above the holes' fill (zorder 1); clipped to the patch ``clip`` if given."""
