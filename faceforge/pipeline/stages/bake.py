@@ -103,7 +103,7 @@ BAKE = register_stage(Stage(
                  "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit", "skin.lip_contact_mm",
                  "bind.cheek_muscles", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.statics",
-                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.eyelid_fold_deg", "animate.eyelid_jaw_hold", "animate.jaw_glide",
+                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.eyelid_fold_deg", "animate.eyelid_jaw_hold", "animate.eyelid_relative", "animate.jaw_glide",
                  "animate.jaw_glide_slope", "animate.chin_path"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
