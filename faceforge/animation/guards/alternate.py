@@ -59,6 +59,9 @@ class GuardedSkinStep:
         has work
     """
 
+    #: ``animate.orientation_guard.fold_progress`` (a step built without it, as tests do, goes on as before)
+    progress = False
+
     def __init__(self, system, skin, guard, orientation, collision, rounds: int, jaw, progress: bool = False):
         self.system, self.skin, self.guard = system, skin, guard
         self.orientation, self.collision, self.rounds, self.jaw = orientation, collision, rounds, jaw
