@@ -108,7 +108,7 @@ BAKE = register_stage(Stage(
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
     # version 14: the sheet draws the mouth's inside dark; 15: through a z-buffer (viz.zbuffer)
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="15", run=run_bake,
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="16", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 
