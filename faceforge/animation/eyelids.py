@@ -441,7 +441,8 @@ class Eyelids:
     """
 
     def __init__(self, rest, faces, landmarks: dict, irisd: float, reach: float = 0.5,
-                 depth: float = 0.5, fold_deg: float = 0.0, jaw_hold: float = 0.0, rigid=None):
+                 depth: float = 0.5, fold_deg: float = 0.0, jaw_hold: float = 0.0, rigid=None,
+                 relative: bool = False):
         from faceforge.animation.guards.orientation import OrientationGuard
         from faceforge.animation.lashes import lash_carriers
         from faceforge.geometry.triangles import vertex_components
@@ -485,6 +486,25 @@ class Eyelids:
                                        inv_mass=None if self._fold is None else self.inv_mass) if len(near) else None
         # the jaw hold's take-back backed off where it would fold the skin or turn a triangle over
         self._jaw_blend = self._backing(faces, fold_deg)
+        # animate.eyelid_relative: the limit and the guard held to each frame the lids are laid over
+        self.relative = bool(relative) and self._guard is not None
+        self._limit0 = None if self._fold is None else self._fold.limit.copy()
+        self._floor0 = None if self._guard is None else self._guard.floor.copy()
+
+    def _refer(self, frame: np.ndarray) -> None:
+        """Hold the lids' fold limit and guard to ``frame (n, 3)``, the simulated frame the lids are laid
+        over (``animate.eyelid_relative``): a quad it bends past the limit may stay as bent, a triangle it
+        squeezes below the floor as low, one it turns over is left alone
+        (:func:`~faceforge.animation.lid_folds.referred_limits`, :func:`~faceforge.animation.lid_folds.referred_floors`).
+        The lids then straighten only what they bend: on the levelled risorius's rig the simulation left
+        MakeHuman's outer canthi bent past the limit in pride.fap's jaw frames, and the limit and the guard,
+        undoing each other over their 24 rounds, crept the corner 0.05-0.2 units in one frame."""
+        from faceforge.animation.lid_folds import referred_floors, referred_limits
+
+        if self._fold is not None:
+            self._fold.set_limit(referred_limits(frame, self._fold.quads, self._limit0))
+        g = self._guard
+        g.floor = referred_floors(frame, g.faces, g.normal0, self._floor0)
 
     def _backing(self, faces, fold_deg: float):
         """:class:`faceforge.skin.fold_limit.BlendLimit` over the skin the jaw hold may take back: the
@@ -529,6 +549,8 @@ class Eyelids:
             kept[:, field.index] = np.minimum(kept[:, field.index], 1.0 - jawed)
             live |= np.any(moves != 0.0, axis=1) | jawed.any(axis=1)
         for f in np.flatnonzero(live):
+            if self.relative:
+                self._refer(np.asarray(frames[f], dtype=np.float64))
             frame = np.ascontiguousarray(out[f], dtype=np.float64)
             held = frame.copy() if self._jaw_blend is not None and (kept[f] < 1.0).any() else None
             self._straighten(frame)

@@ -89,3 +89,25 @@ def fold_quads(rest, faces, moving, fold_deg: float):
     quads = quads[moving[quads].all(axis=1)]
     quads = quads[np.abs(dihedral_angle(rest, quads)) < min(limit, np.radians(FOLD_FLAT_DEG))]
     return (np.ascontiguousarray(quads), np.full(len(quads), limit)) if len(quads) else None
+
+
+def referred_limits(frame: np.ndarray, quads: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    """``(q,)`` radians: each quad's ``limit`` (``(q,)`` radians), or its unsigned dihedral in ``frame (n, 3)``
+    where that is larger (below pi) — the lids' fold limit held to the frame the lids were laid over
+    (``animate.eyelid_relative``): a quad the simulation left bent past the limit may stay as bent, and
+    the lids straighten only what they bend themselves."""
+    from faceforge.pbd.constraints.bending import dihedral_angle
+
+    bent = np.abs(dihedral_angle(np.asarray(frame, dtype=np.float64), np.asarray(quads, dtype=np.int64)))
+    return np.minimum(np.maximum(np.asarray(limit, dtype=np.float64), bent), np.pi - 1e-9)
+
+
+def referred_floors(frame: np.ndarray, faces: np.ndarray, normal0: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """``(m,)``: each triangle's ``floor`` (least signed area along its unit rest normal ``normal0 (m, 3)``,
+    skin units squared), or its signed area in ``frame (n, 3)`` where that is lower but positive, or -inf
+    (left alone) where the triangle is turned over in ``frame`` — the lids' guard held to the frame the lids
+    were laid over (``animate.eyelid_relative``), as :func:`referred_limits`."""
+    p = np.asarray(frame, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
+    area = 0.5 * np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), normal0)
+    floor = np.asarray(floor, dtype=np.float64)
+    return np.where(area >= floor, floor, np.where(area > 0.0, area, -np.inf))

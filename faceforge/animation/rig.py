@@ -130,7 +130,8 @@ class BoundHead:
         self.skin = self._skin(bind, Path(bind_dir), settings, config, fit)
         self._guards(config, cache)
         jaw = JawDrive(self.skull, system)
-        skin_step = self._skin_step(jaw, int(config.get("animate.orientation_guard.rounds")))
+        skin_step = self._skin_step(jaw, int(config.get("animate.orientation_guard.rounds")),
+                                    bool(config.get("animate.orientation_guard.fold_progress")))
 
         def reset():
             system.reset()
@@ -332,11 +333,11 @@ class BoundHead:
             self.rest, self.faces, min_area=float(config.get("animate.orientation_guard.min_area")), reach=1.0) \
             if rounds > 0 else None
 
-    def _skin_step(self, jaw: JawDrive, rounds: int):
+    def _skin_step(self, jaw: JawDrive, rounds: int, progress: bool = False):
         from faceforge.animation.guards.alternate import GuardedSkinStep
 
         return GuardedSkinStep(self.system, self.skin, self.guard, self.orientation, self.collision,
-                               rounds, jaw)
+                               rounds, jaw, progress)
 
     def bone_heights(self) -> tuple[float, float]:
         """(lowest, highest) height (+Y) of the bones at rest (cranium and mandible)."""
@@ -346,7 +347,7 @@ class BoundHead:
     def eyelids(self, config):
         """The lids of this head's eyes (:class:`faceforge.animation.eyelids.Eyelids`) as the
         config sets them (``animate.eyelids``, ``.eyelid_reach``, ``.eyelid_depth``, ``.eyelid_fold_deg``,
-        ``.eyelid_jaw_hold``); None when
+        ``.eyelid_jaw_hold``, ``.eyelid_relative``); None when
         ``animate.eyelids`` is off."""
         from faceforge.animation.eyelids import Eyelids
 
@@ -355,7 +356,8 @@ class BoundHead:
         return Eyelids(self.rest, self.faces, self.landmarks, self.fapu.unit("IRISD"),
                        config.get("animate.eyelid_reach"), config.get("animate.eyelid_depth"),
                        float(config.get("animate.eyelid_fold_deg") or 0.0),
-                       float(config.get("animate.eyelid_jaw_hold") or 0.0), rigid=self.parts != 0)
+                       float(config.get("animate.eyelid_jaw_hold") or 0.0), rigid=self.parts != 0,
+                       relative=bool(config.get("animate.eyelid_relative")))
 
     def inside_at_rest(self) -> np.ndarray:
         """(n,) bool: the working vertices the bone checks do not count (``inside_at_rest`` of

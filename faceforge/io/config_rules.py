@@ -208,6 +208,7 @@ RULES: list[tuple[str, Rule]] = [
     ("muscle.damping", Number(0.0, 0.99)),
     ("animate.orientation_guard.rounds", Integer(0)),            # 0 turns the guard off
     ("animate.orientation_guard.min_area", Number(0.0, 0.95)),
+    ("animate.orientation_guard.fold_progress", Boolean()),    # past its rounds only while the fold limit's work shrinks
     ("animate.skull_guard.collision_reach", Number(0.0, 0.5)),     # 0 turns bone collision off
     ("animate.skull_guard.collision_keep", Number(0.0, 0.95)),
     ("animate.jaw_glide", Number(0.0, 2.0)),                       # 0: the jaw only turns
@@ -267,6 +268,7 @@ RULES: list[tuple[str, Rule]] = [
     ("animate.eyelid_depth", Number(0.1, 10.0)),
     ("animate.eyelid_fold_deg", Number(0.0, 179.0)),       # degrees; 0 turns the lids' fold limit off
     ("animate.eyelid_jaw_hold", Number(0.0, 1.0)),         # share of a moving jaw's drift the upper lids take back
+    ("animate.eyelid_relative", Boolean()),               # the lids' limit and guard held to the simulated frame
     # sane upper bounds: a value past them is a typo, and 1e9 iterations hang, 1e9 s of
     # expression tried to allocate 186 GiB (issue 28)
     ("solver.iterations", Integer(1, 1000)),

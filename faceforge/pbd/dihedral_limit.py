@@ -201,6 +201,17 @@ class DihedralLimit:
         """Quads checked so far by an incremental limit (skipped ones not counted; 0 otherwise)."""
         return int(self._clock[1])
 
+    def set_limit(self, limit) -> None:
+        """Hold the quads to ``limit`` from now on (radians in (0, pi), one for all or (m,) per quad), as the
+        constructor's; an incremental limit checks every quad again at its next pass."""
+        limit = np.ascontiguousarray(np.broadcast_to(np.asarray(limit, dtype=np.float64), (len(self.quads),)))
+        if not np.all((limit > 0.0) & (limit < math.pi)):
+            raise ValueError(f"limit must be in (0, pi) radians, got {limit}")
+        self.limit = limit
+        self._below = -np.cos(np.minimum(self.limit + self.tol, math.pi))
+        if self.incremental:
+            self._qst[:] = -1
+
     def __call__(self, positions: np.ndarray, sweeps: int = 2, touched: np.ndarray | None = None) -> int:
         """Keep every quad's unsigned dihedral at most its limit (+ tol), in place on
         ``positions`` ((n, 3) float64, C-contiguous), in at most ``sweeps`` Gauss-Seidel passes (a

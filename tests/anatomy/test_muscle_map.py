@@ -254,3 +254,14 @@ def test_depressor_anguli_draws_the_corner_down_and_out(by_name):
         fibre = origin - insertion
         assert fibre[1] < 0
         assert np.degrees(np.arctan2(fibre[0], -fibre[1])) >= 5.0
+
+
+def test_the_risorius_shortens_further_than_the_default(by_name):
+    """The risorius's fibres shorten by 70 % at c = 1 (the linear default 50 %): levelled on the
+    fitted head (fit.level_muscles, on) its line is 3-28 % shorter than the tilted one, and at 50 %
+    MediaPipe's stretch FAP (53/54 +110 MW) stopped at 70 MW with the muscle at full contraction
+    (docs/notes/ris23.md)."""
+    from faceforge.anatomy.muscles.linear import LINEAR_MAX_CONTRACTION
+
+    assert by_name["risorius_L"].max_contraction == by_name["risorius_R"].max_contraction == 0.7
+    assert by_name["risorius_L"].max_contraction > LINEAR_MAX_CONTRACTION

@@ -83,6 +83,20 @@ def test_fear_differs_from_surprise_as_facs_says(mapping):
         assert fear[stretch - 1] > 0 >= surprise[stretch - 1]
     assert 0 < fear[3 - 1] < surprise[3 - 1]
 
+def test_joy_and_fear_on_the_levelled_risorius(mapping):
+    # the risorius is levelled on the fitted head (fit.level_muscles, on): the stretch is AU20, not a
+    # second smile, so joy (6+12) borrows no stretch and fear's corners no longer cancel a lift with
+    # a hard pull-down (-600 MNS read as disgust's AU15 on MakeHuman); fear lowers the middle brow a
+    # little (AU4) under the raised inner brow (AU1; docs/notes/ris23.md)
+    joy, fear = mapping.expressions["joy"], mapping.expressions["fear"]
+    for stretch in (53, 54, 6, 7):
+        assert joy[stretch - 1] == 0
+    for corner in (59, 60, 12, 13):
+        assert -300 <= fear[corner - 1] <= -150
+    for side in (0, 1):
+        assert fear[31 + side - 1] > 0 > fear[33 + side - 1] > -fear[31 + side - 1]
+
+
 def test_surprise_and_fear_widen_the_eyes_surprise_most(mapping):
     # AU5 (upper lid raiser) shows the sclera above the iris: a real lid rises 2-4 mm, 0.2-0.4 of a
     # 10 mm opening. Surprise (5B, the lower lids let down) opens each eye by 0.35 openings or more;

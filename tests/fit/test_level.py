@@ -44,3 +44,11 @@ def test_a_line_already_at_the_templates_angle_does_not_move():
     assert np.allclose(level_origins(2.0 * tp, tp, rows), 2.0 * tp)
     mirrored = tp * [-1.0, 1.0, 1.0]                                             # a right muscle: the same angle
     assert np.allclose(level_origins(mirrored, tp, rows), mirrored)
+
+
+def test_the_risorius_is_levelled_by_default():
+    """fit.level_muscles is on for the risorius in the shipped config (ris23): after the fit its line
+    pulled the corner up 24-49 degrees on the samples, a second smile (docs/notes/recog22.md)."""
+    from faceforge.io.config import load_config
+
+    assert "risorius" in list(load_config().get("fit.level_muscles"))

@@ -227,3 +227,22 @@ def test_an_incremental_limit_is_a_full_pass_bit_for_bit_and_checks_only_what_mo
     assert np.mean(checked[4:]) < len(quads) / 4          # later ones what moved and round it (a full
     # pass: len(quads) a sweep)
     assert full.checked == 0
+
+
+@pytest.mark.parametrize("incremental", [False, True])
+def test_set_limit_holds_the_quads_to_the_new_limit(incremental):
+    """A quad bent 115 deg: a limit raised past it leaves it; lowered again to 75, the next pass brings it
+    back to 75 (an incremental limit checks it again though none of its particles moved)."""
+    from faceforge.pbd.dihedral_limit import DihedralLimit
+
+    p, q = folded_quad(np.radians(115))
+    lim = DihedralLimit(q, np.radians(75), 4, incremental=incremental)
+    lim.set_limit(np.radians(120))
+    x = p.copy()
+    assert lim(x) == 0
+    np.testing.assert_array_equal(x, p)
+    lim.set_limit(np.radians(75))
+    assert lim(x) >= 1
+    assert abs(dihedral_angle(x, q)[0]) == pytest.approx(np.radians(75), abs=1e-9)
+    with pytest.raises(ValueError):
+        lim.set_limit(np.radians(180))

@@ -123,7 +123,7 @@ ANIMATE = register_stage(Stage(
                                                 "animate", "template"),
     inputs=("fap", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="14", run=run_animate, description="play a FAP track on the bound head (§9)"))
+    version="15", run=run_animate, description="play a FAP track on the bound head (§9)"))
 
 
 # --------------------------------------------------------------------------- commands

@@ -98,7 +98,7 @@ ARKIT = register_stage(Stage(
                  "curves"),
     inputs=("arkit_take", "animate_mapping?", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     outputs=("animation.npz", "report.json"),
-    version="10", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
+    version="11", run=run_arkit, description="play an ARKit weight track through the baked shapes' muscles"))
 
 
 def write_curves(app, stage: str, curves: str | None, output: str | None) -> bool:

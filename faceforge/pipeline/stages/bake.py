@@ -103,12 +103,12 @@ BAKE = register_stage(Stage(
                  "skin.join_insertions", "skin.cheek_tether", "skin.lid_hold", "skin.lid_hold_sink", "skin.commissure_fold_deg", "skin.fold_deg", "skin.proxy_fold_limit", "skin.lip_contact_mm",
                  "bind.cheek_muscles", "muscle", "template", "animate.fap_mapping",
                  "animate.fps", "animate.skull_guard", "animate.orientation_guard", "animate.statics",
-                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.eyelid_fold_deg", "animate.eyelid_jaw_hold", "animate.jaw_glide",
+                 "animate.eyelids", "animate.eyelid_reach", "animate.eyelid_depth", "animate.eyelid_fold_deg", "animate.eyelid_jaw_hold", "animate.eyelid_relative", "animate.jaw_glide",
                  "animate.jaw_glide_slope", "animate.chin_path"),
     inputs=("bake_shapes", "arkit_mapping", "animate_mapping?", "animate.fap_mapping", "template.skull",
             "template.muscle_map"),
     # version 14: the sheet draws the mouth's inside dark; 15: through a z-buffer (viz.zbuffer)
-    outputs=("shapes.npz", "report.json", "shapes.png"), version="15", run=run_bake,
+    outputs=("shapes.npz", "report.json", "shapes.png"), version="16", run=run_bake,
     description="named blendshapes (ARKit-52, visemes, expressions) from the muscle simulation"))
 
 

@@ -112,7 +112,7 @@ CALIBRATE = register_stage(Stage(
     inputs=("animate.fap_mapping", "animate.calibrate.magnitudes", "template.skull", "template.muscle_map"),
     digests={"animate.fap_mapping": mapping_digest_without_presets},
     outputs=("fap_mapping.yaml", "report.json", "report.txt"),
-    version="8", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
+    version="9", run=run_calibrate, description="measure and fit the FAP -> muscle mapping (§9)"))
 
 
 @click.command("calibrate", help="Measure how precisely FAPs move the skin and fit the mapping (§9).")

@@ -136,11 +136,11 @@ _SHEET_STAGE = dict(deps=("fit", "bind", "calibrate"),
 # versions 12 / 11: the sheets' faces drawn through a z-buffer (viz.zbuffer)
 EXPRESSIONS_STAGE = register_stage(Stage(
     name="expressions", **_SHEET_STAGE, outputs=("expressions.png", "expressions.npz", "report.json"),
-    version="12", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
+    version="13", run=run_expressions, description="the six basic expressions, side by side (Fig. 10)"))
 
 VISEMES_STAGE = register_stage(Stage(
     name="visemes", **_SHEET_STAGE, outputs=("visemes.png", "visemes.npz", "report.json"),
-    version="11", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
+    version="12", run=run_visemes, description="the fourteen MPEG-4 visemes, side by side"))
 
 
 def _sheet_command(stem: str, help_text: str):

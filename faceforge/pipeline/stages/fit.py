@@ -44,7 +44,7 @@ import click
 
 from faceforge.pipeline import Stage, register_command, register_stage
 
-VERSION = "10"
+VERSION = "11"
 
 
 def run(ctx) -> None:

@@ -119,7 +119,7 @@ MATCH_STAGE = register_stage(Stage(
     inputs=("match_target", "animate.fap_mapping", "template.skull", "template.muscle_map"),
     # version 4: the sheet through a z-buffer (viz.zbuffer)
     outputs=("match.npz", "match.png", "report.json"),
-    version="4", run=run_match, description="the muscle pose of a posed copy of the head"))
+    version="5", run=run_match, description="the muscle pose of a posed copy of the head"))
 
 
 @click.command("match", help="Find the muscle contractions and jaw pose that reproduce a posed copy of the head.")
