@@ -81,6 +81,8 @@ def main(argv=None) -> dict:
                          "session): a unit's lid motion stays in the residual")
     ap.add_argument("--eyes", action="store_true",
                     help="also the six eye units (eye-*-closure, -opened-up, -slit), reported apart")
+    ap.add_argument("--units", default=None, metavar="NAME[,NAME...]",
+                    help="only these units (of the chosen ones, or the eye units), e.g. mouth-depression,mouth-elevation")
     args = ap.parse_args(argv)
     from faceforge.animation.fap_mapping import load_fap_mapping
     from faceforge.animation.rig import BoundHead
@@ -107,6 +109,12 @@ def main(argv=None) -> dict:
                                jaw=not args.brows, lids=None if args.no_lids else head.eyelids(cfg))
         if args.eyes:
             chosen = chosen + EYE_UNITS
+        if args.units:
+            subset = [n.strip() for n in args.units.split(",") if n.strip()]
+            unknown = sorted(set(subset) - set(CHOSEN + EYE_UNITS))
+            if unknown:
+                ap.error(f"--units: not a chosen unit: {', '.join(unknown)}")
+            chosen = tuple(n for n in CHOSEN + EYE_UNITS if n in subset)
         J = matcher.J
         units = np.load(UNITS)
         names = [str(n) for n in units["names"]]
@@ -129,7 +137,7 @@ def main(argv=None) -> dict:
                 a, b = fields[left], fields[right][mi] * np.array([-1.0, 1.0, 1.0])
                 mirror[left] = round(float(np.linalg.norm(a - b) / max(np.linalg.norm(a), 1e-12)), 3)
         eyes = {n: rows.pop(n) for n in EYE_UNITS if n in rows}
-        worst = min(rows, key=lambda n: (rows[n]["cosine"], -abs(np.log(max(rows[n]["ratio"], 1e-9)))))
+        worst = min(rows, key=lambda n: (rows[n]["cosine"], -abs(np.log(max(rows[n]["ratio"], 1e-9)))), default=None)
         space, t_jac = matcher.space, matcher.jacobian_seconds
         out = {"head": str(MESH.relative_to(ROOT)), "controls": list(space.names),
                "settle": {"tolerance": settle.tolerance, "max_frames": settle.max_frames,
@@ -144,7 +152,7 @@ def main(argv=None) -> dict:
             np.savez_compressed(args.fields, J=J, controls=np.array(space.names), names=np.array(list(fields)),
                                 solved=np.stack(list(fields.values())), user_rest=user_rest,
                                 x=np.stack([[{**rows, **eyes}[n]["controls"].get(c, 0.0) for c in space.names] for n in fields]))
-        write_results("units_brows" if args.brows else "units", out)
+        write_results("units_brows" if args.brows else "units_subset" if args.units else "units", out)
         return out
 
 
